@@ -1,0 +1,240 @@
+"""The ``gpr3d`` command: a thin layer over the library API.
+
+Every subcommand calls public functions only; user errors (bad files, bad
+arguments, missing extras) print one line on stderr and exit with status 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from pathlib import Path
+
+from gpr3d import __version__
+from gpr3d.core.errors import GPR3DError
+
+EXAMPLES = """\
+examples:
+  gpr3d demo                                   run the end-to-end demo on the embedded recording
+  gpr3d info LINE01.DZT XLINE00.DT1 ten_col.rd3
+  gpr3d show LINE01.DZT --out line01.png --axis depth --cmap hot
+  gpr3d process LINE01.DZT --steps time_zero dewow remove_background gain_tpow:power=1.5 \\
+        bandpass:fmin_hz=2e8:fmax_hz=8e8 --out line01.h5
+  gpr3d convert LINE01.DZT line01.sgy          (.h5 gpr3d HDF5, .sgy/.segy SEG-Y, .png figure)
+"""
+
+
+def _print_survey_info(path, surveys, as_json: bool):
+    rows = []
+    for s in surveys:
+        m = s.metadata
+        row = {
+            "file": str(path),
+            "format": m.get("format"),
+            "channel": m.get("channel", 0),
+            "n_traces": s.n_traces,
+            "n_samples": s.n_samples,
+            "dt_s": s.dt_s,
+            "range_s": s.time_window_s,
+            "antenna": m.get("antenna"),
+            "frequency_hz": s.frequency_hz,
+            "offset_m": s.offset_m,
+            "eps_r": s.eps_r,
+            "date": m.get("created") or m.get("date"),
+            "positions": m.get("positions_source"),
+            "length_m": None if s.distances_m is None else float(s.distances_m[-1]),
+            "history": [h["step"] for h in s.history],
+        }
+        rows.append(row)
+    if as_json:
+        return rows
+    for r in rows:
+        ch = f" channel {r['channel']}" if len(rows) > 1 else ""
+        print(f"{r['file']}{ch}: {r['format']}")
+        print(f"  traces x samples : {r['n_traces']} x {r['n_samples']}")
+        print(f"  sample interval  : {r['dt_s'] * 1e9:.6g} ns   range: {r['range_s'] * 1e9:.6g} ns")
+        ant = r["antenna"] or "?"
+        freq = f"{r['frequency_hz'] / 1e6:.6g} MHz" if r["frequency_hz"] else "unknown frequency"
+        print(f"  antenna          : {ant} ({freq}), tx-rx offset {r['offset_m']:.4g} m")
+        if r["eps_r"]:
+            print(f"  eps_r (header)   : {r['eps_r']:.4g}")
+        if r["date"]:
+            print(f"  recorded         : {r['date']}")
+        if r["positions"]:
+            print(f"  positions        : {r['positions']}; path length {r['length_m']:.4g} m")
+        if r["history"]:
+            print(f"  processing       : {', '.join(r['history'])}")
+    return rows
+
+
+def cmd_info(args):
+    from gpr3d.io.registry import read_all
+
+    out, failed = [], 0
+    for path in args.files:
+        try:
+            surveys = read_all(path, format=args.format)
+        except GPR3DError as exc:
+            if len(args.files) == 1:
+                raise
+            print(f"gpr3d: error: {exc}", file=sys.stderr)
+            failed += 1
+            continue
+        out.extend(_print_survey_info(path, surveys, args.json))
+    if args.json:
+        print(json.dumps(out, indent=2))
+    return 1 if failed else 0
+
+
+def _read_channel(args):
+    from gpr3d.io.registry import read
+
+    return read(args.input, format=args.format, channel=args.channel)
+
+
+def _apply_steps(survey, specs):
+    from gpr3d.processing.steps import parse_step
+
+    for spec in specs or []:
+        name, kwargs = parse_step(spec)
+        survey = survey.apply(name, **kwargs)
+    return survey
+
+
+def cmd_show(args):
+    from gpr3d.viz.bscan import save_bscan_png
+
+    s = _apply_steps(_read_channel(args), args.steps)
+    if args.axis == "depth" and args.eps_r is None and s.eps_r is None:
+        raise GPR3DError("--axis depth needs --eps-r (the file gives no eps_r)")
+    save_bscan_png(s, args.out, axis=args.axis, eps_r=args.eps_r, cmap=args.cmap, clip_percentile=args.clip,
+                   title=f"{Path(args.input).name}" + (f" ({', '.join(h['step'] for h in s.history)})" if s.history else ""))
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _write(survey, out: str):
+    suffix = Path(out).suffix.lower()
+    if suffix in (".h5", ".hdf5"):
+        survey.save(out)
+    elif suffix in (".sgy", ".segy"):
+        from gpr3d.io.segy import write_segy
+
+        write_segy(survey, out)
+    elif suffix == ".png":
+        from gpr3d.viz.bscan import save_bscan_png
+
+        save_bscan_png(survey, out)
+    else:
+        raise GPR3DError(f"{out}: unknown output type {suffix!r} (use .h5, .sgy/.segy or .png)")
+
+
+def cmd_process(args):
+    s = _apply_steps(_read_channel(args), args.steps)
+    _write(s, args.out)
+    print(f"wrote {args.out}: {s}")
+    return 0
+
+
+def cmd_convert(args):
+    s = _read_channel(args)
+    _write(s, args.out)
+    print(f"wrote {args.out}: {s}")
+    return 0
+
+
+def cmd_demo(args):
+    from gpr3d.demo import DemoConfig, run_demo
+
+    run_demo(args.out, DemoConfig(input=args.input))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from gpr3d.processing.steps import describe_steps
+
+    p = argparse.ArgumentParser(
+        prog="gpr3d",
+        description="Find and reconstruct buried objects from ground-penetrating radar.",
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--version", action="version", version=f"gpr3d {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+
+    def add(name, func, help_, epilog=None):
+        sp = sub.add_parser(name, help=help_, description=help_, epilog=epilog,
+                            formatter_class=argparse.RawDescriptionHelpFormatter)
+        sp.set_defaults(func=func)
+        return sp
+
+    def add_input(sp):
+        sp.add_argument("input", help="radar file (DZT, DT1/HD, RD3/RAD, gprMax .h5/.out, gpr3d .h5)")
+        sp.add_argument("--channel", type=int, default=0, help="channel of a multi-channel file (default 0)")
+        sp.add_argument("--format", default=None, help="force a reader: dzt, dt1, rd3, gprmax, gpr3d")
+
+    sp = add("info", cmd_info, "print what radar files hold",
+             "example:\n  gpr3d info FILE____032.DZT XLINE00.DT1 --json")
+    sp.add_argument("files", nargs="+", help="radar files")
+    sp.add_argument("--format", default=None, help="force a reader")
+    sp.add_argument("--json", action="store_true", help="print JSON instead of text")
+
+    steps_help = "processing steps, each NAME[:key=value[:key=value]] (SI units); known steps:\n" + describe_steps()
+    sp = add("show", cmd_show, "draw a B-scan as PNG",
+             "example:\n  gpr3d show FILE____032.DZT --out b.png --steps time_zero dewow --axis depth --cmap hot\n\n"
+             + steps_help)
+    add_input(sp)
+    sp.add_argument("--out", required=True, help="PNG file to write")
+    sp.add_argument("--axis", choices=("time", "depth"), default="time", help="vertical axis (default time)")
+    sp.add_argument("--eps-r", type=float, default=None, help="eps_r for the depth axis (default: file header)")
+    sp.add_argument("--cmap", default="gray", help="colour map: gray, hot (as the reference paper), seismic, ...")
+    sp.add_argument("--clip", type=float, default=99.0, help="colour limit percentile of |amplitude| (default 99)")
+    sp.add_argument("--steps", nargs="*", default=[], help="processing before drawing")
+
+    sp = add("process", cmd_process, "process a radar file and write the result",
+             "example:\n  gpr3d process FILE____032.DZT --steps time_zero dewow remove_background "
+             "gain_tpow:power=1.5 --out p.h5\n\n" + steps_help)
+    add_input(sp)
+    sp.add_argument("--steps", nargs="+", required=True, help="processing steps in order")
+    sp.add_argument("--out", required=True, help="output: .h5 (gpr3d), .sgy/.segy (SEG-Y) or .png")
+
+    sp = add("convert", cmd_convert, "convert a radar file to gpr3d HDF5, SEG-Y or PNG",
+             "example:\n  gpr3d convert XLINE00.DT1 xline00.sgy")
+    add_input(sp)
+    sp.add_argument("out", help="output: .h5 (gpr3d), .sgy/.segy (SEG-Y) or .png")
+
+    sp = add("demo", cmd_demo, "run the end-to-end demo (embedded example by default)",
+             "example:\n  gpr3d demo --out gpr3d_demo")
+    sp.add_argument("--out", default="gpr3d_demo", help="output folder (default gpr3d_demo)")
+    sp.add_argument("--input", default=None, help="use this radar file instead of the embedded example")
+    return p
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    print(f"gpr3d: warning: {message}", file=sys.stderr)
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    warnings.showwarning = _one_line_warning
+    try:
+        return int(args.func(args) or 0)
+    except GPR3DError as exc:
+        print(f"gpr3d: error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:  # e.g. an unwritable output folder
+        print(f"gpr3d: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("gpr3d: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,124 @@
+"""Helpers shared by the format readers."""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from gpr3d.core.errors import FormatError, TruncatedRecordingWarning
+
+
+def check_file(path) -> Path:
+    """The path as a Path; FormatError if it is missing, a folder, or empty."""
+    p = Path(path)
+    if not p.exists():
+        raise FormatError(p, "no such file")
+    if p.is_dir():
+        raise FormatError(p, "is a folder, not a file")
+    if p.stat().st_size == 0:
+        raise FormatError(p, "file is empty")
+    return p
+
+
+def sidecar(path: Path, *suffixes: str) -> Path | None:
+    """The first existing file with the same stem and one of ``suffixes`` (any letter case)."""
+    for suf in suffixes:
+        for cand in (suf.lower(), suf.upper()):
+            q = path.with_suffix(cand)
+            if q.exists():
+                return q
+    # case-insensitive scan (e.g. 'File.Dzg')
+    try:
+        names = {n.lower(): n for n in os.listdir(path.parent)}
+    except OSError:
+        return None
+    for suf in suffixes:
+        hit = names.get((path.stem + suf).lower())
+        if hit:
+            return path.parent / hit
+    return None
+
+
+def whole_traces(path, n_bytes: int, trace_bytes: int, what: str = "trace") -> int:
+    """Number of complete traces in ``n_bytes``; warns if the recording ends mid-trace."""
+    if trace_bytes <= 0:
+        raise FormatError(path, f"{what} size {trace_bytes} bytes is impossible")
+    n, rest = divmod(n_bytes, trace_bytes)
+    if n == 0:
+        raise FormatError(path, f"holds no complete {what} ({n_bytes} data bytes, one {what} needs {trace_bytes})")
+    if rest:
+        warnings.warn(
+            f"{Path(path).name}: recording ends mid-{what}; dropped 1 partial {what} ({rest} bytes), kept {n}",
+            TruncatedRecordingWarning,
+            stacklevel=3,
+        )
+    return n
+
+
+def finite_positive(path, name: str, value, *, allow_zero: bool = False) -> float:
+    """``value`` as float; FormatError if it is not finite and positive."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise FormatError(path, f"header field {name} = {value!r} is not a number") from None
+    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        raise FormatError(path, f"header field {name} = {v!r} is not a positive number")
+    return v
+
+
+def check_finite(path, data: np.ndarray) -> None:
+    bad = np.count_nonzero(~np.isfinite(data))
+    if bad:
+        raise FormatError(path, f"{bad} samples are NaN or infinite")
+
+
+def nmea_degrees(value: str, hemisphere: str) -> float:
+    """Degrees from NMEA ``ddmm.mmmm`` / ``dddmm.mmmm`` and a hemisphere letter."""
+    v = float(value)
+    deg = math.floor(v / 100.0)
+    out = deg + (v - 100.0 * deg) / 60.0
+    return -out if hemisphere.strip().upper() in ("S", "W") else out
+
+
+def local_metres(lat_deg, lon_deg, alt_m, origin=None):
+    """East-north-up metres of geographic points about ``origin`` (lat, lon, alt).
+
+    A local tangent-plane (equirectangular) approximation on the WGS-84
+    ellipsoid's radii of curvature; good to centimetres over a few km.
+    """
+    lat = np.asarray(lat_deg, float)
+    lon = np.asarray(lon_deg, float)
+    alt = np.asarray(alt_m, float)
+    if origin is None:
+        origin = (float(lat[0]), float(lon[0]), float(alt[0]))
+    lat0, lon0, alt0 = origin
+    a, e2 = 6378137.0, 6.69437999014e-3
+    s = math.sin(math.radians(lat0))
+    n_radius = a / math.sqrt(1 - e2 * s * s)
+    m_radius = a * (1 - e2) / (1 - e2 * s * s) ** 1.5
+    east = np.radians(lon - lon0) * n_radius * math.cos(math.radians(lat0))
+    north = np.radians(lat - lat0) * m_radius
+    return np.stack([east, north, alt - alt0], axis=1), origin
+
+
+@contextlib.contextmanager
+def hdf5_errors(path):
+    """Turn the low-level errors h5py raises on damaged files into one FormatError naming the file.
+
+    A corrupt HDF5 file fails deep inside the library (OSError, RuntimeError,
+    KeyError, ValueError, TypeError...); gpr3d's own errors pass through unchanged.
+    """
+    from gpr3d.core.errors import GPR3DError
+
+    try:
+        yield
+    except GPR3DError:
+        raise
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError, IndexError) as exc:
+        detail = str(exc).splitlines()[0][:160] if str(exc) else type(exc).__name__
+        raise FormatError(path, f"HDF5 content is corrupt or truncated ({detail})") from None

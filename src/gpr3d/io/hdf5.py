@@ -1,0 +1,121 @@
+"""gpr3d's own HDF5 file: lossless, versioned storage of one or more :class:`Survey`.
+
+Schema ``gpr3d.survey`` version 1::
+
+    /                     attrs: schema="gpr3d.survey", schema_version=1, gpr3d_version
+    /surveys/<i>/data     (n_traces, n_samples) float32, gzip + shuffle
+    /surveys/<i>/timestamps_s, positions_xyz, orientations_quat_wxyz   (float64, when present)
+    /surveys/<i>          attrs: dt_s, t0_s, offset_m, frequency_hz?, eps_r?,
+                          metadata_json, history_json
+
+Writes are atomic (a temporary file replaced in one step).
+"""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+
+from gpr3d.core.errors import FormatError
+from gpr3d.core.survey import Survey
+from gpr3d.io._common import check_file, hdf5_errors
+from gpr3d.io.atomic import atomic_path
+
+__all__ = ["SCHEMA", "SCHEMA_VERSION", "write_survey", "write_surveys", "read_surveys", "read_survey", "is_gpr3d_h5"]
+
+SCHEMA = "gpr3d.survey"
+SCHEMA_VERSION = 1
+_ARRAYS = ("timestamps_s", "positions_xyz", "orientations_quat_wxyz")
+_SCALARS = ("dt_s", "t0_s", "offset_m", "frequency_hz", "eps_r")
+
+
+def is_gpr3d_h5(path) -> bool:
+    try:
+        with open(path, "rb") as fh:
+            if fh.read(8) != b"\x89HDF\r\n\x1a\n":
+                return False
+        with h5py.File(path, "r") as f:
+            return f.attrs.get("schema") == SCHEMA
+    except Exception:  # noqa: BLE001 - detection never raises
+        return False
+
+
+def write_surveys(surveys, path) -> None:
+    """Write a list of surveys (e.g. the channels of one recording) to ``path`` atomically."""
+    from gpr3d import __version__
+
+    surveys = list(surveys)
+    if not surveys:
+        raise ValueError("nothing to write: empty list of surveys")
+    with atomic_path(path, suffix=".h5.part") as tmp:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["schema"] = SCHEMA
+            f.attrs["schema_version"] = SCHEMA_VERSION
+            f.attrs["gpr3d_version"] = __version__
+            root = f.create_group("surveys")
+            for i, s in enumerate(surveys):
+                g = root.create_group(str(i))
+                g.create_dataset("data", data=s.data, compression="gzip", compression_opts=4, shuffle=True)
+                for name in _ARRAYS:
+                    value = getattr(s, name)
+                    if value is not None:
+                        g.create_dataset(name, data=value)
+                for name in _SCALARS:
+                    value = getattr(s, name)
+                    if value is not None:
+                        g.attrs[name] = float(value)
+                g.attrs["metadata_json"] = json.dumps(s.metadata, allow_nan=True)
+                g.attrs["history_json"] = json.dumps(s.history, allow_nan=True)
+
+
+def write_survey(survey: Survey, path) -> None:
+    """Write one survey to ``path`` atomically."""
+    write_surveys([survey], path)
+
+
+def read_surveys(path) -> list[Survey]:
+    """Read every survey in a gpr3d HDF5 file."""
+    p = check_file(path)
+    with hdf5_errors(p):
+        return _read_surveys(p)
+
+
+def _read_surveys(p) -> list[Survey]:
+    with h5py.File(p, "r") as f:
+        if f.attrs.get("schema") != SCHEMA:
+            raise FormatError(p, f"not a gpr3d survey file (schema attribute {f.attrs.get('schema')!r})")
+        version = int(f.attrs.get("schema_version", -1))
+        if version > SCHEMA_VERSION:
+            raise FormatError(p, f"written with schema version {version}; this gpr3d reads up to {SCHEMA_VERSION}: upgrade gpr3d")
+        if "surveys" not in f or not len(f["surveys"]):
+            raise FormatError(p, "holds no surveys")
+        out = []
+        for key in sorted(f["surveys"], key=int):
+            g = f["surveys"][key]
+            try:
+                kwargs = {"data": g["data"][()]}
+                for name in _ARRAYS:
+                    kwargs[name] = g[name][()] if name in g else None
+                for name in _SCALARS:
+                    kwargs[name] = float(g.attrs[name]) if name in g.attrs else None
+                kwargs["t0_s"] = kwargs["t0_s"] or 0.0
+                kwargs["offset_m"] = kwargs["offset_m"] or 0.0
+                kwargs["metadata"] = json.loads(g.attrs["metadata_json"])
+                kwargs["history"] = json.loads(g.attrs["history_json"])
+            except (KeyError, ValueError, OSError) as exc:
+                raise FormatError(p, f"survey {key} is incomplete or corrupt: {exc}") from None
+            try:
+                out.append(Survey(**kwargs))
+            except ValueError as exc:
+                raise FormatError(p, f"survey {key}: {exc}") from None
+        return out
+
+
+def read_survey(path, channel: int = 0) -> Survey:
+    """Read one survey from a gpr3d HDF5 file."""
+    surveys = read_surveys(path)
+    if not 0 <= channel < len(surveys):
+        raise FormatError(path, f"has {len(surveys)} survey(s); channel {channel} does not exist")
+    return surveys[channel]

@@ -1,0 +1,86 @@
+"""Format detection and the ``read`` entry points.
+
+Each format registers ``is_format(path) -> bool`` and ``read(path, **kw) ->
+list[Survey]`` (one Survey per channel). :func:`read_all` asks the detectors in
+order (content first: HDF5 files by their attributes, DZT by a valid header;
+then header/data pairs by their sidecars) and reads with the first that answers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from gpr3d.core.errors import FormatError, UnknownFormatError
+from gpr3d.io import dt1, dzt, gprmax, hdf5, rd3
+from gpr3d.io._common import check_file
+
+__all__ = ["FORMATS", "register", "detect_format", "read", "read_all"]
+
+
+@dataclass(frozen=True)
+class Format:
+    name: str
+    description: str
+    extensions: tuple[str, ...]
+    is_format: Callable[[Path], bool]
+    read: Callable[..., list]
+
+
+FORMATS: dict[str, Format] = {}
+
+
+def register(fmt: Format) -> None:
+    """Add (or replace) a format plugin."""
+    FORMATS[fmt.name] = fmt
+
+
+register(Format("gpr3d", "gpr3d HDF5 survey", (".h5", ".hdf5"), hdf5.is_gpr3d_h5, hdf5.read_surveys))
+register(Format("gprmax", "gprMax output (v3 .out, v4 .h5)", (".h5", ".out"), gprmax.is_gprmax, gprmax.read_gprmax))
+register(Format("dzt", "GSSI DZT", (".dzt",), dzt.is_dzt, dzt.read_dzt))
+register(Format("dt1", "Sensors & Software DT1/HD", (".dt1", ".hd"), dt1.is_dt1, dt1.read_dt1))
+register(Format("rd3", "MALA RD3/RD7 + RAD", (".rd3", ".rd7", ".rad"), rd3.is_rd3, rd3.read_rd3))
+
+
+def detect_format(path) -> str:
+    """Name of the registered format that recognises ``path``; UnknownFormatError otherwise."""
+    p = check_file(path)
+    for name, fmt in FORMATS.items():
+        if fmt.is_format(p):
+            return name
+    ext = p.suffix.lower()
+    sidecars = {".dzg": ".DZT", ".dzx": ".DZT", ".cor": ".rd3", ".gps": ".DT1"}
+    if ext in sidecars:
+        raise UnknownFormatError(p, f"is a sidecar (GPS/metadata) file: read the {sidecars[ext]} data file beside it")
+    claimed = [f.name for f in FORMATS.values() if ext in f.extensions]
+    if claimed:
+        raise UnknownFormatError(p, f"has a {ext} extension but is not a valid {'/'.join(claimed)} file "
+                                    "(corrupt, truncated, or a missing sidecar header)")
+    known = ", ".join(sorted({e for f in FORMATS.values() for e in f.extensions}))
+    raise UnknownFormatError(p, f"unrecognised file format (readers exist for {known})")
+
+
+def read_all(path, *, format: str | None = None, **kwargs) -> list:
+    """Read every channel of a radar file as a list of :class:`~gpr3d.core.survey.Survey`.
+
+    ``format`` forces a reader (``dzt``, ``dt1``, ``rd3``, ``gprmax``, ``gpr3d``);
+    extra keyword arguments go to that reader (e.g. ``component="Ey"`` for gprMax).
+    """
+    name = format or detect_format(path)
+    if name not in FORMATS:
+        raise FormatError(path, f"unknown format {name!r}; known: {', '.join(FORMATS)}")
+    try:
+        return FORMATS[name].read(Path(path), **kwargs)
+    except TypeError as exc:
+        if "unexpected keyword" in str(exc):
+            raise FormatError(path, f"the {name} reader does not take {exc}".split(" got ")[0]) from None
+        raise
+
+
+def read(path, *, format: str | None = None, channel: int = 0, **kwargs):
+    """Read one channel (default the first) of a radar file as a :class:`~gpr3d.core.survey.Survey`."""
+    surveys = read_all(path, format=format, **kwargs)
+    if not 0 <= channel < len(surveys):
+        raise FormatError(path, f"has {len(surveys)} channel(s); channel {channel} does not exist")
+    return surveys[channel]

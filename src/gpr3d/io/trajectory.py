@@ -1,0 +1,207 @@
+"""Antenna trajectories: TUM and CSV files, xyz tracks, and attaching poses to a survey.
+
+A :class:`Trajectory` holds ``timestamps_s (n,)``, ``positions_xyz (n, 3)`` and
+``orientations_quat_wxyz (n, 4)``: poses ``world_from_antenna``. TUM files store
+``t tx ty tz qx qy qz qw`` (quaternion last, w last); the conversion happens here.
+"""
+
+from __future__ import annotations
+
+import csv
+import io as _io
+from dataclasses import dataclass
+
+import numpy as np
+
+from gpr3d.core.errors import FormatError, InvalidDataError
+from gpr3d.core.poses import normalize_quat, slerp
+from gpr3d.io._common import check_file
+from gpr3d.io.atomic import atomic_write_text
+
+__all__ = ["Trajectory", "read_tum", "write_tum", "read_csv_trajectory", "read_trajectory", "read_xyz_track",
+           "attach_poses", "attach_track"]
+
+
+@dataclass
+class Trajectory:
+    """Timestamped 6-DoF poses ``world_from_antenna``."""
+
+    timestamps_s: np.ndarray
+    positions_xyz: np.ndarray
+    orientations_quat_wxyz: np.ndarray
+
+    def __post_init__(self):
+        self.timestamps_s = np.asarray(self.timestamps_s, dtype=float).reshape(-1)
+        n = self.timestamps_s.size
+        self.positions_xyz = np.asarray(self.positions_xyz, dtype=float).reshape(n, 3)
+        q = np.asarray(self.orientations_quat_wxyz, dtype=float).reshape(n, 4)
+        if not (np.all(np.isfinite(self.timestamps_s)) and np.all(np.isfinite(self.positions_xyz))):
+            raise InvalidDataError("trajectory holds NaN/inf values")
+        try:
+            self.orientations_quat_wxyz = normalize_quat(q)
+        except ValueError as exc:
+            raise InvalidDataError(f"trajectory: {exc}") from None
+
+    def __len__(self) -> int:
+        return self.timestamps_s.size
+
+
+def _rows(path, text: str, ncols: int, what: str) -> np.ndarray:
+    rows = []
+    for lineno, line in enumerate(text.splitlines(), 1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        parts = line.replace(",", " ").split()
+        if len(parts) != ncols:
+            raise FormatError(path, f"line {lineno}: expected {ncols} numbers ({what}), got {len(parts)}")
+        try:
+            vals = [float(v) for v in parts]
+        except ValueError:
+            raise FormatError(path, f"line {lineno}: not a number in {line!r}") from None
+        rows.append(vals)
+    if not rows:
+        raise FormatError(path, "holds no poses")
+    arr = np.asarray(rows)
+    if not np.all(np.isfinite(arr)):
+        raise FormatError(path, "holds NaN/inf values")
+    return arr
+
+
+def read_tum(path) -> Trajectory:
+    """Read a TUM trajectory (``t tx ty tz qx qy qz qw`` per line)."""
+    p = check_file(path)
+    arr = _rows(p, p.read_text(encoding="utf-8", errors="replace"), 8, "t tx ty tz qx qy qz qw")
+    q = arr[:, [7, 4, 5, 6]]
+    if np.any(np.linalg.norm(q, axis=1) < 1e-9):
+        raise FormatError(p, "holds a zero quaternion")
+    return Trajectory(arr[:, 0], arr[:, 1:4], q)
+
+
+def write_tum(traj: Trajectory, path) -> None:
+    """Write a TUM trajectory atomically."""
+    q = traj.orientations_quat_wxyz
+    buf = _io.StringIO()
+    buf.write("# t tx ty tz qx qy qz qw\n")
+    for t, p, qq in zip(traj.timestamps_s, traj.positions_xyz, q):
+        buf.write(" ".join(repr(float(v)) for v in (t, *p, qq[1], qq[2], qq[3], qq[0])) + "\n")
+    atomic_write_text(path, buf.getvalue())
+
+
+_CSV_NAMES = {
+    "t": ("t", "time", "timestamp", "timestamp_s", "time_s"),
+    "x": ("x", "tx", "px", "x_m"), "y": ("y", "ty", "py", "y_m"), "z": ("z", "tz", "pz", "z_m"),
+    "qw": ("qw", "w"), "qx": ("qx",), "qy": ("qy",), "qz": ("qz",),
+}
+
+
+def read_csv_trajectory(path) -> Trajectory:
+    """Read a CSV trajectory with a header naming columns t, x, y, z and (optionally) qw, qx, qy, qz."""
+    p = check_file(path)
+    text = p.read_text(encoding="utf-8", errors="replace")
+    reader = csv.reader(_io.StringIO(text))
+    try:
+        header = [h.strip().lower() for h in next(reader)]
+    except StopIteration:
+        raise FormatError(p, "empty CSV") from None
+    cols = {}
+    for key, names in _CSV_NAMES.items():
+        for n in names:
+            if n in header:
+                cols[key] = header.index(n)
+                break
+    missing = [k for k in ("t", "x", "y", "z") if k not in cols]
+    if missing:
+        raise FormatError(p, f"CSV header lacks column(s) {missing} (has {header})")
+    has_q = all(k in cols for k in ("qw", "qx", "qy", "qz"))
+    rows = []
+    for lineno, row in enumerate(reader, 2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        try:
+            rows.append([float(row[cols[k]]) for k in ("t", "x", "y", "z")]
+                        + ([float(row[cols[k]]) for k in ("qw", "qx", "qy", "qz")] if has_q else [1, 0, 0, 0]))
+        except (ValueError, IndexError):
+            raise FormatError(p, f"line {lineno}: bad or missing number") from None
+    if not rows:
+        raise FormatError(p, "holds no poses")
+    arr = np.asarray(rows)
+    if not np.all(np.isfinite(arr)):
+        raise FormatError(p, "holds NaN/inf values")
+    return Trajectory(arr[:, 0], arr[:, 1:4], arr[:, 4:8])
+
+
+def read_trajectory(path) -> Trajectory:
+    """Read a TUM (``.txt``/``.tum``) or CSV (``.csv``) trajectory."""
+    p = check_file(path)
+    return read_csv_trajectory(p) if p.suffix.lower() == ".csv" else read_tum(p)
+
+
+def read_xyz_track(path) -> np.ndarray:
+    """Read a track of surveyed points, one ``x y z`` (or ``x,y,z``) per line, metres -> ``(n, 3)``."""
+    p = check_file(path)
+    return _rows(p, p.read_text(encoding="utf-8", errors="replace"), 3, "x y z")
+
+
+def attach_poses(survey, traj: Trajectory, *, by: str = "index"):
+    """A new Survey whose traces carry poses from ``traj``.
+
+    ``by="index"``: one pose per trace, in trace order (counts must match).
+    ``by="time"``: poses interpolated at the survey's timestamps (linear positions,
+    slerp orientations); traces outside the trajectory's time span are an error.
+    """
+    if by == "index":
+        if len(traj) != survey.n_traces:
+            raise InvalidDataError(f"trajectory has {len(traj)} poses but the survey has {survey.n_traces} traces")
+        pos, q, t = traj.positions_xyz, traj.orientations_quat_wxyz, traj.timestamps_s
+    elif by == "time":
+        if survey.timestamps_s is None:
+            raise InvalidDataError("survey has no timestamps to interpolate poses at")
+        ts = traj.timestamps_s
+        if np.any(np.diff(ts) <= 0):
+            raise InvalidDataError("trajectory timestamps must increase strictly")
+        t = survey.timestamps_s
+        if t.min() < ts[0] or t.max() > ts[-1]:
+            raise InvalidDataError(
+                f"survey times [{t.min():.3f}, {t.max():.3f}] s fall outside the trajectory [{ts[0]:.3f}, {ts[-1]:.3f}] s"
+            )
+        frac = np.interp(t, ts, np.arange(ts.size))
+        i0 = np.minimum(np.floor(frac).astype(int), ts.size - 1)
+        i1 = np.minimum(i0 + 1, ts.size - 1)
+        w = frac - i0
+        pos = traj.positions_xyz[i0] * (1 - w[:, None]) + traj.positions_xyz[i1] * w[:, None]
+        q = slerp(traj.orientations_quat_wxyz[i0], traj.orientations_quat_wxyz[i1], w)
+    else:
+        raise InvalidDataError(f"by must be 'index' or 'time', got {by!r}")
+    out = survey.replace(positions_xyz=pos, orientations_quat_wxyz=q, timestamps_s=t)
+    out.metadata["positions_source"] = f"trajectory ({by})"
+    return out
+
+
+def attach_track(survey, track_xyz: np.ndarray):
+    """Place a straight-line survey on a surveyed 3D track (e.g. GPS/total-station points).
+
+    Each trace's along-line distance (its x position, from the survey wheel or
+    trace headers) is matched to the cumulative horizontal distance along the
+    track; positions are interpolated there and headings follow the track.
+    """
+    from gpr3d.core.poses import quat_from_yaw
+
+    if survey.positions_xyz is None:
+        raise InvalidDataError("survey has no along-line positions to place on the track")
+    track = np.asarray(track_xyz, dtype=float)
+    if track.ndim != 2 or track.shape[1] != 3 or track.shape[0] < 2:
+        raise InvalidDataError("track must be (n >= 2, 3) points")
+    s_track = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(track[:, :2], axis=0), axis=1))])
+    if np.any(np.diff(s_track) <= 0):
+        keep = np.concatenate([[True], np.diff(s_track) > 0])
+        track, s_track = track[keep], s_track[keep]
+    s = survey.positions_xyz[:, 0] - survey.positions_xyz[0, 0]
+    pos = np.stack([np.interp(s, s_track, track[:, k]) for k in range(3)], axis=1)
+    seg = np.clip(np.searchsorted(s_track, s, side="right") - 1, 0, track.shape[0] - 2)
+    d = track[seg + 1] - track[seg]
+    out = survey.replace(positions_xyz=pos, orientations_quat_wxyz=quat_from_yaw(np.arctan2(d[:, 1], d[:, 0])))
+    out.metadata["positions_source"] = "along-line distance placed on an xyz track"
+    if s[-1] > s_track[-1] * 1.05:
+        out.metadata["track_warning"] = f"survey line {s[-1]:.2f} m is longer than the track {s_track[-1]:.2f} m"
+    return out

@@ -1,0 +1,42 @@
+"""Zero-phase frequency filters."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import butter, sosfiltfilt
+
+__all__ = ["bandpass"]
+
+
+def bandpass(
+    data: np.ndarray,
+    dt_s: float,
+    *,
+    fmin_hz: float | None = None,
+    fmax_hz: float | None = None,
+    order: int = 4,
+) -> np.ndarray:
+    """Zero-phase Butterworth filter along time (forward-backward, so the order doubles).
+
+    Give both corners for a band-pass, only ``fmin_hz`` for a high-pass, only
+    ``fmax_hz`` for a low-pass.
+    """
+    fs = 1.0 / dt_s
+    nyq = fs / 2
+    for name, f in (("fmin_hz", fmin_hz), ("fmax_hz", fmax_hz)):
+        if f is not None and not 0 < f < nyq:
+            raise ValueError(f"{name} = {f:g} Hz must lie between 0 and the Nyquist frequency {nyq:g} Hz")
+    if fmin_hz is None and fmax_hz is None:
+        raise ValueError("give fmin_hz, fmax_hz or both")
+    if fmin_hz is not None and fmax_hz is not None:
+        if fmin_hz >= fmax_hz:
+            raise ValueError(f"fmin_hz ({fmin_hz:g}) must be below fmax_hz ({fmax_hz:g})")
+        sos = butter(order, [fmin_hz, fmax_hz], btype="bandpass", fs=fs, output="sos")
+    elif fmin_hz is not None:
+        sos = butter(order, fmin_hz, btype="highpass", fs=fs, output="sos")
+    else:
+        sos = butter(order, fmax_hz, btype="lowpass", fs=fs, output="sos")
+    x = np.asarray(data, dtype=np.float64)
+    if x.shape[1] <= 3 * (2 * sos.shape[0] + 1):
+        raise ValueError(f"traces of {x.shape[1]} samples are too short for an order-{order} filter")
+    return sosfiltfilt(sos, x, axis=1).astype(np.float32)

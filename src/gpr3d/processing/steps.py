@@ -1,0 +1,190 @@
+"""Named processing steps on a :class:`~gpr3d.core.survey.Survey`, with provenance.
+
+Each step wraps one pure array function from :mod:`gpr3d.processing`, fills in
+defaults from the survey (sample interval, time zero, centre frequency), and
+appends ``{"step", "args", "result"?}`` to the survey's history. The CLI's
+``--steps`` and :meth:`Survey.apply` use the :data:`STEPS` table.
+"""
+
+from __future__ import annotations
+
+import inspect
+from typing import Callable
+
+import numpy as np
+
+from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.poses import slerp
+from gpr3d.processing import gain, timezero
+from gpr3d.processing.background import remove_background as _remove_background, remove_dc as _remove_dc
+from gpr3d.processing.dewow import dewow as _dewow
+from gpr3d.processing.envelope import envelope as _envelope
+from gpr3d.processing.filters import bandpass as _bandpass
+from gpr3d.processing.resample import resample_traces as _resample_traces
+
+__all__ = ["STEPS", "run_step", "parse_step", "describe_steps"]
+
+
+def _need_frequency(s, what: str) -> float:
+    if s.frequency_hz is None:
+        raise InvalidDataError(f"{what}: the survey has no centre frequency; give it explicitly")
+    return s.frequency_hz
+
+
+def time_zero(s, *, method: str = "first_break", threshold: float = 0.1, search_s: float | None = None,
+              per_trace: bool = False, shift: bool = True):
+    """Estimate time zero from the direct wave; with ``shift`` cut the samples before it (t0 becomes 0).
+
+    ``method``: ``first_break`` (first sample above ``threshold`` x trace maximum) or
+    ``peak`` (direct-wave peak within ``search_s``). ``per_trace`` aligns every trace
+    on its own estimate (removes trigger jitter); otherwise the median is used.
+    """
+    t0 = timezero.estimate_time_zero(s.data, s.dt_s, method=method, threshold=threshold,
+                                     search_s=search_s, per_trace=per_trace)
+    result = {"t0_s": (np.median(t0) if per_trace else t0)}
+    if not shift:
+        if per_trace:
+            raise InvalidDataError("per_trace time zero needs shift=True (one t0 per survey otherwise)")
+        return {"t0_s": float(t0)}, result
+    data = timezero.shift_traces(s.data, np.asarray(t0) / s.dt_s)
+    return {"data": data, "t0_s": 0.0}, result
+
+
+def dewow(s, *, window_s: float | None = None):
+    """Running-mean dewow; ``window_s`` defaults to one period of the centre frequency."""
+    w = window_s if window_s is not None else 1.0 / _need_frequency(s, "dewow")
+    return {"data": _dewow(s.data, s.dt_s, w)}, {"window_s": w}
+
+
+def remove_dc(s, *, sample_range=None):
+    """Subtract each trace's mean (optionally over ``sample_range = [start, stop]``)."""
+    rng = None if sample_range is None else tuple(int(v) for v in sample_range)
+    return {"data": _remove_dc(s.data, sample_range=rng)}, None
+
+
+def remove_background(s, *, method: str = "mean", window_traces: int | None = None):
+    """Subtract the mean/median trace (whole survey, or a moving window of traces)."""
+    return {"data": _remove_background(s.data, method=method, window_traces=window_traces)}, None
+
+
+def gain_tpow(s, *, power: float = 1.0, t_ref_s: float = 1e-9):
+    """Multiply by ``((t - t0)/t_ref)^power``."""
+    return {"data": gain.gain_tpow(s.data, s.dt_s, power=power, t0_s=s.t0_s, t_ref_s=t_ref_s)}, None
+
+
+def gain_sec(s, *, alpha_per_s: float, power: float = 1.0, t_ref_s: float = 1e-9, max_gain: float | None = 1e6):
+    """Spreading and exponential compensation."""
+    data = gain.gain_sec(s.data, s.dt_s, alpha_per_s=alpha_per_s, power=power, t0_s=s.t0_s,
+                         t_ref_s=t_ref_s, max_gain=max_gain)
+    return {"data": data}, None
+
+
+def gain_agc(s, *, window_s: float | None = None, eps: float = 1e-3):
+    """AGC; ``window_s`` defaults to four periods of the centre frequency."""
+    w = window_s if window_s is not None else 4.0 / _need_frequency(s, "gain_agc")
+    return {"data": gain.gain_agc(s.data, s.dt_s, window_s=w, eps=eps)}, {"window_s": w}
+
+
+def bandpass(s, *, fmin_hz: float | None = None, fmax_hz: float | None = None, order: int = 4):
+    """Zero-phase Butterworth; without corners, 0.4x to 2x the centre frequency (below 0.9 Nyquist)."""
+    if fmin_hz is None and fmax_hz is None:
+        f = _need_frequency(s, "bandpass")
+        fmin_hz, fmax_hz = 0.4 * f, min(2.0 * f, 0.45 / s.dt_s)
+    data = _bandpass(s.data, s.dt_s, fmin_hz=fmin_hz, fmax_hz=fmax_hz, order=order)
+    return {"data": data}, {"fmin_hz": fmin_hz, "fmax_hz": fmax_hz}
+
+
+def envelope(s):
+    """Hilbert envelope (instantaneous amplitude)."""
+    return {"data": _envelope(s.data)}, None
+
+
+def resample_spacing(s, *, spacing_m: float):
+    """Traces at a constant spacing along the positions (stationary traces merged)."""
+    if s.positions_xyz is None:
+        raise InvalidDataError("resample_spacing needs trace positions (the survey has none)")
+    data, _, src = _resample_traces(s.data, s.positions_xyz, spacing_m)
+    base = np.arange(s.n_traces)
+    changes = {"data": data}
+    changes["positions_xyz"] = np.stack([np.interp(src, base, s.positions_xyz[:, k]) for k in range(3)], axis=1)
+    if s.timestamps_s is not None:
+        changes["timestamps_s"] = np.interp(src, base, s.timestamps_s)
+    if s.orientations_quat_wxyz is not None:
+        i0 = np.floor(src).astype(int)
+        i1 = np.minimum(i0 + 1, s.n_traces - 1)
+        q = s.orientations_quat_wxyz
+        changes["orientations_quat_wxyz"] = slerp(q[i0], q[i1], src - i0)
+    return changes, {"n_traces": int(data.shape[0])}
+
+
+STEPS: dict[str, Callable] = {
+    f.__name__: f
+    for f in (time_zero, dewow, remove_dc, remove_background, gain_tpow, gain_sec, gain_agc,
+              bandpass, envelope, resample_spacing)
+}
+
+
+def run_step(survey, step: str, **kwargs):
+    """Apply ``step`` to ``survey``; return a new Survey with the step in its history."""
+    try:
+        func = STEPS[step]
+    except KeyError:
+        raise InvalidDataError(f"unknown processing step {step!r}; known: {', '.join(STEPS)}") from None
+    sig = inspect.signature(func)
+    try:
+        sig.bind(survey, **kwargs)
+    except TypeError as exc:
+        raise InvalidDataError(f"{step}: {exc}") from None
+    try:
+        changes, result = func(survey, **kwargs)
+    except ValueError as exc:  # bad parameter values from the array functions
+        if isinstance(exc, InvalidDataError):
+            raise
+        raise InvalidDataError(f"{step}: {exc}") from None
+    out = survey._derive(step, kwargs, **changes)
+    if result:
+        from gpr3d.core.survey import _jsonable
+
+        out.history[-1]["result"] = _jsonable(result)
+    return out
+
+
+def _parse_value(text: str):
+    import json
+
+    low = text.lower()
+    if low in ("none", "null"):
+        return None
+    if low in ("true", "false"):
+        return low == "true"
+    if "," in text:
+        return [_parse_value(t) for t in text.split(",")]
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def parse_step(spec: str) -> tuple[str, dict]:
+    """Parse ``'name:key=value:key=value'`` (the CLI's step syntax) into ``(name, kwargs)``."""
+    name, *pairs = spec.split(":")
+    kwargs = {}
+    for pair in pairs:
+        if "=" not in pair:
+            raise InvalidDataError(f"bad step argument {pair!r} in {spec!r}: expected key=value")
+        k, v = pair.split("=", 1)
+        kwargs[k.strip()] = _parse_value(v.strip())
+    if name not in STEPS:
+        raise InvalidDataError(f"unknown processing step {name!r}; known: {', '.join(STEPS)}")
+    return name, kwargs
+
+
+def describe_steps() -> str:
+    """One line per step: name, arguments, first docstring line (for ``--help``)."""
+    lines = []
+    for name, f in STEPS.items():
+        params = [p for p in inspect.signature(f).parameters.values() if p.name != "s"]
+        args = ",".join(p.name for p in params)
+        doc = (f.__doc__ or "").strip().splitlines()[0]
+        lines.append(f"  {name}{'[:' + args + ']' if args else ''}  {doc}")
+    return "\n".join(lines)

@@ -1,0 +1,113 @@
+"""Time zero: find when the wave leaves the surface, and cut the samples before it."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["first_break", "direct_wave_peak", "estimate_time_zero", "shift_traces"]
+
+
+def first_break(data: np.ndarray, threshold: float = 0.1) -> np.ndarray:
+    """First-break sample index of each trace (fractional).
+
+    The first sample whose absolute amplitude reaches ``threshold`` times the
+    trace's maximum absolute amplitude, refined by linear interpolation on the
+    rising edge.
+
+    Parameters
+    ----------
+    data : (n_traces, n_samples) array
+    threshold : float in (0, 1]
+
+    Returns
+    -------
+    (n_traces,) float array of sample indices.
+    """
+    if not 0 < threshold <= 1:
+        raise ValueError(f"threshold must be in (0, 1], got {threshold}")
+    a = np.abs(np.asarray(data, dtype=np.float64))
+    level = threshold * a.max(axis=1, keepdims=True)
+    above = a >= level
+    idx = np.argmax(above, axis=1)
+    out = idx.astype(float)
+    rows = np.nonzero(idx > 0)[0]
+    if rows.size:
+        i = idx[rows]
+        lo, hi = a[rows, i - 1], a[rows, i]
+        lv = level[rows, 0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            frac = np.where(hi > lo, (lv - lo) / (hi - lo), 1.0)
+        out[rows] = i - 1 + np.clip(frac, 0.0, 1.0)
+    return out
+
+
+def direct_wave_peak(data: np.ndarray, search_samples: int | None = None) -> np.ndarray:
+    """Sample index (fractional, parabolic refinement) of the largest absolute amplitude.
+
+    ``search_samples`` limits the search to the first samples of each trace, where
+    the direct (air/ground) wave is.
+    """
+    a = np.abs(np.asarray(data, dtype=np.float64))
+    if search_samples is not None:
+        a = a[:, : max(int(search_samples), 3)]
+    idx = np.argmax(a, axis=1)
+    out = idx.astype(float)
+    inner = (idx > 0) & (idx < a.shape[1] - 1)
+    r = np.nonzero(inner)[0]
+    if r.size:
+        i = idx[r]
+        y0, y1, y2 = a[r, i - 1], a[r, i], a[r, i + 1]
+        denom = y0 - 2 * y1 + y2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            delta = np.where(denom != 0, 0.5 * (y0 - y2) / denom, 0.0)
+        out[r] = i + np.clip(delta, -0.5, 0.5)
+    return out
+
+
+def estimate_time_zero(
+    data: np.ndarray,
+    dt_s: float,
+    *,
+    method: str = "first_break",
+    threshold: float = 0.1,
+    search_s: float | None = None,
+    per_trace: bool = False,
+):
+    """Time zero (s after the first sample) of a B-scan.
+
+    ``method="first_break"`` uses :func:`first_break`; ``"peak"`` the direct-wave peak
+    (:func:`direct_wave_peak`). With ``per_trace=False`` the median over traces is
+    returned (a float); otherwise one value per trace.
+    """
+    if method == "first_break":
+        idx = first_break(data, threshold)
+    elif method == "peak":
+        search = None if search_s is None else int(round(search_s / dt_s))
+        idx = direct_wave_peak(data, search)
+    else:
+        raise ValueError(f"unknown time-zero method {method!r} (use 'first_break' or 'peak')")
+    t0 = idx * dt_s
+    return t0 if per_trace else float(np.median(t0))
+
+
+def shift_traces(data: np.ndarray, shift_samples) -> np.ndarray:
+    """Move each trace earlier by ``shift_samples`` (fractional, linear interpolation).
+
+    Samples that would come from beyond the end of a trace are not invented: the
+    output is cut to the longest length that every trace can fill, i.e.
+    ``floor(n_samples - 1 - max(shift)) + 1`` samples.
+    """
+    x = np.asarray(data, dtype=np.float32)
+    n_tr, n_s = x.shape
+    shift = np.broadcast_to(np.asarray(shift_samples, dtype=float), (n_tr,))
+    if np.any(shift < 0):
+        raise ValueError("shifts must be >= 0 (time zero lies after the first sample)")
+    n_out = int(np.floor(n_s - 1 - shift.max() + 1e-9)) + 1
+    if n_out < 2:
+        raise ValueError("time zero is at the end of the traces: nothing left after cutting")
+    pos = np.arange(n_out)[None, :] + shift[:, None]
+    i0 = np.minimum(np.floor(pos).astype(np.int64), n_s - 1)
+    i1 = np.minimum(i0 + 1, n_s - 1)
+    w = (pos - i0).astype(np.float32)
+    rows = np.arange(n_tr)[:, None]
+    return (x[rows, i0] * (1 - w) + x[rows, i1] * w).astype(np.float32)

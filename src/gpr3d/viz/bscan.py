@@ -1,0 +1,97 @@
+"""B-scan figures: time or depth axis, grey/'hot'/seismic colour maps, optional boxes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gpr3d.io.atomic import atomic_path
+
+__all__ = ["plot_bscan", "save_bscan_png"]
+
+
+def _mpl():
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_bscan(
+    survey,
+    ax=None,
+    *,
+    axis: str = "time",
+    eps_r: float | None = None,
+    cmap: str = "gray",
+    clip_percentile: float = 99.0,
+    envelope: bool = False,
+    boxes=None,
+    title: str | None = None,
+):
+    """Draw ``survey`` as an image on ``ax`` (created if None); returns the axes.
+
+    Parameters
+    ----------
+    axis : ``"time"`` (two-way time below time zero, ns) or ``"depth"`` (m, with
+        ``eps_r`` or the survey's hint; a second axis shows the time).
+    cmap : any matplotlib colour map; ``"hot"`` matches the reference paper's
+        figures (it shows absolute amplitude).
+    clip_percentile : colour limits at this percentile of |amplitude|.
+    boxes : iterable of ``(trace_start, t_start_s, trace_end, t_end_s)`` to outline.
+    """
+    plt = _mpl()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 4.5))
+    img = survey.data.T.astype(np.float64)
+    one_sided = cmap in ("hot", "afmhot", "gist_heat", "inferno", "magma") or envelope
+    if one_sided:
+        img = np.abs(img)
+    lim = float(np.percentile(np.abs(img), clip_percentile)) or 1.0
+    vmin, vmax = (0.0, lim) if one_sided else (-lim, lim)
+    twt = survey.twt_s
+    x = survey.distances_m
+    xlabel = "distance along path (m)"
+    if x is None or x[-1] <= 0:
+        x = np.arange(survey.n_traces, dtype=float)
+        xlabel = "trace"
+    if axis == "depth":
+        d = survey.depths_m(eps_r)
+        y0, y1, ylabel = d[0], d[-1], f"depth (m), eps_r = {eps_r or survey.eps_r:.3g}"
+    elif axis == "time":
+        y0, y1, ylabel = twt[0] * 1e9, twt[-1] * 1e9, "two-way time (ns)"
+    else:
+        raise ValueError(f"axis must be 'time' or 'depth', got {axis!r}")
+    im = ax.imshow(img, aspect="auto", cmap=cmap, vmin=vmin, vmax=vmax, extent=(x[0], x[-1], y1, y0),
+                   interpolation="nearest")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title, fontsize=10)
+    if boxes is not None:
+        from matplotlib.patches import Rectangle
+
+        for b in boxes:
+            i0, t0, i1, t1 = b[:4]
+            xa = np.interp([i0, i1], np.arange(survey.n_traces), x)
+            if axis == "depth":
+                ya = np.interp(np.array([t0, t1]), survey.times_s, survey.depths_m(eps_r))
+            else:
+                ya = (np.array([t0, t1]) - survey.t0_s) * 1e9
+            ax.add_patch(Rectangle((xa[0], ya[0]), xa[1] - xa[0], ya[1] - ya[0], fill=False, ec="cyan", lw=1.2))
+    ax.figure.colorbar(im, ax=ax, fraction=0.04, pad=0.02, label="|amplitude|" if one_sided else "amplitude")
+    return ax
+
+
+def save_bscan_png(survey, path, *, dpi: int = 120, **kwargs) -> None:
+    """Render :func:`plot_bscan` to a PNG file atomically."""
+    plt = _mpl()
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    try:
+        plot_bscan(survey, ax, **kwargs)
+        fig.tight_layout()
+        with atomic_path(path, suffix=".png.part") as tmp:
+            fig.savefig(tmp, dpi=dpi, format="png")
+    finally:
+        plt.close(fig)
