@@ -46,6 +46,7 @@ def _print_survey_info(path, surveys, as_json: bool):
             "positions": m.get("positions_source"),
             "length_m": None if s.distances_m is None else float(s.distances_m[-1]),
             "history": [h["step"] for h in s.history],
+            "header_timewindow_s": m.get("header_timewindow_s"),
         }
         rows.append(row)
     if as_json:
@@ -55,6 +56,9 @@ def _print_survey_info(path, surveys, as_json: bool):
         print(f"{r['file']}{ch}: {r['format']}")
         print(f"  traces x samples : {r['n_traces']} x {r['n_samples']}")
         print(f"  sample interval  : {r['dt_s'] * 1e9:.6g} ns   range: {r['range_s'] * 1e9:.6g} ns")
+        if r["header_timewindow_s"] and abs(r["header_timewindow_s"] - r["range_s"]) > 1e-3 * r["range_s"]:
+            print(f"  header window    : {r['header_timewindow_s'] * 1e9:.6g} ns (TIMEWINDOW field; the range above"
+                  " follows the sampling frequency)")
         ant = r["antenna"] or "?"
         freq = f"{r['frequency_hz'] / 1e6:.6g} MHz" if r["frequency_hz"] else "unknown frequency"
         print(f"  antenna          : {ant} ({freq}), tx-rx offset {r['offset_m']:.4g} m")

@@ -72,7 +72,8 @@ def gain_agc(data: np.ndarray, dt_s: float, *, window_s: float, eps: float = 1e-
     """
     n = max(int(round(window_s / dt_s)), 1)
     x = np.asarray(data, dtype=np.float64)
-    rms = np.sqrt(uniform_filter1d(x * x, size=n, axis=1, mode="nearest"))
+    # the running sum can dip a hair below zero in floating point: clamp before the root
+    rms = np.sqrt(np.maximum(uniform_filter1d(x * x, size=n, axis=1, mode="nearest"), 0.0))
     floor = eps * np.sqrt(np.mean(x * x))
     if floor == 0:
         return np.asarray(data, dtype=np.float32).copy()

@@ -1,0 +1,132 @@
+"""The command line: what a user types and sees."""
+
+import json
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import gpr3d
+from gpr3d.cli.main import main
+from tests.conftest import REAL, real_file, real_files
+
+# (traces, samples, range ns, antenna text) from ../shared/data/real/README.md
+FACTS = {
+    "FILE____032.DZT": (1040, 512, 48, "400MHz"),
+    "test_gssi.DZT": (345, 2048, 2300, "5106"),
+    "ten_col.rd3": (10, 512, 211.03, "500_shielded_egrip"),
+    "ten_col_nogps.rd3": (10, 512, 211.03, "500_shielded_egrip"),
+}
+
+
+def run_cli(*args):
+    return subprocess.run([sys.executable, "-m", "gpr3d", *map(str, args)], capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_info_on_every_real_file():
+    files = real_files()
+    if not files:
+        pytest.skip("real data not available")
+    r = run_cli("info", *files)
+    assert r.returncode == 0, r.stderr
+    blocks = re.split(r"\n(?=\S)", r.stdout.strip())
+    assert len(blocks) == len(files)
+    for path, block in zip(files, blocks):
+        assert block.startswith(str(path))
+        n, m = map(int, re.search(r"traces x samples : (\d+) x (\d+)", block).groups())
+        rng = float(re.search(r"range: ([\d.]+) ns", block).group(1))
+        ant = re.search(r"antenna\s+: (.*) \(", block).group(1)
+        if path.name in FACTS:
+            fn, fm, frange, fant = FACTS[path.name]
+        elif path.suffix == ".DT1":
+            hd = dict(line.split("=", 1) for line in path.with_suffix(".HD").read_text().splitlines() if "=" in line)
+            hd = {k.strip(): v.strip() for k, v in hd.items()}
+            fn, fm = int(hd["NUMBER OF TRACES"]), int(hd["NUMBER OF PTS/TRC"])
+            frange, fant = float(hd["TOTAL TIME WINDOW"]), f"{float(hd['NOMINAL FREQUENCY']):g} MHz pulseEKKO"
+        else:
+            raise AssertionError(f"no facts for {path}")
+        assert (n, m) == (fn, fm), path
+        assert rng == pytest.approx(frange, rel=1e-4), path
+        assert ant == fant, path
+    assert "header window    : 422.061 ns" in r.stdout  # the MALA header's own TIMEWINDOW is shown too
+
+
+def test_info_json():
+    p = real_file("gprpy_sns_50MHz/XLINE00.DT1")
+    assert main(["info", str(p), "--json"]) == 0
+
+
+def test_user_errors_are_one_line_without_traceback(tmp_path):
+    bad = tmp_path / "junk.DZT"
+    bad.write_bytes(b"\x00" * 100)
+    r = run_cli("info", bad)
+    assert r.returncode == 1
+    assert r.stderr.strip().count("\n") == 0 and "Traceback" not in r.stderr
+    assert r.stderr.startswith("gpr3d: error: junk.DZT:")
+    r = run_cli("process", bad, "--steps", "dewow", "--out", tmp_path / "x.h5")
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    good = real_file("impdar_mala_500MHz/ten_col.rd3")
+    for args, msg in [
+        (("process", good, "--steps", "wiggle", "--out", tmp_path / "x.h5"), "unknown processing step 'wiggle'"),
+        (("process", good, "--steps", "bandpass:fmin_hz=9e9", "--out", tmp_path / "x.h5"), "Nyquist"),
+        (("convert", good, tmp_path / "x.xyz"), "unknown output type"),
+        (("show", good, "--out", tmp_path / "x.png", "--axis", "depth"), "needs --eps-r"),
+        (("info", tmp_path / "missing.DZT"), "no such file"),
+        (("info", good, "--format", "dzt"), "not a DZT file"),
+    ]:
+        r = run_cli(*args)
+        assert r.returncode == 1, args
+        assert msg in r.stderr and "Traceback" not in r.stderr, (args, r.stderr)
+        assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_truncated_file_warns_in_one_line(tmp_path):
+    src = real_file("gprpy_gssi_400MHz/FILE____032.DZT")
+    cut = tmp_path / "cut.DZT"
+    cut.write_bytes(src.read_bytes()[:-300])
+    r = run_cli("info", cut)
+    assert r.returncode == 0
+    assert "gpr3d: warning: cut.DZT: recording ends mid-trace; dropped 1 partial trace" in r.stderr
+    assert "1039 x 512" in r.stdout
+
+
+def test_process_convert_show(tmp_path):
+    src = real_file("gprpy_gssi_400MHz/FILE____032.DZT")
+    out = tmp_path / "p.h5"
+    assert main(["process", str(src), "--steps", "time_zero:threshold=0.3", "dewow", "remove_background",
+                 "gain_tpow:power=1.5", "bandpass:fmin_hz=1.5e8:fmax_hz=8e8", "--out", str(out)]) == 0
+    s = gpr3d.read(out)
+    assert [h["step"] for h in s.history] == ["time_zero", "dewow", "remove_background", "gain_tpow", "bandpass"]
+    assert s.history[3]["args"] == {"power": 1.5}
+    ref = gpr3d.read(src).time_zero(threshold=0.3).dewow().remove_background().gain_tpow(power=1.5).bandpass(
+        fmin_hz=1.5e8, fmax_hz=8e8)
+    np.testing.assert_array_equal(s.data, ref.data)
+    assert main(["convert", str(src), str(tmp_path / "c.sgy")]) == 0
+    assert main(["show", str(src), "--out", str(tmp_path / "s.png"), "--axis", "depth", "--cmap", "hot",
+                 "--steps", "time_zero", "dewow"]) == 0
+    assert (tmp_path / "s.png").stat().st_size > 10_000
+
+
+def test_help_has_examples():
+    r = run_cli("--help")
+    assert r.returncode == 0 and "examples:" in r.stdout and "gpr3d demo" in r.stdout
+    r = run_cli("process", "--help")
+    assert "time_zero" in r.stdout and "example:" in r.stdout
+
+
+def test_demo_end_to_end(tmp_path):
+    r = run_cli("demo", "--out", tmp_path / "d")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((tmp_path / "d" / "summary.json").read_text())
+    real = summary["stages"]["real"]
+    assert (real["n_traces"], real["n_samples"]) == (1040, 512)
+    for row in summary["stages"]["synthetic"]["apexes"]:
+        assert abs(row["apex_time_error_s"]) < 0.1e-9  # two samples
+        assert abs(row["apex_trace_found"] - row["apex_trace_true"]) <= 1
+    names = {p.name for p in (tmp_path / "d").iterdir()}
+    assert {"summary.json", "config.json", "real_raw.png", "real_processed.png", "real_processed.h5",
+            "synthetic_processed.png"} <= names
+    assert not [n for n in names if n.endswith(".part")]

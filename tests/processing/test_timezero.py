@@ -1,0 +1,45 @@
+import numpy as np
+import pytest
+
+import gpr3d
+from gpr3d.processing import direct_wave_peak, estimate_time_zero, first_break, shift_traces
+from gpr3d.simulation.synthetic import point_targets_bscan, ricker
+
+DT = 0.05e-9
+
+
+def test_peak_of_a_ricker_at_a_fractional_time():
+    t = np.arange(400) * DT
+    t_true = 3.4321e-9
+    x = np.stack([ricker(t - t_true - k * 0.011e-9, 1e9) for k in range(5)])
+    idx = direct_wave_peak(x)
+    np.testing.assert_allclose(idx * DT, t_true + 0.011e-9 * np.arange(5), atol=0.004e-9)
+    assert estimate_time_zero(x, DT, method="peak") == pytest.approx(t_true + 0.022e-9, abs=0.004e-9)
+
+
+def test_first_break_on_a_ramp():
+    x = np.zeros((1, 100))
+    x[0, 40:60] = np.arange(20) / 19  # reaches 0.1 between samples 41 and 42
+    assert first_break(x, 0.1)[0] == pytest.approx(40 + 0.1 * 19)
+
+
+def test_shift_traces_matches_interpolation():
+    rng = np.random.default_rng(2)
+    x = rng.standard_normal((4, 50)).astype(np.float32)
+    shifts = np.array([0.0, 1.5, 3.25, 2.0])
+    y = shift_traces(x, shifts)
+    assert y.shape == (4, 50 - 4)  # floor(49 - 3.25) + 1
+    for i in range(4):
+        ref = np.interp(np.arange(y.shape[1]) + shifts[i], np.arange(50), x[i])
+        np.testing.assert_allclose(y[i], ref, atol=1e-6)
+
+
+def test_time_zero_step_on_synthetic_survey():
+    s = point_targets_bscan([[0.3, 0.2]], t0_s=2e-9, offset_m=0.0, dt_s=DT, n_samples=300)
+    p = s.time_zero(method="peak", search_s=4e-9)
+    assert p.history[-1]["result"]["t0_s"] == pytest.approx(2e-9, abs=0.01e-9)
+    assert p.t0_s == 0.0 and p.n_samples < s.n_samples
+    q = s.time_zero(method="peak", search_s=4e-9, shift=False)
+    assert q.t0_s == pytest.approx(2e-9, abs=0.01e-9) and q.n_samples == s.n_samples
+    with pytest.raises(gpr3d.InvalidDataError, match="unknown time-zero method"):
+        s.time_zero(method="guess")
