@@ -10,7 +10,7 @@ import pytest
 
 import gpr3d
 from gpr3d.cli.main import main
-from tests.conftest import REAL, real_file, real_files
+from tests.conftest import real_file, real_files
 
 # (traces, samples, range ns, antenna text) from ../shared/data/real/README.md
 FACTS = {

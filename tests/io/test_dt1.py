@@ -88,7 +88,7 @@ def test_trace_header_points_mismatch(tmp_path):
 def test_missing_header_file(tmp_path):
     p = write_dt1(tmp_path / "NOHD")
     p.with_suffix(".HD").unlink()
-    with pytest.raises(FormatError, match="HD header"):
+    with pytest.raises(FormatError, match="no .hd header beside the data"):
         read_dt1(p)
 
 
@@ -98,3 +98,16 @@ def test_truncated_mid_trace(tmp_path):
     with pytest.warns(TruncatedRecordingWarning, match="dropped 1 partial trace"):
         s = gpr3d.read(p)
     assert s.n_traces == 4
+
+
+def test_pulseekko_gps_sidecar(tmp_path):
+    p = write_dt1(tmp_path / "GLINE", n_traces=5)
+    # fixes at traces 1 and 5, 0.01' of longitude apart at the equator (18.55 m east)
+    p.with_suffix(".GPS").write_text(
+        "Trace #1 at position 0.000000\n$GPGGA,120000,0000.0000,N,01000.0000,E,1,08,1.0,5.0,M,,M,,*00\n"
+        "Trace #5 at position 1.000000\n$GPGGA,120004,0000.0000,N,01000.0100,E,1,08,1.0,5.0,M,,M,,*00\n"
+    )
+    s = gpr3d.read(p)
+    assert s.metadata["gps"]["fixes"] == 2
+    assert s.positions_xyz[-1, 0] == pytest.approx(0.01 / 60 * np.pi / 180 * 6378137.0, rel=1e-6)
+    np.testing.assert_allclose(np.diff(s.positions_xyz[:, 0]), s.positions_xyz[-1, 0] / 4)

@@ -122,3 +122,36 @@ def hdf5_errors(path):
     except (OSError, RuntimeError, KeyError, ValueError, TypeError, IndexError) as exc:
         detail = str(exc).splitlines()[0][:160] if str(exc) else type(exc).__name__
         raise FormatError(path, f"HDF5 content is corrupt or truncated ({detail})") from None
+
+
+def data_and_header(path, data_suffixes: tuple[str, ...], header_suffix: str, vendor: str):
+    """Resolve a data/header file pair from either file: ``(data_path, header_path)`` or FormatError."""
+    p = Path(path)
+    data = p if p.suffix.lower() in data_suffixes else next(
+        (q for q in (sidecar(p, s) for s in data_suffixes) if q is not None), None)
+    header = p if p.suffix.lower() == header_suffix else sidecar(p, header_suffix)
+    names = "/".join(data_suffixes)
+    if data is None:
+        raise FormatError(p, f"no {names} data file beside the header")
+    if header is None:
+        raise FormatError(p, f"no {header_suffix} header beside the data ({vendor} needs both)")
+    return check_file(data), check_file(header)
+
+
+def warn_fewer_traces(path, header_count: int, file_count: int, field: str) -> None:
+    """Warn that the header promises more traces than the (truncated) file holds."""
+    warnings.warn(f"{Path(path).name}: {field} says {header_count} traces, file holds {file_count}; "
+                  f"reading {file_count}", TruncatedRecordingWarning, stacklevel=3)
+
+
+def gps_positions(fix_index, lat, lon, alt, trace_index):
+    """Per-trace local ENU metres from GPS fixes at (fractional) trace indices.
+
+    Returns ``(positions (n, 3), origin (lat, lon, alt))``, or ``(None, None)`` when
+    fewer than two fixes with increasing indices exist.
+    """
+    fix_index = np.asarray(fix_index, dtype=float)
+    if fix_index.size < 2 or np.any(np.diff(fix_index) <= 0):
+        return None, None
+    ti = np.asarray(trace_index, dtype=float)
+    return local_metres(np.interp(ti, fix_index, lat), np.interp(ti, fix_index, lon), np.interp(ti, fix_index, alt))

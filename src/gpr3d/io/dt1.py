@@ -17,7 +17,9 @@ import numpy as np
 
 from gpr3d.core.errors import FormatError
 from gpr3d.core.survey import Survey
-from gpr3d.io._common import check_file, finite_positive, local_metres, nmea_degrees, sidecar, whole_traces
+from gpr3d.io._common import (
+    check_file, data_and_header, finite_positive, gps_positions, nmea_degrees, sidecar, warn_fewer_traces, whole_traces,
+)
 
 __all__ = ["is_dt1", "read_dt1", "read_hd", "read_sns_gps"]
 
@@ -86,14 +88,7 @@ def is_dt1(path) -> bool:
 
 def read_dt1(path) -> list[Survey]:
     """Read a DT1/HD pair (give either file) as a one-element list of :class:`Survey`."""
-    p = Path(path)
-    dt1 = sidecar(p, ".dt1") if p.suffix.lower() != ".dt1" else p
-    hd_path = sidecar(p, ".hd")
-    if dt1 is None:
-        raise FormatError(p, "no DT1 data file beside the header")
-    if hd_path is None:
-        raise FormatError(p, "no HD header file beside the data (pulseEKKO needs both)")
-    dt1 = check_file(dt1)
+    dt1, hd_path = data_and_header(path, (".dt1",), ".hd", "pulseEKKO")
     hd = read_hd(hd_path)
     n_hd = int(_hd_number(hd_path, hd, "NUMBER OF TRACES"))
     npts = int(_hd_number(hd_path, hd, "NUMBER OF PTS/TRC"))
@@ -115,12 +110,7 @@ def read_dt1(path) -> list[Survey]:
         raise FormatError(dt1, f"file holds {n_file} traces but the HD header says {n_hd}: header and data disagree")
     partial = (size % trace_bytes) != 0  # already reported by whole_traces
     if n_file + int(partial) < n_hd:
-        import warnings
-
-        from gpr3d.core.errors import TruncatedRecordingWarning
-
-        warnings.warn(f"{dt1.name}: HD header says {n_hd} traces, file holds {n_file}; reading {n_file}",
-                      TruncatedRecordingWarning, stacklevel=2)
+        warn_fewer_traces(dt1, n_hd, n_file, "HD header")
     rec = np.dtype([("h", "<f4", (TRACE_HEADER_BYTES // 4,)), ("d", "<i2" if bpp == 2 else "<i4", (npts,))])
     arr = np.fromfile(dt1, dtype=rec, count=n_file)
     heads = arr["h"]
@@ -147,10 +137,8 @@ def read_dt1(path) -> list[Survey]:
     if gps_file is not None:
         g = read_sns_gps(gps_file)
         gps_meta = {"file": gps_file.name, "fixes": int(g["trace"].size)}
-        if g["trace"].size >= 2 and np.all(np.diff(g["trace"]) > 0):
-            idx = heads[:, 0].astype(float)
-            enu, origin = local_metres(np.interp(idx, g["trace"], g["lat"]), np.interp(idx, g["trace"], g["lon"]),
-                                       np.interp(idx, g["trace"], g["alt"]))
+        enu, origin = gps_positions(g["trace"], g["lat"], g["lon"], g["alt"], heads[:, 0])
+        if enu is not None:
             positions = enu
             pos_source = "pulseEKKO .GPS (local ENU metres about origin)"
             gps_meta["origin_lat_lon_alt"] = list(origin)

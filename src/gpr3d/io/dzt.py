@@ -22,7 +22,7 @@ import numpy as np
 
 from gpr3d.core.errors import FormatError
 from gpr3d.core.survey import Survey
-from gpr3d.io._common import check_file, finite_positive, local_metres, nmea_degrees, sidecar, whole_traces
+from gpr3d.io._common import check_file, finite_positive, gps_positions, nmea_degrees, sidecar, whole_traces
 
 __all__ = ["is_dzt", "read_dzt", "read_dzt_header", "read_dzg", "GSSI_ANTENNA_MHZ"]
 
@@ -216,12 +216,8 @@ def read_dzt(path, *, gps: bool = True) -> list[Survey]:
         if g is not None:
             meta_gps = {"file": dzg.name, "records": g["records"], "fixes": int(g["scan"].size),
                         "malformed": g["malformed"]}
-            if g["scan"].size >= 2 and np.all(np.diff(g["scan"]) > 0):
-                idx = np.arange(n, dtype=float)
-                lat = np.interp(idx, g["scan"], g["lat"])
-                lon = np.interp(idx, g["scan"], g["lon"])
-                alt = np.interp(idx, g["scan"], g["alt"])
-                positions, origin = local_metres(lat, lon, alt)
+            positions, origin = gps_positions(g["scan"], g["lat"], g["lon"], g["alt"], np.arange(n))
+            if positions is not None:
                 pos_source = "DZG GPS (local ENU metres about origin)"
                 meta_gps["origin_lat_lon_alt"] = list(origin)
     if positions is None and hdr["scans_per_m"]:

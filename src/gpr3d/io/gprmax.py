@@ -16,7 +16,6 @@ and the tx-rx offset come from the source and receiver positions.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import h5py
 import numpy as np

@@ -16,7 +16,6 @@ from __future__ import annotations
 import json
 
 import h5py
-import numpy as np
 
 from gpr3d.core.errors import FormatError
 from gpr3d.core.survey import Survey

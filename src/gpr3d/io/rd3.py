@@ -20,7 +20,9 @@ import numpy as np
 
 from gpr3d.core.errors import FormatError
 from gpr3d.core.survey import Survey
-from gpr3d.io._common import check_file, finite_positive, local_metres, sidecar, whole_traces
+from gpr3d.io._common import (
+    check_file, data_and_header, finite_positive, gps_positions, sidecar, warn_fewer_traces, whole_traces,
+)
 
 __all__ = ["is_rd3", "read_rd3", "read_rad", "read_cor"]
 
@@ -78,17 +80,7 @@ def is_rd3(path) -> bool:
 
 def read_rd3(path) -> list[Survey]:
     """Read a MALA ``.rd3``/``.rd7`` + ``.rad`` pair (give any of them) as a one-element list."""
-    p = Path(path)
-    if p.suffix.lower() in (".rd3", ".rd7"):
-        data_path = p
-    else:
-        data_path = sidecar(p, ".rd3") or sidecar(p, ".rd7")
-    rad_path = sidecar(p, ".rad")
-    if data_path is None:
-        raise FormatError(p, "no .rd3/.rd7 data file beside the header")
-    if rad_path is None:
-        raise FormatError(p, "no .rad header beside the data (MALA needs both)")
-    data_path = check_file(data_path)
+    data_path, rad_path = data_and_header(path, (".rd3", ".rd7"), ".rad", "MALA")
     rad = read_rad(rad_path)
     nsamp = int(_num(rad_path, rad, "SAMPLES"))
     if not 2 <= nsamp <= 1_000_000:
@@ -108,12 +100,7 @@ def read_rd3(path) -> list[Survey]:
     if last is not None and int(last) != n:
         if int(last) < n:
             raise FormatError(data_path, f"file holds {n} traces but LAST TRACE says {int(last)}: header and data disagree")
-        import warnings
-
-        from gpr3d.core.errors import TruncatedRecordingWarning
-
-        warnings.warn(f"{data_path.name}: LAST TRACE says {int(last)} traces, file holds {n}; reading {n}",
-                      TruncatedRecordingWarning, stacklevel=2)
+        warn_fewer_traces(data_path, int(last), n, "LAST TRACE")
     data = np.fromfile(data_path, dtype="<i2" if nbytes == 2 else "<i4", count=n * nsamp).reshape(n, nsamp)
     data = data.astype(np.float32)
 
@@ -134,10 +121,9 @@ def read_rd3(path) -> list[Survey]:
     if cor_path is not None:
         g = read_cor(cor_path)
         gps_meta = {"file": cor_path.name, "fixes": int(g["trace"].size)}
-        if g["trace"].size >= 2 and np.all(np.diff(g["trace"]) > 0):
-            idx = np.arange(1, n + 1, dtype=float)  # COR traces count from 1
-            enu, origin = local_metres(np.interp(idx, g["trace"], g["lat"]), np.interp(idx, g["trace"], g["lon"]),
-                                       np.interp(idx, g["trace"], g["alt"]))
+        # COR traces count from 1
+        enu, origin = gps_positions(g["trace"], g["lat"], g["lon"], g["alt"], np.arange(1, n + 1))
+        if enu is not None:
             positions = enu
             pos_source = "COR GPS (local ENU metres about origin)"
             gps_meta["origin_lat_lon_alt"] = list(origin)
