@@ -149,6 +149,19 @@ def cmd_convert(args):
     return 0
 
 
+def cmd_simulate(args):
+    from gpr3d.simulation.dataset import SimulateConfig, build_dataset
+
+    cfg = SimulateConfig(out=args.out, n=args.n, seed=args.seed, engine=args.engine, workers=args.workers,
+                         scheduler=args.scheduler, image_height=args.image_height, preset=args.preset,
+                         host=args.host)
+    summary = build_dataset(cfg, progress=not args.no_progress)
+    if summary["samples_per_s"]:
+        print(f"throughput: {summary['samples_per_s'] * 3600:.0f} samples/hour "
+              f"({summary['mean_sample_wall_s']:.1f} s per sample per worker)")
+    return 0
+
+
 def cmd_demo(args):
     from gpr3d.demo import DemoConfig, run_demo
 
@@ -208,6 +221,22 @@ def build_parser() -> argparse.ArgumentParser:
              "example:\n  gpr3d convert XLINE00.DT1 xline00.sgy")
     add_input(sp)
     sp.add_argument("out", help="output: .h5 (gpr3d), .sgy/.segy (SEG-Y) or .png")
+
+    sp = add("simulate", cmd_simulate, "build a labelled dataset of simulated B-scans (resumable)",
+             "examples:\n  gpr3d simulate --engine gprmax --n 1 --seed 0 --out sim1\n"
+             "  gpr3d simulate --n 400 --workers 2 --out gprmax400         (re-run to resume)\n"
+             "  gpr3d simulate --n 5000 --scheduler tcp://10.0.0.5:8786 --out big")
+    sp.add_argument("--out", required=True, help="dataset folder (re-running with the same settings resumes)")
+    sp.add_argument("--n", type=int, required=True, help="number of samples (scene indices 0..n-1)")
+    sp.add_argument("--seed", type=int, default=0, help="master seed: scene i is sample_scene(seed, i)")
+    sp.add_argument("--engine", choices=("gprmax", "forward"), default="gprmax", help="simulator (default gprmax)")
+    sp.add_argument("--workers", type=int, default=2, help="local Dask worker processes (default 2)")
+    sp.add_argument("--scheduler", default=None, help="tcp://HOST:PORT of a Dask scheduler to run on instead")
+    sp.add_argument("--preset", choices=("standard", "tiny"), default="standard",
+                    help="scene sizes: standard (the sampler's ranges) or tiny (seconds each, for smoke tests)")
+    sp.add_argument("--host", choices=("concrete", "soil"), default=None, help="only this host medium")
+    sp.add_argument("--image-height", type=int, default=256, help="rows of the detector images (default 256)")
+    sp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     sp = add("demo", cmd_demo, "run the end-to-end demo (embedded example by default)",
              "example:\n  gpr3d demo --out gpr3d_demo")

@@ -8,6 +8,7 @@ from gpr3d.processing.background import remove_background, remove_dc
 from gpr3d.processing.dewow import dewow
 from gpr3d.processing.envelope import envelope
 from gpr3d.processing.filters import bandpass
+from gpr3d.processing.picking import pick_peak
 from gpr3d.processing.gain import gain_agc, gain_curve_sec, gain_sec, gain_tpow
 from gpr3d.processing.resample import path_distance, resample_traces
 from gpr3d.processing.timezero import direct_wave_peak, estimate_time_zero, first_break, shift_traces
@@ -15,7 +16,7 @@ from gpr3d.processing.timezero import direct_wave_peak, estimate_time_zero, firs
 __all__ = [
     "remove_background", "remove_dc", "dewow", "envelope", "bandpass", "gain_agc", "gain_curve_sec",
     "gain_sec", "gain_tpow", "path_distance", "resample_traces", "direct_wave_peak", "estimate_time_zero",
-    "first_break", "shift_traces", "STEPS",
+    "first_break", "shift_traces", "pick_peak", "STEPS",
 ]
 
 

@@ -28,6 +28,7 @@ def plot_bscan(
     clip_percentile: float = 99.0,
     envelope: bool = False,
     boxes=None,
+    apexes=None,
     title: str | None = None,
 ):
     """Draw ``survey`` as an image on ``ax`` (created if None); returns the axes.
@@ -40,6 +41,7 @@ def plot_bscan(
         figures (it shows absolute amplitude).
     clip_percentile : colour limits at this percentile of |amplitude|.
     boxes : iterable of ``(trace_start, t_start_s, trace_end, t_end_s)`` to outline.
+    apexes : iterable of ``(trace, t_s)`` (times from the first sample) to mark with a cross.
     """
     plt = _mpl()
     if ax is None:
@@ -80,6 +82,12 @@ def plot_bscan(
             else:
                 ya = (np.array([t0, t1]) - survey.t0_s) * 1e9
             ax.add_patch(Rectangle((xa[0], ya[0]), xa[1] - xa[0], ya[1] - ya[0], fill=False, ec="cyan", lw=1.2))
+    if apexes is not None:
+        for tr, ts in apexes:
+            xa = float(np.interp(tr, np.arange(survey.n_traces), x))
+            ya = (float(np.interp(ts, survey.times_s, survey.depths_m(eps_r))) if axis == "depth"
+                  else (ts - survey.t0_s) * 1e9)
+            ax.plot([xa], [ya], marker="+", color="lime", ms=12, mew=1.5)
     ax.figure.colorbar(im, ax=ax, fraction=0.04, pad=0.02, label="|amplitude|" if one_sided else "amplitude")
     return ax
 

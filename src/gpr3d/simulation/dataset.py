@@ -1,0 +1,267 @@
+"""Labelled B-scan datasets at scale: ``gpr3d simulate``.
+
+Each sample ``i`` is the scene :func:`~gpr3d.simulation.sampler.sample_scene` ``(seed, i)``
+run through an engine, written to ``OUT/samples/{i:06d}/``:
+
+* ``scene.json`` - the scene (with the derived grid step and time window),
+* ``bscan.h5`` - the B-scan as a gpr3d Survey (engine, version and inputs in its metadata),
+* ``labels.json`` - apexes, boxes, depths (:func:`~gpr3d.simulation.labels.label_scene`),
+* ``image.png`` - the detector's input image ('hot' colour map of |background-removed data|,
+  ``image_height`` rows x one column per trace).
+
+A sample is built in ``OUT/samples/{i:06d}.part-*`` and renamed into place when
+complete, so a sample folder either holds everything or does not exist. Re-running
+the same command skips finished samples and removes half-built ones: a killed run
+loses at most the samples in flight. At the end ``manifest.json`` lists every
+sample with the SHA-256 of its files, and ``coco.json`` holds the COCO labels.
+
+Work runs on Dask: a local cluster of ``workers`` processes by default, or the
+cluster behind a ``tcp://`` scheduler address.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import time
+import uuid
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gpr3d import __version__
+from gpr3d.core.deps import require
+from gpr3d.core.errors import GPR3DError
+from gpr3d.io.atomic import atomic_write_text
+
+__all__ = ["SimulateConfig", "simulate_sample", "build_dataset", "write_manifest", "bscan_image", "PRESETS"]
+
+SAMPLE_FILES = ("scene.json", "bscan.h5", "labels.json", "image.png")
+
+#: scene presets: "standard" = the sampler's ranges; "tiny" = small, fast scenes for smoke tests
+PRESETS = ("standard", "tiny")
+
+
+@dataclass
+class SimulateConfig:
+    """What ``gpr3d simulate`` builds."""
+
+    out: str
+    n: int = 10
+    seed: int = 0
+    engine: str = "gprmax"  #: "gprmax" (2D FDTD) or "forward" (fast ray model)
+    workers: int = 2
+    scheduler: str | None = None  #: tcp://host:port of a running Dask scheduler
+    image_height: int = 256
+    preset: str = "standard"
+    host: str | None = None  #: force "concrete" or "soil"
+
+
+def _scene_for(cfg_dict: dict, index: int):
+    from gpr3d.simulation.sampler import sample_scene
+
+    scene = sample_scene(cfg_dict["seed"], index, host=cfg_dict.get("host"))
+    if cfg_dict.get("preset") == "tiny":
+        # a quarter of the width and depth, 10 traces: seconds in gprMax
+        scene.width_m, scene.depth_m = scene.width_m / 2.5, scene.depth_m / 2
+        scene.n_traces = 10
+        scene.x_start_m = scene.width_m * 0.25
+        scene.trace_step_m = scene.width_m * 0.5 / 9
+        scene.targets = [t for t in scene.targets[:1]]
+        for t in scene.targets:
+            t.x_m, t.depth_m = scene.width_m / 2, min(t.depth_m, scene.depth_m / 3)
+            t.radius_m = min(t.radius_m, scene.depth_m / 8)
+        scene.stones, scene.rough_surface_m = [], 0.0
+    return scene
+
+
+def bscan_image(survey, height: int) -> np.ndarray:
+    """RGB uint8 image ``(height, n_traces, 3)``: 'hot' colour map of |background-removed data|."""
+    import matplotlib
+
+    x = survey.remove_background().data
+    t_old = np.arange(survey.n_samples)
+    t_new = np.linspace(0, survey.n_samples - 1, height)
+    img = np.stack([np.interp(t_new, t_old, tr) for tr in x], axis=1)  # (height, n_traces)
+    img = np.abs(img)
+    scale = np.percentile(img, 99.5) or 1.0
+    rgba = matplotlib.colormaps["hot"](np.clip(img / scale, 0, 1))
+    return (rgba[..., :3] * 255).astype(np.uint8)
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def simulate_sample(cfg_dict: dict, index: int) -> dict:
+    """Build sample ``index`` into its folder (atomically); returns ``{"index", "wall_s"}``."""
+    from PIL import Image
+
+    from gpr3d.simulation.labels import label_scene
+
+    out = Path(cfg_dict["out"]) / "samples"
+    final = out / f"{index:06d}"
+    if final.exists():
+        return {"index": index, "wall_s": 0.0, "skipped": True}
+    part = out / f"{index:06d}.part-{uuid.uuid4().hex[:8]}"
+    part.mkdir(parents=True)
+    t0 = time.perf_counter()
+    try:
+        scene = _scene_for(cfg_dict, index)
+        if cfg_dict["engine"] == "gprmax":
+            from gpr3d.simulation.gprmax_runner import run_gprmax
+
+            survey, info = run_gprmax(scene, workdir=part / "gprmax")
+            shutil.rmtree(part / "gprmax", ignore_errors=True)
+        elif cfg_dict["engine"] == "forward":
+            from gpr3d.simulation.forward import simulate_scene_bscan
+
+            survey, info = simulate_scene_bscan(scene)
+        else:
+            raise GPR3DError(f"unknown engine {cfg_dict['engine']!r} (use 'gprmax' or 'forward')")
+        labels = label_scene(scene, survey.n_samples, survey.dt_s)
+        (part / "scene.json").write_text(scene.to_json())
+        survey.save(part / "bscan.h5")
+        (part / "labels.json").write_text(json.dumps({"index": index, "eps_r": scene.medium.eps_r,
+                                                      "n_traces": survey.n_traces, "n_samples": survey.n_samples,
+                                                      "dt_s": survey.dt_s, "simulation": info,
+                                                      "labels": labels}, indent=1))
+        Image.fromarray(bscan_image(survey, cfg_dict.get("image_height", 256))).save(part / "image.png")
+        os.replace(part, final)  # the sample appears complete, or not at all
+    except BaseException:
+        shutil.rmtree(part, ignore_errors=True)
+        raise
+    return {"index": index, "wall_s": time.perf_counter() - t0, "skipped": False}
+
+
+def _finished(out: Path) -> set[int]:
+    d = out / "samples"
+    if not d.exists():
+        return set()
+    return {int(p.name) for p in d.iterdir() if p.is_dir() and p.name.isdigit()}
+
+
+def _clean_partial(out: Path) -> int:
+    d = out / "samples"
+    n = 0
+    if d.exists():
+        for p in d.iterdir():
+            if ".part-" in p.name:
+                shutil.rmtree(p, ignore_errors=True)
+                n += 1
+    return n
+
+
+def write_manifest(out, cfg: SimulateConfig | None = None) -> dict:
+    """(Re)write ``manifest.json`` and ``coco.json`` from the sample folders on disk."""
+    from gpr3d.simulation.labels import coco_dataset
+
+    out = Path(out)
+    entries, coco_in = [], []
+    for index in sorted(_finished(out)):
+        d = out / "samples" / f"{index:06d}"
+        missing = [f for f in SAMPLE_FILES if not (d / f).exists()]
+        if missing:
+            raise GPR3DError(f"{d}: sample folder lacks {missing}; delete it and run again")
+        lab = json.loads((d / "labels.json").read_text())
+        entries.append({"index": index, "files": {f: _sha256(d / f) for f in SAMPLE_FILES},
+                        "n_targets": len(lab["labels"]), "eps_r": lab["eps_r"]})
+        coco_in.append({"id": index + 1, "file_name": f"samples/{index:06d}/image.png",
+                        "n_traces": lab["n_traces"], "n_samples": lab["n_samples"], "dt_s": lab["dt_s"],
+                        "eps_r": lab["eps_r"], "labels": lab["labels"]})
+    height = cfg.image_height if cfg else 256
+    manifest = {"gpr3d": __version__, "config": asdict(cfg) if cfg else None, "n_samples": len(entries),
+                "samples": entries}
+    atomic_write_text(out / "manifest.json", json.dumps(manifest, indent=1))
+    atomic_write_text(out / "coco.json", json.dumps(coco_dataset(coco_in, height), indent=1))
+    return manifest
+
+
+def _client(cfg: SimulateConfig):
+    distributed = require("distributed")
+    if cfg.scheduler:
+        return distributed.Client(cfg.scheduler), None
+    cluster = distributed.LocalCluster(n_workers=cfg.workers, threads_per_worker=1, processes=True,
+                                       dashboard_address=":0", silence_logs=40)
+    return distributed.Client(cluster), cluster
+
+
+def build_dataset(cfg: SimulateConfig, *, progress: bool = True, log=print) -> dict:
+    """Build (or finish) the dataset described by ``cfg``; returns a summary with throughput."""
+    if cfg.n < 1:
+        raise GPR3DError(f"--n must be >= 1, got {cfg.n}")
+    if cfg.preset not in PRESETS:
+        raise GPR3DError(f"unknown preset {cfg.preset!r} (use {', '.join(PRESETS)})")
+    if cfg.engine == "gprmax":
+        require("gprMax")
+    out = Path(cfg.out)
+    (out / "samples").mkdir(parents=True, exist_ok=True)
+    cfg_path = out / "config.json"
+    keys = ("seed", "engine", "preset", "host", "image_height")
+    if cfg_path.exists():
+        old = json.loads(cfg_path.read_text()).get("config", {})
+        clash = [k for k in keys if old.get(k) != getattr(cfg, k)]
+        if clash:
+            raise GPR3DError(f"{out} holds a dataset made with other settings ({', '.join(clash)}); "
+                             "use another --out or the same settings")
+    atomic_write_text(cfg_path, json.dumps({"gpr3d": __version__, "config": asdict(cfg)}, indent=1))
+    removed = _clean_partial(out)
+    if removed:
+        log(f"removed {removed} half-built sample(s) from an interrupted run")
+    done = _finished(out)
+    todo = [i for i in range(cfg.n) if i not in done]
+    log(f"{cfg.n} samples: {len(done & set(range(cfg.n)))} already built, {len(todo)} to build "
+        f"({cfg.engine}, {'scheduler ' + cfg.scheduler if cfg.scheduler else f'{cfg.workers} local worker(s)'})")
+    t0 = time.perf_counter()
+    walls: list[float] = []
+    failures: list[dict] = []
+    if todo:
+        distributed = require("distributed")
+        client, cluster = _client(cfg)
+        try:
+            cfg_dict = asdict(cfg)
+            cfg_dict["out"] = str(out.resolve())
+            futures = client.map(simulate_sample, [cfg_dict] * len(todo), todo, pure=False)
+            bar = None
+            if progress:
+                from tqdm import tqdm
+
+                bar = tqdm(total=len(todo), unit="sample", desc="simulate")
+            for fut in distributed.as_completed(futures):
+                try:
+                    res = fut.result()
+                    walls.append(res["wall_s"])
+                except Exception as exc:  # noqa: BLE001 - one bad scene must not stop the others
+                    idx = todo[futures.index(fut)]
+                    failures.append({"index": idx, "error": f"{type(exc).__name__}: {exc}"[:500]})
+                    log(f"sample {idx} failed: {failures[-1]['error']}")
+                if bar:
+                    bar.update(1)
+            if bar:
+                bar.close()
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    elapsed = time.perf_counter() - t0
+    manifest = write_manifest(out, cfg)
+    built = len(todo) - len(failures)
+    if failures:
+        atomic_write_text(out / "failures.json", json.dumps(failures, indent=1))
+    elif (out / "failures.json").exists():
+        (out / "failures.json").unlink()
+    summary = {"n": cfg.n, "built": built, "failed": failures, "elapsed_s": elapsed,
+               "samples_per_s": built / elapsed if built and elapsed > 0 else None,
+               "mean_sample_wall_s": float(np.mean(walls)) if walls else None,
+               "in_manifest": manifest["n_samples"]}
+    log(f"built {built} sample(s) in {elapsed:.1f} s; manifest lists {manifest['n_samples']}")
+    if failures:
+        raise GPR3DError(f"{len(failures)} sample(s) failed (see {out / 'failures.json'}); run again to retry them")
+    return summary
