@@ -8,6 +8,11 @@ Stages so far (each later stage of the system adds its own):
 2. **Synthetic data** — an analytic B-scan of point targets with known apexes,
    the same processing, and a check that the processed hyperbola apexes sit
    where the travel-time equation puts them.
+3. **Random-motion survey** — the fast forward model simulates a cart wandering
+   over a 2 m x 2 m patch of soil (an L-shaped pipe, a diagonal pipe, two
+   rebars), with clutter and noise: every A-scan from its own 6-DoF pose. The
+   survey (with its poses) and its TUM trajectory are written for the stages
+   that follow.
 
 Everything goes to ``out_dir``: PNG figures, the processed survey as gpr3d HDF5,
 ``config.json`` and ``summary.json`` (all written atomically).
@@ -43,6 +48,8 @@ class DemoConfig:
     synthetic_targets_xz: list = field(default_factory=lambda: [[0.3, 0.15], [0.9, 0.35]])
     synthetic_noise: float = 0.002
     cmap: str = "gray"
+    walk_traces: int = 4000
+    walk_seed: int = 0
 
 
 def _process(survey, cfg: DemoConfig, *, gain: bool = True):
@@ -69,6 +76,58 @@ def _envelope_peak_near(survey, trace, time_s, half_traces=5, half_s=1.5e-9):
     return i0 + int(a), (k0 + int(b)) * survey.dt_s
 
 
+def demo_scene():
+    """The demo's buried scene (soil, eps_r 9): an L-shaped pipe, a diagonal pipe and two rebars."""
+    from gpr3d.simulation.forward import ForwardScene, Pipe
+
+    z_l, r_l = -0.5 - 0.04, 0.04
+    return ForwardScene(
+        eps_r=9.0, conductivity_s_m=0.002,
+        pipes=[Pipe((0.4, 0.5, z_l), (1.6, 0.5, z_l), r_l), Pipe((1.6, 0.5, z_l), (1.6, 1.7, z_l), r_l),
+               Pipe((0.3, 0.9, -0.35 - 0.03), (1.2, 1.8, -0.35 - 0.03), 0.03),
+               Pipe((0.2, 0.2, -0.2 - 0.01), (0.2, 1.8, -0.2 - 0.01), 0.01),
+               Pipe((1.85, 0.2, -0.25 - 0.01), (1.85, 1.8, -0.25 - 0.01), 0.01)],
+    )
+
+
+def _random_motion_stage(out: Path, cfg: DemoConfig, log) -> dict:
+    from gpr3d.core.survey import Survey
+    from gpr3d.io.trajectory import write_tum
+    from gpr3d.simulation.forward import forward_model
+    from gpr3d.simulation.paths import random_walk
+    from gpr3d.viz.bscan import save_bscan_png
+    from gpr3d.viz.maps import save_survey_map_png
+
+    scene = demo_scene()
+    traj = random_walk(cfg.walk_traces, area=((0.0, 2.0), (0.0, 2.0)), step_m=0.01, seed=cfg.walk_seed)
+    f, n_samples, window = 500e6, 512, 40e-9
+    kw = dict(offset_m=0.1, frequency_hz=f, n_samples=n_samples, time_window_s=window, air_wave=1.0,
+              ground_wave=0.5, clutter=30, noise=0.002, seed=cfg.walk_seed)
+    forward_model(scene, traj.positions_xyz[:8], traj.orientations_quat_wxyz[:8], **kw)  # compile once
+    t = time.perf_counter()
+    data = forward_model(scene, traj.positions_xyz, traj.orientations_quat_wxyz, **kw)
+    t_fwd = time.perf_counter() - t
+    survey = Survey(data=data, dt_s=window / n_samples, timestamps_s=traj.timestamps_s,
+                    positions_xyz=traj.positions_xyz, orientations_quat_wxyz=traj.orientations_quat_wxyz,
+                    offset_m=0.1, frequency_hz=f, eps_r=scene.eps_r,
+                    metadata={"format": "forward", "antenna": "forward model, 500 MHz",
+                              "scene": {"eps_r": scene.eps_r, "pipes": [p.__dict__ for p in scene.pipes]},
+                              "truth_t0_s": 2 ** 0.5 / f})
+    survey.save(out / "random_walk_survey.h5")
+    write_tum(traj, out / "random_walk.tum")
+    save_survey_map_png(out / "random_walk_map.png", traj.positions_xyz, pipes=scene.pipes,
+                        title=f"random-motion survey: {len(traj)} traces over the buried pipes")
+    shown = survey[: min(800, survey.n_traces)].time_zero(method="peak", search_s=6e-9).remove_background()
+    save_bscan_png(shown.gain_tpow(power=1.0), out / "random_walk_bscan.png", cmap="gray",
+                   title="random-motion survey, first 800 traces (time zero, background removed, t-gain)")
+    rate = survey.n_traces / t_fwd
+    log(f"[3/3] random-motion survey: {survey.n_traces} A-scans x {n_samples} samples from the forward model "
+        f"in {t_fwd * 1e3:.0f} ms ({rate:,.0f} A-scans/s); path {survey.distances_m[-1]:.1f} m")
+    return {"n_traces": survey.n_traces, "n_samples": n_samples, "forward_s": t_fwd, "ascans_per_s": rate,
+            "path_m": float(survey.distances_m[-1]), "files": ["random_walk_survey.h5", "random_walk.tum",
+                                                                "random_walk_map.png", "random_walk_bscan.png"]}
+
+
 def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=print) -> dict:
     """Run the demo into ``out_dir`` and return the summary (also written to ``summary.json``)."""
     from gpr3d.data import example_dzt
@@ -91,7 +150,7 @@ def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=prin
     t = time.perf_counter()
     proc = _process(raw, cfg)
     t_proc = time.perf_counter() - t
-    log(f"[1/2] read {Path(src).name}: {raw}")
+    log(f"[1/3] read {Path(src).name}: {raw}")
     log(f"      processed ({', '.join(h['step'] for h in proc.history)}) in {t_proc * 1e3:.0f} ms")
     save_bscan_png(raw, out / "real_raw.png", cmap=cfg.cmap, title=f"{Path(src).name}: raw")
     save_bscan_png(proc, out / "real_processed.png", cmap=cfg.cmap, title=f"{Path(src).name}: processed")
@@ -138,7 +197,7 @@ def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=prin
     save_bscan_png(syn, out / "synthetic_raw.png", cmap=cfg.cmap, title="synthetic point targets: raw")
     save_bscan_png(syn_proc, out / "synthetic_processed.png", cmap="hot", boxes=boxes,
                    title="synthetic point targets: processed (boxes: windows around the found apexes)")
-    log(f"[2/2] synthetic B-scan {syn.shape}: apex time errors "
+    log(f"[2/3] synthetic B-scan {syn.shape}: apex time errors "
         + ", ".join(f"{r['apex_time_error_s'] * 1e9:+.2f} ns" for r in rows)
         + f" (time zero estimated at {t0_est * 1e9:.2f} ns)")
     summary["stages"]["synthetic"] = {
@@ -149,6 +208,9 @@ def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=prin
         "apexes": rows,
         "boxes": [[float(v) for v in b] for b in boxes],
     }
+    # 3. random-motion survey from the forward model --------------------------------------
+    summary["stages"]["random_motion"] = _random_motion_stage(out, cfg, log)
+
     summary["total_s"] = time.perf_counter() - t_start
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=2, default=float))
     log(f"wrote {len(list(out.iterdir()))} files to {out}/ in {summary['total_s']:.1f} s")

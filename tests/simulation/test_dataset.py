@@ -92,3 +92,28 @@ def test_forward_engine_dataset(tmp_path):
     with pytest.raises(gpr3d.GPR3DError, match="other settings"):
         build_dataset(SimulateConfig(out=str(tmp_path), n=3, engine="forward", seed=9), progress=False,
                       log=lambda *_: None)
+
+
+def test_pack_and_export_round_trip(tmp_path):
+    pytest.importorskip("distributed")
+    coco_mod = pytest.importorskip("pycocotools.coco")
+    from gpr3d.simulation.dataset import SimulateConfig, build_dataset
+    from gpr3d.simulation.packed import PackedDataset, pack_dataset
+
+    build_dataset(SimulateConfig(out=str(tmp_path / "ds"), n=3, engine="forward", workers=1), progress=False,
+                  log=lambda *_: None)
+    info = pack_dataset(tmp_path / "ds", tmp_path / "p.h5", regenerate="gpr3d simulate --engine forward --n 3")
+    assert info["n"] == 3
+    ds = PackedDataset(tmp_path / "p.h5")
+    assert len(ds) == 3 and ds.regenerate.startswith("gpr3d simulate")
+    for i in range(3):
+        s, lab = ds[i]
+        orig = gpr3d.read(tmp_path / "ds" / "samples" / f"{i:06d}" / "bscan.h5")
+        # forward samples already have 512 samples: only float16 rounding separates them
+        np.testing.assert_allclose(s.data, orig.data, atol=1e-3 * np.abs(orig.data).max())
+        assert s.dt_s == pytest.approx(orig.dt_s)
+        assert lab == json.loads((tmp_path / "ds" / "samples" / f"{i:06d}" / "labels.json").read_text())
+    coco = ds.export_coco(tmp_path / "coco", image_height=64)
+    c = coco_mod.COCO(str(tmp_path / "coco" / "coco.json"))
+    assert len(c.imgs) == 3 and len(c.anns) == len(coco["annotations"])
+    assert (tmp_path / "coco" / c.imgs[1]["file_name"]).exists()

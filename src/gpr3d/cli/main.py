@@ -162,6 +162,24 @@ def cmd_simulate(args):
     return 0
 
 
+def cmd_dataset(args):
+    from gpr3d.simulation.packed import PackedDataset, load_sample, pack_dataset, save_label_preview
+
+    if args.action == "preview":
+        survey, labels = load_sample(args.src, args.index)
+        save_label_preview(survey, labels, args.dst)
+        print(f"wrote {args.dst}")
+    elif args.action == "pack":
+        regen = args.regenerate or ""
+        info = pack_dataset(args.src, args.dst, n_samples=args.n_samples, regenerate=regen)
+        print(f"packed {info['n']} samples into {info['file']} ({info['bytes'] / 1e6:.1f} MB)")
+    else:
+        ds = PackedDataset(args.src)
+        coco = ds.export_coco(args.dst, image_height=args.image_height)
+        print(f"wrote {len(coco['images'])} images and {len(coco['annotations'])} boxes to {args.dst}/")
+    return 0
+
+
 def cmd_demo(args):
     from gpr3d.demo import DemoConfig, run_demo
 
@@ -237,6 +255,19 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--host", choices=("concrete", "soil"), default=None, help="only this host medium")
     sp.add_argument("--image-height", type=int, default=256, help="rows of the detector images (default 256)")
     sp.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    sp = add("dataset", cmd_dataset, "pack a simulated dataset into one file, or export a packed one as COCO",
+             "examples:\n  gpr3d dataset pack gprmax400 datasets/gprmax400.h5\n"
+             "  gpr3d dataset export datasets/gprmax400.h5 coco_out\n"
+             "  gpr3d dataset preview gprmax400 labels.png --index 0")
+    sp.add_argument("action", choices=("pack", "export", "preview"),
+                    help="pack: folder -> file; export: file -> images + COCO; preview: one sample's labels as PNG")
+    sp.add_argument("src", help="dataset folder (pack, preview) or packed file (export, preview)")
+    sp.add_argument("dst", help="packed file (pack), output folder (export) or PNG (preview)")
+    sp.add_argument("--index", type=int, default=0, help="sample to preview")
+    sp.add_argument("--n-samples", type=int, default=512, help="samples per trace in the packed file")
+    sp.add_argument("--image-height", type=int, default=256, help="image rows (export)")
+    sp.add_argument("--regenerate", default=None, help="the command that regenerates the dataset (stored)")
 
     sp = add("demo", cmd_demo, "run the end-to-end demo (embedded example by default)",
              "example:\n  gpr3d demo --out gpr3d_demo")

@@ -1,0 +1,184 @@
+"""A compact, single-file form of a simulated dataset (for storing it in the repository).
+
+``pack_dataset(DIR, FILE.h5)`` stores every sample's B-scan resampled in time to
+``n_samples`` (default 512) as float16 scaled to +-1 (the scale kept per sample),
+with its scene and labels as JSON, the manifest and the command that regenerates
+it. :class:`PackedDataset` reads it back: ``ds[i]`` gives ``(Survey, labels)``;
+:meth:`PackedDataset.export_coco` writes detector images and ``coco.json``.
+
+Schema ``gpr3d.packed_dataset`` version 1::
+
+    /data        (N, n_traces, n_samples) float16, gzip      B-scans / scale
+    /scale       (N,) float32                                 per-sample max |amplitude|
+    /dt_s        (N,) float64                                 resampled sample interval
+    /index       (N,) int64                                   scene index (sample_scene(seed, index))
+    /scene_json, /labels_json   (N,) UTF-8 strings
+    attrs: schema, schema_version, gpr3d_version, manifest_json, config_json, regenerate
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from gpr3d import __version__
+from gpr3d.core.errors import FormatError, GPR3DError
+from gpr3d.io._common import check_file, hdf5_errors
+from gpr3d.io.atomic import atomic_path, atomic_write_text
+
+__all__ = ["pack_dataset", "PackedDataset", "load_sample", "save_label_preview"]
+
+SCHEMA = "gpr3d.packed_dataset"
+
+
+def _resample(data: np.ndarray, n_out: int) -> np.ndarray:
+    n_in = data.shape[1]
+    x_old = np.arange(n_in)
+    x_new = np.linspace(0, n_in - 1, n_out)
+    return np.stack([np.interp(x_new, x_old, tr) for tr in data])
+
+
+def pack_dataset(folder, out, *, n_samples: int = 512, regenerate: str = "") -> dict:
+    """Pack the samples of a ``gpr3d simulate`` folder into one compressed HDF5 file (atomically)."""
+    import gpr3d
+
+    folder = Path(folder)
+    manifest_path = folder / "manifest.json"
+    if not manifest_path.exists():
+        raise GPR3DError(f"{folder}: no manifest.json (is this a gpr3d simulate folder?)")
+    manifest = json.loads(manifest_path.read_text())
+    config = json.loads((folder / "config.json").read_text()) if (folder / "config.json").exists() else {}
+    entries = manifest["samples"]
+    if not entries:
+        raise GPR3DError(f"{folder}: the dataset holds no samples")
+    arrays, scales, dts, idx, scenes, labels = [], [], [], [], [], []
+    for e in entries:
+        d = folder / "samples" / f"{e['index']:06d}"
+        s = gpr3d.read(d / "bscan.h5")
+        x = _resample(s.data.astype(np.float64), n_samples)
+        scale = float(np.abs(x).max()) or 1.0
+        arrays.append((x / scale).astype(np.float16))
+        scales.append(scale)
+        dts.append((s.n_samples - 1) * s.dt_s / (n_samples - 1))
+        idx.append(e["index"])
+        scenes.append((d / "scene.json").read_text())
+        labels.append((d / "labels.json").read_text())
+    shapes = {a.shape for a in arrays}
+    if len(shapes) != 1:
+        raise GPR3DError(f"samples differ in number of traces ({sorted(shapes)}); pack needs one shape")
+    str_t = h5py.string_dtype("utf-8")
+    with atomic_path(out, suffix=".h5.part") as tmp:
+        with h5py.File(tmp, "w") as f:
+            f.attrs.update({"schema": SCHEMA, "schema_version": 1, "gpr3d_version": __version__,
+                            "manifest_json": json.dumps(manifest), "config_json": json.dumps(config),
+                            "regenerate": regenerate})
+            f.create_dataset("data", data=np.stack(arrays), compression="gzip", compression_opts=6, shuffle=True,
+                             chunks=(1,) + arrays[0].shape)
+            f["scale"] = np.asarray(scales, dtype=np.float32)
+            f["dt_s"] = np.asarray(dts)
+            f["index"] = np.asarray(idx, dtype=np.int64)
+            f.create_dataset("scene_json", data=np.asarray(scenes, dtype=object), dtype=str_t, compression="gzip")
+            f.create_dataset("labels_json", data=np.asarray(labels, dtype=object), dtype=str_t, compression="gzip")
+    return {"n": len(entries), "file": str(out), "bytes": Path(out).stat().st_size}
+
+
+class PackedDataset:
+    """Read a packed dataset: ``len(ds)``, ``ds[i] -> (Survey, labels dict)``."""
+
+    def __init__(self, path):
+        self.path = check_file(path)
+        with hdf5_errors(self.path), h5py.File(self.path, "r") as f:
+            if f.attrs.get("schema") != SCHEMA:
+                raise FormatError(self.path, "not a gpr3d packed dataset")
+            self.scale = f["scale"][()]
+            self.dt_s = f["dt_s"][()]
+            self.index = f["index"][()]
+            self.manifest = json.loads(f.attrs["manifest_json"])
+            self.config = json.loads(f.attrs["config_json"])
+            self.regenerate = f.attrs.get("regenerate", "")
+            self.shape = f["data"].shape
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def labels(self, i: int) -> dict:
+        with h5py.File(self.path, "r") as f:
+            return json.loads(f["labels_json"][i])
+
+    def scene(self, i: int):
+        from gpr3d.simulation.scene import Scene
+
+        with h5py.File(self.path, "r") as f:
+            return Scene.from_json(f["scene_json"][i])
+
+    def array(self, i: int) -> np.ndarray:
+        """B-scan ``i`` as float32 in its original amplitude units, ``(n_traces, n_samples)``."""
+        with h5py.File(self.path, "r") as f:
+            return f["data"][i].astype(np.float32) * self.scale[i]
+
+    def __getitem__(self, i: int):
+        from gpr3d.core.survey import Survey
+
+        if not -len(self) <= i < len(self):
+            raise IndexError(i)
+        i = i % len(self)
+        scene = self.scene(i)
+        x = scene.trace_midpoints_x()
+        pos = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
+        s = Survey(data=self.array(i), dt_s=float(self.dt_s[i]), positions_xyz=pos, offset_m=scene.antenna.offset_m,
+                   frequency_hz=scene.antenna.frequency_hz, eps_r=scene.medium.eps_r,
+                   metadata={"format": "packed", "path": str(self.path), "index": int(self.index[i]),
+                             "scene": scene.to_dict()})
+        return s, self.labels(i)
+
+    def export_coco(self, out_dir, *, image_height: int = 256) -> dict:
+        """Write ``images/{index}.png`` and ``coco.json`` (labels in image pixels) into ``out_dir``."""
+        from PIL import Image
+
+        from gpr3d.simulation.dataset import bscan_image
+        from gpr3d.simulation.labels import coco_dataset
+
+        out = Path(out_dir)
+        (out / "images").mkdir(parents=True, exist_ok=True)
+        items = []
+        for i in range(len(self)):
+            s, lab = self[i]
+            name = f"images/{int(self.index[i]):06d}.png"
+            with atomic_path(out / name, suffix=".png.part") as tmp:
+                Image.fromarray(bscan_image(s, image_height)).save(tmp, format="png")
+            items.append({"id": int(self.index[i]) + 1, "file_name": name, "n_traces": s.n_traces,
+                          "n_samples": s.n_samples, "dt_s": s.dt_s, "eps_r": s.eps_r, "labels": lab["labels"]})
+        coco = coco_dataset(items, image_height)
+        atomic_write_text(out / "coco.json", json.dumps(coco, indent=1))
+        return coco
+
+
+def load_sample(source, index: int):
+    """Sample ``index`` of a dataset folder or packed file: ``(Survey, labels dict)``."""
+    import gpr3d
+
+    source = Path(source)
+    if source.is_dir():
+        d = source / "samples" / f"{index:06d}"
+        if not d.exists():
+            raise GPR3DError(f"{source}: no sample {index}")
+        return gpr3d.read(d / "bscan.h5"), json.loads((d / "labels.json").read_text())
+    ds = PackedDataset(source)
+    hits = np.nonzero(ds.index == index)[0]
+    if not hits.size:
+        raise GPR3DError(f"{source}: no sample {index}")
+    return ds[int(hits[0])]
+
+
+def save_label_preview(survey, labels: dict, path, *, title: str | None = None) -> None:
+    """The B-scan (mean trace removed) with every label's box and apex drawn on it."""
+    from gpr3d.viz.bscan import save_bscan_png
+
+    labs = [lab for lab in labels["labels"] if lab["visible"]]
+    kinds = ", ".join(f"{lab['kind']} {lab['depth_m'] * 100:.0f} cm" for lab in labs)
+    save_bscan_png(survey.remove_background(), path, cmap="seismic", boxes=[lab["box"] for lab in labs],
+                   apexes=[(lab["apex_trace"], lab["apex_time_s"]) for lab in labs],
+                   title=title or f"labels (box, + apex): {kinds}; eps_r {labels.get('eps_r', survey.eps_r):.3g}")
