@@ -32,15 +32,20 @@ def _need_frequency(s, what: str) -> float:
 
 
 def time_zero(s, *, method: str = "first_break", threshold: float = 0.1, search_s: float | None = None,
-              per_trace: bool = False, shift: bool = True):
+              per_trace: bool = False, shift: bool = True, offset_correction: bool = True):
     """Estimate time zero from the direct wave; with ``shift`` cut the samples before it (t0 becomes 0).
 
     ``method``: ``first_break`` (first sample above ``threshold`` x trace maximum) or
     ``peak`` (direct-wave peak within ``search_s``). ``per_trace`` aligns every trace
-    on its own estimate (removes trigger jitter); otherwise the median is used.
+    on its own estimate (removes trigger jitter); otherwise the median is used. With
+    ``offset_correction`` the direct air wave's travel time ``offset / c`` is taken
+    off the estimate: the wave left the antenna that much earlier.
     """
     t0 = timezero.estimate_time_zero(s.data, s.dt_s, method=method, threshold=threshold,
                                      search_s=search_s, per_trace=per_trace)
+    if offset_correction and s.offset_m > 0:
+        t0 = np.maximum(np.asarray(t0) - s.offset_m / 299792458.0, 0.0)
+        t0 = float(t0) if not per_trace else t0
     result = {"t0_s": (np.median(t0) if per_trace else t0)}
     if not shift:
         if per_trace:

@@ -1,0 +1,166 @@
+"""Targets from a 3D image: a ridge map, connected parts, sequential robust line fits.
+
+Migrated energy focuses on the surface that reflected it, so each image column's
+envelope maximum marks the top of whatever lies below that point. Extraction
+works on that ridge map (value and depth of the maximum per column):
+
+1. keep the columns above ``threshold`` x the map's maximum; split them into
+   connected parts (8-neighbours);
+2. in each part, find straight segments one after the other by weighted RANSAC,
+   refined by a weighted principal axis; endpoints at the 1st/99th percentile of
+   the inliers along the axis; the depth along the segment by a robust linear fit;
+   the band around an accepted segment is removed before the next search (an
+   L-shaped pipe becomes two segments, a thick image of one pipe stays one);
+3. what remains, if large enough, is a point target (weighted centroid).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+from gpr3d.migration.grid import Grid3D
+
+__all__ = ["Target3D", "ridge_map", "extract_targets", "targets_to_json"]
+
+
+@dataclass
+class Target3D:
+    kind: str  #: "line" or "point"
+    points_xyz: list  #: [[x, y, depth], ...]: the two endpoints of a line, or the point
+    depth_m: float  #: depth of the top (shallowest point)
+    score: float  #: mean ridge value of its columns / ridge maximum
+    n_voxels: int = 0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def direction(self) -> np.ndarray | None:
+        if self.kind != "line":
+            return None
+        d = np.subtract(self.points_xyz[1], self.points_xyz[0])
+        return d / np.linalg.norm(d)
+
+    @property
+    def length_m(self) -> float:
+        return float(np.linalg.norm(np.subtract(self.points_xyz[1], self.points_xyz[0]))) if self.kind == "line" else 0.0
+
+
+def ridge_map(envelope: np.ndarray, grid: Grid3D):
+    """``(value (nx, ny), depth_m (nx, ny))`` of each column's envelope maximum (parabolic sub-cell depth)."""
+    k = np.argmax(envelope, axis=2)
+    val = np.take_along_axis(envelope, k[..., None], axis=2)[..., 0]
+    km = np.clip(k, 1, envelope.shape[2] - 2)
+    y0 = np.take_along_axis(envelope, (km - 1)[..., None], axis=2)[..., 0].astype(float)
+    y1 = np.take_along_axis(envelope, km[..., None], axis=2)[..., 0].astype(float)
+    y2 = np.take_along_axis(envelope, (km + 1)[..., None], axis=2)[..., 0].astype(float)
+    den = y0 - 2 * y1 + y2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        delta = np.where((den < 0) & (k == km), 0.5 * (y0 - y2) / den, 0.0)
+    return val, grid.d0 + (k + np.clip(delta, -0.5, 0.5)) * grid.dd
+
+
+def _line_dist(p, c, d):
+    r = p - c
+    return np.abs(r[:, 0] * d[1] - r[:, 1] * d[0])
+
+
+def _pca(p, w):
+    c = np.average(p, axis=0, weights=w)
+    q = (p - c) * np.sqrt(w)[:, None]
+    _, _, vt = np.linalg.svd(q, full_matrices=False)
+    return c, vt[0]
+
+
+def _ransac(p, w, tol, rng, iters):
+    best, best_score = None, -1.0
+    n = len(p)
+    for _ in range(iters):
+        i, j = rng.integers(0, n, 2)
+        d = p[j] - p[i]
+        nd = np.hypot(*d)
+        if nd < 3 * tol:
+            continue
+        inl = _line_dist(p, p[i], d / nd) < tol
+        score = float(w[inl].sum())
+        if score > best_score:
+            best, best_score = inl, score
+    return best
+
+
+def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.3, min_line_m: float = 0.3,
+                    tol_m: float | None = None, band_m: float | None = None, min_columns: int = 6,
+                    max_segments: int = 10, iters: int = 300, seed: int = 0) -> list[Target3D]:
+    """Line and point targets from an image envelope ``(nx, ny, nd)`` on ``grid``.
+
+    ``threshold`` is relative to the ridge map's maximum. ``tol_m`` (default 1.5
+    cells) is the inlier distance of the line fits; ``band_m`` (default
+    ``max(4 tol, 0.1 m)``) the band removed around an accepted line; segments
+    shorter than ``min_line_m`` become points.
+    """
+    val, dep = ridge_map(np.asarray(envelope, dtype=np.float32), grid)
+    peak = float(val.max())
+    if peak <= 0:
+        return []
+    tol = tol_m or 1.5 * max(grid.dx, grid.dy)
+    band = band_m or max(4 * tol, 0.1)
+    rng = np.random.default_rng(seed)
+    labels, n = ndimage.label(val >= threshold * peak, structure=np.ones((3, 3)))
+    out: list[Target3D] = []
+    for lab in range(1, n + 1):
+        idx = np.argwhere(labels == lab)
+        if len(idx) < min_columns:
+            continue
+        p_all = np.stack([grid.x0 + idx[:, 0] * grid.dx, grid.y0 + idx[:, 1] * grid.dy], axis=1)
+        w_all = val[tuple(idx.T)].astype(float)
+        d_all = dep[tuple(idx.T)].astype(float)
+        left = np.ones(len(idx), bool)
+        for _ in range(max_segments):
+            if left.sum() < min_columns:
+                break
+            sel = np.nonzero(left)[0]
+            p, w = p_all[sel], w_all[sel]
+            inl = _ransac(p, w, tol, rng, iters)
+            if inl is None or inl.sum() < min_columns:
+                break
+            c, d = _pca(p[inl], w[inl])
+            inl = _line_dist(p, c, d) < tol
+            c, d = _pca(p[inl], w[inl])
+            s = (p[inl] - c) @ d
+            lo, hi = np.percentile(s, [1, 99])
+            if hi - lo < min_line_m:
+                break  # no more lines in this part: the rest are points
+            # depth along the line: robust straight-line fit (median of depths in slices)
+            dd = d_all[sel][inl]
+            A = np.stack([s, np.ones_like(s)], axis=1)
+            coef, *_ = np.linalg.lstsq(A * w[inl][:, None], dd * w[inl], rcond=None)
+            res = np.abs(A @ coef - dd)
+            keep = res <= np.percentile(res, 80)
+            coef, *_ = np.linalg.lstsq(A[keep], dd[keep], rcond=None)
+            a = np.append(c + lo * d, coef[0] * lo + coef[1])
+            b = np.append(c + hi * d, coef[0] * hi + coef[1])
+            out.append(Target3D("line", [a.tolist(), b.tolist()], float(min(a[2], b[2])),
+                                float(w[inl].mean() / peak), int(inl.sum())))
+            # remove the band around the accepted segment
+            along = (p - c) @ d
+            near = (_line_dist(p, c, d) < band) & (along >= lo - band) & (along <= hi + band)
+            left[sel[near]] = False
+        if left.sum() >= min_columns:
+            sel = np.nonzero(left)[0]
+            w = w_all[sel]
+            # only a compact, strong remainder is a point target
+            cen = np.average(p_all[sel], axis=0, weights=w)
+            spread = np.sqrt(np.average(np.sum((p_all[sel] - cen) ** 2, axis=1), weights=w))
+            if spread < max(min_line_m / 2, 3 * tol):
+                k = sel[np.argmax(w)]
+                out.append(Target3D("point", [[float(cen[0]), float(cen[1]), float(d_all[k])]], float(d_all[k]),
+                                    float(w.mean() / peak), int(len(sel))))
+    out.sort(key=lambda t: -t.score * t.n_voxels)
+    return out
+
+
+def targets_to_json(targets: list[Target3D]) -> dict:
+    """The ``targets.json`` contract of CONVENTIONS.md."""
+    return {"targets": [{"kind": t.kind, "points_xyz": [[float(v) for v in p] for p in t.points_xyz],
+                         "depth_m": float(t.depth_m), "score": float(t.score)} for t in targets]}
