@@ -48,19 +48,27 @@ def stolt_migrate(data: np.ndarray, dx_m: float, dt_s: float, eps_r: float, *, p
     return img.astype(np.float32), v2 * dt_s
 
 
-def split_lines(positions_xyz: np.ndarray, *, max_gap_m: float = 0.05, min_traces: int = 10):
-    """Split a trajectory of straight grid lines into lines: lists of trace indices (breaks at jumps/turns)."""
+def split_lines(positions_xyz: np.ndarray, *, max_gap_m: float = 0.05, max_turn_rad: float = 0.3,
+                min_traces: int = 10):
+    """Split a trajectory of straight grid lines into lines: lists of trace indices.
+
+    A new line starts after a jump longer than ``max_gap_m`` or a turn sharper than
+    ``max_turn_rad`` between consecutive steps; pieces shorter than ``min_traces`` are dropped.
+    """
     p = np.asarray(positions_xyz)[:, :2]
-    step = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    d = np.diff(p, axis=0)
-    ang = np.arctan2(d[:, 1], d[:, 0])
-    turn = np.abs((np.diff(ang) + np.pi) % (2 * np.pi) - np.pi) > 0.3
-    breaks = set(np.nonzero(step > max_gap_m)[0] + 1) | set(np.nonzero(turn)[0] + 2)
     lines, cur = [], [0]
+    prev_dir = None
     for i in range(1, len(p)):
-        if i in breaks:
+        step = p[i] - p[i - 1]
+        dist = float(np.hypot(*step))
+        new_line = dist > max_gap_m
+        if not new_line and dist > 0:
+            d = step / dist
+            new_line = prev_dir is not None and np.arccos(np.clip(d @ prev_dir, -1, 1)) > max_turn_rad
+            prev_dir = d
+        if new_line:
             lines.append(cur)
-            cur = []
+            cur, prev_dir = [], None
         cur.append(i)
     lines.append(cur)
     return [np.asarray(line) for line in lines if len(line) >= min_traces]

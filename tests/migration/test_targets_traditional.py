@@ -1,0 +1,79 @@
+import numpy as np
+import pytest
+
+from gpr3d.migration.grid import Grid3D
+from gpr3d.migration.metrics import evaluate_targets, truth_lines_from_pipes
+from gpr3d.migration.targets import Target3D, extract_targets, targets_to_json
+from gpr3d.migration.traditional import split_lines, stolt_migrate
+from gpr3d.simulation.forward import Pipe
+from gpr3d.simulation.paths import grid_lines, random_walk
+from gpr3d.simulation.synthetic import point_targets_bscan
+
+
+def blob_image(grid, segments, points, sigma=0.02, point_sigma=0.035):
+    """Envelope-like image: Gaussian tubes along segments (x, y, depth) and blobs at points."""
+    X, Y, D = np.meshgrid(grid.x, grid.y, grid.depth, indexing="ij")
+    P = np.stack([X, Y, D], axis=-1)
+    img = np.zeros(grid.shape)
+    for a, b in segments:
+        a, b = np.array(a), np.array(b)
+        ab = b - a
+        t = np.clip(((P - a) @ ab) / (ab @ ab), 0, 1)
+        dist = np.linalg.norm(P - (a + t[..., None] * ab), axis=-1)
+        img = np.maximum(img, np.exp(-0.5 * (dist / sigma) ** 2))
+    for p in points:
+        dist = np.linalg.norm(P - np.array(p), axis=-1)
+        img = np.maximum(img, 0.8 * np.exp(-0.5 * (dist / point_sigma) ** 2))
+    return img.astype(np.float32)
+
+
+def test_extracts_an_l_a_diagonal_and_a_point():
+    g = Grid3D(0, 0, 0.1, 0.02, 0.02, 0.02, 101, 101, 30)
+    segs = [((0.3, 0.4, 0.5), (1.5, 0.4, 0.5)), ((1.5, 0.4, 0.5), (1.5, 1.6, 0.5)), ((0.3, 0.8, 0.3), (1.2, 1.7, 0.4))]
+    img = blob_image(g, segs, [(0.5, 1.6, 0.2)])
+    t = extract_targets(img, g)
+    lines = [x for x in t if x.kind == "line"]
+    points = [x for x in t if x.kind == "point"]
+    assert len(lines) == 3 and len(points) == 1
+    np.testing.assert_allclose(points[0].points_xyz[0], (0.5, 1.6, 0.2), atol=0.025)
+    truth = [{"p0": list(a), "p1": list(b), "radius_m": 0.01} for a, b in segs]
+    ev = evaluate_targets(t, truth)
+    for row in ev["truth"]:
+        assert row["completeness"] > 0.9
+        assert row["position_error_m"] < 0.01 and row["orientation_error_deg"] < 1.5
+        assert row["depth_error_m"] < 0.015
+    assert ev["false_targets"] == 1  # the point is not on any truth line
+    js = targets_to_json(t)
+    assert {k for k in js["targets"][0]} == {"kind", "points_xyz", "depth_m", "score"}
+
+
+def test_metrics_on_known_offsets():
+    truth = truth_lines_from_pipes([Pipe((0, 0, -0.52), (2, 0, -0.52), 0.02)])  # top at 0.5 m
+    est = [Target3D("line", [[0.0, 0.03, 0.52], [1.0, 0.03, 0.52]], 0.52, 1.0)]
+    row = evaluate_targets(est, truth)["truth"][0]
+    assert row["position_error_m"] == pytest.approx(0.03)
+    assert row["depth_error_m"] == pytest.approx(0.02)
+    assert row["orientation_error_deg"] == pytest.approx(0.0, abs=1e-6)
+    # covered: x up to 1 m plus where the 0.1 m tolerance reaches past the end (3D offset 0.036 m)
+    assert row["completeness"] == pytest.approx((1.0 + np.sqrt(0.1**2 - 0.03**2 - 0.02**2)) / 2, abs=0.01)
+
+
+def test_stolt_focuses_a_diffraction_hyperbola():
+    from scipy.signal import hilbert
+
+    s = point_targets_bscan([[0.6, 0.3]], eps_r=6, offset_m=0.0, direct_wave=0, t0_s=0.0, n_traces=121,
+                            trace_step_m=0.01, n_samples=400, dt_s=0.05e-9)
+    img, dz = stolt_migrate(s.data, 0.01, s.dt_s, 6.0)
+    env = np.abs(hilbert(img, axis=1))
+    i, k = np.unravel_index(np.argmax(env), env.shape)
+    assert i * 0.01 == pytest.approx(0.6, abs=0.011) and k * dz == pytest.approx(0.3, abs=2 * dz)
+    assert (env[:, k] > 0.5 * env.max()).sum() <= 9  # focused: a hyperbola 100 traces wide became a spot
+
+
+def test_split_grid_lines():
+    tr = grid_lines(area=((0, 1), (0, 1)), line_spacing_m=0.25, step_m=0.02, directions="xy")
+    lines = split_lines(tr.positions_xyz)
+    assert len(lines) == 10
+    assert sum(len(l) for l in lines) == len(tr)
+    walk = random_walk(500, seed=1)
+    assert np.all(np.linalg.norm(np.diff(walk.positions_xyz, axis=0), axis=1) == pytest.approx(0.01, abs=1e-9))
