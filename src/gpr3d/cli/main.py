@@ -323,7 +323,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--spacing", type=float, default=0.02, help="voxel size in metres (default 0.02)")
     sp.add_argument("--max-depth", type=float, default=None, help="deepest voxel (m; default: the time window)")
     sp.add_argument("--aperture", type=float, default=50.0, help="beam half-angle in degrees (0: none)")
-    sp.add_argument("--threshold", type=float, default=0.3, help="target threshold, fraction of the maximum")
+    sp.add_argument("--threshold", type=float, default=0.3,
+                    help="target threshold, fraction of the image's 99.5th-percentile column maximum")
     sp.add_argument("--min-line", type=float, default=0.3, help="shortest line target (m)")
     sp.add_argument("--no-time-zero", action="store_true", help="the data already start at time zero")
     sp.add_argument("--engine", choices=("numba", "numpy"), default="numba", help="migration kernel")

@@ -37,7 +37,7 @@ class ReconstructConfig:
     pad_m: float = 0.1
     aperture_deg: float | None = 50.0
     obliquity: bool = True
-    spreading: bool = False
+    spreading: bool = True
     time_zero: str = "peak"  #: "peak", "first_break" or "none" (data already start at time zero)
     remove_background: bool = True
     normalize: str = "sqrt_fold"  #: divide the image by sqrt(fold) ("sqrt_fold"), by the fold ("fold") or not ("none")
@@ -137,7 +137,7 @@ def _figures(result, out: Path):
     figs["front.png"] = fig
     fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
-    thr = result["config"]["threshold"] * env.max()
+    thr = result["config"]["threshold"] * float(np.percentile(env.max(axis=2), 99.5))
     idx = np.argwhere(env >= thr)
     if len(idx) > 20000:
         idx = idx[np.random.default_rng(0).choice(len(idx), 20000, replace=False)]

@@ -10,7 +10,8 @@ works on that ridge map (value and depth of the maximum per column):
    refined by a weighted principal axis; endpoints at the 1st/99th percentile of
    the inliers along the axis; the depth along the segment by a robust linear fit;
    the band around an accepted segment is removed before the next search (an
-   L-shaped pipe becomes two segments, a thick image of one pipe stays one);
+   L-shaped pipe becomes two segments, a thick image of one pipe stays one), and a
+   segment lying wholly within the band of a longer one is dropped as its fragment;
 3. what remains, if large enough, is a point target (weighted centroid).
 """
 
@@ -31,7 +32,7 @@ class Target3D:
     kind: str  #: "line" or "point"
     points_xyz: list  #: [[x, y, depth], ...]: the two endpoints of a line, or the point
     depth_m: float  #: depth of the top (shallowest point)
-    score: float  #: mean ridge value of its columns / ridge maximum
+    score: float  #: mean ridge value of its columns / the reference level (see extract_targets)
     n_voxels: int = 0
     extra: dict = field(default_factory=dict)
 
@@ -89,21 +90,44 @@ def _ransac(p, w, tol, rng, iters):
     return best
 
 
-def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.3, min_line_m: float = 0.3,
+def _seg_point_dist(p, a, b):
+    ab = b - a
+    t = np.clip((p - a) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
+    return float(np.hypot(*(p - (a + t * ab))))
+
+
+def _shadowed(a, b, found, band):
+    """True when both ends of segment a-b lie within ``band`` of one longer line already found
+    (a fragment of that line's image, e.g. from a bright end or corner)."""
+    for t in found:
+        if t.kind != "line":
+            continue
+        pa, pb = np.array(t.points_xyz[0][:2]), np.array(t.points_xyz[1][:2])
+        if np.hypot(*(pb - pa)) >= np.hypot(*(b - a)) and max(_seg_point_dist(a, pa, pb),
+                                                               _seg_point_dist(b, pa, pb)) < band:
+            return True
+    return False
+
+
+def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.3, reference_percentile: float = 99.5,
+                    min_line_m: float = 0.3,
                     tol_m: float | None = None, band_m: float | None = None, min_columns: int = 6,
+                    min_density: float = 1.0,
                     max_segments: int = 10, iters: int = 300, seed: int = 0) -> list[Target3D]:
     """Line and point targets from an image envelope ``(nx, ny, nd)`` on ``grid``.
 
-    ``threshold`` is relative to the ridge map's maximum. ``tol_m`` (default 1.5
-    cells) is the inlier distance of the line fits; ``band_m`` (default
+    ``threshold`` is relative to the ``reference_percentile`` of the ridge map (a
+    robust stand-in for its maximum: pipe ends and crossings make hot spots far
+    brighter than the pipes themselves). ``tol_m`` (default 2 cells) is the inlier distance of the line fits; ``band_m`` (default
     ``max(4 tol, 0.1 m)``) the band removed around an accepted line; segments
-    shorter than ``min_line_m`` become points.
+    shorter than ``min_line_m`` become points; a line needs ``min_density`` inlier
+    columns per cell of its length.
     """
     val, dep = ridge_map(np.asarray(envelope, dtype=np.float32), grid)
-    peak = float(val.max())
+    peak = float(np.percentile(val, reference_percentile))
     if peak <= 0:
         return []
-    tol = tol_m or 1.5 * max(grid.dx, grid.dy)
+    tol = tol_m or 2.0 * max(grid.dx, grid.dy)
     band = band_m or max(4 * tol, 0.1)
     rng = np.random.default_rng(seed)
     labels, n = ndimage.label(val >= threshold * peak, structure=np.ones((3, 3)))
@@ -140,8 +164,11 @@ def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.
             coef, *_ = np.linalg.lstsq(A[keep], dd[keep], rcond=None)
             a = np.append(c + lo * d, coef[0] * lo + coef[1])
             b = np.append(c + hi * d, coef[0] * hi + coef[1])
-            out.append(Target3D("line", [a.tolist(), b.tolist()], float(min(a[2], b[2])),
-                                float(w[inl].mean() / peak), int(inl.sum())))
+            # a real line's image is at least a cell wide all along: sparse "lines" join scattered blobs
+            dense = inl.sum() * min(grid.dx, grid.dy) / max(hi - lo, 1e-9) >= min_density
+            if dense and not _shadowed(a[:2], b[:2], out, band):
+                out.append(Target3D("line", [a.tolist(), b.tolist()], float(min(a[2], b[2])),
+                                    float(w[inl].mean() / peak), int(inl.sum())))
             # remove the band around the accepted segment
             along = (p - c) @ d
             near = (_line_dist(p, c, d) < band) & (along >= lo - band) & (along <= hi + band)

@@ -29,11 +29,11 @@ def random_walk(n_traces: int, *, area=((0.0, 2.0), (0.0, 2.0)), step_m: float =
     p = np.array([rng.uniform(x0, x1), rng.uniform(y0, y1)])
     h = rng.uniform(-np.pi, np.pi)
     w = 0.0
-    margin = 0.05 * min(x1 - x0, y1 - y0)
+    margin = 0.02 * min(x1 - x0, y1 - y0)
     centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2])
     for i in range(n_traces):
         w = 0.9 * w + 0.1 * rng.normal(0, turn_rate * 3)
-        ahead = p + 10 * step_m * np.array([np.cos(h), np.sin(h)])
+        ahead = p + max(5 * step_m, 0.05) * np.array([np.cos(h), np.sin(h)])
         if not (x0 + margin < ahead[0] < x1 - margin and y0 + margin < ahead[1] < y1 - margin):
             to_c = np.arctan2(*(centre - p)[::-1])
             diff = (to_c - h + np.pi) % (2 * np.pi) - np.pi
