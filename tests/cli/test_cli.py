@@ -126,7 +126,16 @@ def test_demo_end_to_end(tmp_path):
     for row in summary["stages"]["synthetic"]["apexes"]:
         assert abs(row["apex_time_error_s"]) < 0.1e-9  # two samples
         assert abs(row["apex_trace_found"] - row["apex_trace_true"]) <= 1
+    walk = summary["stages"]["random_motion"]
+    assert walk["n_traces"] == 8000 and walk["ascans_per_s"] > 0
+    rec = summary["stages"]["reconstruction"]
+    found = [row for row in rec["truth"] if "position_error_m" in row]
+    assert len(found) >= 3  # both legs of the L and more
+    for row in found:
+        assert row["position_error_m"] < 0.05 and row["depth_error_m"] < 0.05
     names = {p.name for p in (tmp_path / "d").iterdir()}
     assert {"summary.json", "config.json", "real_raw.png", "real_processed.png", "real_processed.h5",
-            "synthetic_processed.png"} <= names
+            "synthetic_processed.png", "random_walk_survey.h5", "random_walk.tum", "random_walk_map.png",
+            "reconstruction"} <= names
+    assert (tmp_path / "d" / "reconstruction" / "targets.json").exists()
     assert not [n for n in names if n.endswith(".part")]

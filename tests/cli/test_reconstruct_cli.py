@@ -1,0 +1,77 @@
+"""gpr3d reconstruct: a radar file plus a TUM trajectory in, a volume and targets.json out."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from gpr3d import Survey
+from gpr3d.io.trajectory import Trajectory, write_tum
+from gpr3d.simulation.forward import ForwardScene, Pipe, forward_model
+from gpr3d.simulation.paths import random_walk
+
+
+def run_cli(*args):
+    return subprocess.run([sys.executable, "-m", "gpr3d", *map(str, args)], capture_output=True, text=True,
+                          timeout=600)
+
+
+@pytest.fixture(scope="module")
+def pipe_survey(tmp_path_factory):
+    d = tmp_path_factory.mktemp("rec")
+    walk = random_walk(2500, area=((0, 1.2), (0, 1.2)), step_m=0.01, seed=2)
+    top = 0.4
+    scene = ForwardScene(eps_r=6.0, pipes=[Pipe((0.1, 0.6, -top - 0.03), (1.1, 0.6, -top - 0.03), 0.03)])
+    data = forward_model(scene, walk.positions_xyz, walk.orientations_quat_wxyz, offset_m=0.08, frequency_hz=800e6,
+                         n_samples=256, time_window_s=16e-9, air_wave=1.0, ground_wave=0.5)
+    s = Survey(data=data, dt_s=16e-9 / 256, offset_m=0.08, frequency_hz=800e6, eps_r=6.0)  # no poses in the file
+    s.save(d / "line.h5")
+    write_tum(walk, d / "walk.tum")
+    return d, top
+
+
+def test_reconstruct_with_a_tum_trajectory(pipe_survey):
+    d, top = pipe_survey
+    r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--out", d / "out", "--max-depth", "0.7")
+    assert r.returncode == 0, r.stderr
+    out = d / "out"
+    for name in ("volume.h5", "volume.vti", "targets.json", "config.json", "top.png", "front.png", "view3d.png"):
+        assert (out / name).stat().st_size > 0, name
+    assert (out / "volume.vti").read_text(errors="ignore").startswith("<?xml")
+    targets = json.loads((out / "targets.json").read_text())["targets"]
+    lines = [t for t in targets if t["kind"] == "line"]
+    assert lines, targets
+    best = max(lines, key=lambda t: np.linalg.norm(np.subtract(t["points_xyz"][1], t["points_xyz"][0])))
+    p = np.array(best["points_xyz"])
+    assert np.allclose(p[:, 1], 0.6, atol=0.03)  # along x at y = 0.6
+    assert np.allclose(p[:, 2], top, atol=0.03)  # depth to the top, positive down
+    assert abs(p[1, 0] - p[0, 0]) > 0.6
+
+
+def test_reconstruct_errors_are_one_line(pipe_survey, tmp_path):
+    d, _ = pipe_survey
+    r = run_cli("reconstruct", d / "line.h5", "--out", tmp_path / "o")
+    assert r.returncode == 1 and "no antenna positions" in r.stderr and "Traceback" not in r.stderr
+    short = Trajectory([0, 1], [[0, 0, 0], [1, 0, 0]], [[1, 0, 0, 0]] * 2)
+    write_tum(short, tmp_path / "short.tum")
+    r = run_cli("reconstruct", d / "line.h5", "--poses", tmp_path / "short.tum", "--out", tmp_path / "o")
+    assert r.returncode == 1 and "2 poses but the survey has 2500 traces" in r.stderr
+    (tmp_path / "boxes.json").write_text("[[1, 2, 3]]")
+    r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--boxes", tmp_path / "boxes.json",
+                "--out", tmp_path / "o")
+    assert r.returncode == 1 and "boxes must be" in r.stderr
+
+
+def test_boxes_make_a_noise_map(pipe_survey, tmp_path):
+    import h5py
+
+    d, _ = pipe_survey
+    boxes = {"targets": [{"box": [0, 2e-9, 2499, 12e-9]}]}
+    (tmp_path / "b.json").write_text(json.dumps(boxes))
+    r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--boxes", tmp_path / "b.json",
+                "--out", tmp_path / "o", "--max-depth", "0.7")
+    assert r.returncode == 0, r.stderr
+    with h5py.File(tmp_path / "o" / "volume.h5") as f:
+        assert "noise_map" in f and f["noise_map"].shape == f["envelope"].shape
