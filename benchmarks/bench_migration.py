@@ -10,6 +10,7 @@ gpr3d's reference engine on a 20-trace subset, scaled to a rate. The images of
 gpr3d and PyLops are compared (correlation), to show they compute the same sum.
 
     python benchmarks/bench_migration.py [--threads 2] [--repeat 3]
+    python benchmarks/bench_migration.py --big     # a 1e8-voxel reconstruction: wall time and peak memory
 """
 
 from __future__ import annotations
@@ -55,12 +56,39 @@ def timed(fn, repeat):
     return min(ts), float(np.median(ts)), out
 
 
+def big(n_traces=16):
+    """gpr3d reconstruct on a 500 x 500 x 400 grid (1e8 voxels): peak resident memory."""
+    import resource
+
+    from gpr3d.core.poses import quat_from_yaw
+    from gpr3d.core.survey import Survey
+    from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct
+
+    rng = np.random.default_rng(0)
+    pos = np.c_[rng.uniform(0, 9.98, n_traces), rng.uniform(0, 9.98, n_traces), np.zeros(n_traces)]
+    pos[:2, :2] = [[0, 0], [9.98, 9.98]]
+    s = Survey(data=rng.standard_normal((n_traces, NT)).astype(np.float32), dt_s=0.2e-9, positions_xyz=pos,
+               orientations_quat_wxyz=quat_from_yaw(np.zeros(n_traces)), offset_m=0.1, eps_r=EPS)
+    t = time.perf_counter()
+    r = reconstruct(s, ReconstructConfig(spacing_m=0.02, pad_m=0.0, max_depth_m=8.0, time_zero="none"))
+    wall = time.perf_counter() - t
+    g = r["grid"]
+    peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+    print(f"reconstruct on {g.nx} x {g.ny} x {g.nd} = {g.size:.3g} voxels, {n_traces} traces: {wall:.1f} s, "
+          f"peak resident memory {peak_gb:.2f} GB (limit 8 GB)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--big", action="store_true", help="only the 1e8-voxel memory check")
     args = ap.parse_args(argv)
     import numba
+
+    if args.big:
+        big()
+        return
 
     src, rec, tx, rx, grid, data = problem()
     n_tr = len(tx)

@@ -81,3 +81,10 @@ def test_mask_and_noise_map_add_up():
     assert mask[10, 60] == 1.0 and mask[0, 0] == 0.0 and 0 < mask[4, 60] < 1
     sig, noise = masked_migration(op, d, mask)
     np.testing.assert_allclose(sig + noise, op.adjoint(d), atol=1e-4 * np.abs(op.adjoint(d)).max())
+
+
+def test_envelope_in_slabs_equals_one_transform():
+    from scipy.signal import hilbert
+
+    a = np.random.default_rng(5).standard_normal((37, 11, 29)).astype(np.float32)
+    np.testing.assert_allclose(image_envelope(a, chunk_voxels=500), np.abs(hilbert(a, axis=2)), atol=1e-5)

@@ -41,9 +41,18 @@ def masked_migration(op, data, mask):
     return op.adjoint(data * mask), op.adjoint(data * (1.0 - mask))
 
 
-def image_envelope(image: np.ndarray) -> np.ndarray:
-    """Instantaneous amplitude of a migrated image along depth (Hilbert transform per column)."""
-    return np.abs(hilbert(np.asarray(image, dtype=np.float32), axis=2)).astype(np.float32)
+def image_envelope(image: np.ndarray, *, chunk_voxels: int = 4_000_000) -> np.ndarray:
+    """Instantaneous amplitude of a migrated image along depth (Hilbert transform per column).
+
+    Works on slabs of about ``chunk_voxels`` voxels, so the complex temporaries stay small
+    (a 1e8-voxel image needs its own size again, not the 16x of one whole transform).
+    """
+    img = np.asarray(image, dtype=np.float32)
+    out = np.empty_like(img)
+    step = max(1, chunk_voxels // max(img.shape[1] * img.shape[2], 1))
+    for i in range(0, img.shape[0], step):
+        out[i : i + step] = np.abs(hilbert(img[i : i + step], axis=2))
+    return out
 
 
 def signal_to_clutter(envelope: np.ndarray, target_mask: np.ndarray) -> float:
