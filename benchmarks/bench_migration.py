@@ -26,6 +26,8 @@ if __name__ == "__main__":  # numba and PyLops read the thread count at import
             os.environ["NUMBA_NUM_THREADS"] = sys.argv[i + 1]
     os.environ.setdefault("NUMBA_NUM_THREADS", "2")
 
+import warnings
+
 import numpy as np
 
 from gpr3d.core.units import C0
@@ -109,6 +111,7 @@ def main(argv=None):
 
         t_axis = np.arange(NT) * DT
         v = C0 / np.sqrt(EPS)
+        warnings.filterwarnings("ignore", category=FutureWarning, module="pylops")
         kop = Kirchhoff(grid.depth, grid.x, t_axis, src[:, [1, 0, 2]].T * np.array([[1], [1], [-1]]),
                         rec[:, [1, 0, 2]].T * np.array([[1], [1], [-1]]), v, np.array([1.0], dtype=np.float32), 0,
                         y=grid.y, mode="analytic", engine="numba", dtype="float32")

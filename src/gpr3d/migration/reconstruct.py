@@ -106,11 +106,9 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None) -> 
 
 
 def _figures(result, out: Path):
-    import matplotlib
+    from gpr3d.viz._figures import pyplot, save_figure
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     g, env = result["grid"], result["envelope"]
     ext_xy = (g.x[0], g.x[-1], g.y[0], g.y[-1])
     figs = {}
@@ -152,10 +150,7 @@ def _figures(result, out: Path):
     ax.set_title("3D: voxels above the threshold, extracted targets (blue)", fontsize=9)
     figs["view3d.png"] = fig
     for name, f in figs.items():
-        f.tight_layout()
-        with atomic_path(out / name, suffix=".png.part") as tmp:
-            f.savefig(tmp, dpi=110, format="png")
-        plt.close(f)
+        save_figure(f, out / name, dpi=110)
 
 
 def write_reconstruction(result: dict, out_dir, *, source: str = "") -> list[str]:

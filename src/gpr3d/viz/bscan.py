@@ -4,18 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpr3d.io.atomic import atomic_path
+from gpr3d.viz._figures import pyplot, save_figure
 
 __all__ = ["plot_bscan", "save_bscan_png"]
-
-
-def _mpl():
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def plot_bscan(
@@ -43,7 +34,7 @@ def plot_bscan(
     boxes : iterable of ``(trace_start, t_start_s, trace_end, t_end_s)`` to outline.
     apexes : iterable of ``(trace, t_s)`` (times from the first sample) to mark with a cross.
     """
-    plt = _mpl()
+    plt = pyplot()
     if ax is None:
         _, ax = plt.subplots(figsize=(8, 4.5))
     img = survey.data.T.astype(np.float64)
@@ -94,12 +85,10 @@ def plot_bscan(
 
 def save_bscan_png(survey, path, *, dpi: int = 120, **kwargs) -> None:
     """Render :func:`plot_bscan` to a PNG file atomically."""
-    plt = _mpl()
-    fig, ax = plt.subplots(figsize=(8, 4.5))
+    fig, ax = pyplot().subplots(figsize=(8, 4.5))
     try:
         plot_bscan(survey, ax, **kwargs)
-        fig.tight_layout()
-        with atomic_path(path, suffix=".png.part") as tmp:
-            fig.savefig(tmp, dpi=dpi, format="png")
-    finally:
-        plt.close(fig)
+    except BaseException:
+        pyplot().close(fig)
+        raise
+    save_figure(fig, path, dpi=dpi)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpr3d.io.atomic import atomic_path
+from gpr3d.viz._figures import pyplot, save_figure
 
 __all__ = ["plot_survey_map", "save_survey_map_png"]
 
@@ -13,11 +13,8 @@ def plot_survey_map(positions_xyz, ax=None, *, pipes=(), spheres=(), title=None,
     """Antenna path (top view) with pipes (segments) and spheres; returns the axes."""
     import matplotlib
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
     if ax is None:
-        _, ax = plt.subplots(figsize=(6, 6))
+        _, ax = pyplot().subplots(figsize=(6, 6))
     p = np.asarray(positions_xyz)
     c = np.arange(len(p)) if color_by is None else color_by
     sc = ax.scatter(p[:, 0], p[:, 1], c=c, s=1.5, cmap="viridis")
@@ -43,16 +40,10 @@ def plot_survey_map(positions_xyz, ax=None, *, pipes=(), spheres=(), title=None,
 
 
 def save_survey_map_png(path, positions_xyz, *, dpi=120, **kwargs) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.5, 6))
+    fig, ax = pyplot().subplots(figsize=(6.5, 6))
     try:
         plot_survey_map(positions_xyz, ax, **kwargs)
-        fig.tight_layout()
-        with atomic_path(path, suffix=".png.part") as tmp:
-            fig.savefig(tmp, dpi=dpi, format="png")
-    finally:
-        plt.close(fig)
+    except BaseException:
+        pyplot().close(fig)
+        raise
+    save_figure(fig, path, dpi=dpi)

@@ -1,0 +1,28 @@
+"""Matplotlib without a screen, and atomic PNG writes."""
+
+from __future__ import annotations
+
+from gpr3d.io.atomic import atomic_path
+
+__all__ = ["pyplot", "save_figure"]
+
+
+def pyplot():
+    """``matplotlib.pyplot`` on the Agg backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig, path, *, dpi: int = 120, close: bool = True) -> None:
+    """Lay out ``fig`` and write it to ``path`` as PNG in one atomic step."""
+    try:
+        fig.tight_layout()
+        with atomic_path(path, suffix=".png.part") as tmp:
+            fig.savefig(tmp, dpi=dpi, format="png")
+    finally:
+        if close:
+            pyplot().close(fig)
