@@ -49,6 +49,8 @@ def build_gprmax_scene(scene: Scene):
     s.add(g.TimeWindow(time=scene.time_window))
     s.add(g.OMPThreads(n=1))
     m = scene.medium
+    # "host" always exists: the body of a homogeneous host, and the bumps of a rough surface
+    s.add(g.Material(er=m.eps_r, se=m.conductivity_s_m, mr=1, sm=0, id="host"))
     if m.peplinski:
         p = m.peplinski
         s.add(g.SoilPeplinski(sand_fraction=p["sand"], clay_fraction=p["clay"], bulk_density=p["bulk_density"],
@@ -58,7 +60,6 @@ def build_gprmax_scene(scene: Scene):
                            weighting=(1, 1, 1), n_materials=p.get("n_materials", 20), mixing_model_id="soil_mix",
                            id="host_box", seed=scene.seed))
     else:
-        s.add(g.Material(er=m.eps_r, se=m.conductivity_s_m, mr=1, sm=0, id="host"))
         s.add(g.Box(p1=(0, 0, 0), p2=(scene.width_m, ys, INF), material_id="host"))
     used = {t.material for t in scene.targets} | {t.fill for t in scene.targets if t.fill}
     for name in sorted(used - {"pec"}):
