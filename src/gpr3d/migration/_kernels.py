@@ -44,6 +44,8 @@ def kernels():
             col = image[ix, iy]
             uu = np.empty(nd, np.float32)
             ww = np.ones(nd, np.float32)
+            acc = np.zeros(nd, np.float32)
+            one = np.uint32(1)
             for j in range(n_tr):
                 ax = x[ix] - tx[j, 0]
                 ay = y[iy] - tx[j, 1]
@@ -75,18 +77,53 @@ def kernels():
                             w *= f32(0.5) * (ra + rb)
                         ww[k] = w
                 row = data[j]
+                # unsigned indices (u >= 0 by the clamp): no negative-index wraparound, so the gathers vectorise
                 if mode == 0:
                     for k in range(k0, nd):
                         u = uu[k]
-                        i0 = int(u)
-                        f = u - i0
-                        col[k] += row[i0] + f * (row[i0 + 1] - row[i0])
+                        i0 = np.uint32(u)
+                        f = u - f32(i0)
+                        acc[k] += row[i0] + f * (row[i0 + one] - row[i0])
                 else:
                     for k in range(k0, nd):
                         u = uu[k]
-                        i0 = int(u)
-                        f = u - i0
-                        col[k] += ww[k] * (row[i0] + f * (row[i0 + 1] - row[i0]))
+                        i0 = np.uint32(u)
+                        f = u - f32(i0)
+                        acc[k] += ww[k] * (row[i0] + f * (row[i0 + one] - row[i0]))
+            for k in range(nd):
+                col[k] += acc[k]
+
+    @njit(parallel=True, fastmath=True, cache=True)
+    def adjoint_surface(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, image):
+        # the common case, kept lean: antennas on the surface, no aperture, no weights
+        nx, ny, nd = image.shape
+        n_tr = data.shape[0]
+        z2 = depth * depth
+        one = np.uint32(1)
+        for c in prange(nx * ny):
+            ix = c // ny
+            iy = c - ix * ny
+            col = image[ix, iy]
+            uu = np.empty(nd, np.float32)
+            acc = np.zeros(nd, np.float32)
+            for j in range(n_tr):
+                ax = x[ix] - tx[j, 0]
+                ay = y[iy] - tx[j, 1]
+                bx = x[ix] - rx[j, 0]
+                by = y[iy] - rx[j, 1]
+                h2a = ax * ax + ay * ay
+                h2b = bx * bx + by * by
+                for k in range(nd):
+                    u = (t0 + (math.sqrt(h2a + z2[k]) + math.sqrt(h2b + z2[k])) * slow[k]) * inv_dt
+                    uu[k] = min(max(u, f32(0.0)), umax)
+                row = data[j]
+                for k in range(nd):
+                    u = uu[k]
+                    i0 = np.uint32(u)
+                    f = u - f32(i0)
+                    acc[k] += row[i0] + f * (row[i0 + one] - row[i0])
+            for k in range(nd):
+                col[k] += acc[k]
 
     @njit(parallel=True, fastmath=True, cache=True)
     def forward(image, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, data):
@@ -115,8 +152,8 @@ def kernels():
                         rb = math.sqrt(h2b + zb * zb)
                         u = (t0 + (ra + rb) * slow[k]) * inv_dt
                         u = min(max(u, f32(0.0)), umax)
-                        i0 = int(u)
-                        f = u - i0
+                        i0 = np.uint32(u)
+                        f = u - f32(i0)
                         w = f32(1.0)
                         if mode & 1:
                             w *= f32(0.5) * (za / ra + zb / rb)
@@ -124,7 +161,13 @@ def kernels():
                             w *= f32(0.5) * (ra + rb)
                         m = w * col[k]
                         row[i0] += (f32(1.0) - f) * m
-                        row[i0 + 1] += f * m
+                        row[i0 + np.uint32(1)] += f * m
 
-    _CACHE["adjoint"], _CACHE["forward"] = adjoint, forward
+    _CACHE["adjoint"], _CACHE["forward"], _CACHE["adjoint_surface"] = adjoint, forward, adjoint_surface
     return adjoint, forward
+
+
+def adjoint_surface_kernel():
+    """The lean adjoint for antennas on the surface with no aperture and no weights."""
+    kernels()
+    return _CACHE["adjoint_surface"]

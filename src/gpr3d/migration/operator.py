@@ -165,7 +165,14 @@ class BackProjection:
         img = np.zeros(self.grid.shape, dtype=np.float32)
         padded = np.zeros((self.n_traces, self.n_samples + 2), dtype=np.float32)
         padded[:, : self.n_samples] = data
-        adjoint(padded, *self._kernel_args(), img)
+        args = self._kernel_args()
+        if self.tan_ap == 0 and not (self.obliquity or self.spreading) and not (self.tx[:, 2].any()
+                                                                                or self.rx[:, 2].any()):
+            from gpr3d.migration._kernels import adjoint_surface_kernel
+
+            adjoint_surface_kernel()(padded, *args[:9], img)
+        else:
+            adjoint(padded, *args, img)
         return img
 
     def forward(self, image) -> np.ndarray:
