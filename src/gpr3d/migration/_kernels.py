@@ -23,6 +23,15 @@ def kernels():
     f32 = np.float32
 
     @njit(fastmath=True, cache=True, inline="always")
+    def legs(px, py, tx, rx, j):
+        # horizontal offsets of a column (px, py) from trace j's transmitter and receiver, and their squares
+        ax = px - tx[j, 0]
+        ay = py - tx[j, 1]
+        bx = px - rx[j, 0]
+        by = py - rx[j, 1]
+        return ax, ay, bx, by, ax * ax + ay * ay, bx * bx + by * by
+
+    @njit(fastmath=True, cache=True, inline="always")
     def start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd):
         if tan_ap <= 0.0:
             return 0
@@ -47,12 +56,7 @@ def kernels():
             acc = np.zeros(nd, np.float32)
             one = np.uint32(1)
             for j in range(n_tr):
-                ax = x[ix] - tx[j, 0]
-                ay = y[iy] - tx[j, 1]
-                bx = x[ix] - rx[j, 0]
-                by = y[iy] - rx[j, 1]
-                h2a = ax * ax + ay * ay
-                h2b = bx * bx + by * by
+                ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
                 ha = tx[j, 2]
                 hb = rx[j, 2]
                 k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
@@ -107,12 +111,7 @@ def kernels():
             uu = np.empty(nd, np.float32)
             acc = np.zeros(nd, np.float32)
             for j in range(n_tr):
-                ax = x[ix] - tx[j, 0]
-                ay = y[iy] - tx[j, 1]
-                bx = x[ix] - rx[j, 0]
-                by = y[iy] - rx[j, 1]
-                h2a = ax * ax + ay * ay
-                h2b = bx * bx + by * by
+                _, _, _, _, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
                 for k in range(nd):
                     u = (t0 + (math.sqrt(h2a + z2[k]) + math.sqrt(h2b + z2[k])) * slow[k]) * inv_dt
                     uu[k] = min(max(u, f32(0.0)), umax)
@@ -136,13 +135,8 @@ def kernels():
             ha = tx[j, 2]
             hb = rx[j, 2]
             for ix in range(nx):
-                ax = x[ix] - tx[j, 0]
-                bx = x[ix] - rx[j, 0]
                 for iy in range(ny):
-                    ay = y[iy] - tx[j, 1]
-                    by = y[iy] - rx[j, 1]
-                    h2a = ax * ax + ay * ay
-                    h2b = bx * bx + by * by
+                    ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
                     k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
                     col = image[ix, iy]
                     for k in range(k0, nd):
