@@ -54,9 +54,11 @@ def test_info_on_every_real_file():
     assert "header window    : 422.061 ns" in r.stdout  # the MALA header's own TIMEWINDOW is shown too
 
 
-def test_info_json():
+def test_info_json(capsys):
     p = real_file("gprpy_sns_50MHz/XLINE00.DT1")
     assert main(["info", str(p), "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert rows[0]["n_traces"] == 531 and rows[0]["frequency_hz"] == 50e6
 
 
 def test_user_errors_are_one_line_without_traceback(tmp_path):

@@ -31,9 +31,10 @@ def test_units_round_trip():
         velocity_from_eps_r(0.5)
 
 
-def test_missing_dependency_hint():
-    with pytest.raises(MissingDependencyError, match=r"pip install 'gpr3d\[dl\]'"):
-        from gpr3d.core import deps
+def test_missing_dependency_hint(monkeypatch):
+    from gpr3d.core import deps
 
-        deps.EXTRAS["definitely_not_a_module_xyz"] = ("dl", "testing")
+    monkeypatch.setitem(deps.EXTRAS, "definitely_not_a_module_xyz", ("dl", "testing"))
+    with pytest.raises(MissingDependencyError, match=r"pip install 'gpr3d\[dl\]'") as info:
         require("definitely_not_a_module_xyz")
+    assert "needed for testing" in str(info.value)
