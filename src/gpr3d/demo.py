@@ -29,7 +29,6 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import numpy as np
 
 from gpr3d import __version__
 from gpr3d.io.atomic import atomic_write_text
@@ -69,14 +68,15 @@ def _process(survey, cfg: DemoConfig, *, gain: bool = True):
 
 
 def _envelope_peak_near(survey, trace, time_s, half_traces=5, half_s=1.5e-9):
-    """Envelope maximum within a window around (trace, time from the first sample): (trace, time_s)."""
+    """The strongest envelope pick among the traces near ``trace``: (trace, time s from the first sample)."""
+    from gpr3d.processing.picking import pick_peak
+
     env = survey.envelope().data
-    i, k = int(round(trace)), int(round(time_s / survey.dt_s))
-    hw = int(round(half_s / survey.dt_s))
-    i0, i1 = max(i - half_traces, 0), min(i + half_traces + 1, survey.n_traces)
-    k0, k1 = max(k - hw, 0), min(k + hw + 1, survey.n_samples)
-    a, b = np.unravel_index(np.argmax(env[i0:i1, k0:k1]), (i1 - i0, k1 - k0))
-    return i0 + int(a), (k0 + int(b)) * survey.dt_s
+    i = int(round(trace))
+    picks = [(pick_peak(env, survey.dt_s, j, time_s, half_s), j)
+             for j in range(max(i - half_traces, 0), min(i + half_traces + 1, survey.n_traces))]
+    (t, _), j = max(picks, key=lambda p: p[0][1])
+    return j, t
 
 
 def demo_scene():

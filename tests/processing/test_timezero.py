@@ -43,3 +43,12 @@ def test_time_zero_step_on_synthetic_survey():
     assert q.t0_s == pytest.approx(2e-9, abs=0.01e-9) and q.n_samples == s.n_samples
     with pytest.raises(gpr3d.InvalidDataError, match="unknown time-zero method"):
         s.time_zero(method="guess")
+
+
+def test_time_zero_takes_off_the_direct_waves_offset():
+    # the direct wave peaks offset/c after the pulse leaves; the estimate must land on the departure
+    s = point_targets_bscan([[0.3, 0.2]], t0_s=2e-9, offset_m=0.3, dt_s=DT, n_samples=300)
+    p = s.time_zero(method="peak", search_s=4e-9, shift=False)
+    assert p.t0_s == pytest.approx(2e-9, abs=0.01e-9)
+    q = s.time_zero(method="peak", search_s=4e-9, shift=False, offset_correction=False)
+    assert q.t0_s - p.t0_s == pytest.approx(0.3 / 299792458.0, rel=1e-9)

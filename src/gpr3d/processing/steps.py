@@ -15,6 +15,7 @@ import numpy as np
 
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.poses import slerp
+from gpr3d.core.units import C0
 from gpr3d.processing import gain, timezero
 from gpr3d.processing.background import remove_background as _remove_background, remove_dc as _remove_dc
 from gpr3d.processing.dewow import dewow as _dewow
@@ -44,7 +45,7 @@ def time_zero(s, *, method: str = "first_break", threshold: float = 0.1, search_
     t0 = timezero.estimate_time_zero(s.data, s.dt_s, method=method, threshold=threshold,
                                      search_s=search_s, per_trace=per_trace)
     if offset_correction and s.offset_m > 0:
-        t0 = np.maximum(np.asarray(t0) - s.offset_m / 299792458.0, 0.0)
+        t0 = np.maximum(np.asarray(t0) - s.offset_m / C0, 0.0)
         t0 = float(t0) if not per_trace else t0
     result = {"t0_s": (np.median(t0) if per_trace else t0)}
     if not shift:

@@ -49,6 +49,7 @@ import numpy as np
 from gpr3d.core.deps import require
 from gpr3d.core.poses import quat_from_yaw, rotate_vectors
 from gpr3d.core.units import C0
+from gpr3d.simulation.synthetic import ricker
 
 __all__ = ["Pipe", "Sphere", "Box", "Layer", "ForwardScene", "forward_model", "wavelet_table",
            "simulate_scene_bscan", "scene_to_forward"]
@@ -126,8 +127,7 @@ def wavelet_table(frequency_hz: float, kind: str = "ricker", step_s: float | Non
     half = 3.0 / frequency_hz
     n_pad = 1 << int(math.ceil(math.log2(8 * half / step)))
     t = (np.arange(n_pad) - n_pad // 2) * step
-    a = (math.pi * frequency_hz * t) ** 2
-    w = (1 - 2 * a) * np.exp(-a)
+    w = ricker(t, frequency_hz)
     if kind != "ricker":
         power = {"ricker_d1": 1.0, "ricker_half": 0.5}.get(kind)
         if power is None:
