@@ -120,6 +120,7 @@ def simulate_sample(cfg_dict: dict, index: int) -> dict:
 
             survey, info = run_gprmax(scene, workdir=part / "gprmax")
             shutil.rmtree(part / "gprmax", ignore_errors=True)
+            scene = type(scene).from_dict(survey.metadata["scene"])  # as simulated: steps snapped to the grid
         elif cfg_dict["engine"] == "forward":
             from gpr3d.simulation.forward import simulate_scene_bscan
 

@@ -11,6 +11,7 @@ outputs are merged with gprMax's own merge tool and read back as a Survey.
 from __future__ import annotations
 
 import contextlib
+import copy
 import io
 import logging
 import math
@@ -104,14 +105,16 @@ def run_gprmax(scene: Scene, *, workdir=None, keep_files: bool = False):
     """Simulate ``scene`` with gprMax; return ``(Survey, info)``.
 
     The Survey is the merged B-scan (``Ez``), with positions in the world frame
-    (surface at z = 0) and ``metadata["scene"]`` the scene. ``info`` records the
-    gprMax version, grid, iterations and wall time. Source/receiver steps snap to
-    whole cells in gprMax, so the trace step is rounded to the grid first.
+    (surface at z = 0) and ``metadata["scene"]`` the scene as simulated. ``info``
+    records the gprMax version, grid, iterations and wall time. gprMax moves sources
+    by whole cells, so a copy of ``scene`` with the trace step, start and offset
+    snapped to the grid is run; ``scene`` itself is left as it was.
     """
     g = require("gprMax")
     merge = require("gprMax.toolboxes.Utilities.outputfiles_merge")
     from gpr3d.io.gprmax import read_gprmax
 
+    scene = copy.deepcopy(scene)
     dx = scene.dx
     # gprMax moves sources by whole cells: snap the step and the start to the grid
     scene.trace_step_m = max(round(scene.trace_step_m / dx), 1) * dx
