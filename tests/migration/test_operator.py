@@ -13,12 +13,24 @@ YAW = RNG.uniform(-3, 3, 25)
 GRID = Grid3D(0, 0, 0.04, 0.05, 0.05, 0.02, 21, 21, 25)
 
 
-def make(engine, **kw):
-    tx, rx = antenna_positions(POS, headings_rad=YAW, offset_m=0.1)
-    return BackProjection(GRID, tx, rx, dt_s=0.1e-9, n_samples=200, eps_r=6.0, engine=engine, **kw)
+def make(engine, heights=False, **kw):
+    """engine "numba" (SIMD adjoint), "numba-scalar" (the plain numba adjoint) or "numpy"."""
+    pos = POS.copy()
+    if heights:  # antennas lifted 0..5 cm above the surface
+        pos[:, 2] = np.random.default_rng(7).uniform(0, 0.05, len(pos))
+    tx, rx = antenna_positions(pos, headings_rad=YAW, offset_m=0.1)
+    op = BackProjection(GRID, tx, rx, dt_s=0.1e-9, n_samples=200, eps_r=6.0, engine=engine.split("-")[0], **kw)
+    op.simd = engine == "numba"
+    return op
 
 
-@pytest.mark.parametrize("engine", ["numba", "numpy"])
+def test_the_simd_kernel_builds_here():
+    from gpr3d.migration._kernels import simd_adjoint
+
+    assert simd_adjoint() is not None
+
+
+@pytest.mark.parametrize("engine", ["numba", "numba-scalar", "numpy"])
 @pytest.mark.parametrize("kw", [{}, {"aperture_deg": 40}, {"obliquity": True, "spreading": True},
                                 {"layers": [(0.0, 4.0), (0.2, 9.0)], "t0_s": 1e-9}])
 def test_dot_test(engine, kw):
@@ -38,9 +50,12 @@ def test_dot_test(engine, kw):
     assert (lhs, rhs) == pytest.approx(dot_test(op, seed=3))
 
 
-@pytest.mark.parametrize("kw", [{}, {"aperture_deg": 40, "obliquity": True}, {"spreading": True}])
-def test_numba_matches_numpy_reference(kw):
-    a, b = make("numpy", **kw), make("numba", **kw)
+@pytest.mark.parametrize("engine", ["numba", "numba-scalar"])
+@pytest.mark.parametrize("kw", [{}, {"aperture_deg": 40, "obliquity": True}, {"spreading": True},
+                                {"obliquity": True}, {"aperture_deg": 30, "obliquity": True, "spreading": True},
+                                {"heights": True, "aperture_deg": 40}, {"heights": True, "t0_s": -2e-9}])
+def test_numba_matches_numpy_reference(engine, kw):
+    a, b = make("numpy", **kw), make(engine, **kw)
     d = RNG.standard_normal((25, 200)).astype(np.float32)
     ia, ib = a.adjoint(d), b.adjoint(d)
     np.testing.assert_allclose(ib, ia, atol=1e-4 * np.abs(ia).max())

@@ -16,7 +16,7 @@ _CACHE = {}
 
 
 def kernels():
-    if _CACHE:
+    if "adjoint" in _CACHE:
         return _CACHE["adjoint"], _CACHE["forward"]
     numba = require("numba")
     njit, prange = numba.njit, numba.prange
@@ -98,33 +98,6 @@ def kernels():
                 col[k] += acc[k]
 
     @njit(parallel=True, fastmath=True, cache=True)
-    def adjoint_surface(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, image):
-        # the common case, kept lean: antennas on the surface, no aperture, no weights
-        nx, ny, nd = image.shape
-        n_tr = data.shape[0]
-        z2 = depth * depth
-        one = np.uint32(1)
-        for c in prange(nx * ny):
-            ix = c // ny
-            iy = c - ix * ny
-            col = image[ix, iy]
-            uu = np.empty(nd, np.float32)
-            acc = np.zeros(nd, np.float32)
-            for j in range(n_tr):
-                _, _, _, _, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
-                for k in range(nd):
-                    u = (t0 + (math.sqrt(h2a + z2[k]) + math.sqrt(h2b + z2[k])) * slow[k]) * inv_dt
-                    uu[k] = min(max(u, f32(0.0)), umax)
-                row = data[j]
-                for k in range(nd):
-                    u = uu[k]
-                    i0 = np.uint32(u)
-                    f = u - f32(i0)
-                    acc[k] += row[i0] + f * (row[i0 + one] - row[i0])
-            for k in range(nd):
-                col[k] += acc[k]
-
-    @njit(parallel=True, fastmath=True, cache=True)
     def forward(image, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, data):
         nx, ny, nd = image.shape
         n_tr = data.shape[0]
@@ -157,11 +130,63 @@ def kernels():
                         row[i0] += (f32(1.0) - f) * m
                         row[i0 + np.uint32(1)] += f * m
 
-    _CACHE["adjoint"], _CACHE["forward"], _CACHE["adjoint_surface"] = adjoint, forward, adjoint_surface
+    _CACHE["adjoint"], _CACHE["forward"] = adjoint, forward
+    _CACHE["legs"], _CACHE["start_depth"] = legs, start_depth
     return adjoint, forward
 
 
-def adjoint_surface_kernel():
-    """The lean adjoint for antennas on the surface with no aperture and no weights."""
+def simd_adjoint():
+    """The adjoint with the explicit-SIMD depth loop of :mod:`._simd`, or None where it does not compile.
+
+    Same arguments as the scalar adjoint, except ``depth`` and ``slow`` padded to a
+    multiple of ``_simd.W`` (the real depth count is ``image.shape[2]``).
+    """
+    if "simd" in _CACHE:
+        return _CACHE["simd"]
+    numba = require("numba")
+    from gpr3d.migration import _simd
+
     kernels()
-    return _CACHE["adjoint_surface"]
+    legs, start_depth = _CACHE["legs"], _CACHE["start_depth"]
+    s0, s1, s2, s3 = (_simd.stack(m) for m in range(4))
+    W = _simd.W
+
+    @numba.njit(parallel=True, fastmath=True, cache=True)
+    def adjoint_simd(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image):
+        nx, ny, nd = image.shape
+        n_tr = data.shape[0]
+        nblk = depth.shape[0] // W
+        d0 = depth[0]
+        dd = depth[1] - depth[0] if nd > 1 else np.float32(1.0)
+        for c in numba.prange(nx * ny):
+            ix = c // ny
+            iy = c - ix * ny
+            col = image[ix, iy]
+            acc = np.zeros(depth.shape[0], np.float32)
+            for j in range(n_tr):
+                ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
+                k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
+                if k0 >= nd:
+                    continue
+                args = (data[j], depth, slow, acc, h2a, h2b, tx[j, 2], rx[j, 2], t0, inv_dt, umax, k0, nblk)
+                if mode == 0:
+                    s0(*args)
+                elif mode == 1:
+                    s1(*args)
+                elif mode == 2:
+                    s2(*args)
+                else:
+                    s3(*args)
+            for k in range(nd):
+                col[k] += acc[k]
+
+    try:  # compile now, on a tiny problem, so that a CPU/LLVM without support falls back cleanly
+        f = np.float32
+        one = np.zeros((1, 3), f)
+        for mode in range(4):
+            adjoint_simd(np.zeros((1, 4), f), one, one, np.zeros(1, f), np.zeros(1, f), np.arange(W, dtype=f),
+                         np.ones(W, f), f(0), f(1), f(2), f(0), mode, np.zeros((1, 1, 2), f))
+    except Exception:  # noqa: BLE001 - any failure to build means: use the scalar kernel
+        adjoint_simd = None
+    _CACHE["simd"] = adjoint_simd
+    return adjoint_simd

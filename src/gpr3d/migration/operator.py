@@ -14,13 +14,15 @@ from the antenna midpoint), an obliquity weight ``cos(theta)`` and a spreading
 weight ``r``. ``v_eff(d)`` is constant or, for layers, the vertical average
 velocity down to ``d`` (straight rays).
 
-Engines: ``"numba"`` (parallel kernels in :mod:`._kernels`) and ``"numpy"`` (the
-readable reference below, vectorised over voxels, one trace at a time).
+Engines: ``"numba"`` (parallel kernels in :mod:`._kernels`; the adjoint's depth loop
+in explicit SIMD, :mod:`._simd`) and ``"numpy"`` (the readable reference below,
+vectorised over voxels, one trace at a time).
 """
 
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
@@ -98,6 +100,8 @@ class BackProjection:
         self.obliquity = bool(obliquity)
         self.spreading = bool(spreading)
         self.engine = engine
+        # the numba engine's adjoint uses the explicit-SIMD kernel where it compiles; GPR3D_SIMD=0 turns it off
+        self.simd = os.environ.get("GPR3D_SIMD", "1") != "0"
         self.x = grid.x.astype(np.float64)
         self.y = grid.y.astype(np.float64)
         self.depth = grid.depth.astype(np.float64)
@@ -159,20 +163,24 @@ class BackProjection:
             raise InvalidDataError(f"data must be {(self.n_traces, self.n_samples)}, got {data.shape}")
         if self.engine == "numpy":
             return self._adjoint_numpy(data)
-        from gpr3d.migration._kernels import kernels
+        from gpr3d.migration import _kernels
 
-        adjoint, _ = kernels()
         img = np.zeros(self.grid.shape, dtype=np.float32)
         padded = np.zeros((self.n_traces, self.n_samples + 2), dtype=np.float32)
         padded[:, : self.n_samples] = data
-        args = self._kernel_args()
-        if self.tan_ap == 0 and not (self.obliquity or self.spreading) and not (self.tx[:, 2].any()
-                                                                                or self.rx[:, 2].any()):
-            from gpr3d.migration._kernels import adjoint_surface_kernel
+        args = list(self._kernel_args())
+        simd = _kernels.simd_adjoint() if self.simd else None
+        if simd is not None:
+            from gpr3d.migration._simd import W
 
-            adjoint_surface_kernel()(padded, *args[:9], img)
+            nd = self.grid.nd
+            extra = -nd % W  # pad depth and slowness to whole SIMD blocks (the pad voxels are discarded)
+            step = self.depth[1] - self.depth[0] if nd > 1 else 1.0
+            args[4] = np.r_[self.depth, self.depth[-1] + step * np.arange(1, extra + 1)].astype(np.float32)
+            args[5] = np.r_[self.slow, np.full(extra, self.slow[-1])].astype(np.float32)
+            simd(padded, *args, img)
         else:
-            adjoint(padded, *args, img)
+            _kernels.kernels()[0](padded, *args, img)
         return img
 
     def forward(self, image) -> np.ndarray:
