@@ -6,7 +6,7 @@ from gpr3d.migration.metrics import evaluate_targets, truth_lines_from_pipes
 from gpr3d.migration.targets import Target3D, extract_targets, targets_to_json
 from gpr3d.migration.traditional import split_lines, stolt_migrate
 from gpr3d.simulation.forward import Pipe
-from gpr3d.simulation.paths import grid_lines, random_walk
+from gpr3d.simulation.paths import grid_lines
 from gpr3d.simulation.synthetic import point_targets_bscan
 
 
@@ -75,5 +75,3 @@ def test_split_grid_lines():
     lines = split_lines(tr.positions_xyz)
     assert len(lines) == 10
     assert sum(len(l) for l in lines) == len(tr)
-    walk = random_walk(500, seed=1)
-    assert np.all(np.linalg.norm(np.diff(walk.positions_xyz, axis=0), axis=1) == pytest.approx(0.01, abs=1e-9))
