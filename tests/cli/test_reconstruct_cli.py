@@ -75,3 +75,19 @@ def test_boxes_make_a_noise_map(pipe_survey, tmp_path):
     assert r.returncode == 0, r.stderr
     with h5py.File(tmp_path / "o" / "volume.h5") as f:
         assert "noise_map" in f and f["noise_map"].shape == f["envelope"].shape
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--eps-r", "-3"], "eps_r must be a relative permittivity >= 1"),
+    (["--spacing", "0"], "spacing_m must be positive"),
+    (["--boxes", "{box}"], "no 'targets' list"),
+    (["--boxes", "{ns_box}"], "box 0 [10, 5, 40, 9] lies outside the data"),
+])
+def test_bad_reconstruct_arguments_are_one_line_errors(pipe_survey, tmp_path, extra, words):
+    d, _ = pipe_survey
+    (tmp_path / "box.json").write_text(json.dumps({"boxes": [[10, 5e-9, 40, 9e-9]]}))
+    (tmp_path / "ns_box.json").write_text(json.dumps([[10, 5, 40, 9]]))
+    extra = [e.format(box=tmp_path / "box.json", ns_box=tmp_path / "ns_box.json") for e in extra]
+    r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--out", tmp_path / "o", *extra)
+    assert r.returncode == 1 and words in r.stderr, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "o").exists()

@@ -189,8 +189,12 @@ def _load_boxes(path):
         raise FormatError(path, f"cannot read boxes: {exc}") from None
     if isinstance(obj, list) and obj and isinstance(obj[0], dict) and "targets" in obj[0]:
         obj = obj[0]  # multi-channel detect output: first channel
-    items = obj.get("targets", []) if isinstance(obj, dict) else obj
-    boxes = [t["box"] if isinstance(t, dict) else t for t in items]
+    if isinstance(obj, dict) and not isinstance(obj.get("targets"), list):
+        raise FormatError(path, "no 'targets' list (expected gpr3d detect output, or a list of boxes)")
+    items = obj["targets"] if isinstance(obj, dict) else obj
+    if not isinstance(items, list):
+        raise FormatError(path, "expected a list of boxes")
+    boxes = [t.get("box") if isinstance(t, dict) else t for t in items]
     if not all(isinstance(b, (list, tuple)) and len(b) == 4 for b in boxes):
         raise FormatError(path, "boxes must be [trace_start, t_start_s, trace_end, t_end_s]")
     return boxes

@@ -11,7 +11,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import hilbert
 
-__all__ = ["box_mask", "masked_migration", "image_envelope", "signal_to_clutter"]
+from gpr3d.core.errors import InvalidDataError
+
+__all__ = ["box_mask", "check_boxes", "masked_migration", "image_envelope", "signal_to_clutter"]
 
 
 def _taper_1d(n: int, lo: float, hi: float, width: float) -> np.ndarray:
@@ -25,14 +27,34 @@ def _taper_1d(n: int, lo: float, hi: float, width: float) -> np.ndarray:
 
 def box_mask(n_traces: int, n_samples: int, dt_s: float, boxes, *, taper_traces: float = 3.0,
              taper_s: float | None = None) -> np.ndarray:
-    """Mask ``(n_traces, n_samples)`` in [0, 1]: 1 inside any box, tapered edges, 0 elsewhere."""
+    """Mask ``(n_traces, n_samples)`` in [0, 1]: 1 inside any box, tapered edges, 0 elsewhere.
+
+    A box is ``[trace_start, t_start_s, trace_end, t_end_s]`` (times after the first sample).
+    """
     mask = np.zeros((n_traces, n_samples))
     tw = (taper_s / dt_s) if taper_s else 3.0
-    for b in boxes:
-        i0, t0, i1, t1 = (float(v) for v in b[:4])
+    for i0, t0, i1, t1 in check_boxes(boxes, n_traces, n_samples * dt_s):
         m = np.outer(_taper_1d(n_traces, i0, i1, taper_traces), _taper_1d(n_samples, t0 / dt_s, t1 / dt_s, tw))
         mask = np.maximum(mask, m)
     return mask.astype(np.float32)
+
+
+def check_boxes(boxes, n_traces: int, window_s: float) -> list[tuple[float, float, float, float]]:
+    """The boxes as float tuples, or a one-line :class:`InvalidDataError` naming the first bad one."""
+    return [_check_box(k, b, n_traces, window_s) for k, b in enumerate(boxes)]
+
+
+def _check_box(k, b, n_traces, window_s):
+    try:
+        i0, t0, i1, t1 = (float(v) for v in b)
+    except (TypeError, ValueError):
+        raise InvalidDataError(f"box {k} must be 4 numbers [trace_start, t_start_s, trace_end, t_end_s], got {b!r}")
+    if not all(np.isfinite([i0, t0, i1, t1])) or i1 < i0 or t1 <= t0:
+        raise InvalidDataError(f"box {k} {b!r} is empty or not finite: need trace_start <= trace_end, t_start < t_end")
+    if i1 < 0 or i0 > n_traces - 1 or t1 < 0 or t0 > window_s:
+        raise InvalidDataError(f"box {k} {b!r} lies outside the data ({n_traces} traces, {window_s * 1e9:.4g} ns): "
+                               "are its times in seconds?")
+    return i0, t0, i1, t1
 
 
 def masked_migration(op, data, mask):

@@ -21,7 +21,7 @@ from gpr3d import __version__
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.io.atomic import atomic_path, atomic_write_text
 from gpr3d.migration.grid import Grid3D
-from gpr3d.migration.masking import box_mask, image_envelope
+from gpr3d.migration.masking import box_mask, check_boxes, image_envelope
 from gpr3d.migration.operator import BackProjection, antenna_positions
 from gpr3d.migration.targets import extract_targets, targets_to_json
 
@@ -64,6 +64,14 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None) -> 
     eps = cfg.eps_r or survey.eps_r
     if eps is None:
         raise InvalidDataError("no eps_r: the survey has none; give --eps-r")
+    if not (np.isfinite(eps) and eps >= 1.0):
+        raise InvalidDataError(f"eps_r must be a relative permittivity >= 1, got {eps}")
+    for name in ("spacing_m", "depth_spacing_m", "max_depth_m"):
+        val = getattr(cfg, name)
+        if val is not None and not (np.isfinite(val) and val > 0):
+            raise InvalidDataError(f"{name} must be positive, got {val}")
+    if boxes:
+        boxes = check_boxes(boxes, survey.n_traces, survey.n_samples * survey.dt_s)
     t = time.perf_counter()
     s = _prepare(survey, cfg)
     t_prep = time.perf_counter() - t
