@@ -61,7 +61,7 @@ def test_reconstruct_errors_are_one_line(pipe_survey, tmp_path):
     (tmp_path / "boxes.json").write_text("[[1, 2, 3]]")
     r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--boxes", tmp_path / "boxes.json",
                 "--out", tmp_path / "o")
-    assert r.returncode == 1 and "boxes must be" in r.stderr
+    assert r.returncode == 1 and "box 0 must be 4 numbers" in r.stderr
 
 
 def test_boxes_make_a_noise_map(pipe_survey, tmp_path):

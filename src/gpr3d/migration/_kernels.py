@@ -39,14 +39,18 @@ def kernels():
         k0 = int(math.ceil((hm / tan_ap - d0) / dd - 1e-6))
         return min(max(k0, 0), nd)
 
+    @njit(fastmath=True, cache=True, inline="always")
+    def depth_axis(depth, nd):
+        # first depth and depth step (the aperture's start_depth needs them)
+        return depth[0], (depth[1] - depth[0] if nd > 1 else f32(1.0))
+
     @njit(parallel=True, fastmath=True, cache=True)
     def adjoint(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image):
         # per (column, trace): pass 1 computes the sample positions and weights for all depths
         # (vectorised: two square roots per voxel), pass 2 gathers and accumulates
         nx, ny, nd = image.shape
         n_tr = data.shape[0]
-        d0 = depth[0]
-        dd = depth[1] - depth[0] if nd > 1 else f32(1.0)
+        d0, dd = depth_axis(depth, nd)
         for c in prange(nx * ny):
             ix = c // ny
             iy = c - ix * ny
@@ -101,8 +105,7 @@ def kernels():
     def forward(image, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, data):
         nx, ny, nd = image.shape
         n_tr = data.shape[0]
-        d0 = depth[0]
-        dd = depth[1] - depth[0] if nd > 1 else f32(1.0)
+        d0, dd = depth_axis(depth, nd)
         for j in prange(n_tr):
             row = data[j]
             ha = tx[j, 2]
@@ -131,7 +134,7 @@ def kernels():
                         row[i0 + np.uint32(1)] += f * m
 
     _CACHE["adjoint"], _CACHE["forward"] = adjoint, forward
-    _CACHE["legs"], _CACHE["start_depth"] = legs, start_depth
+    _CACHE["helpers"] = legs, start_depth, depth_axis
     return adjoint, forward
 
 
@@ -147,7 +150,7 @@ def simd_adjoint():
     from gpr3d.migration import _simd
 
     kernels()
-    legs, start_depth = _CACHE["legs"], _CACHE["start_depth"]
+    legs, start_depth, depth_axis = _CACHE["helpers"]
     s0, s1, s2, s3 = (_simd.stack(m) for m in range(4))
     W = _simd.W
 
@@ -156,8 +159,7 @@ def simd_adjoint():
         nx, ny, nd = image.shape
         n_tr = data.shape[0]
         nblk = depth.shape[0] // W
-        d0 = depth[0]
-        dd = depth[1] - depth[0] if nd > 1 else np.float32(1.0)
+        d0, dd = depth_axis(depth, nd)
         for c in numba.prange(nx * ny):
             ix = c // ny
             iy = c - ix * ny

@@ -38,16 +38,15 @@ def random_walk(n_traces: int, *, area=((0.0, 2.0), (0.0, 2.0)), step_m: float =
     cell, look, side = 0.1, 0.4, 0.5
     visits = np.zeros((int(np.ceil((x1 - x0) / cell)) + 1, int(np.ceil((y1 - y0) / cell)) + 1))
 
-    def visited(q):
-        i = int(np.clip((q[0] - x0) / cell, 0, visits.shape[0] - 1))
-        j = int(np.clip((q[1] - y0) / cell, 0, visits.shape[1] - 1))
-        return visits[i, j]
+    def cell_of(q):
+        return (int(np.clip((q[0] - x0) / cell, 0, visits.shape[0] - 1)),
+                int(np.clip((q[1] - y0) / cell, 0, visits.shape[1] - 1)))
 
     for i in range(n_traces):
         w = 0.9 * w + 0.1 * rng.normal(0, turn_rate * 3)
         if explore > 0:
-            left = visited(p + look * np.array([np.cos(h + side), np.sin(h + side)]))
-            right = visited(p + look * np.array([np.cos(h - side), np.sin(h - side)]))
+            left = visits[cell_of(p + look * np.array([np.cos(h + side), np.sin(h + side)]))]
+            right = visits[cell_of(p + look * np.array([np.cos(h - side), np.sin(h - side)]))]
             w += 0.1 * explore * turn_rate * np.tanh((right - left) / (1.0 + left + right) * 4)
         ahead = p + max(5 * step_m, 0.05) * np.array([np.cos(h), np.sin(h)])
         if not (x0 + margin < ahead[0] < x1 - margin and y0 + margin < ahead[1] < y1 - margin):
@@ -57,7 +56,7 @@ def random_walk(n_traces: int, *, area=((0.0, 2.0), (0.0, 2.0)), step_m: float =
         h = h + w
         p = p + step_m * np.array([np.cos(h), np.sin(h)])
         p = np.clip(p, [x0, y0], [x1, y1])
-        visits[int((p[0] - x0) / cell), int((p[1] - y0) / cell)] += 1
+        visits[cell_of(p)] += 1
         pos[i, :2] = p
         yaw[i] = h
     t = np.arange(n_traces) * step_m / speed_m_s
