@@ -40,6 +40,17 @@ def kernels():
         return min(max(k0, 0), nd)
 
     @njit(fastmath=True, cache=True, inline="always")
+    def sample_position(dk, ha, hb, h2a, h2b, sk, t0, inv_dt, umax):
+        # fractional sample index of the two-way time tx -> voxel at depth dk -> rx, clamped to the padded trace;
+        # with the vertical legs and path lengths the weights need
+        za = dk + ha
+        zb = dk + hb
+        ra = math.sqrt(h2a + za * za)
+        rb = math.sqrt(h2b + zb * zb)
+        u = (t0 + (ra + rb) * sk) * inv_dt
+        return min(max(u, f32(0.0)), umax), za, zb, ra, rb
+
+    @njit(fastmath=True, cache=True, inline="always")
     def depth_axis(depth, nd):
         # first depth and depth step (the aperture's start_depth needs them)
         return depth[0], (depth[1] - depth[0] if nd > 1 else f32(1.0))
@@ -66,18 +77,10 @@ def kernels():
                 k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
                 if mode == 0:
                     for k in range(k0, nd):
-                        za = depth[k] + ha
-                        zb = depth[k] + hb
-                        u = (t0 + (math.sqrt(h2a + za * za) + math.sqrt(h2b + zb * zb)) * slow[k]) * inv_dt
-                        uu[k] = min(max(u, f32(0.0)), umax)
+                        uu[k] = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)[0]
                 else:
                     for k in range(k0, nd):
-                        za = depth[k] + ha
-                        zb = depth[k] + hb
-                        ra = math.sqrt(h2a + za * za)
-                        rb = math.sqrt(h2b + zb * zb)
-                        u = (t0 + (ra + rb) * slow[k]) * inv_dt
-                        uu[k] = min(max(u, f32(0.0)), umax)
+                        uu[k], za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
                         w = f32(1.0)
                         if mode & 1:
                             w *= f32(0.5) * (za / ra + zb / rb)
@@ -116,12 +119,7 @@ def kernels():
                     k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
                     col = image[ix, iy]
                     for k in range(k0, nd):
-                        za = depth[k] + ha
-                        zb = depth[k] + hb
-                        ra = math.sqrt(h2a + za * za)
-                        rb = math.sqrt(h2b + zb * zb)
-                        u = (t0 + (ra + rb) * slow[k]) * inv_dt
-                        u = min(max(u, f32(0.0)), umax)
+                        u, za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
                         i0 = np.uint32(u)
                         f = u - f32(i0)
                         w = f32(1.0)
