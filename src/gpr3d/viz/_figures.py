@@ -26,3 +26,14 @@ def save_figure(fig, path, *, dpi: int = 120, close: bool = True) -> None:
     finally:
         if close:
             pyplot().close(fig)
+
+
+def plot_to_png(path, plot, *args, figsize, dpi: int = 120, **kwargs) -> None:
+    """``plot(*args, ax, **kwargs)`` on a new figure, written to ``path`` atomically; the figure is closed either way."""
+    fig, ax = pyplot().subplots(figsize=figsize)
+    try:
+        plot(*args, ax, **kwargs)
+    except BaseException:
+        pyplot().close(fig)
+        raise
+    save_figure(fig, path, dpi=dpi)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpr3d.viz._figures import pyplot, save_figure
+from gpr3d.viz._figures import plot_to_png, pyplot
 
 __all__ = ["plot_bscan", "save_bscan_png"]
 
@@ -85,10 +85,4 @@ def plot_bscan(
 
 def save_bscan_png(survey, path, *, dpi: int = 120, **kwargs) -> None:
     """Render :func:`plot_bscan` to a PNG file atomically."""
-    fig, ax = pyplot().subplots(figsize=(8, 4.5))
-    try:
-        plot_bscan(survey, ax, **kwargs)
-    except BaseException:
-        pyplot().close(fig)
-        raise
-    save_figure(fig, path, dpi=dpi)
+    plot_to_png(path, plot_bscan, survey, figsize=(8, 4.5), dpi=dpi, **kwargs)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpr3d.viz._figures import pyplot, save_figure
+from gpr3d.viz._figures import plot_to_png, pyplot
 
 __all__ = ["plot_survey_map", "save_survey_map_png"]
 
@@ -40,10 +40,4 @@ def plot_survey_map(positions_xyz, ax=None, *, pipes=(), spheres=(), title=None,
 
 
 def save_survey_map_png(path, positions_xyz, *, dpi=120, **kwargs) -> None:
-    fig, ax = pyplot().subplots(figsize=(6.5, 6))
-    try:
-        plot_survey_map(positions_xyz, ax, **kwargs)
-    except BaseException:
-        pyplot().close(fig)
-        raise
-    save_figure(fig, path, dpi=dpi)
+    plot_to_png(path, plot_survey_map, positions_xyz, figsize=(6.5, 6), dpi=dpi, **kwargs)
