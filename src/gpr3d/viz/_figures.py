@@ -29,7 +29,9 @@ def save_figure(fig, path, *, dpi: int = 120, close: bool = True) -> None:
 
 
 def plot_to_png(path, plot, *args, figsize, dpi: int = 120, **kwargs) -> None:
-    """``plot(*args, ax, **kwargs)`` on a new figure, written to ``path`` atomically; the figure is closed either way."""
+    """``plot(*args, ax, **kwargs)`` on a new figure, written to ``path`` atomically.
+
+    The figure is closed whether or not the plot succeeds."""
     fig, ax = pyplot().subplots(figsize=figsize)
     try:
         plot(*args, ax, **kwargs)
