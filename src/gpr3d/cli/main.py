@@ -180,25 +180,8 @@ def cmd_dataset(args):
     return 0
 
 
-def _load_boxes(path):
-    from gpr3d.core.errors import FormatError
-
-    try:
-        obj = json.loads(Path(path).read_text())
-    except (OSError, ValueError) as exc:
-        raise FormatError(path, f"cannot read boxes: {exc}") from None
-    if isinstance(obj, list) and obj and isinstance(obj[0], dict) and "targets" in obj[0]:
-        obj = obj[0]  # multi-channel detect output: first channel
-    if isinstance(obj, dict) and not isinstance(obj.get("targets"), list):
-        raise FormatError(path, "no 'targets' list (expected gpr3d detect output, or a list of boxes)")
-    items = obj["targets"] if isinstance(obj, dict) else obj
-    if not isinstance(items, list):
-        raise FormatError(path, "expected a list of boxes")
-    # each box's contents are checked by reconstruct (masking.check_boxes)
-    return [t.get("box") if isinstance(t, dict) else t for t in items]
-
-
 def cmd_reconstruct(args):
+    from gpr3d.io.detections import read_boxes
     from gpr3d.io.registry import read
     from gpr3d.io.trajectory import attach_poses, read_trajectory
     from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct, write_reconstruction
@@ -210,7 +193,7 @@ def cmd_reconstruct(args):
                             aperture_deg=None if args.aperture <= 0 else args.aperture, threshold=args.threshold,
                             min_line_m=args.min_line, engine=args.engine,
                             time_zero="none" if args.no_time_zero else "peak")
-    boxes = _load_boxes(args.boxes) if args.boxes else None
+    boxes = read_boxes(args.boxes) if args.boxes else None
     result = reconstruct(survey, cfg, boxes=boxes)
     files = write_reconstruction(result, args.out, source=str(args.input))
     g = result["grid"]

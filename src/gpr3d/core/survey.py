@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.jsonutil import jsonable as _jsonable
 from gpr3d.core.poses import normalize_quat, quat_from_yaw, yaw_from_quat
 from gpr3d.core.units import twt_to_depth
 
@@ -348,16 +349,3 @@ class Survey:
         from gpr3d.io.hdf5 import read_survey
 
         return read_survey(path)
-
-
-def _jsonable(value):
-    """Convert numpy scalars/arrays inside ``value`` to plain Python for JSON."""
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    return value

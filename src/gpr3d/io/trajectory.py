@@ -1,6 +1,6 @@
 """Antenna trajectories: TUM and CSV files, xyz tracks, and attaching poses to a survey.
 
-A :class:`Trajectory` holds ``timestamps_s (n,)``, ``positions_xyz (n, 3)`` and
+A :class:`~gpr3d.core.trajectory.Trajectory` (the type lives in ``core``) holds ``timestamps_s (n,)``, ``positions_xyz (n, 3)`` and
 ``orientations_quat_wxyz (n, 4)``: poses ``world_from_antenna``. TUM files store
 ``t tx ty tz qx qy qz qw`` (quaternion last, w last); the conversion happens here.
 """
@@ -9,41 +9,17 @@ from __future__ import annotations
 
 import csv
 import io as _io
-from dataclasses import dataclass
 
 import numpy as np
 
 from gpr3d.core.errors import FormatError, InvalidDataError
-from gpr3d.core.poses import normalize_quat, slerp
+from gpr3d.core.poses import slerp
+from gpr3d.core.trajectory import Trajectory
 from gpr3d.io._common import check_file
 from gpr3d.io.atomic import atomic_write_text
 
 __all__ = ["Trajectory", "read_tum", "write_tum", "read_csv_trajectory", "read_trajectory", "read_xyz_track",
            "attach_poses", "attach_track"]
-
-
-@dataclass
-class Trajectory:
-    """Timestamped 6-DoF poses ``world_from_antenna``."""
-
-    timestamps_s: np.ndarray
-    positions_xyz: np.ndarray
-    orientations_quat_wxyz: np.ndarray
-
-    def __post_init__(self):
-        self.timestamps_s = np.asarray(self.timestamps_s, dtype=float).reshape(-1)
-        n = self.timestamps_s.size
-        self.positions_xyz = np.asarray(self.positions_xyz, dtype=float).reshape(n, 3)
-        q = np.asarray(self.orientations_quat_wxyz, dtype=float).reshape(n, 4)
-        if not (np.all(np.isfinite(self.timestamps_s)) and np.all(np.isfinite(self.positions_xyz))):
-            raise InvalidDataError("trajectory holds NaN/inf values")
-        try:
-            self.orientations_quat_wxyz = normalize_quat(q)
-        except ValueError as exc:
-            raise InvalidDataError(f"trajectory: {exc}") from None
-
-    def __len__(self) -> int:
-        return self.timestamps_s.size
 
 
 def _rows(path, text: str, ncols: int, what: str) -> np.ndarray:

@@ -14,6 +14,7 @@ from typing import Callable
 import numpy as np
 
 from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.jsonutil import jsonable
 from gpr3d.core.poses import slerp
 from gpr3d.core.units import C0
 from gpr3d.processing import gain, timezero
@@ -149,9 +150,7 @@ def run_step(survey, step: str, **kwargs):
         raise InvalidDataError(f"{step}: {exc}") from None
     out = survey._derive(step, kwargs, **changes)
     if result:
-        from gpr3d.core.survey import _jsonable
-
-        out.history[-1]["result"] = _jsonable(result)
+        out.history[-1]["result"] = jsonable(result)
     return out
 
 

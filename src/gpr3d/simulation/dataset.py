@@ -39,6 +39,8 @@ from gpr3d.io.atomic import atomic_write_text
 
 __all__ = ["SimulateConfig", "simulate_sample", "build_dataset", "write_manifest", "bscan_image", "PRESETS"]
 
+from gpr3d.processing.image import bscan_image  # noqa: E402 (re-exported: the image.png rendering)
+
 SAMPLE_FILES = ("scene.json", "bscan.h5", "labels.json", "image.png")
 
 #: scene presets: "standard" = the sampler's ranges; "tiny" = small, fast scenes for smoke tests
@@ -76,20 +78,6 @@ def _scene_for(cfg_dict: dict, index: int):
             t.radius_m = min(t.radius_m, scene.depth_m / 8)
         scene.stones, scene.rough_surface_m = [], 0.0
     return scene
-
-
-def bscan_image(survey, height: int) -> np.ndarray:
-    """RGB uint8 image ``(height, n_traces, 3)``: 'hot' colour map of |background-removed data|."""
-    import matplotlib
-
-    x = survey.remove_background().data
-    t_old = np.arange(survey.n_samples)
-    t_new = np.linspace(0, survey.n_samples - 1, height)
-    img = np.stack([np.interp(t_new, t_old, tr) for tr in x], axis=1)  # (height, n_traces)
-    img = np.abs(img)
-    scale = np.percentile(img, 99.5) or 1.0
-    rgba = matplotlib.colormaps["hot"](np.clip(img / scale, 0, 1))
-    return (rgba[..., :3] * 255).astype(np.uint8)
 
 
 def _sha256(path: Path) -> str:
@@ -162,7 +150,7 @@ def _clean_partial(out: Path) -> int:
 
 def write_manifest(out, cfg: SimulateConfig | None = None) -> dict:
     """(Re)write ``manifest.json`` and ``coco.json`` from the sample folders on disk."""
-    from gpr3d.simulation.labels import coco_dataset
+    from gpr3d.io.coco import coco_dataset
 
     out = Path(out)
     entries, coco_in = [], []

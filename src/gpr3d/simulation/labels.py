@@ -6,6 +6,8 @@ surface, straight rays; a cylinder crossing the line is a circle in the x-z
 plane). The recorded time adds the source delay: gprMax's Ricker pulse peaks
 ``sqrt(2)/f`` after the start of the simulation.
 
+COCO export lives in :mod:`gpr3d.io.coco` (shared with detection).
+
 Box rule (see ``docs/labels.md`` for the figure): the box spans the traces whose
 antenna midpoint lies within ``(depth_to_centre) * tan(45 deg)`` of the target
 axis (the part of the hyperbola a broadside antenna sees well), and in time from
@@ -20,13 +22,13 @@ import math
 
 import numpy as np
 
+from gpr3d.io.coco import CATEGORIES, coco_dataset  # noqa: F401 (coco_dataset: re-exported)
 from gpr3d.simulation.scene import Scene
 
-__all__ = ["hyperbola_times", "label_scene", "coco_dataset", "BOX_HALF_ANGLE_DEG", "BOX_PAD_PERIODS"]
+__all__ = ["hyperbola_times", "label_scene", "label_traces", "coco_dataset", "BOX_HALF_ANGLE_DEG", "BOX_PAD_PERIODS"]
 
 BOX_HALF_ANGLE_DEG = 45.0
 BOX_PAD_PERIODS = 0.7
-CATEGORIES = ["rebar", "steel_pipe", "pvc_pipe", "void", "tank"]
 
 
 def _circle_path(tx_x, rx_x, cx, cz, r, n_angles=721):
@@ -47,32 +49,48 @@ def _circle_path(tx_x, rx_x, cx, cz, r, n_angles=721):
     return best
 
 
-def hyperbola_times(scene: Scene, target) -> np.ndarray:
-    """Two-way time (s, below the surface) to ``target`` for every trace of ``scene``."""
-    x = scene.trace_midpoints_x()
+def hyperbola_times(scene: Scene, target, x=None) -> np.ndarray:
+    """Two-way time (s, below the surface) to ``target`` for every trace (midpoints ``x``, default the scene's)."""
+    x = scene.trace_midpoints_x() if x is None else np.asarray(x, dtype=float)
     half = scene.antenna.offset_m / 2
     path = _circle_path(x - half, x + half, target.x_m, -(target.depth_m + target.radius_m), target.radius_m)
     return path / scene.medium.velocity_m_s
 
 
 def label_scene(scene: Scene, n_samples: int, dt_s: float) -> list[dict]:
-    """Labels of every target of ``scene`` for a record of ``n_samples`` at ``dt_s``.
+    """Labels of every target of ``scene`` for a record of ``n_samples`` at ``dt_s`` (its own trace positions).
 
     Each label: ``kind, category, apex_trace, apex_time_s`` (from the first sample),
     ``apex_twt_s`` (below the surface), ``depth_m`` (to the top), ``x_m``,
     ``radius_m``, ``box = [trace_start, t_start_s, trace_end, t_end_s]``, ``visible``
     (the apex lies inside the record).
     """
+    return label_traces(scene, scene.trace_midpoints_x(), n_samples, dt_s)
+
+
+def label_traces(scene: Scene, x, n_samples: int, dt_s: float, *, source_delay_s: float | None = None) -> list[dict]:
+    """Labels (as :func:`label_scene`) for traces at antenna midpoints ``x`` (non-decreasing, m).
+
+    ``source_delay_s`` is the time from the first sample to the pulse's peak at the
+    source (default gprMax's ``sqrt(2)/f``). Uneven steps, stops (repeated
+    positions) and gaps are allowed; ``apex_trace`` is then the fractional trace
+    index at which the antenna passes over the target.
+    """
     f = scene.antenna.frequency_hz
-    delay = math.sqrt(2) / f
-    x = scene.trace_midpoints_x()
+    delay = math.sqrt(2) / f if source_delay_s is None else float(source_delay_s)
+    x = np.asarray(x, dtype=float)
+    n = x.size
     t_end = (n_samples - 1) * dt_s
+    idx = np.arange(n, dtype=float)
+    xu, first = np.unique(x, return_index=True)  # positions repeat where the cart stopped
     out = []
     for t in scene.targets:
-        twt = hyperbola_times(scene, t)
+        twt = hyperbola_times(scene, t, x)
         k = int(np.argmin(twt))
-        # fractional apex trace: the target axis position in trace units
-        apex_trace = float((t.x_m - scene.x_start_m) / scene.trace_step_m)
+        apex_trace = float(np.interp(t.x_m, xu, idx[first])) if xu.size > 1 else 0.0
+        if t.x_m < x[0] or t.x_m > x[-1]:  # outside the line: extrapolate with the mean step
+            step = (x[-1] - x[0]) / max(n - 1, 1) or 1.0
+            apex_trace = (t.x_m - x[0]) / step
         apex_twt = float(twt.min())
         reach = (t.depth_m + t.radius_m) * math.tan(math.radians(BOX_HALF_ANGLE_DEG))
         sel = np.nonzero(np.abs(x - t.x_m) <= reach)[0]
@@ -90,39 +108,9 @@ def label_scene(scene: Scene, n_samples: int, dt_s: float) -> list[dict]:
             "x_m": t.x_m,
             "radius_m": t.radius_m,
             "box": [int(sel[0]), max(t0, 0.0), int(sel[-1]), min(t1, t_end)],
-            "visible": bool(0 <= delay + apex_twt <= t_end and 0 <= apex_trace <= scene.n_traces - 1),
+            "visible": bool(0 <= delay + apex_twt <= t_end and 0 <= apex_trace <= n - 1),
         })
     return out
-
-
-def coco_dataset(samples: list[dict], image_height: int) -> dict:
-    """COCO detection JSON for a list of ``{"id", "file_name", "n_traces", "dt_s", "n_samples", "eps_r", "labels"}``.
-
-    Images are ``n_traces`` pixels wide and ``image_height`` tall (the record resampled
-    in time; ``row_s`` per image gives seconds per row); boxes are ``[x, y, w, h]`` in
-    pixels, trace ``i`` at column ``i``. Extra fields: per annotation ``apex_trace``,
-    ``apex_time_s``, ``depth_m``; per image ``eps_r`` (CONVENTIONS.md).
-    """
-    images, anns = [], []
-    for s in samples:
-        # row r shows time r * (n_samples - 1) * dt / (image_height - 1)
-        row_s = (s["n_samples"] - 1) * s["dt_s"] / (image_height - 1)
-        sy = 1.0 / row_s
-        images.append({"id": s["id"], "file_name": s["file_name"], "width": s["n_traces"], "height": image_height,
-                       "eps_r": s["eps_r"], "row_s": row_s})
-        for lab in s["labels"]:
-            if not lab["visible"]:
-                continue
-            i0, ta, i1, tb = lab["box"]
-            x, y = float(i0), float(ta * sy)
-            w, h = float(i1 - i0), float((tb - ta) * sy)
-            anns.append({"id": len(anns) + 1, "image_id": s["id"], "category_id": lab["category"],
-                         "bbox": [x, y, w, h], "area": w * h, "iscrowd": 0,
-                         "apex_trace": lab["apex_trace"], "apex_time_s": lab["apex_time_s"],
-                         "depth_m": lab["depth_m"]})
-    cats = [{"id": i + 1, "name": n, "supercategory": "target"} for i, n in enumerate(CATEGORIES)]
-    return {"info": {"description": "gpr3d simulated B-scans"}, "images": images, "annotations": anns,
-            "categories": cats}
 
 
 def to_json(obj) -> str:

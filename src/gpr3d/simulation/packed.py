@@ -25,14 +25,11 @@ import h5py
 import numpy as np
 
 from gpr3d import __version__
-from gpr3d.core.errors import FormatError, GPR3DError
-from gpr3d.io._common import check_file, hdf5_errors
+from gpr3d.core.errors import GPR3DError
 from gpr3d.io.atomic import atomic_path, atomic_write_text
+from gpr3d.io.packed import SCHEMA, PackedDataset as _PackedReader
 
 __all__ = ["pack_dataset", "PackedDataset", "load_sample", "save_label_preview"]
-
-SCHEMA = "gpr3d.packed_dataset"
-
 
 def _resample(data: np.ndarray, n_out: int) -> np.ndarray:
     n_in = data.shape[1]
@@ -85,61 +82,20 @@ def pack_dataset(folder, out, *, n_samples: int = 512, regenerate: str = "") -> 
     return {"n": len(entries), "file": str(out), "bytes": Path(out).stat().st_size}
 
 
-class PackedDataset:
-    """Read a packed dataset: ``len(ds)``, ``ds[i] -> (Survey, labels dict)``."""
-
-    def __init__(self, path):
-        self.path = check_file(path)
-        with hdf5_errors(self.path), h5py.File(self.path, "r") as f:
-            if f.attrs.get("schema") != SCHEMA:
-                raise FormatError(self.path, "not a gpr3d packed dataset")
-            self.scale = f["scale"][()]
-            self.dt_s = f["dt_s"][()]
-            self.index = f["index"][()]
-            self.manifest = json.loads(f.attrs["manifest_json"])
-            self.config = json.loads(f.attrs["config_json"])
-            self.regenerate = f.attrs.get("regenerate", "")
-            self.shape = f["data"].shape
-
-    def __len__(self) -> int:
-        return len(self.index)
-
-    def labels(self, i: int) -> dict:
-        with h5py.File(self.path, "r") as f:
-            return json.loads(f["labels_json"][i])
+class PackedDataset(_PackedReader):
+    """A packed dataset with its scenes as :class:`~gpr3d.simulation.scene.Scene` and COCO export."""
 
     def scene(self, i: int):
         from gpr3d.simulation.scene import Scene
 
-        with h5py.File(self.path, "r") as f:
-            return Scene.from_json(f["scene_json"][i])
-
-    def array(self, i: int) -> np.ndarray:
-        """B-scan ``i`` as float32 in its original amplitude units, ``(n_traces, n_samples)``."""
-        with h5py.File(self.path, "r") as f:
-            return f["data"][i].astype(np.float32) * self.scale[i]
-
-    def __getitem__(self, i: int):
-        from gpr3d.core.survey import Survey
-
-        if not -len(self) <= i < len(self):
-            raise IndexError(i)
-        i = i % len(self)
-        scene = self.scene(i)
-        x = scene.trace_midpoints_x()
-        pos = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
-        s = Survey(data=self.array(i), dt_s=float(self.dt_s[i]), positions_xyz=pos, offset_m=scene.antenna.offset_m,
-                   frequency_hz=scene.antenna.frequency_hz, eps_r=scene.medium.eps_r,
-                   metadata={"format": "packed", "path": str(self.path), "index": int(self.index[i]),
-                             "scene": scene.to_dict()})
-        return s, self.labels(i)
+        return Scene.from_dict(self.scene_dict(i))
 
     def export_coco(self, out_dir, *, image_height: int = 256) -> dict:
         """Write ``images/{index}.png`` and ``coco.json`` (labels in image pixels) into ``out_dir``."""
         from PIL import Image
 
-        from gpr3d.simulation.dataset import bscan_image
-        from gpr3d.simulation.labels import coco_dataset
+        from gpr3d.io.coco import coco_dataset
+        from gpr3d.processing.image import bscan_image
 
         out = Path(out_dir)
         (out / "images").mkdir(parents=True, exist_ok=True)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpr3d.core.poses import quat_from_yaw
-from gpr3d.io.trajectory import Trajectory
+from gpr3d.core.trajectory import Trajectory
 
 __all__ = ["random_walk", "grid_lines"]
 

@@ -1,0 +1,235 @@
+"""Survey-scale B-scans: real-world sizes, survey geometry and recording artefacts.
+
+The scenes of :mod:`gpr3d.simulation.sampler` are short (25-40 traces) so that
+gprMax stays cheap; real recordings are not. :func:`sample_survey_scene` draws
+scenes at the sizes practitioners meet (ranges stated in ``SURVEY_RANGES`` and
+``docs/labels.md``):
+
+==========  ============  =======  ==========================================================
+host        frequency     eps_r    geometry
+==========  ============  =======  ==========================================================
+concrete    1.0-2.6 GHz   4-12     100-600 traces 2-10 mm apart; rebars 10-32 mm diameter,
+                                   10-30 cm apart, 2-15 cm cover, a second layer in half of
+                                   the scans; a few conduits (steel, PVC) and voids; a slab
+                                   bottom in half of them
+soil        100-900 MHz   3-25     100-600 traces 1-10 cm apart; pipes 2-60 cm diameter at
+                                   0.3-2 m (steel, PVC with air or water, voids, tanks), stones
+==========  ============  =======  ==========================================================
+
+:func:`synthesize_survey` turns a scene into a recorded-looking B-scan with the
+fast forward model and the artefacts of real radars, each drawn at random:
+uneven trace spacing, dropped traces and stops (repeated traces), a pre-trigger
+time shift, direct waves, antenna ringing, wow, gain curves, clutter points and
+noise, and another wavelet. Labels follow the same box rule as every other sample
+(:func:`gpr3d.simulation.labels.label_traces`), computed at the traces' actual
+positions and time shift.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from gpr3d.simulation.scene import Antenna, Medium, Scene, Stone, Target
+
+__all__ = ["SURVEY_RANGES", "sample_survey_scene", "synthesize_survey", "survey_sample"]
+
+SURVEY_RANGES = {
+    "concrete": {"frequency_hz": (1.0e9, 2.6e9), "eps_r": (4.0, 12.0), "conductivity_s_m": (0.001, 0.03),
+                 "step_m": (0.002, 0.01), "rebar_radius_m": (0.005, 0.016), "rebar_spacing_m": (0.10, 0.30),
+                 "cover_m": (0.02, 0.15), "second_layer": 0.5, "slab_bottom": 0.5},
+    "soil": {"frequency_hz": (1.0e8, 9.0e8), "eps_r": (3.0, 25.0), "conductivity_s_m": (0.0005, 0.02),
+             "step_m": (0.01, 0.10), "pipe_radius_m": (0.01, 0.30), "depth_m": (0.3, 2.0),
+             "kinds": {"steel_pipe": 0.35, "pvc_pipe": 0.3, "void": 0.15, "tank": 0.05, "rebar": 0.15}},
+    "n_traces": (100, 600),
+}
+
+
+def _rng(seed: int, index: int) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence([int(seed), int(index), 0x5157]))
+
+
+def _log_uniform(rng, lo, hi):
+    return float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+
+
+def sample_survey_scene(seed: int, index: int, *, host: str | None = None) -> Scene:
+    """The ``index``-th survey-scale scene of ``seed`` (2D: every target crosses the line)."""
+    rng = _rng(seed, index)
+    host = host or ("concrete" if rng.random() < 0.5 else "soil")
+    r = SURVEY_RANGES[host]
+    f = _log_uniform(rng, *r["frequency_hz"])
+    eps = float(rng.uniform(*r["eps_r"]))
+    sigma = _log_uniform(rng, *r["conductivity_s_m"])
+    medium = Medium(kind=host, eps_r=round(eps, 3), conductivity_s_m=round(sigma, 5))
+    v = medium.velocity_m_s
+    n_traces = int(rng.integers(SURVEY_RANGES["n_traces"][0], SURVEY_RANGES["n_traces"][1] + 1))
+    step = _log_uniform(rng, *r["step_m"])
+    targets: list[Target] = []
+    if host == "concrete":
+        length = n_traces * step
+        rad = float(rng.uniform(*r["rebar_radius_m"]))
+        spacing = float(rng.uniform(*r["rebar_spacing_m"]))
+        cover = float(rng.uniform(*r["cover_m"]))
+        x = float(rng.uniform(0.0, spacing))
+        while x < length:
+            targets.append(Target("rebar", x_m=round(x, 4), depth_m=round(cover, 4), radius_m=round(rad, 4)))
+            x += spacing * float(rng.uniform(0.95, 1.05))
+        if rng.random() < r["second_layer"]:
+            rad2 = float(rng.uniform(*r["rebar_radius_m"]))
+            sp2 = float(rng.uniform(*r["rebar_spacing_m"]))
+            d2 = cover + 2 * rad + float(rng.uniform(0.04, 0.12))
+            x = float(rng.uniform(0.0, sp2))
+            while x < length:
+                t = Target("rebar", x_m=round(x, 4), depth_m=round(d2, 4), radius_m=round(rad2, 4))
+                if all(abs(t.x_m - o.x_m) > 2.5 * (t.radius_m + o.radius_m) for o in targets):
+                    targets.append(t)
+                x += sp2 * float(rng.uniform(0.95, 1.05))
+        deepest = max(t.depth_m + 2 * t.radius_m for t in targets) if targets else cover
+        for _ in range(int(rng.integers(0, 3))):  # conduits and voids between or below the bars
+            kind = str(rng.choice(["steel_pipe", "pvc_pipe", "void"]))
+            t = Target(kind, x_m=round(float(rng.uniform(0, length)), 4),
+                       depth_m=round(float(rng.uniform(cover + 0.02, deepest + 0.12)), 4),
+                       radius_m=round(float(rng.uniform(0.008, 0.025)), 4))
+            _finish_target(t, rng)
+            if all(math.hypot(t.x_m - o.x_m, t.centre_depth_m - o.centre_depth_m) > 2 * (t.radius_m + o.radius_m)
+                   + 0.02 for o in targets):
+                targets.append(t)
+        depth_range = max(t.depth_m + 2 * t.radius_m for t in targets) + float(rng.uniform(0.05, 0.25))
+    else:
+        # the sampler keeps boxes within ~100 traces each side: trace step >= depth / 100
+        max_depth = float(rng.uniform(0.5, r["depth_m"][1]))
+        step = max(step, 1.2 * max_depth / 100)
+        length = n_traces * step
+        kinds, probs = zip(*r["kinds"].items())
+        for _ in range(60):
+            if len(targets) >= int(rng.integers(1, 7)):
+                break
+            kind = str(rng.choice(kinds, p=np.asarray(probs) / sum(probs)))
+            rad = {"rebar": (0.006, 0.016), "tank": (0.3, 0.6)}.get(kind, r["pipe_radius_m"])
+            rad = _log_uniform(rng, *rad)
+            top = float(rng.uniform(r["depth_m"][0], max(max_depth, r["depth_m"][0] + 0.05)))
+            t = Target(kind, x_m=round(float(rng.uniform(0.05, 0.95) * length), 4), depth_m=round(top, 4),
+                       radius_m=round(rad, 4))
+            _finish_target(t, rng)
+            if all(math.hypot(t.x_m - o.x_m, t.centre_depth_m - o.centre_depth_m)
+                   > 1.5 * (t.radius_m + o.radius_m) + 0.25 * v / f for o in targets):
+                targets.append(t)
+        depth_range = max(t.depth_m + 2 * t.radius_m for t in targets) * float(rng.uniform(1.1, 1.8))
+    scene = Scene(medium=medium, antenna=Antenna(frequency_hz=round(f, -6), offset_m=round(0.2 * v / f, 4)),
+                  width_m=round(length, 4), depth_m=round(depth_range, 4), n_traces=n_traces,
+                  trace_step_m=round(step, 5), x_start_m=0.0, seed=int(seed),
+                  name=f"survey_{host}_{seed}_{index:06d}")
+    scene.targets = targets
+    scene.time_window_s = 2 * depth_range / v + 2.5 / f
+    if host == "soil":
+        for _ in range(int(rng.integers(0, 8))):
+            scene.stones.append(Stone(x_m=round(float(rng.uniform(0, length)), 4),
+                                      depth_m=round(float(rng.uniform(0.05, depth_range)), 4),
+                                      radius_m=round(float(rng.uniform(0.01, 0.05)), 4),
+                                      eps_r=round(float(rng.uniform(5.0, 9.0)), 2)))
+    return scene
+
+
+def _finish_target(t: Target, rng) -> None:
+    if t.kind == "pvc_pipe":
+        t.material, t.fill = "pvc", str(rng.choice(["air", "water"], p=[0.7, 0.3]))
+        t.wall_m = round(min(0.003 + 0.05 * t.radius_m, 0.5 * t.radius_m), 4)
+    elif t.kind == "void":
+        t.material = "air"
+
+
+def _trace_positions(scene: Scene, rng, augment: bool) -> np.ndarray:
+    """Antenna midpoints along x: even steps, or jittered with stops and dropped traces."""
+    n = scene.n_traces
+    if not augment:
+        return scene.trace_midpoints_x()
+    steps = scene.trace_step_m * np.clip(1 + rng.uniform(0, 0.3) * rng.standard_normal(n), 0.2, 2.0)
+    steps[0] = 0.0
+    if rng.random() < 0.3:  # stops: the wheel does not turn, the radar keeps recording
+        for _ in range(int(rng.integers(1, 4))):
+            i = int(rng.integers(1, n))
+            steps[i : i + int(rng.integers(2, 12))] = 0.0
+    if rng.random() < 0.3:  # dropped traces: a step of two or three
+        k = rng.random(n) < 0.03
+        steps[k] *= rng.integers(2, 4, size=int(k.sum()))
+    return scene.x_start_m + np.cumsum(steps)
+
+
+def synthesize_survey(scene: Scene, *, seed: int = 0, augment: bool = True, n_samples: int | None = None):
+    """A recorded-looking B-scan of ``scene`` (forward model) and its labels: ``(Survey, labels dict)``.
+
+    With ``augment`` the artefacts listed in the module docstring are drawn from
+    ``seed``; without it the B-scan is the clean forward model at even steps.
+    """
+    from gpr3d.core.poses import quat_from_yaw
+    from gpr3d.core.survey import Survey
+    from gpr3d.simulation.forward import Layer, forward_model, scene_to_forward
+    from gpr3d.simulation.labels import label_traces
+
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA06]))
+    f = scene.antenna.frequency_hz
+    window = scene.time_window
+    if n_samples is None:
+        n_samples = int(np.clip(round(window * f * rng.uniform(8, 30) if augment else window * f * 16), 256, 2048))
+    dt = window / n_samples
+    x = _trace_positions(scene, rng, augment)
+    pos = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
+    delay = math.sqrt(2) / f + (rng.uniform(0, 0.08) * window if augment else 0.0)
+    fs = scene_to_forward(scene)
+    if scene.medium.kind == "concrete" and augment and rng.random() < SURVEY_RANGES["concrete"]["slab_bottom"]:
+        deepest = max((t.depth_m + 2 * t.radius_m for t in scene.targets), default=0.05)
+        fs.layers.append(Layer(depth_m=float(rng.uniform(deepest + 0.03, max(deepest + 0.05, scene.depth_m))),
+                               eps_r=1.0))
+    kw = dict(offset_m=scene.antenna.offset_m, frequency_hz=f, n_samples=n_samples, dt_s=dt, source_delay_s=delay,
+              wavelet="ricker_half", spreading="2d", air_wave=1.0, ground_wave=0.5, seed=int(seed))
+    if augment:
+        f_eff = f * float(rng.uniform(0.8, 1.2))  # the antenna's true centre frequency differs from its label
+        kw.update(frequency_hz=f_eff, wavelet=str(rng.choice(["ricker", "ricker_half", "ricker_d1"])),
+                  spreading=str(rng.choice(["2d", "3d"])), air_wave=float(rng.uniform(0.2, 2.0)),
+                  ground_wave=float(rng.uniform(0.1, 1.0)), clutter=int(rng.integers(0, 30)),
+                  clutter_amplitude=float(rng.uniform(0.01, 0.06)))
+    data = forward_model(fs, pos, **kw).astype(np.float64)
+    if augment:
+        data = _artefacts(data, dt, f, rng)
+    survey = Survey(data=data.astype(np.float32), dt_s=dt, positions_xyz=pos, offset_m=scene.antenna.offset_m,
+                    frequency_hz=f, eps_r=scene.medium.eps_r, orientations_quat_wxyz=quat_from_yaw(np.zeros(len(x))),
+                    metadata={"format": "forward", "scene": scene.to_dict(), "antenna": "forward model",
+                              "simulation": {"engine": "forward", "augment": augment, "seed": int(seed),
+                                             "source_delay_s": delay}})
+    labels = label_traces(scene, x, n_samples, dt, source_delay_s=delay)
+    return survey, {"eps_r": scene.medium.eps_r, "n_traces": len(x), "n_samples": n_samples, "dt_s": dt,
+                    "labels": labels}
+
+
+def _artefacts(data: np.ndarray, dt: float, f: float, rng) -> np.ndarray:
+    n_tr, n_s = data.shape
+    t = np.arange(n_s) * dt
+    peak = float(np.percentile(np.abs(data), 99.9)) or 1.0
+    if rng.random() < 0.6:  # antenna ringing: horizontal bands, slowly varying along the line
+        fr = f * rng.uniform(0.6, 1.4)
+        ring = np.sin(2 * np.pi * fr * t + rng.uniform(0, 2 * np.pi)) * np.exp(-t / (rng.uniform(2, 12) / f))
+        ring *= rng.uniform(0.05, 0.5) * peak
+        drift = 1 + 0.2 * np.sin(np.linspace(0, rng.uniform(1, 6), n_tr) + rng.uniform(0, 6))
+        data = data + drift[:, None] * ring[None, :]
+    if rng.random() < 0.5:  # wow: a low-frequency drift of each trace
+        wow = np.exp(-t / (rng.uniform(0.2, 1.0) * t[-1])) * rng.uniform(0.05, 0.5) * peak
+        data = data + wow[None, :] * (1 + 0.3 * rng.standard_normal((n_tr, 1)))
+    if rng.random() < 0.7:  # the radar's gain curve
+        tt = t / t[-1]
+        gain = (1 + rng.uniform(0, 30) * tt ** rng.uniform(0.5, 3)) if rng.random() < 0.5 \
+            else np.exp(rng.uniform(0, 4) * tt)
+        data = data * gain[None, :]
+    sig = float(np.percentile(np.abs(data), 99.5)) or 1.0
+    data = data + rng.uniform(0.002, 0.08) * sig * rng.standard_normal(data.shape)
+    if rng.random() < 0.3:  # DC offset
+        data = data + rng.uniform(-0.2, 0.2) * sig
+    return data
+
+
+def survey_sample(seed: int, index: int, *, host: str | None = None, augment: bool = True):
+    """``(Survey, labels)`` of survey-scale sample ``index``: the detector's training and test source."""
+    scene = sample_survey_scene(seed, index, host=host)
+    return synthesize_survey(scene, seed=int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0]),
+                             augment=augment)
