@@ -23,6 +23,8 @@ examples:
   gpr3d process LINE01.DZT --steps time_zero dewow remove_background gain_tpow:power=1.5 \\
         bandpass:fmin_hz=2e8:fmax_hz=8e8 --out line01.h5
   gpr3d convert LINE01.DZT line01.sgy          (.h5 gpr3d HDF5, .sgy/.segy SEG-Y, .png figure)
+  gpr3d detect LINE01.DZT --out det.json --overlay det.png
+  gpr3d reconstruct survey.h5 --mask detect --out rec
 """
 
 
@@ -193,7 +195,19 @@ def cmd_reconstruct(args):
                             aperture_deg=None if args.aperture <= 0 else args.aperture, threshold=args.threshold,
                             min_line_m=args.min_line, engine=args.engine,
                             time_zero="none" if args.no_time_zero else "peak")
+    if args.mask == "detect" and args.boxes:
+        raise GPR3DError("give --boxes or --mask detect, not both")
     boxes = read_boxes(args.boxes) if args.boxes else None
+    if args.mask == "detect":
+        from gpr3d.io.detections import write_detections
+
+        found = _detector(args).detect(survey, score_threshold=args.score, input_name=str(args.input))
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        write_detections([found], Path(args.out) / "detections.json")
+        boxes = [t["box"] for t in found["targets"]]
+        print(f"detector: {len(boxes)} boxes in {survey.n_traces} traces ({found['wall_s']:.1f} s)")
+        if not boxes:
+            raise GPR3DError("the detector found no hyperbolas: nothing to migrate (try a lower --score)")
     result = reconstruct(survey, cfg, boxes=boxes)
     files = write_reconstruction(result, args.out, source=str(args.input))
     g = result["grid"]
@@ -203,6 +217,96 @@ def cmd_reconstruct(args):
         pts = "  ".join("(" + ", ".join(f"{v:.2f}" for v in p) + ")" for p in t.points_xyz)
         print(f"  {t.kind:5s} depth {t.depth_m:.2f} m  score {t.score:.2f}  {pts}")
     print(f"wrote {', '.join(files)} to {args.out}/")
+    return 0
+
+
+def _check_suffix(path, suffixes, what):
+    if path and Path(path).suffix.lower() not in suffixes:
+        raise GPR3DError(f"{what} {path}: expected a {' or '.join(suffixes)} file")
+
+
+def _detector(args):
+    from gpr3d.detection.infer import Detector
+
+    if not 0.0 <= args.score <= 1.0:
+        raise GPR3DError(f"--score must lie in 0..1, got {args.score}")
+    return Detector.load(args.weights, device=args.device)
+
+
+def cmd_detect(args):
+    from gpr3d.io.detections import write_detections
+    from gpr3d.io.registry import read_all
+
+    _check_suffix(args.out, (".json",), "--out")
+    _check_suffix(args.overlay, (".png",), "--overlay")
+    det = _detector(args)  # weights checked before the recording is read
+    surveys = read_all(args.input, format=args.format)
+    results = [det.detect(s, score_threshold=args.score, input_name=str(args.input)) for s in surveys]
+    write_detections(results, args.out)
+    for r in results:
+        ch = f" channel {r['channel']}" if len(results) > 1 else ""
+        print(f"{args.input}{ch}: {len(r['targets'])} targets in {r['n_traces']} traces "
+              f"({r['n_windows']} windows, {r['wall_s']:.2f} s)")
+        for t in r["targets"]:
+            print(f"  trace {t['apex_trace']:5d}  {t['apex_time_s'] * 1e9:8.2f} ns  score {t['score']:.2f}")
+    if args.overlay:
+        from gpr3d.viz.bscan import save_bscan_png
+
+        s = surveys[0]
+        shown = s.dewow().remove_background()
+        save_bscan_png(shown, args.overlay, cmap="gray", boxes=[t["box"] for t in results[0]["targets"]],
+                       apexes=[(t["apex_trace"], t["apex_time_s"]) for t in results[0]["targets"]],
+                       title=f"{Path(args.input).name}: {len(results[0]['targets'])} detections (score >= {args.score})")
+    print(f"wrote {args.out}" + (f" and {args.overlay}" if args.overlay else ""))
+    return 0
+
+
+class _SurveySource:
+    """Survey-scale synthetic records for training (picklable for data-loading workers)."""
+
+    def __init__(self, seed: int):
+        self.seed = seed
+
+    def __call__(self, i):
+        from gpr3d.simulation.surveys import survey_sample
+
+        return survey_sample(self.seed, i)
+
+
+def cmd_train(args):
+    from dataclasses import asdict
+
+    from gpr3d.detection.train import TrainConfig, train_detector
+    from gpr3d.detection.weights import save_weights
+
+    cfg = TrainConfig(out=args.out, model=args.model, steps=args.steps, batch=args.batch, lr=args.lr,
+                      optimiser=args.optimiser, seed=args.seed, data_seed=args.data_seed, device=args.device,
+                      workers=args.workers, checkpoint_every=args.checkpoint_every)
+    res = train_detector(cfg, _SurveySource(cfg.data_seed), progress=not args.no_progress,
+                         max_seconds=args.max_seconds)
+    weights = Path(args.out) / "weights.pt"
+    cmd = "gpr3d " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("gpr3d") else "gpr3d train detector"
+    save_weights(res["model"], cfg.model, cfg.window, weights,
+                 provenance={"name": cfg.model, "command": cmd, "config": asdict(cfg), "train_wall_s": res["wall_s"],
+                             "device": cfg.device, "data": f"survey_sample(seed={cfg.data_seed}, i)",
+                             "steps_done": res["steps"]})
+    print(f"trained {cfg.model} for {res['steps']} steps in {res['wall_s']:.0f} s; wrote {weights}")
+    return 0
+
+
+def cmd_eval(args):
+    from gpr3d.detection.evaluate import evaluate_detector
+    from gpr3d.simulation.surveys import survey_sample
+
+    if args.n < 1:
+        raise GPR3DError(f"--n must be at least 1, got {args.n}")
+    det = _detector(args)
+    m = evaluate_detector(det, (survey_sample(args.seed, i) for i in range(args.n)), score_threshold=args.score)
+    print(f"held-out survey-scale set (seed {args.seed}, {m['n_records']} records, {m['n_true']} targets)")
+    print("| mAP@0.75 | mAP@0.5 | AR@10 | AR@100 | apex recall | false / true | s per window |")
+    print("|---|---|---|---|---|---|---|")
+    print(f"| {m['mAP@0.75']:.3f} | {m['mAP@0.5']:.3f} | {m['AR@10']:.3f} | {m['AR@100']:.3f} | "
+          f"{m['apex_recall']:.3f} | {m['false_per_true']:.3f} | {m['s_per_window']:.3f} |")
     return 0
 
 
@@ -230,6 +334,11 @@ def build_parser() -> argparse.ArgumentParser:
                             formatter_class=argparse.RawDescriptionHelpFormatter)
         sp.set_defaults(func=func)
         return sp
+
+    def add_detector_args(sp):
+        sp.add_argument("--weights", default=None, help="detector weights (default: the shipped model)")
+        sp.add_argument("--score", type=float, default=0.5, help="keep detections scoring at least this (0..1)")
+        sp.add_argument("--device", default="cpu", help="cpu (default), cuda, cuda:N")
 
     def add_input(sp):
         sp.add_argument("input", help="radar file (DZT, DT1/HD, RD3/RAD, gprMax .h5/.out, gpr3d .h5)")
@@ -313,6 +422,48 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--min-line", type=float, default=0.3, help="shortest line target (m)")
     sp.add_argument("--no-time-zero", action="store_true", help="the data already start at time zero")
     sp.add_argument("--engine", choices=("numba", "numpy"), default="numba", help="migration kernel")
+    sp.add_argument("--mask", choices=("none", "detect"), default="none",
+                    help="detect: run the detector on the trace sequence and migrate only its boxes")
+    add_detector_args(sp)
+
+    sp = add("detect", cmd_detect, "find hyperbolas in a radar file (boxes, scores, apexes as JSON)",
+             "examples:\n  gpr3d detect FILE____032.DZT --out det.json --overlay det.png\n"
+             "  gpr3d detect line.h5 --out det.json --weights my_detector.pt --score 0.3\n\n"
+             "output: {input, n_traces, dt_s, targets: [{box: [trace_start, t_start_s, trace_end, t_end_s], score,\n"
+             "apex_trace, apex_time_s}]}; times from the first recorded sample; a list for multi-channel files")
+    sp.add_argument("input", help="radar file (DZT, DT1/HD, RD3/RAD, gprMax .h5/.out, gpr3d .h5)")
+    sp.add_argument("--format", default=None, help="force a reader: dzt, dt1, rd3, gprmax, gpr3d")
+    sp.add_argument("--out", required=True, help="JSON file to write")
+    sp.add_argument("--overlay", default=None, help="PNG of the B-scan with the boxes drawn (first channel)")
+    add_detector_args(sp)
+
+    sp = add("train", cmd_train, "train a hyperbola detector on survey-scale synthetic B-scans (resumable)",
+             "examples:\n  gpr3d train detector --out det_run --steps 3000 --batch 8          (CPU)\n"
+             "  gpr3d train detector --out det_run --steps 6000 --batch 16 --device cuda --workers 12\n"
+             "re-run the same command to resume after a kill; weights go to OUT/weights.pt")
+    sp.add_argument("what", choices=("detector",), help="what to train")
+    sp.add_argument("--out", required=True, help="run folder (checkpoint.pt, losses.csv, weights.pt)")
+    sp.add_argument("--model", default="frcnn_lean", help="frcnn_lean (default), frcnn_r18/r50/r101, "
+                    "frcnn_mobilenet, retinanet_r18, fcos_r18, ssdlite")
+    sp.add_argument("--steps", type=int, default=3000, help="optimiser steps (default 3000)")
+    sp.add_argument("--batch", type=int, default=8, help="windows per step (default 8)")
+    sp.add_argument("--lr", type=float, default=None, help="learning rate (default: the optimiser's)")
+    sp.add_argument("--optimiser", default="adamw", help="adamw (default), sgd, reference (the paper's SGD)")
+    sp.add_argument("--seed", type=int, default=0, help="initialisation seed")
+    sp.add_argument("--data-seed", type=int, default=1000, help="synthetic records survey_sample(SEED, i)")
+    sp.add_argument("--device", default="cpu", help="cpu (default), cuda, cuda:N")
+    sp.add_argument("--workers", type=int, default=0, help="data-loading processes (default 0)")
+    sp.add_argument("--checkpoint-every", type=int, default=100, help="steps between checkpoints")
+    sp.add_argument("--max-seconds", type=float, default=None, help="stop after this long (resume later)")
+    sp.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    sp = add("eval", cmd_eval, "evaluate a detector on held-out survey-scale synthetic B-scans (COCO metrics)",
+             "example:\n  gpr3d eval detector --n 60 --seed 777\n"
+             "the full comparison table: python benchmarks/eval_detector.py WEIGHTS.pt ...")
+    sp.add_argument("what", choices=("detector",), help="what to evaluate")
+    sp.add_argument("--n", type=int, default=60, help="records (default 60)")
+    sp.add_argument("--seed", type=int, default=777, help="seed of the held-out set (training uses 1000)")
+    add_detector_args(sp)
 
     sp = add("demo", cmd_demo, "run the end-to-end demo (embedded example by default)",
              "example:\n  gpr3d demo --out gpr3d_demo")

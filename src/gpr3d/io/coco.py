@@ -14,7 +14,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["CATEGORIES", "PixelMap", "coco_dataset"]
+__all__ = ["CATEGORIES", "PixelMap", "coco_dataset", "BOX_HALF_ANGLE_DEG", "BOX_PAD_PERIODS"]
+
+#: the label box rule (docs/labels.md), shared by the labeller and the detector's apex estimate:
+#: traces within depth * tan(45 deg) of the target, time from this many periods before the apex
+BOX_HALF_ANGLE_DEG = 45.0
+BOX_PAD_PERIODS = 0.7
 
 #: target kinds of the labels; detectors may merge them into one class
 CATEGORIES = ["rebar", "steel_pipe", "pvc_pipe", "void", "tank"]

@@ -22,13 +22,11 @@ import math
 
 import numpy as np
 
-from gpr3d.io.coco import CATEGORIES, coco_dataset  # noqa: F401 (coco_dataset: re-exported)
+from gpr3d.io.coco import BOX_HALF_ANGLE_DEG, BOX_PAD_PERIODS, CATEGORIES, coco_dataset  # noqa: F401 (re-exported)
 from gpr3d.simulation.scene import Scene
 
 __all__ = ["hyperbola_times", "label_scene", "label_traces", "coco_dataset", "BOX_HALF_ANGLE_DEG", "BOX_PAD_PERIODS"]
 
-BOX_HALF_ANGLE_DEG = 45.0
-BOX_PAD_PERIODS = 0.7
 
 
 def _circle_path(tx_x, rx_x, cx, cz, r, n_angles=721):
@@ -85,19 +83,18 @@ def label_traces(scene: Scene, x, n_samples: int, dt_s: float, *, source_delay_s
     xu, first = np.unique(x, return_index=True)  # positions repeat where the cart stopped
     out = []
     for t in scene.targets:
-        twt = hyperbola_times(scene, t, x)
-        k = int(np.argmin(twt))
+        reach = (t.depth_m + t.radius_m) * math.tan(math.radians(BOX_HALF_ANGLE_DEG))
+        sel = np.nonzero(np.abs(x - t.x_m) <= reach)[0]
+        if sel.size == 0:  # the line passes beside the target: its nearest trace
+            sel = np.array([int(np.argmin(np.abs(x - t.x_m)))])
+        twt = hyperbola_times(scene, t, x[sel])  # the apex trace lies inside the reach
         apex_trace = float(np.interp(t.x_m, xu, idx[first])) if xu.size > 1 else 0.0
         if t.x_m < x[0] or t.x_m > x[-1]:  # outside the line: extrapolate with the mean step
             step = (x[-1] - x[0]) / max(n - 1, 1) or 1.0
             apex_trace = (t.x_m - x[0]) / step
         apex_twt = float(twt.min())
-        reach = (t.depth_m + t.radius_m) * math.tan(math.radians(BOX_HALF_ANGLE_DEG))
-        sel = np.nonzero(np.abs(x - t.x_m) <= reach)[0]
-        if sel.size == 0:
-            sel = np.array([k])
         t0 = delay + apex_twt - BOX_PAD_PERIODS / f
-        t1 = delay + float(twt[sel].max()) + BOX_PAD_PERIODS / f
+        t1 = delay + float(twt.max()) + BOX_PAD_PERIODS / f
         out.append({
             "kind": t.kind,
             "category": CATEGORIES.index(t.kind) + 1,

@@ -86,7 +86,10 @@ def sample_survey_scene(seed: int, index: int, *, host: str | None = None) -> Sc
                 if all(abs(t.x_m - o.x_m) > 2.5 * (t.radius_m + o.radius_m) for o in targets):
                     targets.append(t)
                 x += sp2 * float(rng.uniform(0.95, 1.05))
-        deepest = max(t.depth_m + 2 * t.radius_m for t in targets) if targets else cover
+        if not targets:  # a short scan between two bars of a wide mesh: put one bar on it
+            targets.append(Target("rebar", x_m=round(float(rng.uniform(0.2, 0.8)) * length, 4),
+                                  depth_m=round(cover, 4), radius_m=round(rad, 4)))
+        deepest = max(t.depth_m + 2 * t.radius_m for t in targets)
         for _ in range(int(rng.integers(0, 3))):  # conduits and voids between or below the bars
             kind = str(rng.choice(["steel_pipe", "pvc_pipe", "void"]))
             t = Target(kind, x_m=round(float(rng.uniform(0, length)), 4),
@@ -103,8 +106,9 @@ def sample_survey_scene(seed: int, index: int, *, host: str | None = None) -> Sc
         step = max(step, 1.2 * max_depth / 100)
         length = n_traces * step
         kinds, probs = zip(*r["kinds"].items())
-        for _ in range(60):
-            if len(targets) >= int(rng.integers(1, 7)):
+        n_want = int(rng.integers(1, 7))
+        for attempt in range(200):
+            if len(targets) >= n_want:
                 break
             kind = str(rng.choice(kinds, p=np.asarray(probs) / sum(probs)))
             rad = {"rebar": (0.006, 0.016), "tank": (0.3, 0.6)}.get(kind, r["pipe_radius_m"])
@@ -113,8 +117,8 @@ def sample_survey_scene(seed: int, index: int, *, host: str | None = None) -> Sc
             t = Target(kind, x_m=round(float(rng.uniform(0.05, 0.95) * length), 4), depth_m=round(top, 4),
                        radius_m=round(rad, 4))
             _finish_target(t, rng)
-            if all(math.hypot(t.x_m - o.x_m, t.centre_depth_m - o.centre_depth_m)
-                   > 1.5 * (t.radius_m + o.radius_m) + 0.25 * v / f for o in targets):
+            if not targets or all(math.hypot(t.x_m - o.x_m, t.centre_depth_m - o.centre_depth_m)
+                                  > 1.5 * (t.radius_m + o.radius_m) + 0.25 * v / f for o in targets):
                 targets.append(t)
         depth_range = max(t.depth_m + 2 * t.radius_m for t in targets) * float(rng.uniform(1.1, 1.8))
     scene = Scene(medium=medium, antenna=Antenna(frequency_hz=round(f, -6), offset_m=round(0.2 * v / f, 4)),

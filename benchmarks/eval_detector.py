@@ -1,0 +1,132 @@
+"""Detector evaluation table (the reference's Table 1 format) on held-out records.
+
+    python benchmarks/eval_detector.py WEIGHTS.pt [MORE.pt ...] [--n 60] [--seed 777] [--out benchmarks/results]
+
+Sets (no training or tuning touches them):
+* ``survey``: survey-scale forward-model B-scans ``survey_sample(seed, i)``, i < n
+  (training uses seed 1000), with the recording artefacts switched on;
+* ``gprmax400``: the stored gprMax B-scans (``datasets/gprmax400.h5``; short
+  scenes, other physics) when present.
+
+Prints a Markdown table per set and writes ``detector_eval.md`` / ``.csv`` beside
+``--out``, with training time (from the weights' provenance) and CPU time per window.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def cpu_name() -> str:
+    try:
+        import numba.misc.numba_sysinfo as si
+
+        return si.get_sysinfo().get("CPU Name", platform.processor())
+    except Exception:
+        return platform.processor() or platform.machine()
+
+
+def records(kind: str, n: int, seed: int):
+    if kind == "survey":
+        from gpr3d.simulation.surveys import survey_sample
+
+        for i in range(n):
+            yield survey_sample(seed, i)
+    else:
+        from gpr3d.io.packed import PackedDataset
+
+        ds = PackedDataset(ROOT / "datasets" / "gprmax400.h5")
+        for i in range(min(n, len(ds))):
+            s, lab = ds[len(ds) - 1 - i]  # from the end: the most recent samples
+            yield s, lab
+
+
+def draw_worst(det, per_record, args):
+    from gpr3d.simulation.surveys import survey_sample
+    from gpr3d.viz.bscan import save_bscan_png
+
+    order = sorted(per_record, key=lambda r: (r["apex_found"] - r["false"]) / max(r["n_true"], 1))
+    out = ROOT / "docs" / "figures" / "detections"
+    out.mkdir(parents=True, exist_ok=True)
+    for r in order[: args.worst]:
+        s, lab = survey_sample(args.seed, r["record"])
+        res = det.detect(s, score_threshold=args.score)
+        vis = [x for x in lab["labels"] if x["visible"]]
+        save_bscan_png(s.dewow().remove_background(), out / f"worst_survey_{args.seed}_{r['record']}.png",
+                       cmap="gray", boxes=[t["box"] for t in res["targets"]] + [x["box"] for x in vis],
+                       apexes=[(t["apex_trace"], t["apex_time_s"]) for t in res["targets"]],
+                       title=f"held-out record {r['record']}: {r['apex_found']}/{r['n_true']} apexes found, "
+                             f"{r['false']} false (boxes: detections first, then truth)")
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("weights", nargs="+")
+    p.add_argument("--n", type=int, default=60)
+    p.add_argument("--seed", type=int, default=777)
+    p.add_argument("--sets", nargs="+", default=["survey", "gprmax400"])
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--score", type=float, default=0.5, help="score threshold for apex recall / false targets")
+    p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
+    p.add_argument("--worst", type=int, default=0, help="draw the K records of the survey set with the lowest "
+                   "apex recall (first weights) into docs/figures/detections/worst_*.png")
+    args = p.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    from gpr3d.detection.evaluate import evaluate_detector
+    from gpr3d.detection.infer import Detector
+    from gpr3d.detection.models import count_parameters
+
+    rows = []
+    for w in args.weights:
+        det = Detector.load(w)
+        prov = det.provenance
+        for kind in args.sets:
+            if kind == "gprmax400" and not (ROOT / "datasets" / "gprmax400.h5").exists():
+                continue
+            t = time.perf_counter()
+            m = evaluate_detector(det, records(kind, args.n, args.seed), score_threshold=args.score)
+            rows.append({"model": prov.get("name", Path(w).stem), "set": kind, "records": m["n_records"],
+                         "true_targets": m["n_true"], "mAP@0.5": m["mAP@0.5"], "mAP@0.75": m["mAP@0.75"],
+                         "AR@10": m["AR@10"], "AR@100": m["AR@100"], "apex_recall": m["apex_recall"],
+                         "false_per_true": m["false_per_true"], "cpu_s_per_window": m["s_per_window"],
+                         "train_steps": prov.get("steps_done", prov.get("config", {}).get("steps")), "train_s": prov.get("train_wall_s"),
+                         "train_device": prov.get("device"), "params_M": count_parameters(det.model) / 1e6,
+                         "eval_wall_s": time.perf_counter() - t})
+            print(json.dumps(rows[-1]), flush=True)
+            if args.worst and kind == "survey" and w == args.weights[0]:
+                draw_worst(det, m["rows"], args)
+    head = ["model", "set", "records", "true_targets", "mAP@0.75", "mAP@0.5", "AR@10", "AR@100", "apex_recall",
+            "false_per_true", "cpu_s_per_window", "params_M", "train_steps", "train_s", "train_device"]
+    lines = [f"Host CPU: {cpu_name()}, {args.threads} threads; score threshold {args.score} for apex recall; "
+             f"survey set seed {args.seed}, n {args.n}", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        cells = []
+        for h in head:
+            v = r.get(h)
+            cells.append(f"{v:.3f}" if isinstance(v, float) else str(v))
+        lines.append("| " + " | ".join(cells) + " |")
+    table = "\n".join(lines)
+    print(table)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "detector_eval.md").write_text(table + "\n\ncommand: python benchmarks/eval_detector.py "
+                                          + " ".join(sys.argv[1:] if argv is None else argv) + "\n")
+    with open(out / "detector_eval.csv", "w", newline="") as f:
+        wr = csv.DictWriter(f, fieldnames=list(rows[0].keys()) if rows else head)
+        wr.writeheader()
+        wr.writerows(rows)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,117 @@
+"""Hyperbola detectors from torchvision, built without downloaded weights.
+
+Every model takes the 3-channel 256 x 256 windows of :mod:`gpr3d.detection.windows`
+and finds one class, ``hyperbola`` (label 1). Names (``MODELS``):
+
+* ``frcnn_lean`` (the default): Faster R-CNN on a ResNet-18 cut after its third
+  stage, a 128-channel FPN, anchors shaped for hyperbola boxes (wide and flat to
+  square), 1000/300 proposals and 128 sampled RoIs in training. About 7 M
+  parameters: trains on CPU, runs a window in a few tens of milliseconds.
+* ``frcnn_r18``, ``frcnn_r50``, ``frcnn_r101``: Faster R-CNN with full ResNet FPN
+  backbones (the reference's best model is ResNet-101).
+* ``frcnn_mobilenet``: Faster R-CNN MobileNetV3-Large FPN.
+* ``retinanet_r18``, ``fcos_r18``: one-stage detectors on a ResNet-18 FPN.
+* ``ssdlite``: SSDlite with MobileNetV3-Large (as the reference's SSD rows).
+
+Batch norm is trainable throughout (nothing is pretrained).
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+from gpr3d.core.deps import require
+from gpr3d.core.errors import InvalidDataError
+
+__all__ = ["MODELS", "build_model", "count_parameters"]
+
+MODELS = ("frcnn_lean", "frcnn_r18", "frcnn_r50", "frcnn_r101", "frcnn_mobilenet", "retinanet_r18", "fcos_r18",
+          "ssdlite")
+
+#: anchor heights over widths: hyperbola boxes are wide and flat to about square
+ASPECT_RATIOS = (0.25, 0.5, 1.0, 2.0)
+IMAGE_MEAN = [0.5, 0.5, 0.5]
+IMAGE_STD = [0.25, 0.25, 0.25]
+
+
+def _anchors(n_levels: int, base: int = 16, two_scales: bool = True):
+    from torchvision.models.detection.anchor_utils import AnchorGenerator
+
+    sizes = tuple((base * 2**k, int(base * 2**k * 1.5)) if two_scales else (base * 2**k,) for k in range(n_levels))
+    return AnchorGenerator(sizes=sizes, aspect_ratios=(ASPECT_RATIOS,) * n_levels)
+
+
+def _resnet_fpn(name: str, *, returned=(1, 2, 3, 4), out_channels: int = 256, extra=None):
+    import torch.nn as nn
+    import torchvision
+    from torchvision.models.detection.backbone_utils import BackboneWithFPN
+    from torchvision.ops.feature_pyramid_network import LastLevelMaxPool
+
+    body = getattr(torchvision.models, name)(weights=None, norm_layer=nn.BatchNorm2d)
+    in_ch = body.inplanes // 8  # channels of layer1's output (64 for resnet18, 256 for resnet50)
+    return_layers = {f"layer{k}": str(i) for i, k in enumerate(returned)}
+    in_list = [in_ch * 2 ** (k - 1) for k in returned]
+    return BackboneWithFPN(body, return_layers, in_list, out_channels,
+                           extra_blocks=extra if extra is not None else LastLevelMaxPool(), norm_layer=None)
+
+
+def _frcnn_common(image_size: int) -> dict:
+    return dict(min_size=image_size, max_size=image_size, image_mean=IMAGE_MEAN, image_std=IMAGE_STD,
+                rpn_pre_nms_top_n_train=1000, rpn_post_nms_top_n_train=300, rpn_pre_nms_top_n_test=500,
+                rpn_post_nms_top_n_test=150, box_batch_size_per_image=128, box_detections_per_img=100,
+                box_score_thresh=0.01)
+
+
+def build_model(name: str = "frcnn_lean", *, image_size: int = 256):
+    """A fresh detector ``name`` (see ``MODELS``) for ``image_size`` square windows; 2 classes."""
+    torch = require("torch")
+    require("torchvision")
+    import torchvision.models.detection as det
+    from torchvision.models.detection.faster_rcnn import FastRCNNPredictor, TwoMLPHead
+    from torchvision.ops import MultiScaleRoIAlign
+
+    if name not in MODELS:
+        raise InvalidDataError(f"unknown detector {name!r}; choose one of {', '.join(MODELS)}")
+    torch.manual_seed(0)
+    common = _frcnn_common(image_size)
+    if name == "frcnn_lean":
+        bb = _resnet_fpn("resnet18", returned=(1, 2, 3), out_channels=128)
+        pool = MultiScaleRoIAlign(featmap_names=["0", "1", "2"], output_size=7, sampling_ratio=2)
+        model = det.FasterRCNN(bb, num_classes=None, rpn_anchor_generator=_anchors(4), box_roi_pool=pool,
+                               box_head=TwoMLPHead(128 * 7 * 7, 512), box_predictor=FastRCNNPredictor(512, 2),
+                               **common)
+    elif name in ("frcnn_r18", "frcnn_r50", "frcnn_r101"):
+        bb = _resnet_fpn({"frcnn_r18": "resnet18", "frcnn_r50": "resnet50", "frcnn_r101": "resnet101"}[name])
+        model = det.FasterRCNN(bb, num_classes=2, rpn_anchor_generator=_anchors(5), **common)
+    elif name == "frcnn_mobilenet":
+        model = det.fasterrcnn_mobilenet_v3_large_fpn(weights=None, weights_backbone=None, num_classes=2,
+                                                      trainable_backbone_layers=6, **common)
+    elif name in ("retinanet_r18", "fcos_r18"):
+        from torchvision.ops.feature_pyramid_network import LastLevelP6P7
+
+        bb = _resnet_fpn("resnet18", returned=(2, 3, 4), extra=LastLevelP6P7(256, 256))
+        kw = dict(min_size=image_size, max_size=image_size, image_mean=IMAGE_MEAN, image_std=IMAGE_STD,
+                  score_thresh=0.01, detections_per_img=100)
+        if name == "retinanet_r18":
+            model = det.RetinaNet(bb, num_classes=2, anchor_generator=_anchors(5, base=16), **kw)
+        else:
+            from torchvision.models.detection.anchor_utils import AnchorGenerator
+
+            anchors = AnchorGenerator(sizes=tuple((8 * 2**k,) for k in range(5)), aspect_ratios=((1.0,),) * 5)
+            model = det.FCOS(bb, num_classes=2, anchor_generator=anchors, **kw)
+    else:  # ssdlite
+        from torchvision.models.detection import ssdlite
+
+        model = det.ssdlite320_mobilenet_v3_large(weights=None, weights_backbone=None, num_classes=2,
+                                                  norm_layer=partial(torch.nn.BatchNorm2d, eps=0.001, momentum=0.03),
+                                                  image_mean=IMAGE_MEAN, image_std=IMAGE_STD, score_thresh=0.01,
+                                                  detections_per_img=100)
+        model.transform.min_size = (image_size,)
+        model.transform.max_size = image_size
+        model.transform.fixed_size = (image_size, image_size)
+        _ = ssdlite
+    return model
+
+
+def count_parameters(model) -> int:
+    return int(sum(p.numel() for p in model.parameters()))

@@ -1,0 +1,65 @@
+"""Detector weight files: the state dict in float16 with what is needed to rebuild and trust it.
+
+A weights file is a ``torch.save`` dict, loaded with ``weights_only=True``::
+
+    {"format": "gpr3d.detector", "version": 1, "model": NAME, "window": {...WindowConfig},
+     "state_dict": {...float16 tensors...}, "provenance": {"command", "dataset", "metrics", ...}}
+
+The default weights ship inside the package (``gpr3d/detection/default_detector.pt``)
+with their provenance beside them in ``default_detector.json``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from gpr3d.core.deps import require
+from gpr3d.core.errors import FormatError
+from gpr3d.io.atomic import atomic_path
+
+__all__ = ["save_weights", "load_weights", "DEFAULT_WEIGHTS"]
+
+FORMAT = "gpr3d.detector"
+DEFAULT_WEIGHTS = Path(__file__).with_name("default_detector.pt")
+
+
+def save_weights(model, name: str, window: dict, path, *, provenance: dict | None = None) -> None:
+    """Write ``model``'s weights (float16 for floating tensors) atomically."""
+    torch = require("torch")
+    sd = {k: (v.detach().half() if v.is_floating_point() else v.detach()).cpu() for k, v in model.state_dict().items()}
+    obj = {"format": FORMAT, "version": 1, "model": name, "window": dict(window), "state_dict": sd,
+           "provenance": provenance or {}}
+    with atomic_path(path, suffix=".pt.part") as tmp:
+        torch.save(obj, tmp)
+
+
+def load_weights(path=None, *, device: str = "cpu"):
+    """``(model in eval mode, WindowConfig, provenance)`` from a weights file (default: the shipped one)."""
+    torch = require("torch")
+    from gpr3d.detection.models import MODELS, build_model
+    from gpr3d.detection.windows import WindowConfig
+
+    p = Path(path) if path is not None else DEFAULT_WEIGHTS
+    if not p.is_file():
+        raise FormatError(p, "no such weights file")
+    try:
+        obj = torch.load(p, map_location="cpu", weights_only=True)
+    except Exception as exc:
+        raise FormatError(p, f"not a readable weights file ({type(exc).__name__}: {str(exc).splitlines()[0][:120]})")
+    if not isinstance(obj, dict) or obj.get("format") != FORMAT:
+        raise FormatError(p, "not a gpr3d detector weights file")
+    if obj.get("version") != 1:
+        raise FormatError(p, f"weights format version {obj.get('version')!r} is not supported (expected 1)")
+    name = obj.get("model")
+    if name not in MODELS:
+        raise FormatError(p, f"unknown model {name!r} in the weights file")
+    window = WindowConfig(**obj["window"])
+    model = build_model(name, image_size=window.rows)
+    sd = {k: v.float() if v.is_floating_point() else v for k, v in obj["state_dict"].items()}
+    try:
+        model.load_state_dict(sd)
+    except RuntimeError as exc:
+        first = str(exc).splitlines()[1].strip() if len(str(exc).splitlines()) > 1 else str(exc)
+        raise FormatError(p, f"weights do not fit model {name!r}: {first[:160]}") from None
+    model.eval().to(device)
+    return model, window, obj.get("provenance", {})

@@ -1,0 +1,243 @@
+"""From any Survey to detector windows and back.
+
+:func:`prepare` applies the standard processing (dewow, removal of the mean trace,
+a depth-equalising gain) without moving time zero, so that rows keep counting
+from the first recorded sample (CONVENTIONS.md). :func:`windows` cuts the record
+into blocks of ``traces`` traces with ``overlap``, each resampled to ``rows`` rows
+over the whole time window, and :func:`render` makes the network's 3-channel
+image of a block: the signed amplitude, its envelope, and the amplitude after a
+time-power gain (or the reference paper's 'hot' colouring, ``style="hot"``).
+:func:`merge` maps window boxes back to traces and seconds and removes the
+duplicates of overlapping windows; :func:`apex_of_box` finds the top of the
+hyperbola inside a box.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy.ndimage import uniform_filter1d
+from scipy.signal import hilbert
+
+from gpr3d.core.errors import InvalidDataError
+from gpr3d.io.coco import BOX_PAD_PERIODS, PixelMap
+from gpr3d.processing.image import hot_rgb, normalise_window, resample_rows
+
+__all__ = ["WindowConfig", "Window", "prepare", "windows", "render", "merge", "apex_of_box", "window_targets"]
+
+
+@dataclass
+class WindowConfig:
+    """How a record becomes detector windows."""
+
+    traces: int = 256  #: traces per window (one image column each)
+    rows: int = 256  #: image rows (the record's whole time window, resampled)
+    overlap: float = 0.5  #: fraction of a window shared with the next
+    style: str = "channels"  #: "channels" (signed, envelope, gained) or "hot" (the reference's colouring)
+    dewow: bool = True
+    background: bool = True
+    equalise: bool = True  #: divide each row by its RMS across the record (deep echoes as bright as shallow)
+
+    def __post_init__(self):
+        if not (isinstance(self.traces, int) and 16 <= self.traces <= 4096):
+            raise InvalidDataError(f"window traces must be an integer in 16..4096, got {self.traces!r}")
+        if not (isinstance(self.rows, int) and 32 <= self.rows <= 2048):
+            raise InvalidDataError(f"window rows must be an integer in 32..2048, got {self.rows!r}")
+        if not (0.0 <= float(self.overlap) <= 0.9):
+            raise InvalidDataError(f"window overlap must lie in 0..0.9, got {self.overlap!r}")
+        if self.style not in ("channels", "hot"):
+            raise InvalidDataError(f"window style must be 'channels' or 'hot', got {self.style!r}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class Window:
+    """One block of a record: ``image (3, rows, traces)`` float32 and its :class:`PixelMap`."""
+
+    image: np.ndarray
+    pixmap: PixelMap
+    trace_start: int
+    n_traces: int  #: real traces in the block (the rest is padding)
+
+
+def prepare(survey, cfg: WindowConfig | None = None) -> np.ndarray:
+    """Processed data ``(n_traces, rows)`` float32 of a record: the detector's view of it."""
+    cfg = cfg or WindowConfig()
+    data = np.asarray(survey.data, dtype=np.float64)
+    if not np.all(np.isfinite(data)):
+        raise InvalidDataError("the record holds NaN/inf samples; detection needs finite data")
+    if data.shape[0] < 2 or data.shape[1] < 8:
+        raise InvalidDataError(f"a {data.shape[0]} x {data.shape[1]} record is too small to detect in")
+    if cfg.dewow:
+        # remove the low-frequency wow: a running mean over about one period of the antenna
+        f = survey.frequency_hz or 1.0 / (data.shape[1] * survey.dt_s / 20)
+        w = int(np.clip(round(1.0 / (f * survey.dt_s)), 3, data.shape[1] // 2 | 1))
+        data = data - uniform_filter1d(data, w, axis=1, mode="nearest")
+    if cfg.background:
+        data = data - data.mean(axis=0, keepdims=True)
+    factor = data.shape[1] / cfg.rows
+    if factor > 1.5:  # anti-alias before the time axis shrinks
+        data = uniform_filter1d(data, int(round(factor)), axis=1, mode="nearest")
+    out = resample_rows(data.astype(np.float32), cfg.rows).astype(np.float64)
+    if cfg.equalise:
+        rms = np.sqrt(np.mean(out**2, axis=0))
+        rms = uniform_filter1d(rms, max(3, cfg.rows // 16), mode="nearest")
+        floor = 0.05 * float(np.max(rms)) if rms.size else 0.0
+        out = out / np.maximum(rms, floor if floor > 0 else 1.0)
+    return out.astype(np.float32)
+
+
+def render(block: np.ndarray, style: str = "channels", *, scale: float | None = None) -> np.ndarray:
+    """Image ``(3, rows, cols)`` float32 in [0, 1] of a processed block ``(cols traces, rows)``."""
+    x = normalise_window(np.asarray(block, dtype=np.float32).T, scale=scale)  # (rows, cols) in [-1, 1]
+    env = np.abs(hilbert(x, axis=0)).astype(np.float32)
+    if style == "hot":
+        return np.ascontiguousarray(hot_rgb(np.clip(env, 0, 1)).transpose(2, 0, 1).astype(np.float32) / 255.0)
+    rows = x.shape[0]
+    tg = x * np.linspace(0.5, 1.5, rows, dtype=np.float32)[:, None]
+    return np.stack([0.5 + 0.5 * x, np.clip(env, 0, 1), 0.5 + 0.5 * np.clip(tg, -1, 1)]).astype(np.float32)
+
+
+def windows(survey, cfg: WindowConfig | None = None, *, processed: np.ndarray | None = None) -> list[Window]:
+    """The record's windows, left to right; the last one ends at the last trace; short records are padded."""
+    cfg = cfg or WindowConfig()
+    proc = prepare(survey, cfg) if processed is None else processed
+    n = proc.shape[0]
+    s_per_row = (survey.n_samples - 1) * survey.dt_s / (cfg.rows - 1)
+    scale = float(np.percentile(np.abs(proc), 99.5)) or 1.0  # one scale for the whole record
+    step = max(1, int(round(cfg.traces * (1 - cfg.overlap))))
+    starts = list(range(0, max(n - cfg.traces, 0) + 1, step))
+    if starts[-1] + cfg.traces < n:
+        starts.append(n - cfg.traces)
+    out = []
+    for s0 in starts:
+        block = proc[s0 : s0 + cfg.traces]
+        real = block.shape[0]
+        if real < cfg.traces:
+            block = np.concatenate([block, np.zeros((cfg.traces - real, proc.shape[1]), np.float32)])
+        out.append(Window(render(block, cfg.style, scale=scale), PixelMap(trace0=s0 - 0.5, traces_per_px=1.0,
+                                                                          t0_s=-0.5 * s_per_row,
+                                                                          s_per_px=s_per_row), s0, real))
+    return out
+
+
+def window_targets(labels: list[dict], win: Window, *, min_inside: float = 0.6) -> np.ndarray:
+    """Boxes ``(k, 4)`` in window pixels of the visible labels whose apex lies in the window.
+
+    A box cut by the window's edge is kept (clipped) when at least ``min_inside`` of
+    its width is inside; otherwise it is left out.
+    """
+    w = win.image.shape[2]
+    h = win.image.shape[1]
+    out = []
+    for lab in labels:
+        if not lab.get("visible", True):
+            continue
+        x0, y0, x1, y1 = win.pixmap.box_to_px(lab["box"])
+        ax, _ = win.pixmap.point_to_px(lab["apex_trace"], lab["apex_time_s"])
+        if not (0 <= ax <= win.n_traces):
+            continue
+        cx0, cx1 = max(x0, 0.0), min(x1, float(win.n_traces))
+        if (cx1 - cx0) < min_inside * max(x1 - x0, 1e-9):
+            continue
+        cy0, cy1 = max(y0, 0.0), min(y1, float(h))
+        if cy1 - cy0 < 1 or cx1 - cx0 < 1:
+            continue
+        out.append([cx0, cy0, min(cx1, w), cy1])
+    return np.asarray(out, dtype=np.float32).reshape(-1, 4)
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    x0 = np.maximum(a[:, None, 0], b[None, :, 0])
+    y0 = np.maximum(a[:, None, 1], b[None, :, 1])
+    x1 = np.minimum(a[:, None, 2], b[None, :, 2])
+    y1 = np.minimum(a[:, None, 3], b[None, :, 3])
+    inter = np.clip(x1 - x0, 0, None) * np.clip(y1 - y0, 0, None)
+    area_a = (a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1])
+    area_b = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
+    return inter / np.maximum(area_a[:, None] + area_b[None, :] - inter, 1e-12)
+
+
+def merge(per_window: list[tuple[Window, np.ndarray, np.ndarray]], n_traces: int, dt_s: float, *,
+          iou: float = 0.5, edge_px: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """Window detections -> record boxes ``(k, 4)`` [trace_start, t_start_s, trace_end, t_end_s] and scores.
+
+    A box that touches a window's inner edge (not the record's) is cut by it: its
+    score is lowered so that the same hyperbola seen whole in the overlapping window
+    wins; duplicates are removed by greedy non-maximum suppression in record
+    coordinates (time in samples, so that IoU does not depend on units).
+    """
+    boxes, scores, ranks = [], [], []
+    for win, b, s in per_window:
+        for bb, ss in zip(np.asarray(b, float).reshape(-1, 4), np.asarray(s, float).reshape(-1)):
+            rec = win.pixmap.px_to_box(bb)
+            cut = (bb[0] <= edge_px and win.trace_start > 0) or \
+                  (bb[2] >= win.n_traces - edge_px and win.trace_start + win.n_traces < n_traces)
+            rec[0], rec[2] = max(rec[0], 0.0), min(rec[2], n_traces - 1.0)
+            boxes.append(rec)
+            scores.append(float(ss))
+            ranks.append(float(ss) * (0.5 if cut else 1.0))
+    if not boxes:
+        return np.zeros((0, 4)), np.zeros(0)
+    boxes_a = np.asarray(boxes)
+    scores_a = np.asarray(scores)
+    ranks_a = np.asarray(ranks)
+    scaled = boxes_a.copy()
+    scaled[:, [1, 3]] /= dt_s
+    order = np.argsort(-ranks_a, kind="stable")
+    keep = []
+    suppressed = np.zeros(len(order), bool)
+    ious = _iou(scaled[order], scaled[order])
+    for a in range(len(order)):
+        if suppressed[a]:
+            continue
+        keep.append(order[a])
+        suppressed |= ious[a] > iou
+    keep = np.asarray(keep)
+    return boxes_a[keep], scores_a[keep]
+
+
+def apex_of_box(processed: np.ndarray, box, s_per_row: float, *, frequency_hz: float | None = None,
+                n_traces: int | None = None) -> tuple[float, float]:
+    """Apex ``(trace, time_s)`` of the hyperbola in ``box`` (times from the first sample).
+
+    Boxes follow the label rule (``docs/labels.md``): symmetric about the apex in
+    traces, their top ``BOX_PAD_PERIODS / f`` before the apex. So the apex trace is
+    the box's centre, unless the box is cut by the record's first or last trace;
+    then it is the trace of earliest strong arrival (envelope above half its box
+    maximum) in the box. The apex time is the box top plus the pad when the
+    antenna frequency is known, else the envelope peak on the apex trace in the
+    box's upper part.
+    """
+    i0, ta, i1, tb = (float(v) for v in box)
+    n, rows = processed.shape
+    n_traces = n if n_traces is None else n_traces
+    c0, c1 = int(np.clip(np.floor(i0), 0, n - 1)), int(np.clip(np.ceil(i1), 0, n - 1))
+    r0, r1 = int(np.clip(np.floor(ta / s_per_row), 0, rows - 1)), int(np.clip(np.ceil(tb / s_per_row), 0, rows - 1))
+    trace = 0.5 * (i0 + i1)
+    env = None
+    if c1 >= c0 and r1 > r0:
+        env = np.abs(hilbert(processed[c0 : c1 + 1].astype(np.float64), axis=1))[:, r0 : r1 + 1]
+    cut = i0 <= 0.5 or i1 >= n_traces - 1.5
+    if cut and env is not None and env.max() > 0:
+        top = env[:, : max(2, (env.shape[1] + 1) // 2)]
+        strong = top >= 0.5 * top.max()
+        first = np.where(strong.any(axis=1), np.argmax(strong, axis=1), top.shape[1] + 5).astype(float)
+        smooth = uniform_filter1d(first, max(1, min(5, first.size // 4 or 1)), mode="nearest")
+        cand = np.nonzero(smooth <= smooth.min() + 0.5)[0]
+        trace = float(c0 + cand[len(cand) // 2])
+    if frequency_hz:
+        return trace, ta + BOX_PAD_PERIODS / frequency_hz
+    if env is None:
+        return trace, ta
+    col = env[int(np.clip(round(trace) - c0, 0, env.shape[0] - 1)), : max(2, (env.shape[1] + 1) // 2)]
+    j = int(np.argmax(col))
+    y = float(j)
+    if 0 < j < col.size - 1:  # parabolic sub-row refinement
+        den = col[j - 1] - 2 * col[j] + col[j + 1]
+        if den < 0:
+            y += 0.5 * (col[j - 1] - col[j + 1]) / den
+    return trace, (r0 + y) * s_per_row
