@@ -16,15 +16,7 @@ from dataclasses import asdict
 
 from gpr3d.detection.train import TrainConfig, train_detector
 from gpr3d.detection.weights import save_weights
-from gpr3d.simulation.surveys import survey_sample
-
-
-class Source:
-    def __init__(self, seed):
-        self.seed = seed
-
-    def __call__(self, i):
-        return survey_sample(self.seed, i)
+from gpr3d.simulation.surveys import SurveySource
 
 
 def main():
@@ -46,7 +38,7 @@ def main():
                           device=args.device, workers=args.workers, data_seed=args.data_seed, lr=args.lr,
                           checkpoint_every=250)
         t = time.perf_counter()
-        res = train_detector(cfg, Source(args.data_seed), progress=False, log=print, max_seconds=args.max_seconds)
+        res = train_detector(cfg, SurveySource(args.data_seed), progress=False, log=print, max_seconds=args.max_seconds)
         wall = time.perf_counter() - t
         cmd = "python references/detection/train_many.py " + " ".join(sys.argv[1:])
         save_weights(res["model"], name, cfg.window, f"{args.out}/{name}.pt",

@@ -91,3 +91,25 @@ def test_bad_reconstruct_arguments_are_one_line_errors(pipe_survey, tmp_path, ex
     r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--out", tmp_path / "o", *extra)
     assert r.returncode == 1 and words in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+
+
+def test_mask_detect_migrates_the_detected_boxes(pipe_survey, tmp_path):
+    pytest.importorskip("torchvision")
+    import h5py
+
+    d, top = pipe_survey
+    out = tmp_path / "o"
+    r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--mask", "detect", "--out", out,
+                "--max-depth", "0.7")
+    assert r.returncode == 0, r.stderr
+    det = json.loads((out / "detections.json").read_text())
+    assert det["n_traces"] == 2500 and det["targets"]
+    # the boxes hold the pipe's echo: two-way time to its top at eps_r 6 plus the source delay
+    twt = 2 * top / (299792458 / 6**0.5) + 2**0.5 / 800e6
+    assert any(t["box"][1] <= twt <= t["box"][3] for t in det["targets"])
+    with h5py.File(out / "volume.h5") as f:
+        assert "noise_map" in f
+    lines = [t for t in json.loads((out / "targets.json").read_text())["targets"] if t["kind"] == "line"]
+    assert any(abs(t["depth_m"] - top) < 0.05 for t in lines), lines
+    r = run_cli("reconstruct", d / "line.h5", "--mask", "detect", "--boxes", out / "detections.json", "--out", out)
+    assert r.returncode == 1 and "not both" in r.stderr

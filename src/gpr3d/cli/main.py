@@ -188,6 +188,9 @@ def cmd_reconstruct(args):
     from gpr3d.io.trajectory import attach_poses, read_trajectory
     from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct, write_reconstruction
 
+    if args.mask == "detect" and args.boxes:
+        raise GPR3DError("give --boxes or --mask detect, not both")
+    detector = _detector(args) if args.mask == "detect" else None  # weights checked before the work starts
     survey = read(args.input, format=args.format, channel=args.channel)
     if args.poses:
         survey = attach_poses(survey, read_trajectory(args.poses), by="index")
@@ -195,13 +198,11 @@ def cmd_reconstruct(args):
                             aperture_deg=None if args.aperture <= 0 else args.aperture, threshold=args.threshold,
                             min_line_m=args.min_line, engine=args.engine,
                             time_zero="none" if args.no_time_zero else "peak")
-    if args.mask == "detect" and args.boxes:
-        raise GPR3DError("give --boxes or --mask detect, not both")
     boxes = read_boxes(args.boxes) if args.boxes else None
     if args.mask == "detect":
         from gpr3d.io.detections import write_detections
 
-        found = _detector(args).detect(survey, score_threshold=args.score, input_name=str(args.input))
+        found = detector.detect(survey, score_threshold=args.score, input_name=str(args.input))
         Path(args.out).mkdir(parents=True, exist_ok=True)
         write_detections([found], Path(args.out) / "detections.json")
         boxes = [t["box"] for t in found["targets"]]
@@ -261,28 +262,19 @@ def cmd_detect(args):
     return 0
 
 
-class _SurveySource:
-    """Survey-scale synthetic records for training (picklable for data-loading workers)."""
-
-    def __init__(self, seed: int):
-        self.seed = seed
-
-    def __call__(self, i):
-        from gpr3d.simulation.surveys import survey_sample
-
-        return survey_sample(self.seed, i)
-
-
 def cmd_train(args):
     from dataclasses import asdict
 
     from gpr3d.detection.train import TrainConfig, train_detector
     from gpr3d.detection.weights import save_weights
+    from gpr3d.simulation.surveys import SurveySource
 
+    if args.max_seconds is not None and not args.max_seconds > 0:
+        raise GPR3DError(f"--max-seconds must be positive, got {args.max_seconds}")
     cfg = TrainConfig(out=args.out, model=args.model, steps=args.steps, batch=args.batch, lr=args.lr,
                       optimiser=args.optimiser, seed=args.seed, data_seed=args.data_seed, device=args.device,
                       workers=args.workers, checkpoint_every=args.checkpoint_every)
-    res = train_detector(cfg, _SurveySource(cfg.data_seed), progress=not args.no_progress,
+    res = train_detector(cfg, SurveySource(cfg.data_seed), progress=not args.no_progress,
                          max_seconds=args.max_seconds)
     weights = Path(args.out) / "weights.pt"
     cmd = "gpr3d " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("gpr3d") else "gpr3d train detector"
@@ -300,6 +292,8 @@ def cmd_eval(args):
 
     if args.n < 1:
         raise GPR3DError(f"--n must be at least 1, got {args.n}")
+    if args.seed < 0:
+        raise GPR3DError(f"--seed must be 0 or more, got {args.seed}")
     det = _detector(args)
     m = evaluate_detector(det, (survey_sample(args.seed, i) for i in range(args.n)), score_threshold=args.score)
     print(f"held-out survey-scale set (seed {args.seed}, {m['n_records']} records, {m['n_true']} targets)")

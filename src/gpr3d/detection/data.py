@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpr3d.detection.windows import Window, WindowConfig, prepare, render, window_targets
-from gpr3d.io.coco import PixelMap
+from gpr3d.detection.windows import WindowConfig, make_window, prepare, record_scale, rows_interval, window_targets
 
 __all__ = ["random_window", "WindowDataset", "collate"]
 
@@ -27,7 +26,6 @@ def random_window(survey, labels: dict, cfg: WindowConfig, rng: np.random.Genera
     """
     proc = prepare(survey, cfg)
     n = proc.shape[0]
-    s_per_row = (survey.n_samples - 1) * survey.dt_s / (cfg.rows - 1)
     vis = [lab for lab in labels["labels"] if lab.get("visible", True)]
     hi = max(n - cfg.traces, 0)
     if vis and rng.random() < target_bias:
@@ -35,13 +33,7 @@ def random_window(survey, labels: dict, cfg: WindowConfig, rng: np.random.Genera
         s0 = int(np.clip(round(a - rng.uniform(0.1, 0.9) * cfg.traces), 0, hi))
     else:
         s0 = int(rng.integers(0, hi + 1))
-    block = proc[s0 : s0 + cfg.traces]
-    real = block.shape[0]
-    if real < cfg.traces:
-        block = np.concatenate([block, np.zeros((cfg.traces - real, proc.shape[1]), np.float32)])
-    scale = float(np.percentile(np.abs(proc), 99.5)) or 1.0
-    win = Window(render(block, cfg.style, scale=scale),
-                 PixelMap(trace0=s0 - 0.5, t0_s=-0.5 * s_per_row, s_per_px=s_per_row), s0, real)
+    win = make_window(proc, s0, cfg, rows_interval(survey, cfg), record_scale(proc))
     boxes = window_targets(labels["labels"], win)
     image = win.image
     if flip and rng.random() < 0.5:

@@ -15,7 +15,7 @@ import numpy as np
 
 from gpr3d.core.deps import require
 from gpr3d.core.errors import InvalidDataError
-from gpr3d.detection.windows import WindowConfig, apex_of_box, merge, prepare, windows
+from gpr3d.detection.windows import WindowConfig, apex_of_box, merge, prepare, rows_interval, windows
 
 __all__ = ["Detector"]
 
@@ -57,7 +57,7 @@ class Detector:
         wins = windows(survey, self.window, processed=proc)
         raw = self.predict_windows([w.image for w in wins])
         boxes, scores = merge([(w, b, s) for w, (b, s) in zip(wins, raw)], survey.n_traces, survey.dt_s)
-        s_per_row = (survey.n_samples - 1) * survey.dt_s / (self.window.rows - 1)
+        s_per_row = rows_interval(survey, self.window)
         # apexes from data whose rows keep the pulse's shape (equalising the rows distorts it)
         plain = prepare(survey, replace(self.window, equalise=False)) if self.window.equalise else proc
         t_end = (survey.n_samples - 1) * survey.dt_s

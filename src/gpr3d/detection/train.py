@@ -20,7 +20,7 @@ from pathlib import Path
 from gpr3d import __version__
 from gpr3d.core.deps import require
 from gpr3d.core.errors import GPR3DError, InvalidDataError
-from gpr3d.detection.models import MODELS
+from gpr3d.detection.models import MODELS, resolve_device
 from gpr3d.detection.windows import WindowConfig
 from gpr3d.io.atomic import atomic_path, atomic_write_text
 
@@ -56,10 +56,12 @@ class TrainConfig:
             raise InvalidDataError(f"unknown detector {self.model!r}; choose one of {', '.join(MODELS)}")
         if self.optimiser not in OPTIMISERS:
             raise InvalidDataError(f"unknown optimiser {self.optimiser!r}; choose one of {', '.join(OPTIMISERS)}")
-        for name in ("steps", "batch", "checkpoint_every"):
+        for name, low in (("steps", 1), ("batch", 2), ("checkpoint_every", 1), ("warmup", 1), ("seed", 0),
+                          ("data_seed", 0)):
             v = getattr(self, name)
-            if not isinstance(v, int) or v < 1:
-                raise InvalidDataError(f"--{name.replace('_', '-')} must be a positive integer, got {v!r}")
+            if not isinstance(v, int) or v < low:
+                raise InvalidDataError(f"--{name.replace('_', '-')} must be an integer >= {low}, got {v!r}"
+                                       + (" (batch norm needs two windows a step)" if name == "batch" else ""))
         if not isinstance(self.workers, int) or self.workers < 0:
             raise InvalidDataError(f"--workers must be 0 or more, got {self.workers!r}")
         if self.lr is not None and not (0 < self.lr < 10):
@@ -88,15 +90,6 @@ def _schedule(cfg: TrainConfig):
     return f
 
 
-def _resolve_device(name: str):
-    torch = require("torch")
-    if name.startswith("cuda") and not torch.cuda.is_available():
-        raise GPR3DError(f"--device {name}: CUDA is not available on this machine (use --device cpu)")
-    if name not in ("cpu", "mps") and not name.startswith("cuda"):
-        raise InvalidDataError(f"--device must be cpu, cuda, cuda:N or mps, got {name!r}")
-    return torch.device(name)
-
-
 def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print,
                    max_seconds: float | None = None) -> dict:
     """Train ``cfg.model`` on windows of ``source(i) -> (Survey, labels)``; returns a summary.
@@ -112,7 +105,7 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
 
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
-    device = _resolve_device(cfg.device)
+    device = resolve_device(cfg.device)
     ckpt_path = out / "checkpoint.pt"
     cfg_dict = asdict(cfg)
     same = {k: v for k, v in cfg_dict.items() if k not in ("device", "workers", "checkpoint_every", "out")}
@@ -150,7 +143,8 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
 
     def save():
         state = {"model": model.state_dict(), "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
-                 "step": step, "epoch": step // max(1, cfg.steps // 10), "config": cfg_dict, "resume_key": same,
+                 # records are drawn fresh and never repeat: the run is one epoch of steps * batch windows
+                 "step": step, "epoch": 0, "windows_seen": step * cfg.batch, "config": cfg_dict, "resume_key": same,
                  "gpr3d": __version__}
         with atomic_path(ckpt_path, suffix=".pt.part") as tmp:
             torch.save(state, tmp)

@@ -36,9 +36,10 @@ def save_weights(model, name: str, window: dict, path, *, provenance: dict | Non
 def load_weights(path=None, *, device: str = "cpu"):
     """``(model in eval mode, WindowConfig, provenance)`` from a weights file (default: the shipped one)."""
     torch = require("torch")
-    from gpr3d.detection.models import MODELS, build_model
+    from gpr3d.detection.models import MODELS, build_model, resolve_device
     from gpr3d.detection.windows import WindowConfig
 
+    dev = resolve_device(device)
     p = Path(path) if path is not None else DEFAULT_WEIGHTS
     if not p.is_file():
         raise FormatError(p, "no such weights file")
@@ -61,5 +62,5 @@ def load_weights(path=None, *, device: str = "cpu"):
     except RuntimeError as exc:
         first = str(exc).splitlines()[1].strip() if len(str(exc).splitlines()) > 1 else str(exc)
         raise FormatError(p, f"weights do not fit model {name!r}: {first[:160]}") from None
-    model.eval().to(device)
+    model.eval().to(dev)
     return model, window, obj.get("provenance", {})

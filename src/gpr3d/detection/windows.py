@@ -20,11 +20,13 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 from scipy.signal import hilbert
 
+from gpr3d.core.deps import require
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.io.coco import BOX_PAD_PERIODS, PixelMap
 from gpr3d.processing.image import hot_rgb, normalise_window, resample_rows
 
-__all__ = ["WindowConfig", "Window", "prepare", "windows", "render", "merge", "apex_of_box", "window_targets"]
+__all__ = ["WindowConfig", "Window", "prepare", "windows", "make_window", "record_scale", "rows_interval", "render",
+           "merge", "apex_of_box", "window_targets"]
 
 
 @dataclass
@@ -101,27 +103,38 @@ def render(block: np.ndarray, style: str = "channels", *, scale: float | None = 
     return np.stack([0.5 + 0.5 * x, np.clip(env, 0, 1), 0.5 + 0.5 * np.clip(tg, -1, 1)]).astype(np.float32)
 
 
+def record_scale(processed: np.ndarray) -> float:
+    """The amplitude that every window of one record is normalised by (99.5th percentile of |data|)."""
+    return float(np.percentile(np.abs(processed), 99.5)) or 1.0
+
+
+def make_window(processed: np.ndarray, start: int, cfg: WindowConfig, s_per_row: float, scale: float) -> Window:
+    """The window of ``cfg.traces`` traces from ``start`` (zero-padded past the record's end), rendered."""
+    block = processed[start : start + cfg.traces]
+    real = block.shape[0]
+    if real < cfg.traces:
+        block = np.concatenate([block, np.zeros((cfg.traces - real, processed.shape[1]), np.float32)])
+    # column c shows trace start + c, row r time r * s_per_row (pixel centres at +0.5)
+    pm = PixelMap(trace0=start - 0.5, traces_per_px=1.0, t0_s=-0.5 * s_per_row, s_per_px=s_per_row)
+    return Window(render(block, cfg.style, scale=scale), pm, start, real)
+
+
+def rows_interval(survey, cfg: WindowConfig) -> float:
+    """Seconds per image row: the whole record resampled to ``cfg.rows`` rows."""
+    return (survey.n_samples - 1) * survey.dt_s / (cfg.rows - 1)
+
+
 def windows(survey, cfg: WindowConfig | None = None, *, processed: np.ndarray | None = None) -> list[Window]:
     """The record's windows, left to right; the last one ends at the last trace; short records are padded."""
     cfg = cfg or WindowConfig()
     proc = prepare(survey, cfg) if processed is None else processed
     n = proc.shape[0]
-    s_per_row = (survey.n_samples - 1) * survey.dt_s / (cfg.rows - 1)
-    scale = float(np.percentile(np.abs(proc), 99.5)) or 1.0  # one scale for the whole record
     step = max(1, int(round(cfg.traces * (1 - cfg.overlap))))
     starts = list(range(0, max(n - cfg.traces, 0) + 1, step))
     if starts[-1] + cfg.traces < n:
         starts.append(n - cfg.traces)
-    out = []
-    for s0 in starts:
-        block = proc[s0 : s0 + cfg.traces]
-        real = block.shape[0]
-        if real < cfg.traces:
-            block = np.concatenate([block, np.zeros((cfg.traces - real, proc.shape[1]), np.float32)])
-        out.append(Window(render(block, cfg.style, scale=scale), PixelMap(trace0=s0 - 0.5, traces_per_px=1.0,
-                                                                          t0_s=-0.5 * s_per_row,
-                                                                          s_per_px=s_per_row), s0, real))
-    return out
+    spr, scale = rows_interval(survey, cfg), record_scale(proc)
+    return [make_window(proc, s0, cfg, spr, scale) for s0 in starts]
 
 
 def window_targets(labels: list[dict], win: Window, *, min_inside: float = 0.6) -> np.ndarray:
@@ -150,26 +163,18 @@ def window_targets(labels: list[dict], win: Window, *, min_inside: float = 0.6) 
     return np.asarray(out, dtype=np.float32).reshape(-1, 4)
 
 
-def _iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    x0 = np.maximum(a[:, None, 0], b[None, :, 0])
-    y0 = np.maximum(a[:, None, 1], b[None, :, 1])
-    x1 = np.minimum(a[:, None, 2], b[None, :, 2])
-    y1 = np.minimum(a[:, None, 3], b[None, :, 3])
-    inter = np.clip(x1 - x0, 0, None) * np.clip(y1 - y0, 0, None)
-    area_a = (a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1])
-    area_b = (b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1])
-    return inter / np.maximum(area_a[:, None] + area_b[None, :] - inter, 1e-12)
-
-
 def merge(per_window: list[tuple[Window, np.ndarray, np.ndarray]], n_traces: int, dt_s: float, *,
           iou: float = 0.5, edge_px: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
     """Window detections -> record boxes ``(k, 4)`` [trace_start, t_start_s, trace_end, t_end_s] and scores.
 
     A box that touches a window's inner edge (not the record's) is cut by it: its
     score is lowered so that the same hyperbola seen whole in the overlapping window
-    wins; duplicates are removed by greedy non-maximum suppression in record
+    wins; duplicates are removed by torchvision's non-maximum suppression in record
     coordinates (time in samples, so that IoU does not depend on units).
     """
+    torch = require("torch")
+    from torchvision.ops import nms
+
     boxes, scores, ranks = [], [], []
     for win, b, s in per_window:
         for bb, ss in zip(np.asarray(b, float).reshape(-1, 4), np.asarray(s, float).reshape(-1)):
@@ -183,21 +188,10 @@ def merge(per_window: list[tuple[Window, np.ndarray, np.ndarray]], n_traces: int
     if not boxes:
         return np.zeros((0, 4)), np.zeros(0)
     boxes_a = np.asarray(boxes)
-    scores_a = np.asarray(scores)
-    ranks_a = np.asarray(ranks)
     scaled = boxes_a.copy()
     scaled[:, [1, 3]] /= dt_s
-    order = np.argsort(-ranks_a, kind="stable")
-    keep = []
-    suppressed = np.zeros(len(order), bool)
-    ious = _iou(scaled[order], scaled[order])
-    for a in range(len(order)):
-        if suppressed[a]:
-            continue
-        keep.append(order[a])
-        suppressed |= ious[a] > iou
-    keep = np.asarray(keep)
-    return boxes_a[keep], scores_a[keep]
+    keep = nms(torch.as_tensor(scaled), torch.as_tensor(np.asarray(ranks)), iou).numpy()
+    return boxes_a[keep], np.asarray(scores)[keep]
 
 
 def apex_of_box(processed: np.ndarray, box, s_per_row: float, *, frequency_hz: float | None = None,

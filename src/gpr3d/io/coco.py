@@ -12,8 +12,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 __all__ = ["CATEGORIES", "PixelMap", "coco_dataset", "BOX_HALF_ANGLE_DEG", "BOX_PAD_PERIODS"]
 
 #: the label box rule (docs/labels.md), shared by the labeller and the detector's apex estimate:
@@ -54,9 +52,6 @@ class PixelMap:
 
     def px_to_point(self, x: float, y: float) -> tuple[float, float]:
         return self.trace0 + x * self.traces_per_px, self.t0_s + y * self.s_per_px
-
-    def boxes_to_px(self, boxes) -> np.ndarray:
-        return np.asarray([self.box_to_px(b) for b in boxes], dtype=np.float64).reshape(-1, 4)
 
 
 def coco_dataset(samples: list[dict], image_height: int) -> dict:

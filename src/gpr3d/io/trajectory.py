@@ -1,7 +1,7 @@
 """Antenna trajectories: TUM and CSV files, xyz tracks, and attaching poses to a survey.
 
-A :class:`~gpr3d.core.trajectory.Trajectory` (the type lives in ``core``) holds ``timestamps_s (n,)``, ``positions_xyz (n, 3)`` and
-``orientations_quat_wxyz (n, 4)``: poses ``world_from_antenna``. TUM files store
+A :class:`~gpr3d.core.trajectory.Trajectory` (the type lives in ``core``) holds
+``timestamps_s (n,)``, ``positions_xyz (n, 3)`` and ``orientations_quat_wxyz (n, 4)``: poses ``world_from_antenna``. TUM files store
 ``t tx ty tz qx qy qz qw`` (quaternion last, w last); the conversion happens here.
 """
 

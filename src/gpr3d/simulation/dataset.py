@@ -36,10 +36,9 @@ from gpr3d import __version__
 from gpr3d.core.deps import require
 from gpr3d.core.errors import GPR3DError
 from gpr3d.io.atomic import atomic_write_text
+from gpr3d.processing.image import bscan_image  # re-exported: the image.png rendering
 
 __all__ = ["SimulateConfig", "simulate_sample", "build_dataset", "write_manifest", "bscan_image", "PRESETS"]
-
-from gpr3d.processing.image import bscan_image  # noqa: E402 (re-exported: the image.png rendering)
 
 SAMPLE_FILES = ("scene.json", "bscan.h5", "labels.json", "image.png")
 

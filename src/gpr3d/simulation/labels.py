@@ -28,7 +28,6 @@ from gpr3d.simulation.scene import Scene
 __all__ = ["hyperbola_times", "label_scene", "label_traces", "coco_dataset", "BOX_HALF_ANGLE_DEG", "BOX_PAD_PERIODS"]
 
 
-
 def _circle_path(tx_x, rx_x, cx, cz, r, n_angles=721):
     """Shortest tx -> circle -> rx path length (m) for antennas on z = 0; arrays over traces."""
     ang = np.linspace(0.0, np.pi, n_angles)  # upper half: the side facing the surface

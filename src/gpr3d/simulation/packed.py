@@ -28,14 +28,9 @@ from gpr3d import __version__
 from gpr3d.core.errors import GPR3DError
 from gpr3d.io.atomic import atomic_path, atomic_write_text
 from gpr3d.io.packed import SCHEMA, PackedDataset as _PackedReader
+from gpr3d.processing.image import resample_rows
 
 __all__ = ["pack_dataset", "PackedDataset", "load_sample", "save_label_preview"]
-
-def _resample(data: np.ndarray, n_out: int) -> np.ndarray:
-    n_in = data.shape[1]
-    x_old = np.arange(n_in)
-    x_new = np.linspace(0, n_in - 1, n_out)
-    return np.stack([np.interp(x_new, x_old, tr) for tr in data])
 
 
 def pack_dataset(folder, out, *, n_samples: int = 512, regenerate: str = "") -> dict:
@@ -55,7 +50,7 @@ def pack_dataset(folder, out, *, n_samples: int = 512, regenerate: str = "") -> 
     for e in entries:
         d = folder / "samples" / f"{e['index']:06d}"
         s = gpr3d.read(d / "bscan.h5")
-        x = _resample(s.data.astype(np.float64), n_samples)
+        x = resample_rows(s.data, n_samples).astype(np.float64)
         scale = float(np.abs(x).max()) or 1.0
         arrays.append((x / scale).astype(np.float16))
         scales.append(scale)

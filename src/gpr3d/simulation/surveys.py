@@ -33,7 +33,7 @@ import numpy as np
 
 from gpr3d.simulation.scene import Antenna, Medium, Scene, Stone, Target
 
-__all__ = ["SURVEY_RANGES", "sample_survey_scene", "synthesize_survey", "survey_sample"]
+__all__ = ["SURVEY_RANGES", "sample_survey_scene", "synthesize_survey", "survey_sample", "SurveySource"]
 
 SURVEY_RANGES = {
     "concrete": {"frequency_hz": (1.0e9, 2.6e9), "eps_r": (4.0, 12.0), "conductivity_s_m": (0.001, 0.03),
@@ -107,7 +107,7 @@ def sample_survey_scene(seed: int, index: int, *, host: str | None = None) -> Sc
         length = n_traces * step
         kinds, probs = zip(*r["kinds"].items())
         n_want = int(rng.integers(1, 7))
-        for attempt in range(200):
+        for _ in range(200):
             if len(targets) >= n_want:
                 break
             kind = str(rng.choice(kinds, p=np.asarray(probs) / sum(probs)))
@@ -237,3 +237,15 @@ def survey_sample(seed: int, index: int, *, host: str | None = None, augment: bo
     scene = sample_survey_scene(seed, index, host=host)
     return synthesize_survey(scene, seed=int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0]),
                              augment=augment)
+
+
+class SurveySource:
+    """``source(i) -> survey_sample(seed, i)``: a picklable record source for training and evaluation."""
+
+    def __init__(self, seed: int, *, augment: bool = True):
+        if not isinstance(seed, int) or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+        self.seed, self.augment = seed, augment
+
+    def __call__(self, i: int):
+        return survey_sample(self.seed, i, augment=self.augment)
