@@ -29,6 +29,10 @@ def main():
     p.add_argument("--data-seed", type=int, default=1000)
     p.add_argument("--lr", type=float, default=None)
     p.add_argument("--max-seconds", type=float, default=None, help="per model")
+    p.add_argument("--init", default=None, help="weights to start from")
+    p.add_argument("--packed", default=None, help="packed dataset mixed in")
+    p.add_argument("--packed-fraction", type=float, default=0.2)
+    p.add_argument("--warmup", type=int, default=200)
     p.add_argument("--copy-to", default=None, help="also copy each NAME.pt and losses there")
     args = p.parse_args()
     summary = {}
@@ -36,7 +40,8 @@ def main():
         name, steps = item.split(":")
         cfg = TrainConfig(out=f"{args.out}/{name}", model=name, steps=int(steps), batch=args.batch,
                           device=args.device, workers=args.workers, data_seed=args.data_seed, lr=args.lr,
-                          checkpoint_every=250)
+                          checkpoint_every=250, init=args.init, packed=args.packed,
+                          packed_fraction=args.packed_fraction, warmup=args.warmup)
         t = time.perf_counter()
         res = train_detector(cfg, SurveySource(args.data_seed), progress=False, log=print, max_seconds=args.max_seconds)
         wall = time.perf_counter() - t

@@ -273,7 +273,8 @@ def cmd_train(args):
         raise GPR3DError(f"--max-seconds must be positive, got {args.max_seconds}")
     cfg = TrainConfig(out=args.out, model=args.model, steps=args.steps, batch=args.batch, lr=args.lr,
                       optimiser=args.optimiser, seed=args.seed, data_seed=args.data_seed, device=args.device,
-                      workers=args.workers, checkpoint_every=args.checkpoint_every)
+                      workers=args.workers, checkpoint_every=args.checkpoint_every, init=args.init,
+                      packed=args.packed, packed_fraction=args.packed_fraction, packed_holdout=args.packed_holdout)
     res = train_detector(cfg, SurveySource(cfg.data_seed), progress=not args.no_progress,
                          max_seconds=args.max_seconds)
     weights = Path(args.out) / "weights.pt"
@@ -449,6 +450,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--workers", type=int, default=0, help="data-loading processes (default 0)")
     sp.add_argument("--checkpoint-every", type=int, default=100, help="steps between checkpoints")
     sp.add_argument("--max-seconds", type=float, default=None, help="stop after this long (resume later)")
+    sp.add_argument("--init", default=None, help="start from these weights (fine-tuning)")
+    sp.add_argument("--packed", default=None, help="mix records of a packed dataset in (e.g. datasets/gprmax400.h5)")
+    sp.add_argument("--packed-fraction", type=float, default=0.2, help="share of windows from --packed (0.2)")
+    sp.add_argument("--packed-holdout", type=int, default=60, help="last records of --packed kept out (60)")
     sp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     sp = add("eval", cmd_eval, "evaluate a detector on held-out survey-scale synthetic B-scans (COCO metrics)",

@@ -13,7 +13,7 @@ import numpy as np
 
 from gpr3d.detection.windows import WindowConfig, make_window, prepare, record_scale, rows_interval, window_targets
 
-__all__ = ["random_window", "WindowDataset", "collate"]
+__all__ = ["random_window", "WindowDataset", "collate", "PackedSource", "MixedSource"]
 
 
 def random_window(survey, labels: dict, cfg: WindowConfig, rng: np.random.Generator, *, flip: bool = True,
@@ -68,3 +68,33 @@ class WindowDataset:
 
 def collate(batch):
     return [b[0] for b in batch], [b[1] for b in batch]
+
+
+class PackedSource:
+    """Records of a packed labelled dataset (:class:`gpr3d.io.packed.PackedDataset`), its last ``holdout`` left out.
+
+    ``source(i)`` cycles through the kept records.
+    """
+
+    def __init__(self, path, *, holdout: int = 0):
+        from gpr3d.core.errors import GPR3DError
+        from gpr3d.io.packed import PackedDataset
+
+        self.ds = PackedDataset(path)
+        self.n = len(self.ds) - holdout
+        if self.n < 1:
+            raise GPR3DError(f"{path}: {len(self.ds)} records; none left after holding out {holdout}")
+
+    def __call__(self, i: int):
+        return self.ds[int(i) % self.n]
+
+
+class MixedSource:
+    """``source(i)`` from ``second`` for a seeded ``fraction`` of the indices, else from ``first``."""
+
+    def __init__(self, first, second, fraction: float):
+        self.first, self.second, self.fraction = first, second, float(fraction)
+
+    def __call__(self, i: int):
+        u = np.random.default_rng(np.random.SeedSequence([int(i), 0x313])).random()
+        return self.second(i) if u < self.fraction else self.first(i)

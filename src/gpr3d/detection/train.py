@@ -49,7 +49,10 @@ class TrainConfig:
     workers: int = 0  #: data-loading processes
     checkpoint_every: int = 100
     window: dict = field(default_factory=lambda: WindowConfig().to_dict())
-    data: str = "synthetic"  #: "synthetic" (survey-scale forward model) or a COCO/VOC folder of the user's labels
+    init: str | None = None  #: weights file to start from (fine-tuning) instead of a fresh model
+    packed: str | None = None  #: a packed labelled dataset (e.g. datasets/gprmax400.h5) mixed into the records
+    packed_fraction: float = 0.2  #: share of the windows drawn from ``packed``
+    packed_holdout: int = 60  #: its last records, kept out of training (the evaluation uses them)
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -67,6 +70,10 @@ class TrainConfig:
         if self.lr is not None and not (0 < self.lr < 10):
             raise InvalidDataError(f"--lr must lie in (0, 10), got {self.lr!r}")
         WindowConfig(**self.window)
+        if not 0.0 <= self.packed_fraction <= 1.0:
+            raise InvalidDataError(f"--packed-fraction must lie in 0..1, got {self.packed_fraction!r}")
+        if not isinstance(self.packed_holdout, int) or self.packed_holdout < 0:
+            raise InvalidDataError(f"--packed-holdout must be 0 or more, got {self.packed_holdout!r}")
 
     def resolved_lr(self) -> float:
         return self.lr or {"adamw": 1e-3, "sgd": 0.02, "reference": 4e-5}[self.optimiser]
@@ -110,7 +117,22 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
     cfg_dict = asdict(cfg)
     same = {k: v for k, v in cfg_dict.items() if k not in ("device", "workers", "checkpoint_every", "out")}
     torch.manual_seed(cfg.seed)
-    model = build_model(cfg.model, image_size=cfg.window["rows"]).to(device)
+    model = build_model(cfg.model, image_size=cfg.window["rows"])
+    if cfg.init:
+        from gpr3d.detection.weights import load_weights
+
+        init, init_window, _ = load_weights(cfg.init)
+        if type(init) is not type(model) or init_window.to_dict() != cfg.window:
+            raise GPR3DError(f"--init {cfg.init}: made for another model or window; it cannot start {cfg.model!r}")
+        try:
+            model.load_state_dict(init.state_dict())
+        except RuntimeError:
+            raise GPR3DError(f"--init {cfg.init}: its weights do not fit {cfg.model!r}") from None
+    model = model.to(device)
+    if cfg.packed:
+        from gpr3d.detection.data import MixedSource, PackedSource
+
+        source = MixedSource(source, PackedSource(cfg.packed, holdout=cfg.packed_holdout), cfg.packed_fraction)
     opt = _optimiser(cfg, [p for p in model.parameters() if p.requires_grad])
     sched = torch.optim.lr_scheduler.LambdaLR(opt, _schedule(cfg))
     step = 0
