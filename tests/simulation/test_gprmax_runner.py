@@ -3,9 +3,10 @@
 import contextlib
 import io
 
+import numpy as np
 import pytest
 
-from gpr3d.simulation.gprmax_runner import build_gprmax_scene
+from gpr3d.simulation.gprmax_runner import build_gprmax_scene, run_gprmax
 from gpr3d.simulation.sampler import sample_scene
 from gpr3d.simulation.scene import Antenna, Medium, Scene, Stone, Target
 
@@ -41,3 +42,75 @@ def test_targets_must_cross_the_line():
     pytest.importorskip("gprMax")
     with pytest.raises(ValueError, match="must cross the line"):
         build_gprmax_scene(s)
+
+
+def _two_target_scene():
+    from gpr3d.simulation.scene import Antenna, Medium, Scene, Target
+
+    s = Scene(medium=Medium("concrete", 6.0, 0.005), antenna=Antenna(2.0e9, 0.02), width_m=0.5, depth_m=0.1,
+              n_traces=5, trace_step_m=0.02, x_start_m=0.21, time_window_s=2.2e-9)
+    s.targets = [Target("rebar", x_m=0.25, depth_m=0.04, radius_m=0.008),
+                 Target("pvc_pipe", x_m=0.31, depth_m=0.05, radius_m=0.012, material="pvc", fill="air", wall_m=0.003)]
+    return s
+
+
+def test_antenna_following_models_equal_one_long_model(tmp_path):
+    """Small models that follow the antenna give the traces of one model spanning the whole line."""
+    from gpr3d.simulation.gprmax_runner import following_domain, run_gprmax_following
+
+    s = _two_target_scene()
+    dom = following_domain(s)
+    assert dom["half_width_m"] >= s.medium.velocity_m_s * s.time_window / 2  # nothing outside answers in time
+    s.air_m = dom["air_m"]  # the same air above the surface in both runs
+    x = s.trace_midpoints_x()
+    # the long model's edges lie further from every trace than the following models' do
+    assert x.min() >= dom["half_width_m"] and s.width_m - x.max() >= dom["half_width_m"]
+    full, _ = run_gprmax(s)
+    fol, info = run_gprmax_following(s, tmp_path / "work")
+    assert info["runner"] == "following" and fol.data.shape == full.data.shape
+    np.testing.assert_allclose(fol.positions_xyz[:, 0], full.positions_xyz[:, 0], atol=1e-9)
+    assert fol.dt_s == pytest.approx(full.dt_s, rel=1e-9)
+    scattered = full.data - full.data.mean(axis=0)  # the targets' echoes, without the direct wave
+    err = np.abs(fol.data - full.data).max()
+    assert err < 1e-3 * np.abs(scattered).max()
+    # the echoes are there: moving the rebar changes the traces far more than the runners differ
+    s2 = _two_target_scene()
+    s2.air_m = dom["air_m"]
+    s2.targets[0].x_m += 0.03
+    moved, _ = run_gprmax_following(s2, tmp_path / "work2")
+    assert np.abs(moved.data - fol.data).max() > 100 * err
+
+
+def test_antenna_following_run_resumes_from_finished_traces(tmp_path):
+    from gpr3d.simulation.gprmax_runner import run_gprmax_following
+
+    s = _two_target_scene()
+    s.n_traces = 3
+    a, _ = run_gprmax_following(s, tmp_path / "w")
+    files = sorted((tmp_path / "w").glob("trace_*.npy"))
+    assert len(files) == 3 and not list((tmp_path / "w").glob("model_*"))
+    # a finished trace is read back, not run again: tamper with one and it shows in the result
+    rec = np.load(files[1])
+    rec[1] *= 2
+    np.save(files[1], rec)
+    b, _ = run_gprmax_following(s, tmp_path / "w")
+    np.testing.assert_allclose(b.data[1], 2 * a.data[1], rtol=1e-6)
+    np.testing.assert_array_equal(b.data[0], a.data[0])
+
+
+def test_gprmax_survey_scenes_are_affordable_buildable_and_varied():
+    from gpr3d.simulation.gprmax_runner import following_cost
+    from gpr3d.simulation.surveys import GPRMAX_EVAL_MAX_CELL_STEPS, sample_gprmax_survey_scene, sample_survey_scene
+
+    kinds, hosts = set(), set()
+    for i in range(30):
+        s = sample_gprmax_survey_scene(4242, i)
+        assert following_cost(s) <= GPRMAX_EVAL_MAX_CELL_STEPS
+        assert 100 <= s.n_traces <= 200
+        assert all(t.radius_m >= 1.5 * s.dx - 1e-4 for t in s.targets)
+        assert all(st.radius_m >= 1.5 * s.dx for st in s.stones)
+        kinds |= {t.kind for t in s.targets}
+        hosts.add(s.medium.kind)
+    assert kinds == {"rebar", "steel_pipe", "pvc_pipe", "void", "tank"} and hosts == {"concrete", "soil"}
+    # the training draws are not touched by the held-out profile
+    assert sample_survey_scene(4242, 0).to_dict() != sample_gprmax_survey_scene(4242, 0).to_dict()

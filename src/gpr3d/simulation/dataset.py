@@ -42,8 +42,11 @@ __all__ = ["SimulateConfig", "simulate_sample", "build_dataset", "write_manifest
 
 SAMPLE_FILES = ("scene.json", "bscan.h5", "labels.json", "image.png")
 
-#: scene presets: "standard" = the sampler's ranges; "tiny" = small, fast scenes for smoke tests
-PRESETS = ("standard", "tiny")
+#: scene presets: "standard" = the sampler's ranges (short scenes); "tiny" = small, fast scenes for
+#: smoke tests; "survey" = survey-scale scenes of the held-out gprMax set
+#: (:func:`~gpr3d.simulation.surveys.sample_gprmax_survey_scene`), run in antenna-following models
+#: (:func:`~gpr3d.simulation.gprmax_runner.run_gprmax_following`) that resume trace by trace
+PRESETS = ("standard", "tiny", "survey")
 
 
 @dataclass
@@ -64,6 +67,10 @@ class SimulateConfig:
 def _scene_for(cfg_dict: dict, index: int):
     from gpr3d.simulation.sampler import sample_scene
 
+    if cfg_dict.get("preset") == "survey":
+        from gpr3d.simulation.surveys import sample_gprmax_survey_scene
+
+        return sample_gprmax_survey_scene(cfg_dict["seed"], index, host=cfg_dict.get("host"))
     scene = sample_scene(cfg_dict["seed"], index, host=cfg_dict.get("host"))
     if cfg_dict.get("preset") == "tiny":
         # a quarter of the width and depth, 10 traces: seconds in gprMax
@@ -102,7 +109,14 @@ def simulate_sample(cfg_dict: dict, index: int) -> dict:
     t0 = time.perf_counter()
     try:
         scene = _scene_for(cfg_dict, index)
-        if cfg_dict["engine"] == "gprmax":
+        if cfg_dict["engine"] == "gprmax" and cfg_dict.get("preset") == "survey":
+            from gpr3d.simulation.gprmax_runner import run_gprmax_following
+
+            # traces finished before a kill stay in work/ and are not run again
+            work = Path(cfg_dict["out"]) / "work" / f"{index:06d}"
+            survey, info = run_gprmax_following(scene, work)
+            scene = type(scene).from_dict(survey.metadata["scene"])
+        elif cfg_dict["engine"] == "gprmax":
             from gpr3d.simulation.gprmax_runner import run_gprmax
 
             survey, info = run_gprmax(scene, workdir=part / "gprmax")
@@ -123,6 +137,7 @@ def simulate_sample(cfg_dict: dict, index: int) -> dict:
                                                       "labels": labels}, indent=1))
         Image.fromarray(bscan_image(survey, cfg_dict.get("image_height", 256))).save(part / "image.png")
         os.replace(part, final)  # the sample appears complete, or not at all
+        shutil.rmtree(Path(cfg_dict["out"]) / "work" / f"{index:06d}", ignore_errors=True)
     except BaseException:
         shutil.rmtree(part, ignore_errors=True)
         raise

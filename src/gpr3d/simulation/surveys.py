@@ -33,7 +33,7 @@ import numpy as np
 
 from gpr3d.simulation.scene import Antenna, Medium, Scene, Stone, Target
 
-__all__ = ["SURVEY_RANGES", "sample_survey_scene", "synthesize_survey", "survey_sample", "SurveySource"]
+__all__ = ["SURVEY_RANGES", "SURVEY_PROFILES", "sample_survey_scene", "sample_gprmax_survey_scene", "synthesize_survey", "survey_sample", "SurveySource"]
 
 SURVEY_RANGES = {
     "concrete": {"frequency_hz": (1.0e9, 2.6e9), "eps_r": (4.0, 12.0), "conductivity_s_m": (0.001, 0.03),
@@ -45,26 +45,49 @@ SURVEY_RANGES = {
     "n_traces": (100, 600),
 }
 
+#: how scenes are drawn from SURVEY_RANGES. "train": the detector's training and test records
+#: (forward model). "gprmax_eval": the held-out gprMax set at survey scale - soil targets of every
+#: kind in equal shares (so that each kind gathers >= 200 targets), 100-200 traces and a shorter
+#: record below the deepest target, so that one B-scan costs minutes of FDTD, not hours.
+SURVEY_PROFILES = {
+    "train": {"p_concrete": 0.5, "n_traces": (100, 600), "soil_kinds": SURVEY_RANGES["soil"]["kinds"],
+              "soil_n_targets": (1, 6), "concrete_extra": (0, 2), "depth_factor": (1.1, 1.8)},
+    "gprmax_eval": {"p_concrete": 0.25, "n_traces": (100, 200),
+                    "soil_kinds": {"steel_pipe": 0.2, "pvc_pipe": 0.2, "void": 0.2, "tank": 0.4},
+                    "soil_n_targets": (4, 9), "concrete_extra": (1, 3), "depth_factor": (1.1, 1.4)},
+}
 
-def _rng(seed: int, index: int) -> np.random.Generator:
-    return np.random.default_rng(np.random.SeedSequence([int(seed), int(index), 0x5157]))
+#: the most FDTD work (cells x iterations x traces) a "gprmax_eval" scene may cost; dearer draws are redrawn
+GPRMAX_EVAL_MAX_CELL_STEPS = 8e9
+
+
+def _rng(seed: int, index: int, *salt: int) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence([int(seed), int(index), 0x5157, *salt]))
 
 
 def _log_uniform(rng, lo, hi):
     return float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
 
 
-def sample_survey_scene(seed: int, index: int, *, host: str | None = None) -> Scene:
-    """The ``index``-th survey-scale scene of ``seed`` (2D: every target crosses the line)."""
-    rng = _rng(seed, index)
-    host = host or ("concrete" if rng.random() < 0.5 else "soil")
+def sample_survey_scene(seed: int, index: int, *, host: str | None = None, profile: str = "train",
+                        attempt: int = 0) -> Scene:
+    """The ``index``-th survey-scale scene of ``seed`` (2D: every target crosses the line).
+
+    ``profile`` names the draw rules in ``SURVEY_PROFILES``; ``attempt`` > 0 gives another
+    draw for the same index (used to redraw scenes over a cost limit).
+    """
+    if profile not in SURVEY_PROFILES:
+        raise ValueError(f"unknown survey profile {profile!r} (use {', '.join(SURVEY_PROFILES)})")
+    prof = SURVEY_PROFILES[profile]
+    rng = _rng(seed, index) if profile == "train" and attempt == 0 else _rng(seed, index, 0xE7A1, attempt)
+    host = host or ("concrete" if rng.random() < prof["p_concrete"] else "soil")
     r = SURVEY_RANGES[host]
     f = _log_uniform(rng, *r["frequency_hz"])
     eps = float(rng.uniform(*r["eps_r"]))
     sigma = _log_uniform(rng, *r["conductivity_s_m"])
     medium = Medium(kind=host, eps_r=round(eps, 3), conductivity_s_m=round(sigma, 5))
     v = medium.velocity_m_s
-    n_traces = int(rng.integers(SURVEY_RANGES["n_traces"][0], SURVEY_RANGES["n_traces"][1] + 1))
+    n_traces = int(rng.integers(prof["n_traces"][0], prof["n_traces"][1] + 1))
     step = _log_uniform(rng, *r["step_m"])
     targets: list[Target] = []
     if host == "concrete":
@@ -90,7 +113,8 @@ def sample_survey_scene(seed: int, index: int, *, host: str | None = None) -> Sc
             targets.append(Target("rebar", x_m=round(float(rng.uniform(0.2, 0.8)) * length, 4),
                                   depth_m=round(cover, 4), radius_m=round(rad, 4)))
         deepest = max(t.depth_m + 2 * t.radius_m for t in targets)
-        for _ in range(int(rng.integers(0, 3))):  # conduits and voids between or below the bars
+        for _ in range(int(rng.integers(prof["concrete_extra"][0], prof["concrete_extra"][1] + 1))):
+            # conduits and voids between or below the bars
             kind = str(rng.choice(["steel_pipe", "pvc_pipe", "void"]))
             t = Target(kind, x_m=round(float(rng.uniform(0, length)), 4),
                        depth_m=round(float(rng.uniform(cover + 0.02, deepest + 0.12)), 4),
@@ -105,8 +129,8 @@ def sample_survey_scene(seed: int, index: int, *, host: str | None = None) -> Sc
         max_depth = float(rng.uniform(0.5, r["depth_m"][1]))
         step = max(step, 1.2 * max_depth / 100)
         length = n_traces * step
-        kinds, probs = zip(*r["kinds"].items())
-        n_want = int(rng.integers(1, 7))
+        kinds, probs = zip(*prof["soil_kinds"].items())
+        n_want = int(rng.integers(prof["soil_n_targets"][0], prof["soil_n_targets"][1] + 1))
         for _ in range(200):
             if len(targets) >= n_want:
                 break
@@ -120,7 +144,7 @@ def sample_survey_scene(seed: int, index: int, *, host: str | None = None) -> Sc
             if not targets or all(math.hypot(t.x_m - o.x_m, t.centre_depth_m - o.centre_depth_m)
                                   > 1.5 * (t.radius_m + o.radius_m) + 0.25 * v / f for o in targets):
                 targets.append(t)
-        depth_range = max(t.depth_m + 2 * t.radius_m for t in targets) * float(rng.uniform(1.1, 1.8))
+        depth_range = max(t.depth_m + 2 * t.radius_m for t in targets) * float(rng.uniform(*prof["depth_factor"]))
     scene = Scene(medium=medium, antenna=Antenna(frequency_hz=round(f, -6), offset_m=round(0.2 * v / f, 4)),
                   width_m=round(length, 4), depth_m=round(depth_range, 4), n_traces=n_traces,
                   trace_step_m=round(step, 5), x_start_m=0.0, seed=int(seed),
@@ -134,6 +158,33 @@ def sample_survey_scene(seed: int, index: int, *, host: str | None = None) -> Sc
                                       radius_m=round(float(rng.uniform(0.01, 0.05)), 4),
                                       eps_r=round(float(rng.uniform(5.0, 9.0)), 2)))
     return scene
+
+
+def sample_gprmax_survey_scene(seed: int, index: int, *, max_cell_steps: float = GPRMAX_EVAL_MAX_CELL_STEPS,
+                               host: str | None = None) -> Scene:
+    """The ``index``-th scene of the held-out gprMax survey set (profile ``"gprmax_eval"``).
+
+    Targets under 1.5 grid cells in radius (gprMax cannot build them) are drawn at 1.5
+    cells, stones under 1.5 cells are left out, and draws over ``max_cell_steps`` of FDTD
+    work (:func:`gprmax_runner.following_cost`) or with targets that then touch are
+    redrawn, so the set leans to the cheaper scans of each range.
+    """
+    from gpr3d.simulation.gprmax_runner import following_cost
+
+    for attempt in range(200):
+        scene = sample_survey_scene(seed, index, host=host, profile="gprmax_eval", attempt=attempt)
+        dx = scene.dx_m = scene.dx  # fixed now: leaving stones out must not coarsen the grid
+        scene.stones = [st for st in scene.stones if st.radius_m >= 1.5 * dx]  # finer clutter: below the grid
+        for t in scene.targets:  # gprMax cannot build a cylinder under a cell or two: draw it at 1.5 cells
+            t.radius_m = max(t.radius_m, round(1.5 * dx + 5e-5, 4))
+            if t.wall_m:
+                t.wall_m = min(max(t.wall_m, round(dx + 5e-5, 4)), round(t.radius_m - dx, 4))
+        clash = any(math.hypot(a.x_m - b.x_m, a.centre_depth_m - b.centre_depth_m) < a.radius_m + b.radius_m + dx
+                    for k, a in enumerate(scene.targets) for b in scene.targets[k + 1:])
+        if not clash and following_cost(scene) <= max_cell_steps:
+            scene.name = f"gprmax_survey_{scene.medium.kind}_{seed}_{index:06d}"
+            return scene
+    raise ValueError(f"no scene of seed {seed}, index {index} costs under {max_cell_steps:.3g} cell-steps")
 
 
 def _finish_target(t: Target, rng) -> None:
