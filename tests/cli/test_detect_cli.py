@@ -47,3 +47,43 @@ def test_detect_bad_arguments_one_line(tmp_path, args, msg):
     r = run_cli(*base, *args)
     assert r.returncode == 1
     assert msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_eval_detector_on_a_dataset_folder_matches_the_library(tmp_path):
+    """`gpr3d eval detector --data` reports what evaluate_detector finds on the same records."""
+    pytest.importorskip("distributed")
+    pytest.importorskip("pycocotools")
+    from gpr3d.detection.evaluate import evaluate_detector
+    from gpr3d.detection.infer import Detector
+    from gpr3d.io.packed import labelled_records
+    from gpr3d.simulation.dataset import SimulateConfig, build_dataset
+    from gpr3d.simulation.surveys import survey_sample
+
+    ds = tmp_path / "ds"
+    build_dataset(SimulateConfig(out=str(ds), n=2, engine="forward", workers=1), progress=False, log=lambda *_: None)
+    # put a survey-scale record in place of sample 1 (its own labels), so the set is not trivially empty
+    s, lab = survey_sample(777, 3)
+    s.save(ds / "samples" / "000001" / "bscan.h5")
+    (ds / "samples" / "000001" / "labels.json").write_text(json.dumps(lab))
+    r = run_cli("eval", "detector", "--data", ds)
+    assert r.returncode == 0, r.stderr
+    m = evaluate_detector(Detector.load(), labelled_records(ds), score_threshold=0.5)
+    assert f"{m['n_records']} records, {m['n_true']} targets" in r.stdout
+    row = r.stdout.strip().splitlines()[-1].split("|")
+    assert float(row[1]) == pytest.approx(m["mAP@0.75"], abs=6e-4)
+    assert float(row[4]) == pytest.approx(m["AR@100"], abs=6e-4)
+    assert m["n_true"] >= 3 and m["n_records"] == 2
+
+
+@pytest.mark.parametrize("args, msg", [
+    (["--data", "{missing}"], "no such file or folder"),
+    (["--data", "{junk}"], "corrupt or truncated"),
+    (["--n", "0"], "--n must be at least 1"),
+])
+def test_eval_detector_bad_arguments_one_line(tmp_path, args, msg):
+    junk = tmp_path / "junk.h5"
+    junk.write_bytes(b"nothing here")
+    args = [a.format(missing=tmp_path / "nope.h5", junk=junk) for a in args]
+    r = run_cli("eval", "detector", *args)
+    assert r.returncode != 0
+    assert msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr

@@ -117,3 +117,36 @@ def test_pack_and_export_round_trip(tmp_path):
     c = coco_mod.COCO(str(tmp_path / "coco" / "coco.json"))
     assert len(c.imgs) == 3 and len(c.anns) == len(coco["annotations"])
     assert (tmp_path / "coco" / c.imgs[1]["file_name"]).exists()
+
+
+def test_records_of_different_lengths_pack_and_read_back(tmp_path):
+    """Survey-scale records differ in trace count: packing pads them and reads each back at its own length."""
+    pytest.importorskip("distributed")
+    from gpr3d.io.packed import labelled_records
+    from gpr3d.simulation.dataset import SimulateConfig, build_dataset, write_manifest
+    from gpr3d.simulation.packed import PackedDataset, pack_dataset
+
+    build_dataset(SimulateConfig(out=str(tmp_path / "ds"), n=3, engine="forward", workers=1), progress=False,
+                  log=lambda *_: None)
+    p1 = tmp_path / "ds" / "samples" / "000001" / "bscan.h5"
+    s1 = gpr3d.read(p1)
+    short = s1.replace(data=s1.data[:17], positions_xyz=s1.positions_xyz[:17],
+                       orientations_quat_wxyz=None if s1.orientations_quat_wxyz is None
+                       else s1.orientations_quat_wxyz[:17])
+    short.save(p1)
+    write_manifest(tmp_path / "ds")
+    pack_dataset(tmp_path / "ds", tmp_path / "p.h5")
+    ds = PackedDataset(tmp_path / "p.h5")
+    lengths = [gpr3d.read(tmp_path / "ds" / "samples" / f"{i:06d}" / "bscan.h5").n_traces for i in range(3)]
+    assert lengths[1] == 17 and list(ds.n_traces) == lengths and ds.shape[1] == max(lengths)
+    from_file = list(labelled_records(tmp_path / "p.h5"))
+    from_dir = list(labelled_records(tmp_path / "ds"))
+    assert [s.n_traces for s, _ in from_file] == [s.n_traces for s, _ in from_dir]
+    assert from_file[1][0].n_traces == 17
+    for (a, la), (b, lb) in zip(from_file, from_dir):
+        np.testing.assert_allclose(a.data, b.data, atol=1e-3 * np.abs(b.data).max())
+        assert la == lb
+    assert [s.n_traces for s, _ in labelled_records(tmp_path / "ds", n=2, last=True)] == \
+        [from_dir[1][0].n_traces, from_dir[2][0].n_traces]
+    with pytest.raises(gpr3d.GPR3DError, match="not a gpr3d simulate dataset"):
+        list(labelled_records(tmp_path))

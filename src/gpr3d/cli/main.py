@@ -289,15 +289,30 @@ def cmd_train(args):
 
 def cmd_eval(args):
     from gpr3d.detection.evaluate import evaluate_detector
-    from gpr3d.simulation.surveys import survey_sample
 
-    if args.n < 1:
+    if args.n is not None and args.n < 1:
         raise GPR3DError(f"--n must be at least 1, got {args.n}")
     if args.seed < 0:
         raise GPR3DError(f"--seed must be 0 or more, got {args.seed}")
+    if args.data is not None:
+        from gpr3d.io.packed import PackedDataset, labelled_records
+
+        src = Path(args.data)
+        if not src.exists():
+            raise GPR3DError(f"--data {src}: no such file or folder")
+        if src.is_file():
+            PackedDataset(src)  # a wrong file fails here, in one line, before the model loads
+        records = labelled_records(src, n=args.n)
+        what = f"{src} ({'first ' + str(args.n) if args.n else 'all'} records)"
+    else:
+        from gpr3d.simulation.surveys import survey_sample
+
+        n = args.n or 60
+        records = (survey_sample(args.seed, i) for i in range(n))
+        what = f"held-out survey-scale forward-model set (seed {args.seed})"
     det = _detector(args)
-    m = evaluate_detector(det, (survey_sample(args.seed, i) for i in range(args.n)), score_threshold=args.score)
-    print(f"held-out survey-scale set (seed {args.seed}, {m['n_records']} records, {m['n_true']} targets)")
+    m = evaluate_detector(det, records, score_threshold=args.score)
+    print(f"{what}: {m['n_records']} records, {m['n_true']} targets")
     print("| mAP@0.75 | mAP@0.5 | AR@10 | AR@100 | apex recall | false / true | s per window |")
     print("|---|---|---|---|---|---|---|")
     print(f"| {m['mAP@0.75']:.3f} | {m['mAP@0.5']:.3f} | {m['AR@10']:.3f} | {m['AR@100']:.3f} | "
@@ -460,11 +475,14 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     sp = add("eval", cmd_eval, "evaluate a detector on held-out survey-scale synthetic B-scans (COCO metrics)",
-             "example:\n  gpr3d eval detector --n 60 --seed 777\n"
+             "examples:\n  gpr3d eval detector --n 60 --seed 777\n  gpr3d eval detector --data datasets/gprmax_survey.h5\n"
              "the full comparison table: python benchmarks/eval_detector.py WEIGHTS.pt ...")
     sp.add_argument("what", choices=("detector",), help="what to evaluate")
-    sp.add_argument("--n", type=int, default=60, help="records (default 60)")
+    sp.add_argument("--n", type=int, default=None, help="records (default: 60 drawn, or all of --data)")
     sp.add_argument("--seed", type=int, default=777, help="seed of the held-out set (training uses 1000)")
+    sp.add_argument("--data", default=None,
+                    help="evaluate on a labelled dataset instead: packed file or gpr3d simulate folder "
+                         "(e.g. datasets/gprmax_survey.h5)")
     add_detector_args(sp)
 
     sp = add("demo", cmd_demo, "run the end-to-end demo (embedded example by default)",

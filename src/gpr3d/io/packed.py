@@ -16,7 +16,7 @@ import numpy as np
 from gpr3d.core.errors import FormatError
 from gpr3d.io._common import check_file, hdf5_errors
 
-__all__ = ["PackedDataset", "SCHEMA"]
+__all__ = ["PackedDataset", "SCHEMA", "labelled_records"]
 
 SCHEMA = "gpr3d.packed_dataset"
 
@@ -36,6 +36,8 @@ class PackedDataset:
             self.config = json.loads(f.attrs["config_json"])
             self.regenerate = f.attrs.get("regenerate", "")
             self.shape = f["data"].shape
+            # records of different lengths are zero-padded; n_traces keeps each length
+            self.n_traces = f["n_traces"][()] if "n_traces" in f else np.full(len(self.index), self.shape[1])
 
     def __len__(self) -> int:
         return len(self.index)
@@ -52,7 +54,7 @@ class PackedDataset:
     def array(self, i: int) -> np.ndarray:
         """B-scan ``i`` as float32 in its original amplitude units, ``(n_traces, n_samples)``."""
         with h5py.File(self.path, "r") as f:
-            return f["data"][i].astype(np.float32) * self.scale[i]
+            return f["data"][i, : int(self.n_traces[i])].astype(np.float32) * self.scale[i]
 
     def __getitem__(self, i: int):
         from gpr3d.core.survey import Survey
@@ -70,3 +72,34 @@ class PackedDataset:
                    metadata={"format": "packed", "path": str(self.path), "index": int(self.index[i]),
                              "scene": scene})
         return s, self.labels(i)
+
+
+def labelled_records(source, *, n: int | None = None, last: bool = False):
+    """``(Survey, labels dict)`` of every record of a packed file or a ``gpr3d simulate`` folder.
+
+    ``n`` limits the count (the first ``n``, or the last ``n`` with ``last``). A folder's
+    samples are read in index order from ``samples/NNNNNN/{bscan.h5,labels.json}``.
+    """
+    from pathlib import Path
+
+    src = Path(source)
+    if src.is_dir():
+        from gpr3d.io.registry import read
+
+        folders = sorted(p for p in (src / "samples").glob("[0-9]" * 6) if p.is_dir()) \
+            if (src / "samples").is_dir() else []
+        if not folders:
+            raise FormatError(src, "no samples/NNNNNN folders: not a gpr3d simulate dataset")
+        folders = folders if n is None else (folders[-n:] if last else folders[:n])
+        for d in folders:
+            lab = d / "labels.json"
+            if not lab.exists():
+                raise FormatError(d, "sample folder has no labels.json")
+            yield read(d / "bscan.h5"), json.loads(lab.read_text())
+        return
+    ds = PackedDataset(src)
+    idx = range(len(ds))
+    if n is not None:
+        idx = idx[-n:] if last else idx[:n]
+    for i in idx:
+        yield ds[i]

@@ -9,6 +9,8 @@ it. :class:`PackedDataset` reads it back: ``ds[i]`` gives ``(Survey, labels)``;
 Schema ``gpr3d.packed_dataset`` version 1::
 
     /data        (N, n_traces, n_samples) float16, gzip      B-scans / scale
+    /n_traces    (N,) int64, only where records differ in length: record i is
+                 data[i, :n_traces[i]] (the rest is zero padding)
     /scale       (N,) float32                                 per-sample max |amplitude|
     /dt_s        (N,) float64                                 resampled sample interval
     /index       (N,) int64                                   scene index (sample_scene(seed, index))
@@ -58,9 +60,11 @@ def pack_dataset(folder, out, *, n_samples: int = 512, regenerate: str = "") -> 
         idx.append(e["index"])
         scenes.append((d / "scene.json").read_text())
         labels.append((d / "labels.json").read_text())
-    shapes = {a.shape for a in arrays}
-    if len(shapes) != 1:
-        raise GPR3DError(f"samples differ in number of traces ({sorted(shapes)}); pack needs one shape")
+    n_traces = np.asarray([a.shape[0] for a in arrays], dtype=np.int64)
+    ragged = bool(np.any(n_traces != n_traces[0]))
+    if ragged:  # survey-scale records differ in length: pad with zeros, keep each length
+        width = int(n_traces.max())
+        arrays = [np.pad(a, ((0, width - a.shape[0]), (0, 0))) for a in arrays]
     str_t = h5py.string_dtype("utf-8")
     with atomic_path(out, suffix=".h5.part") as tmp:
         with h5py.File(tmp, "w") as f:
@@ -72,6 +76,8 @@ def pack_dataset(folder, out, *, n_samples: int = 512, regenerate: str = "") -> 
             f["scale"] = np.asarray(scales, dtype=np.float32)
             f["dt_s"] = np.asarray(dts)
             f["index"] = np.asarray(idx, dtype=np.int64)
+            if ragged:
+                f["n_traces"] = n_traces
             f.create_dataset("scene_json", data=np.asarray(scenes, dtype=object), dtype=str_t, compression="gzip")
             f.create_dataset("labels_json", data=np.asarray(labels, dtype=object), dtype=str_t, compression="gzip")
     return {"n": len(entries), "file": str(out), "bytes": Path(out).stat().st_size}
