@@ -5,8 +5,11 @@
 Sets (no training or tuning touches them):
 * ``survey``: survey-scale forward-model B-scans ``survey_sample(seed, i)``, i < n
   (training uses seed 1000), with the recording artefacts switched on;
-* ``gprmax400``: the stored gprMax B-scans (``datasets/gprmax400.h5``; short
-  scenes, other physics) when present.
+* ``gprmax400``: the last n stored gprMax B-scans (``datasets/gprmax400.h5``; short
+  scenes, other physics; training with ``--packed`` keeps the last 60 out) when present;
+* ``gprmax_survey``: the held-out gprMax set at survey scale (``--gprmax-survey``, default
+  ``datasets/gprmax_survey.h5``; ``gpr3d simulate --preset survey --seed 4242``), all its
+  records, when present. Nothing trains or tunes on it.
 
 Prints a Markdown table per set and writes ``detector_eval.md`` / ``.csv`` beside
 ``--out``, with training time (from the weights' provenance) and CPU time per window.
@@ -36,19 +39,18 @@ def cpu_name() -> str:
         return platform.processor() or platform.machine()
 
 
-def records(kind: str, n: int, seed: int):
+def records(kind: str, n: int, seed: int, gprmax_survey=None):
+    from gpr3d.io.packed import labelled_records
+
     if kind == "survey":
         from gpr3d.simulation.surveys import survey_sample
 
         for i in range(n):
             yield survey_sample(seed, i)
+    elif kind == "gprmax_survey":
+        yield from labelled_records(gprmax_survey)
     else:
-        from gpr3d.io.packed import PackedDataset
-
-        ds = PackedDataset(ROOT / "datasets" / "gprmax400.h5")
-        for i in range(min(n, len(ds))):
-            s, lab = ds[len(ds) - 1 - i]  # from the end: the most recent samples
-            yield s, lab
+        yield from labelled_records(ROOT / "datasets" / "gprmax400.h5", n=n, last=True)
 
 
 def draw_worst(det, per_record, args):
@@ -74,7 +76,9 @@ def main(argv=None):
     p.add_argument("weights", nargs="+")
     p.add_argument("--n", type=int, default=60)
     p.add_argument("--seed", type=int, default=777)
-    p.add_argument("--sets", nargs="+", default=["survey", "gprmax400"])
+    p.add_argument("--sets", nargs="+", default=["survey", "gprmax400", "gprmax_survey"])
+    p.add_argument("--gprmax-survey", default=str(ROOT / "datasets" / "gprmax_survey.h5"),
+                   help="the held-out gprMax survey set: packed file or gpr3d simulate folder")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--score", type=float, default=0.5, help="score threshold for apex recall / false targets")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
@@ -93,8 +97,12 @@ def main(argv=None):
         for kind in args.sets:
             if kind == "gprmax400" and not (ROOT / "datasets" / "gprmax400.h5").exists():
                 continue
+            if kind == "gprmax_survey" and not Path(args.gprmax_survey).exists():
+                print(f"no {args.gprmax_survey}: gprmax_survey set skipped", file=sys.stderr)
+                continue
             t = time.perf_counter()
-            m = evaluate_detector(det, records(kind, args.n, args.seed), score_threshold=args.score)
+            m = evaluate_detector(det, records(kind, args.n, args.seed, args.gprmax_survey),
+                                  score_threshold=args.score)
             rows.append({"model": prov.get("name", Path(w).stem), "set": kind, "records": m["n_records"],
                          "true_targets": m["n_true"], "mAP@0.5": m["mAP@0.5"], "mAP@0.75": m["mAP@0.75"],
                          "AR@10": m["AR@10"], "AR@100": m["AR@100"], "apex_recall": m["apex_recall"],

@@ -262,6 +262,17 @@ def cmd_detect(args):
     return 0
 
 
+def _labels_provenance(labels) -> dict:
+    """The user's label files (and the files they name) by SHA-256, for the weights' provenance."""
+    if not labels:
+        return {}
+    import hashlib
+
+    p = Path(labels)
+    files = sorted(p.glob("*.xml")) if p.is_dir() else [p]
+    return {"labels": str(p), "labels_sha256": {f.name: hashlib.sha256(f.read_bytes()).hexdigest() for f in files}}
+
+
 def cmd_train(args):
     from dataclasses import asdict
 
@@ -272,9 +283,15 @@ def cmd_train(args):
     if args.max_seconds is not None and not args.max_seconds > 0:
         raise GPR3DError(f"--max-seconds must be positive, got {args.max_seconds}")
     cfg = TrainConfig(out=args.out, model=args.model, steps=args.steps, batch=args.batch, lr=args.lr,
-                      optimiser=args.optimiser, seed=args.seed, data_seed=args.data_seed, device=args.device,
+                      optimiser=args.optimiser, warmup=args.warmup, seed=args.seed, data_seed=args.data_seed,
+                      device=args.device,
                       workers=args.workers, checkpoint_every=args.checkpoint_every, init=args.init,
-                      packed=args.packed, packed_fraction=args.packed_fraction, packed_holdout=args.packed_holdout)
+                      packed=args.packed, packed_fraction=args.packed_fraction, packed_holdout=args.packed_holdout,
+                      labels=args.labels, labels_fraction=args.labels_fraction, pixel_map=args.pixel_map)
+    if cfg.labels:  # a wrong label file fails in one line before any model is built
+        from gpr3d.io.userlabels import read_user_labels
+
+        read_user_labels(cfg.labels, pixel_map=cfg.pixel_map)
     res = train_detector(cfg, SurveySource(cfg.data_seed), progress=not args.no_progress,
                          max_seconds=args.max_seconds)
     weights = Path(args.out) / "weights.pt"
@@ -282,7 +299,7 @@ def cmd_train(args):
     save_weights(res["model"], cfg.model, cfg.window, weights,
                  provenance={"name": cfg.model, "command": cmd, "config": asdict(cfg), "train_wall_s": res["wall_s"],
                              "device": cfg.device, "data": f"survey_sample(seed={cfg.data_seed}, i)",
-                             "steps_done": res["steps"]})
+                             "steps_done": res["steps"], **_labels_provenance(cfg.labels)})
     print(f"trained {cfg.model} for {res['steps']} steps in {res['wall_s']:.0f} s; wrote {weights}")
     return 0
 
@@ -453,6 +470,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp = add("train", cmd_train, "train a hyperbola detector on survey-scale synthetic B-scans (resumable)",
              "examples:\n  gpr3d train detector --out det_run --steps 3000 --batch 8          (CPU)\n"
              "  gpr3d train detector --out det_run --steps 6000 --batch 16 --device cuda --workers 12\n"
+             "  gpr3d train detector --init default --labels my_bscans/coco.json --steps 300 --out ft   "
+             "(fine-tune on your labels)\n"
              "re-run the same command to resume after a kill; weights go to OUT/weights.pt")
     sp.add_argument("what", choices=("detector",), help="what to train")
     sp.add_argument("--out", required=True, help="run folder (checkpoint.pt, losses.csv, weights.pt)")
@@ -462,13 +481,20 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--batch", type=int, default=8, help="windows per step (default 8)")
     sp.add_argument("--lr", type=float, default=None, help="learning rate (default: the optimiser's)")
     sp.add_argument("--optimiser", default="adamw", help="adamw (default), sgd, reference (the paper's SGD)")
+    sp.add_argument("--warmup", type=int, default=200, help="steps of linear learning-rate warm-up (default 200)")
     sp.add_argument("--seed", type=int, default=0, help="initialisation seed")
     sp.add_argument("--data-seed", type=int, default=1000, help="synthetic records survey_sample(SEED, i)")
     sp.add_argument("--device", default="cpu", help="cpu (default), cuda, cuda:N")
     sp.add_argument("--workers", type=int, default=0, help="data-loading processes (default 0)")
     sp.add_argument("--checkpoint-every", type=int, default=100, help="steps between checkpoints")
     sp.add_argument("--max-seconds", type=float, default=None, help="stop after this long (resume later)")
-    sp.add_argument("--init", default=None, help="start from these weights (fine-tuning)")
+    sp.add_argument("--init", default=None, help="start from these weights (fine-tuning); 'default': the shipped ones")
+    sp.add_argument("--labels", default=None,
+                    help="your own labelled B-scans mixed in: COCO .json, Pascal VOC .xml or a folder of them "
+                         "(images may be radar files or pictures; see docs/CONVENTIONS.md)")
+    sp.add_argument("--labels-fraction", type=float, default=0.5, help="share of windows from --labels (0.5)")
+    sp.add_argument("--pixel-map", default=None,
+                    help="time axis of labelled pictures: s_per_px=SECONDS[,t0_s=..,traces_per_px=..,trace0=..]")
     sp.add_argument("--packed", default=None, help="mix records of a packed dataset in (e.g. datasets/gprmax400.h5)")
     sp.add_argument("--packed-fraction", type=float, default=0.2, help="share of windows from --packed (0.2)")
     sp.add_argument("--packed-holdout", type=int, default=60, help="last records of --packed kept out (60)")

@@ -3,7 +3,7 @@
 A *source* is anything that maps an index to ``(Survey, labels dict)`` (labels as
 written by the simulator: ``{"labels": [{"box", "apex_trace", "apex_time_s",
 "visible", ...}]}``): the survey-scale synthesizer, a packed gprMax dataset, or
-a user's own labelled recordings (:mod:`gpr3d.detection.userlabels`). Detection
+a user's own labelled recordings (:func:`gpr3d.io.userlabels.read_user_labels`). Detection
 does not depend on how the records were made.
 """
 
@@ -13,7 +13,7 @@ import numpy as np
 
 from gpr3d.detection.windows import WindowConfig, make_window, prepare, record_scale, rows_interval, window_targets
 
-__all__ = ["random_window", "WindowDataset", "collate", "PackedSource", "MixedSource"]
+__all__ = ["random_window", "WindowDataset", "collate", "PackedSource", "MixedSource", "RecordsSource"]
 
 
 def random_window(survey, labels: dict, cfg: WindowConfig, rng: np.random.Generator, *, flip: bool = True,
@@ -87,6 +87,23 @@ class PackedSource:
 
     def __call__(self, i: int):
         return self.ds[int(i) % self.n]
+
+
+class RecordsSource:
+    """Records held in memory (e.g. a user's labelled B-scans); ``source(i)`` cycles through them."""
+
+    def __init__(self, records):
+        from gpr3d.core.errors import GPR3DError
+
+        self.records = list(records)
+        if not self.records:
+            raise GPR3DError("no labelled records to train on")
+        self.n_boxes = sum(len(lab["labels"]) for _, lab in self.records)
+        if self.n_boxes == 0:
+            raise GPR3DError("the labelled records hold no boxes: nothing to learn from")
+
+    def __call__(self, i: int):
+        return self.records[int(i) % len(self.records)]
 
 
 class MixedSource:

@@ -53,6 +53,9 @@ class TrainConfig:
     packed: str | None = None  #: a packed labelled dataset (e.g. datasets/gprmax400.h5) mixed into the records
     packed_fraction: float = 0.2  #: share of the windows drawn from ``packed``
     packed_holdout: int = 60  #: its last records, kept out of training (the evaluation uses them)
+    labels: str | None = None  #: the user's own labelled B-scans (COCO .json, VOC .xml or folder) mixed in
+    labels_fraction: float = 0.5  #: share of the windows drawn from ``labels``
+    pixel_map: str | None = None  #: time axis of labelled pictures (screenshots): "s_per_px=...,t0_s=..."
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -74,6 +77,12 @@ class TrainConfig:
             raise InvalidDataError(f"--packed-fraction must lie in 0..1, got {self.packed_fraction!r}")
         if not isinstance(self.packed_holdout, int) or self.packed_holdout < 0:
             raise InvalidDataError(f"--packed-holdout must be 0 or more, got {self.packed_holdout!r}")
+        if not 0.0 <= self.labels_fraction <= 1.0:
+            raise InvalidDataError(f"--labels-fraction must lie in 0..1, got {self.labels_fraction!r}")
+        if self.init == "default":
+            from gpr3d.detection.weights import DEFAULT_WEIGHTS
+
+            self.init = str(DEFAULT_WEIGHTS)
 
     def resolved_lr(self) -> float:
         return self.lr or {"adamw": 1e-3, "sgd": 0.02, "reference": 4e-5}[self.optimiser]
@@ -133,6 +142,14 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
         from gpr3d.detection.data import MixedSource, PackedSource
 
         source = MixedSource(source, PackedSource(cfg.packed, holdout=cfg.packed_holdout), cfg.packed_fraction)
+    if cfg.labels:
+        from gpr3d.detection.data import MixedSource, RecordsSource
+        from gpr3d.io.userlabels import read_user_labels
+
+        user = RecordsSource(read_user_labels(cfg.labels, pixel_map=cfg.pixel_map))
+        log(f"{len(user.records)} labelled record(s), {user.n_boxes} box(es) from {cfg.labels}: "
+            f"{cfg.labels_fraction:.0%} of the windows")
+        source = MixedSource(source, user, cfg.labels_fraction)
     opt = _optimiser(cfg, [p for p in model.parameters() if p.requires_grad])
     sched = torch.optim.lr_scheduler.LambdaLR(opt, _schedule(cfg))
     step = 0

@@ -1,0 +1,86 @@
+"""Fine-tuning on the user's own labels: `gpr3d train detector --init default --labels ...`."""
+
+import hashlib
+import json
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("torchvision")
+
+from tests.cli.test_cli import run_cli  # noqa: E402
+from tests.io.test_userlabels import _write_coco  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def user_set(tmp_path_factory):
+    from gpr3d.simulation.surveys import survey_sample
+
+    d = tmp_path_factory.mktemp("user")
+    return _write_coco(d, [survey_sample(4321, i) for i in (0, 1)], height=256)
+
+
+def test_fine_tuning_on_user_labels_changes_the_weights_and_records_them(tmp_path, user_set):
+    from gpr3d.detection.weights import load_weights
+
+    out = tmp_path / "ft"
+    r = run_cli("train", "detector", "--init", "default", "--labels", user_set, "--labels-fraction", "1",
+                "--steps", "2", "--batch", "2", "--warmup", "1", "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    assert "2 labelled record(s)" in r.stdout
+    new, _, prov = load_weights(out / "weights.pt")
+    old, _, _ = load_weights()
+    diff = max(float((a - b).abs().max()) for a, b in zip(new.state_dict().values(), old.state_dict().values())
+               if a.is_floating_point())
+    assert diff > 1e-4  # it trained from the shipped weights ...
+    first = next(iter(old.state_dict().values()))
+    assert first.shape == next(iter(new.state_dict().values())).shape
+    assert prov["config"]["init"].endswith("default_detector.pt")
+    assert prov["labels_sha256"] == {user_set.name: hashlib.sha256(user_set.read_bytes()).hexdigest()}
+
+
+def test_user_windows_carry_the_user_boxes(user_set):
+    """With --labels-fraction 1 every window comes from the user's records, boxes where the labels put them."""
+    from gpr3d.detection.data import MixedSource, RecordsSource, WindowDataset
+    from gpr3d.detection.windows import WindowConfig
+    from gpr3d.io.userlabels import read_user_labels
+
+    recs = read_user_labels(user_set)
+
+    def never(i):
+        raise AssertionError("the synthetic source was drawn")
+
+    ds = WindowDataset(MixedSource(never, RecordsSource(recs), 1.0), 6, WindowConfig(), seed=3, flip=False)
+    seen = 0
+    for i in range(6):
+        image, target = ds[i]
+        assert image.shape == (3, 256, 256)
+        seen += len(target["boxes"])
+    assert seen > 0
+    # the labels of record 0 land on its window's pixels as the pixel map says
+    from gpr3d.detection.windows import make_window, prepare, record_scale, rows_interval, window_targets
+
+    s, lab = recs[0]
+    cfg = WindowConfig()
+    proc = prepare(s, cfg)
+    win = make_window(proc, 0, cfg, rows_interval(s, cfg), record_scale(proc))
+    boxes = window_targets(lab["labels"], win)
+    inside = [x for x in lab["labels"] if 0 <= x["apex_trace"] <= cfg.traces and x["box"][2] <= cfg.traces]
+    assert len(boxes) >= len(inside) > 0
+    for x in inside:
+        px = win.pixmap.box_to_px(x["box"])
+        assert any(np.allclose(b, px, atol=1e-3) for b in boxes)
+
+
+@pytest.mark.parametrize("args, msg", [
+    (["--labels", "{missing}"], "no such file"),
+    (["--labels", "{user}", "--labels-fraction", "1.5"], "--labels-fraction must lie in 0..1"),
+    (["--labels", "{user}", "--pixel-map", "t0_s=0"], "needs s_per_px"),
+])
+def test_fine_tuning_bad_arguments_one_line(tmp_path, user_set, args, msg):
+    args = [a.format(missing=tmp_path / "none.json", user=user_set) for a in args]
+    r = run_cli("train", "detector", "--out", tmp_path / "x", "--steps", "1", "--batch", "2", *args)
+    assert r.returncode != 0
+    assert msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not (tmp_path / "x" / "checkpoint.pt").exists()
