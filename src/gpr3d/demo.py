@@ -175,14 +175,14 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
     if not (available("torch") and available("torchvision")):
         log("[5/5] detection skipped: PyTorch is not installed (pip install 'gpr3d[dl]')")
         return {"skipped": "torch not installed"}
-    from gpr3d.detection.infer import Detector
+    from gpr3d.detection.infer import load_detector
     from gpr3d.io.detections import write_detections
     from gpr3d.io.registry import read
     from gpr3d.migration.metrics import evaluate_targets, truth_lines_from_pipes
     from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct, write_reconstruction
     from gpr3d.viz.bscan import save_bscan_png
 
-    det = Detector.load()
+    det = load_detector()  # ONNX Runtime when installed, else PyTorch
     survey = Survey.load(out / "random_walk_survey.h5")
     t = time.perf_counter()
     found = det.detect(survey, score_threshold=0.5, input_name="random_walk_survey.h5")

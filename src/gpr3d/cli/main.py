@@ -227,11 +227,11 @@ def _check_suffix(path, suffixes, what):
 
 
 def _detector(args):
-    from gpr3d.detection.infer import Detector
+    from gpr3d.detection.infer import load_detector
 
     if not 0.0 <= args.score <= 1.0:
         raise GPR3DError(f"--score must lie in 0..1, got {args.score}")
-    return Detector.load(args.weights, device=args.device)
+    return load_detector(args.weights, device=args.device, engine=args.runtime)
 
 
 def cmd_detect(args):
@@ -366,6 +366,9 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--weights", default=None, help="detector weights (default: the shipped model)")
         sp.add_argument("--score", type=float, default=0.5, help="keep detections scoring at least this (0..1)")
         sp.add_argument("--device", default="cpu", help="cpu (default), cuda, cuda:N")
+        sp.add_argument("--runtime", default="auto", choices=("auto", "torch", "onnx"),
+                        help="auto (default: ONNX Runtime for the shipped model on the CPU, else PyTorch), "
+                             "torch, or onnx (an .onnx export; no PyTorch import, faster start)")
 
     def add_input(sp):
         sp.add_argument("input", help="radar file (DZT, DT1/HD, RD3/RAD, gprMax .h5/.out, gpr3d .h5)")

@@ -17,11 +17,51 @@ from gpr3d.core.deps import require
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.detection.windows import WindowConfig, apex_of_box, merge, prepare, rows_interval, windows
 
-__all__ = ["Detector"]
+__all__ = ["Detector", "load_detector", "ENGINES"]
+
+#: how a detector runs: "torch" (PyTorch, any device), "onnx" (ONNX Runtime on the CPU, no PyTorch
+#: import: the faster start), "auto" (onnx for the shipped model on the CPU when ONNX Runtime is
+#: installed, else torch)
+ENGINES = ("auto", "torch", "onnx")
+
+
+def load_detector(path=None, *, device: str = "cpu", engine: str = "auto") -> "Detector":
+    """The detector in ``path`` (default: the shipped one), run by ``engine`` (see ``ENGINES``).
+
+    ``path`` may be a ``.pt`` weights file (torch) or an ``.onnx`` export of one (onnx).
+    """
+    from gpr3d.core.errors import GPR3DError
+
+    if engine not in ENGINES:
+        raise GPR3DError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
+    is_onnx = path is not None and str(path).lower().endswith(".onnx")
+    if engine == "auto":
+        if is_onnx:
+            engine = "onnx"
+        elif path is None and str(device) == "cpu":
+            from importlib.util import find_spec
+
+            from gpr3d.detection.ort import DEFAULT_ONNX
+
+            engine = "onnx" if DEFAULT_ONNX.is_file() and find_spec("onnxruntime") else "torch"
+        else:
+            engine = "torch"
+    if engine == "onnx":
+        if path is not None and not is_onnx:
+            raise GPR3DError(f"--runtime onnx needs an .onnx file (export one with "
+                             f"python references/detection/export_onnx.py {path} OUT.onnx), not {path}")
+        from gpr3d.detection.ort import OnnxDetector
+
+        return OnnxDetector.load(path, device=device)
+    if is_onnx:
+        raise GPR3DError(f"{path} is an ONNX export: run it with --runtime onnx (or auto)")
+    return Detector.load(path, device=device)
 
 
 class Detector:
     """A trained detector with its window settings."""
+
+    nms = None  #: None: torchvision's non-maximum suppression when merging windows
 
     def __init__(self, model, window: WindowConfig, *, provenance: dict | None = None, device: str = "cpu",
                  batch: int = 8):
@@ -56,7 +96,8 @@ class Detector:
         proc = prepare(survey, self.window)
         wins = windows(survey, self.window, processed=proc)
         raw = self.predict_windows([w.image for w in wins])
-        boxes, scores = merge([(w, b, s) for w, (b, s) in zip(wins, raw)], survey.n_traces, survey.dt_s)
+        boxes, scores = merge([(w, b, s) for w, (b, s) in zip(wins, raw)], survey.n_traces, survey.dt_s,
+                              nms=self.nms)
         s_per_row = rows_interval(survey, self.window)
         # apexes from data whose rows keep the pulse's shape (equalising the rows distorts it)
         plain = prepare(survey, replace(self.window, equalise=False)) if self.window.equalise else proc

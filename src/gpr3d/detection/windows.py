@@ -164,16 +164,16 @@ def window_targets(labels: list[dict], win: Window, *, min_inside: float = 0.6) 
 
 
 def merge(per_window: list[tuple[Window, np.ndarray, np.ndarray]], n_traces: int, dt_s: float, *,
-          iou: float = 0.5, edge_px: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+          iou: float = 0.5, edge_px: float = 2.0, nms=None) -> tuple[np.ndarray, np.ndarray]:
     """Window detections -> record boxes ``(k, 4)`` [trace_start, t_start_s, trace_end, t_end_s] and scores.
 
     A box that touches a window's inner edge (not the record's) is cut by it: its
     score is lowered so that the same hyperbola seen whole in the overlapping window
-    wins; duplicates are removed by torchvision's non-maximum suppression in record
-    coordinates (time in samples, so that IoU does not depend on units).
+    wins; duplicates are removed by non-maximum suppression in record coordinates
+    (time in samples, so that IoU does not depend on units): torchvision's, or ``nms``
+    (``nms(boxes, scores, iou) -> kept indices``, e.g. ONNX Runtime's in
+    :func:`gpr3d.detection.ort.onnx_nms`).
     """
-    torch = require("torch")
-    from torchvision.ops import nms
 
     boxes, scores, ranks = [], [], []
     for win, b, s in per_window:
@@ -190,7 +190,13 @@ def merge(per_window: list[tuple[Window, np.ndarray, np.ndarray]], n_traces: int
     boxes_a = np.asarray(boxes)
     scaled = boxes_a.copy()
     scaled[:, [1, 3]] /= dt_s
-    keep = nms(torch.as_tensor(scaled), torch.as_tensor(np.asarray(ranks)), iou).numpy()
+    if nms is None:
+        torch = require("torch")
+        from torchvision.ops import nms as tv_nms
+
+        keep = tv_nms(torch.as_tensor(scaled), torch.as_tensor(np.asarray(ranks)), iou).numpy()
+    else:
+        keep = np.asarray(nms(scaled, np.asarray(ranks), iou), dtype=np.int64)
     return boxes_a[keep], np.asarray(scores)[keep]
 
 

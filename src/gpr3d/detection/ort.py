@@ -1,0 +1,179 @@
+"""Detection without PyTorch at run time: the detector exported to ONNX, run by ONNX Runtime.
+
+Importing PyTorch and torchvision takes seconds (about 4 s here, most of
+``gpr3d detect``'s start-up), ONNX Runtime a fifth of one. :func:`export_onnx` turns a
+weights file into an ONNX graph (torchvision's detectors export with their
+post-processing); :class:`OnnxDetector` runs it with the same windows, merge and
+apex rules as :class:`~gpr3d.detection.infer.Detector`, and merges boxes across
+windows with ONNX Runtime's own ``NonMaxSuppression``.
+
+The graph stores its weights in float16 (as the ``.pt`` files do) with a cast to
+float32 in front of each: the file is half the size, and ONNX Runtime folds the
+casts once when the session starts, so it computes in float32 as PyTorch does.
+The window settings and the provenance travel in the graph's metadata.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from gpr3d.core.deps import require
+from gpr3d.core.errors import FormatError
+from gpr3d.detection.infer import Detector
+from gpr3d.detection.windows import WindowConfig
+from gpr3d.io.atomic import atomic_path
+
+__all__ = ["export_onnx", "OnnxDetector", "onnx_nms", "DEFAULT_ONNX", "OPSET"]
+
+DEFAULT_ONNX = Path(__file__).with_name("default_detector.onnx")
+OPSET = 17
+_META = "gpr3d.detector"
+
+
+def _fp16_initializers(model_proto):
+    """Store float32 initializers as float16, each followed by a Cast back to float32 (in place)."""
+    from onnx import TensorProto, helper, numpy_helper
+
+    g = model_proto.graph
+    casts, keep = [], []
+    for init in g.initializer:
+        if init.data_type != TensorProto.FLOAT or int(np.prod(init.dims or [1])) < 16:
+            keep.append(init)  # small tensors (shapes, thresholds) stay as they are
+            continue
+        arr = numpy_helper.to_array(init)
+        half = numpy_helper.from_array(arr.astype(np.float16), init.name + "__fp16")
+        keep.append(half)
+        casts.append(helper.make_node("Cast", [half.name], [init.name], to=TensorProto.FLOAT,
+                                      name=init.name + "__cast"))
+    del g.initializer[:]
+    g.initializer.extend(keep)
+    nodes = list(g.node)
+    del g.node[:]
+    g.node.extend(casts + nodes)
+
+
+def export_onnx(weights=None, out=DEFAULT_ONNX) -> dict:
+    """Export a detector weights file (default: the shipped one) to ONNX at ``out`` (atomically).
+
+    Needs ``torch``, ``torchvision`` and ``onnx``; returns ``{"file", "bytes", "max_abs_diff"}``,
+    the largest difference (pixels) of the exported graph's boxes from PyTorch's on a
+    test window (each box against its nearest).
+    """
+    torch = require("torch")
+    onnx = require("onnx")
+    ort = require("onnxruntime")
+    from gpr3d.detection.weights import DEFAULT_WEIGHTS, load_weights
+
+    src = Path(weights) if weights is not None else DEFAULT_WEIGHTS
+    model, window, prov = load_weights(src)
+    model.eval()
+    rng = np.random.default_rng(0)
+    example = torch.from_numpy(rng.random((3, window.rows, window.traces), dtype=np.float32))
+    meta = {"window": window.to_dict(), "provenance": prov,
+            "source_weights": src.name, "source_sha256": hashlib.sha256(src.read_bytes()).hexdigest(),
+            "opset": OPSET}
+    with atomic_path(out, suffix=".onnx.part") as tmp:
+        torch.onnx.export(model, ([example],), str(tmp), opset_version=OPSET, input_names=["image"],
+                          output_names=["boxes", "labels", "scores"], dynamo=False)
+        proto = onnx.load(str(tmp))
+        _fp16_initializers(proto)
+        del proto.metadata_props[:]
+        entry = proto.metadata_props.add()
+        entry.key, entry.value = _META, json.dumps(meta)
+        onnx.checker.check_model(proto)
+        onnx.save(proto, str(tmp))
+        # the graph must give PyTorch's answer (float16 weights in both)
+        sess = ort.InferenceSession(str(tmp), providers=["CPUExecutionProvider"])
+        got = sess.run(None, {"image": example.numpy()})
+        with torch.inference_mode():
+            ref = model([example])[0]
+        if got[0].shape != tuple(ref["boxes"].shape):
+            raise RuntimeError(f"exported graph finds {got[0].shape[0]} boxes, PyTorch {ref['boxes'].shape[0]}")
+        rb = ref["boxes"].numpy()
+        # near-equal scores may come out in another order: match each box to its nearest
+        diff = float(max((np.abs(rb - b).max(axis=1).min() for b in got[0]), default=0.0))
+    return {"file": str(out), "bytes": Path(out).stat().st_size, "max_abs_diff": diff}
+
+
+def _nms_graph():
+    """A one-node ONNX graph: NonMaxSuppression over one class (boxes (1, N, 4), scores (1, 1, N))."""
+    from onnx import TensorProto, helper
+
+    node = helper.make_node("NonMaxSuppression", ["boxes", "scores", "max_out", "iou"], ["selected"],
+                            center_point_box=0)
+    graph = helper.make_graph(
+        [node], "gpr3d_nms",
+        [helper.make_tensor_value_info("boxes", TensorProto.FLOAT, [1, None, 4]),
+         helper.make_tensor_value_info("scores", TensorProto.FLOAT, [1, 1, None]),
+         helper.make_tensor_value_info("max_out", TensorProto.INT64, [1]),
+         helper.make_tensor_value_info("iou", TensorProto.FLOAT, [1])],
+        [helper.make_tensor_value_info("selected", TensorProto.INT64, [None, 3])])
+    return helper.make_model(graph, opset_imports=[helper.make_opsetid("", 11)])
+
+
+NMS_ONNX = Path(__file__).with_name("nms.onnx")
+_nms_session = None
+
+
+def onnx_nms(boxes: np.ndarray, scores: np.ndarray, iou: float) -> np.ndarray:
+    """Indices of the boxes ``(n, 4)`` [x0, y0, x1, y1] that survive non-maximum suppression, best first.
+
+    ONNX Runtime's ``NonMaxSuppression`` (boxes overlapping a better one by IoU > ``iou``
+    are dropped), as torchvision's ``nms``; the graph ships as ``nms.onnx``.
+    """
+    global _nms_session
+    ort = require("onnxruntime")
+    if _nms_session is None:
+        _nms_session = ort.InferenceSession(str(NMS_ONNX), providers=["CPUExecutionProvider"])
+    b = np.asarray(boxes, dtype=np.float32).reshape(1, -1, 4)
+    s = np.asarray(scores, dtype=np.float32).reshape(1, 1, -1)
+    if b.shape[1] == 0:
+        return np.zeros(0, dtype=np.int64)
+    sel = _nms_session.run(None, {"boxes": b, "scores": s, "max_out": np.array([b.shape[1]], dtype=np.int64),
+                                  "iou": np.array([iou], dtype=np.float32)})[0]
+    return sel[:, 2].astype(np.int64)
+
+
+class OnnxDetector(Detector):
+    """A :class:`Detector` whose network runs in ONNX Runtime (no PyTorch needed)."""
+
+    nms = staticmethod(onnx_nms)
+
+    def __init__(self, session, window: WindowConfig, *, provenance: dict | None = None, path=None):
+        super().__init__(None, window, provenance=provenance, device="cpu")
+        self.session, self.path = session, path
+
+    @classmethod
+    def load(cls, path=None, *, device: str = "cpu", threads: int | None = None) -> "OnnxDetector":
+        ort = require("onnxruntime")
+        p = Path(path) if path is not None else DEFAULT_ONNX
+        if str(device) != "cpu":
+            raise FormatError(p, f"the ONNX engine runs on the CPU; use the torch engine for --device {device}")
+        if not p.is_file():
+            raise FormatError(p, "no such ONNX detector file")
+        opts = ort.SessionOptions()
+        if threads:
+            opts.intra_op_num_threads = int(threads)
+        opts.log_severity_level = 3
+        try:
+            sess = ort.InferenceSession(str(p), opts, providers=["CPUExecutionProvider"])
+        except Exception as exc:  # noqa: BLE001 - ORT raises its own exception types
+            raise FormatError(p, f"not a readable ONNX detector ({type(exc).__name__}: "
+                                 f"{str(exc).splitlines()[0][:120]})") from None
+        meta = sess.get_modelmeta().custom_metadata_map.get(_META)
+        if meta is None:
+            raise FormatError(p, "an ONNX file without gpr3d detector metadata")
+        meta = json.loads(meta)
+        return cls(sess, WindowConfig(**meta["window"]), provenance=meta.get("provenance", {}), path=p)
+
+    def predict_windows(self, images: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+        out = []
+        for im in images:
+            boxes, labels, scores = self.session.run(None, {"image": np.ascontiguousarray(im, dtype=np.float32)})
+            keep = labels == 1
+            out.append((boxes[keep].astype(np.float64), scores[keep].astype(np.float64)))
+        return out

@@ -1,0 +1,80 @@
+"""The torch-free runtime: the shipped ONNX export gives the shipped weights' detections, NMS as torchvision's."""
+
+import hashlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+ort = pytest.importorskip("onnxruntime")
+torch = pytest.importorskip("torch")
+pytest.importorskip("torchvision")
+
+from gpr3d.core.errors import GPR3DError  # noqa: E402
+from gpr3d.detection.infer import Detector, load_detector  # noqa: E402
+from gpr3d.detection.ort import DEFAULT_ONNX, OnnxDetector, onnx_nms  # noqa: E402
+from gpr3d.detection.weights import DEFAULT_WEIGHTS  # noqa: E402
+
+
+def test_onnx_nms_keeps_what_torchvision_keeps():
+    from torchvision.ops import nms
+
+    rng = np.random.default_rng(5)
+    for n, iou in ((1, 0.5), (40, 0.5), (200, 0.3), (200, 0.7)):
+        xy = rng.uniform(0, 100, (n, 2))
+        wh = rng.uniform(5, 40, (n, 2))
+        boxes = np.concatenate([xy, xy + wh], axis=1)
+        scores = rng.random(n)
+        want = nms(torch.as_tensor(boxes), torch.as_tensor(scores), iou).numpy()
+        got = onnx_nms(boxes, scores, iou)
+        np.testing.assert_array_equal(got, want)
+    assert onnx_nms(np.zeros((0, 4)), np.zeros(0), 0.5).size == 0
+
+
+def test_shipped_onnx_is_the_shipped_weights_and_detects_the_same():
+    onnx_det = OnnxDetector.load()
+    assert onnx_det.provenance.get("name") == Detector.load().provenance.get("name")
+    meta = onnx_det.session.get_modelmeta().custom_metadata_map
+    assert hashlib.sha256(DEFAULT_WEIGHTS.read_bytes()).hexdigest() in meta["gpr3d.detector"]
+    from gpr3d.simulation.surveys import survey_sample
+
+    s, _ = survey_sample(777, 5)
+    a = Detector.load().detect(s, score_threshold=0.3)["targets"]
+    b = onnx_det.detect(s, score_threshold=0.3)["targets"]
+    assert len(a) == len(b) and len(a) > 0
+    for x, y in zip(a, b):
+        np.testing.assert_allclose(x["box"][::2], y["box"][::2], atol=0.05)  # traces
+        np.testing.assert_allclose(x["box"][1::2], y["box"][1::2], atol=0.02 * s.dt_s)  # seconds
+        assert abs(x["score"] - y["score"]) < 2e-3 and x["apex_trace"] == y["apex_trace"]
+
+
+def test_runtime_choice_and_wrong_files(tmp_path):
+    assert isinstance(load_detector(), OnnxDetector)  # the shipped model on the CPU: ONNX Runtime
+    assert type(load_detector(engine="torch")) is Detector
+    assert type(load_detector(DEFAULT_WEIGHTS)) is Detector  # a .pt file: PyTorch
+    assert isinstance(load_detector(DEFAULT_ONNX), OnnxDetector)
+    with pytest.raises(GPR3DError, match="needs an .onnx file"):
+        load_detector(DEFAULT_WEIGHTS, engine="onnx")
+    with pytest.raises(GPR3DError, match="ONNX export: run it with --runtime onnx"):
+        load_detector(DEFAULT_ONNX, engine="torch")
+    bad = tmp_path / "bad.onnx"
+    bad.write_bytes(b"\x08\x07junk")
+    with pytest.raises(GPR3DError, match="not a readable ONNX detector"):
+        load_detector(bad)
+    with pytest.raises(GPR3DError, match="unknown engine"):
+        load_detector(engine="tensorrt")
+
+
+def test_detect_with_onnx_runtime_never_imports_torch(tmp_path):
+    from gpr3d.core.survey import Survey
+    from gpr3d.simulation.surveys import survey_sample
+
+    s, _ = survey_sample(777, 2)
+    f = tmp_path / "s.h5"
+    Survey.save(s, f)
+    code = ("import sys; from gpr3d.cli.main import main; rc = main(['detect', sys.argv[1], '--out', sys.argv[2]]); "
+            "assert rc == 0; print('torch' in sys.modules, 'torchvision' in sys.modules)")
+    r = subprocess.run([sys.executable, "-c", code, str(f), str(tmp_path / "d.json")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().splitlines()[-1] == "False False"
