@@ -5,9 +5,9 @@ centre ``(x0, zc)`` and radius ``R`` in a host of wave speed ``v``, seen by a
 transmitter and receiver ``h`` apart on the surface with their midpoint at ``x``,
 answers at::
 
-    t(x) = t0 + (|tx - C| + |rx - C| - 2 R) / v,    tx = (x - h/2, 0), rx = (x + h/2, 0), C = (x0, zc)
+    t(x) = t0 + min over P on the circle (|tx - P| + |P - rx|) / v,   tx = (x - h/2, 0), rx = (x + h/2, 0)
 
-(times from the first recorded sample; ``t0`` is time zero, when the wave leaves
+(for a point, ``(|tx - C| + |rx - C|) / v`` with ``C = (x0, zc)``; times from the first recorded sample; ``t0`` is time zero, when the wave leaves
 the surface). So the fit needs, for each hyperbola:
 
 * **time zero from the data**: the direct wave (air and ground coupling between the
@@ -183,10 +183,37 @@ def pick_arrivals(envelope: np.ndarray, dt_s: float, box, *, level: float = 0.5,
     return np.asarray(tr, int), np.asarray(tt), np.asarray(aa), np.asarray(rise)
 
 
+def _circle_path(x, h, x0, zc, r):
+    """Shortest path tx -> circle (centre (x0, depth zc), radius r) -> rx for antennas at x -+ h/2 on the surface.
+
+    Newton's method on the angle of the reflection point, from the direction of the
+    antenna midpoint (exact to float precision in a few steps; smooth in the parameters).
+    """
+    tx, rx = x - h / 2, x + h / 2
+    th = np.arctan2(-zc, x - x0)  # angle (from the centre; depth positive down) pointing at the midpoint
+    # P(th) = (x0 + r cos th, zc + r sin th) in (x, depth); the surface is depth 0
+    for _ in range(4):
+        c, s_ = np.cos(th), np.sin(th)
+        px, pz = x0 + r * c, zc + r * s_
+        dxt, dzt, dxr, dzr = px - tx, pz, px - rx, pz
+        dt_, dr_ = np.hypot(dxt, dzt), np.hypot(dxr, dzr)
+        dpx, dpz = -r * s_, r * c  # dP/dth
+        g = (dxt * dpx + dzt * dpz) / dt_ + (dxr * dpx + dzr * dpz) / dr_
+        # second derivative: |dP|^2/d - (d.dP)^2/d^3 + d.d2P/d, with d2P = -(P - C)
+        d2px, d2pz = -r * c, -r * s_
+        hh = (r * r / dt_ - (dxt * dpx + dzt * dpz) ** 2 / dt_**3 + (dxt * d2px + dzt * d2pz) / dt_
+              + r * r / dr_ - (dxr * dpx + dzr * dpz) ** 2 / dr_**3 + (dxr * d2px + dzr * d2pz) / dr_)
+        th = th - np.where(hh > 0, g / np.where(hh > 0, hh, 1.0), 0.0)
+    c, s_ = np.cos(th), np.sin(th)
+    px, pz = x0 + r * c, zc + r * s_
+    return np.hypot(px - tx, pz) + np.hypot(px - rx, pz)
+
+
 def _travel(p, x, h, with_radius):
     x0, zc, v = p[0], p[1], p[2]
-    r = p[3] if with_radius else 0.0
-    return (np.hypot(x - h / 2 - x0, zc) + np.hypot(x + h / 2 - x0, zc) - 2 * r) / v
+    if not with_radius:
+        return (np.hypot(x - h / 2 - x0, zc) + np.hypot(x + h / 2 - x0, zc)) / v
+    return _circle_path(x, h, x0, zc, p[3]) / v
 
 
 def _solve(x, t, t0, h, with_radius, scale, x_guess, t_apex):
@@ -285,14 +312,15 @@ def fit_boxes(survey, boxes, *, trace_spacing_m: float | None = None, t0_s: floa
     """:func:`fit_hyperbola` for every box ``[trace_start, t_start_s, trace_end, t_end_s]`` of ``survey``.
 
     Time zero comes from the direct wave unless ``t0_s`` is given; positions from the
-    file unless ``trace_spacing_m`` is given. The record's mean trace is removed
-    before picking (it holds the direct wave and flat layers, not hyperbolas).
+    file unless ``trace_spacing_m`` is given. The record's median trace is removed
+    before picking: a hyperbola crosses any one time in a few traces only, so the
+    median keeps the direct wave and flat layers and leaves the hyperbolas out.
     """
     x = trace_positions(survey, trace_spacing_m)
     onset = time_zero_from_direct_wave(survey)[0] if t0_s is None else None
     data = np.asarray(survey.data, dtype=np.float64)
-    if remove_background:
-        data = data - data.mean(axis=0, keepdims=True)
+    if remove_background:  # the median trace: the direct wave and flat layers, not the hyperbolas' apexes
+        data = data - np.median(data, axis=0, keepdims=True)
     env = _envelope(data, survey.dt_s, survey.frequency_hz)
     out = []
     for b in boxes:
