@@ -312,15 +312,19 @@ def fit_boxes(survey, boxes, *, trace_spacing_m: float | None = None, t0_s: floa
     """:func:`fit_hyperbola` for every box ``[trace_start, t_start_s, trace_end, t_end_s]`` of ``survey``.
 
     Time zero comes from the direct wave unless ``t0_s`` is given; positions from the
-    file unless ``trace_spacing_m`` is given. The record's median trace is removed
-    before picking: a hyperbola crosses any one time in a few traces only, so the
-    median keeps the direct wave and flat layers and leaves the hyperbolas out.
+    file unless ``trace_spacing_m`` is given. Before picking, the median of the traces
+    outside every box (the direct wave and flat layers, no hyperbola) is removed,
+    when at least a tenth of the traces (8 or more) lie outside the boxes.
     """
     x = trace_positions(survey, trace_spacing_m)
     onset = time_zero_from_direct_wave(survey)[0] if t0_s is None else None
     data = np.asarray(survey.data, dtype=np.float64)
-    if remove_background:  # the median trace: the direct wave and flat layers, not the hyperbolas' apexes
-        data = data - np.median(data, axis=0, keepdims=True)
+    if remove_background:  # the direct wave and flat layers: the median of the traces outside every box
+        outside = np.ones(survey.n_traces, bool)
+        for b in boxes:
+            outside[int(max(math.floor(b[0]), 0)) : int(math.ceil(b[2])) + 1] = False
+        if outside.sum() >= max(8, survey.n_traces // 10):
+            data = data - np.median(data[outside], axis=0, keepdims=True)
     env = _envelope(data, survey.dt_s, survey.frequency_hz)
     out = []
     for b in boxes:
