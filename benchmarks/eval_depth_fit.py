@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+MODELS = ("point", "cylinder", "auto", "joint point", "joint cylinder")
 
 
 def gprmax_example(work: Path):
@@ -59,30 +60,36 @@ def cpu_name() -> str:
 
 
 def main(argv=None):
-    from gpr3d.inversion.hyperbola import combine_permittivity, fit_boxes, time_zero_from_direct_wave
+    from gpr3d.inversion.hyperbola import combine_permittivity, fit_boxes, fit_record
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--survey", default=str(ROOT / "build" / "gprmax_survey_4242"))
     p.add_argument("--work", default=str(ROOT / "build" / "gprmax_example"))
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
+    p.add_argument("--truth-apex", action="store_true", help="start the tracking at the labelled apexes")
+    p.add_argument("--n", type=int, default=None, help="only the first N records of --survey")
+    p.add_argument("--no-example", action="store_true", help="skip gprMax's example")
     args = p.parse_args(argv)
     lines = [f"Host CPU: {cpu_name()}", "", "### gprMax example cylinder_Bscan_2D (eps_r 6, top 0.080 m, radius 0.010 m)",
              "", "| box | model | eps_r | sigma | error % | depth m | error mm | radius m | time zero ns (true 0.943) |",
              "|---|---|---|---|---|---|---|---|---|"]
     s = gprmax_example(Path(args.work))
-    boxes = {"below the direct wave": [0, 1.9e-9, 59, 3e-9]}
+    boxes = {} if args.no_example else {"below the direct wave": [0, 1.9e-9, 59, 3e-9]}
+    apex = {}
     try:
+        if args.no_example:
+            raise RuntimeError("--no-example")
         from gpr3d.detection.infer import load_detector
 
         found = load_detector().detect(s, score_threshold=0.3)["targets"]
         if found:
             boxes["detector's box"] = found[0]["box"]
+            apex["detector's box"] = (found[0]["apex_trace"], found[0]["apex_time_s"])
     except Exception as exc:  # noqa: BLE001 - the detector is optional here
         print(f"detector not run: {exc}", file=sys.stderr)
-    t0, _ = time_zero_from_direct_wave(s)
     for name, box in boxes.items():
         for model in ("point", "cylinder", "auto"):
-            f = fit_boxes(s, [box], model=model)[0]
+            f = fit_boxes(s, [box], model=model, apexes=[apex[name]] if name in apex else None)[0]
             lines.append(f"| {name} | {f.model if model == 'auto' else model}{' (auto)' if model == 'auto' else ''} | "
                          f"{f.eps_r:.3f} | {f.sigma_eps_r:.3f} | {100 * (f.eps_r - 6) / 6:+.1f} | {f.depth_m:.4f} | "
                          f"{1000 * (f.depth_m - 0.08):+.1f} | {f.radius_m:.4f} | {f.t0_s * 1e9:.3f} |")
@@ -92,18 +99,23 @@ def main(argv=None):
 
         rows = []
         n_rec = 0
-        for s, lab in labelled_records(survey):
+        for s, lab in labelled_records(survey, n=args.n):
             n_rec += 1
             vis = [x for x in lab["labels"] if x["visible"]]
-            for model in ("point", "cylinder", "auto"):
-                fits = fit_boxes(s, [x["box"] for x in vis], model=model)
-                rec_eps = combine_permittivity(fits)[0]
+            ap = [(x["apex_trace"], x["apex_time_s"]) for x in vis] if args.truth_apex else None
+            for model in MODELS:
+                if model.startswith("joint"):
+                    fits, info = fit_record(s, [x["box"] for x in vis], model=model.split()[1], apexes=ap)
+                    rec_eps = info["eps_r"]
+                else:
+                    fits = fit_boxes(s, [x["box"] for x in vis], model=model, apexes=ap)
+                    rec_eps = combine_permittivity(fits)[0]
                 for x, f in zip(vis, fits):
                     rows.append((model, x["kind"], x["depth_m"], lab["eps_r"], f, rec_eps))
         lines += ["", f"### held-out gprMax survey set ({survey.name}: {n_rec} records), truth boxes", "",
                   "| model | kind | targets | fitted | eps_r MAPE | record eps_r MAPE | depth MAE m | "
                   "depth MAE m (top < 0.3 m) |", "|---|---|---|---|---|---|---|---|"]
-        for model in ("point", "cylinder", "auto"):
+        for model in MODELS:
             groups = collections.defaultdict(list)
             for r in rows:
                 if r[0] == model:

@@ -11,11 +11,10 @@ answers at::
 the surface). So the fit needs, for each hyperbola:
 
 * **time zero from the data**: the direct wave (air and ground coupling between the
-  antennas) is the first strong event common to every trace; its envelope starts
-  to rise ``h / c`` after the pulse's onset leaves (the air wave comes first).
-  Arrivals are picked at envelope peaks, so the pulse's rise time (onset to peak,
-  measured on the hyperbola's own strongest traces) is added.
-  :func:`time_zero_from_direct_wave`.
+  antennas) is the first strong event common to every trace; its envelope peaks
+  between the air wave's ``h / c`` and the ground wave's ``h / v`` after the pulse,
+  taken half-way (:func:`time_zero`), so ``t0`` is solved with ``v``
+  (:func:`direct_wave_time`).
 * **arrivals**: in each trace of the detection box, the first envelope peak of the
   background-removed record that reaches half of that trace's strongest in the
   box (the hyperbola is the earliest event under the box top). :func:`pick_arrivals`.
@@ -23,12 +22,15 @@ the surface). So the fit needs, for each hyperbola:
   a trace spacing.
 
 :func:`fit_hyperbola` solves for ``x0, zc, v`` (and ``R`` with ``model="cylinder"``)
-by robust least squares (SciPy's ``least_squares``, soft-L1 loss scaled to a
-quarter period), with each estimate's standard error from the Jacobian:
+by robust least squares (SciPy's ``least_squares``, Cauchy loss scaled to a
+twentieth of a period: picks further off, mostly on a neighbour's crossing tail,
+count little), with each estimate's standard error from the Jacobian:
 ``eps_r = (c / v)^2`` and depth to top ``zc - R``. ``model="auto"`` keeps the
 cylinder only where it explains the picks clearly better than the point.
 :func:`fit_boxes` runs it for every detection of a record and
-:func:`combine_permittivity` gives one eps_r per record from all its hyperbolas.
+:func:`combine_permittivity` gives one eps_r per record from all its hyperbolas;
+:func:`fit_record` fits them all at once with one speed (the better estimate where a
+record holds several hyperbolas; ``benchmarks/eval_depth_fit.py`` compares them).
 """
 
 from __future__ import annotations
@@ -44,8 +46,8 @@ from scipy.signal import hilbert
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.units import C0
 
-__all__ = ["HyperbolaFit", "time_zero_from_direct_wave", "pick_arrivals", "fit_hyperbola", "fit_boxes",
-           "combine_permittivity", "trace_positions", "MODELS"]
+__all__ = ["HyperbolaFit", "direct_wave_time", "time_zero", "pick_arrivals", "fit_hyperbola", "fit_boxes",
+           "combine_permittivity", "fit_record", "trace_positions", "MODELS"]
 
 MODELS = ("auto", "point", "cylinder")
 EPS_RANGE = (1.0, 81.0)
@@ -98,43 +100,28 @@ def _first_peak(e: np.ndarray, level: float = 0.5) -> tuple[float, float]:
     return y, v
 
 
-def _onset(e: np.ndarray, k: float, frac: float) -> float:
-    """Where the envelope ``e`` last rises through ``frac`` of its value at peak index ``k`` (fractional index)."""
-    j = int(round(k))
-    lev = frac * e[j]
-    while j > 0 and e[j - 1] >= lev:
-        j -= 1
-    if j == 0:
-        return 0.0
-    a, b = e[j - 1], e[j]
-    return j - 1 + (lev - a) / (b - a) if b > a else float(j)
+def direct_wave_time(survey) -> tuple[float, float]:
+    """Envelope peak of the direct wave (s from the first sample) and its spread over traces (s).
 
-
-ONSET_FRACTION = 0.1
-
-
-def time_zero_from_direct_wave(survey, *, offset_m: float | None = None) -> tuple[float, float]:
-    """When the pulse's onset leaves the surface (s from the first sample), and the spread over traces.
-
-    The direct wave (the air wave between the antennas, then the ground wave) is the
-    first strong event common to every trace. Its envelope (mean trace) first rises
-    through a tenth of its first strong peak when the air wave arrives, ``offset / c``
-    after the pulse's onset left. The spread is the median absolute deviation of the
-    same onset picked trace by trace (s). Arrivals picked at their envelope peak add
-    the pulse's rise time (:func:`fit_boxes` measures it on each hyperbola).
+    The direct wave (air and ground coupling between the antennas) is the first strong
+    event common to every trace: the first envelope peak of the mean trace reaching
+    half its largest, parabola-refined. The spread is the median absolute deviation of
+    the same peak picked trace by trace.
     """
-    h = survey.offset_m if offset_m is None else float(offset_m)
     data = np.asarray(survey.data, np.float64)
-    mean_env = np.abs(hilbert(data.mean(axis=0)))
-    k, _ = _first_peak(mean_env)
-    on = _onset(mean_env, k, ONSET_FRACTION)
+    k, _ = _first_peak(np.abs(hilbert(data.mean(axis=0))))
     env = np.abs(hilbert(data[:: max(1, data.shape[0] // 64)], axis=1))
-    per = []
-    for e in env:
-        kk, _ = _first_peak(e)
-        per.append(_onset(e, kk, ONSET_FRACTION))
-    spread = float(np.median(np.abs(np.asarray(per) - on))) * survey.dt_s
-    return on * survey.dt_s - h / C0, spread
+    per = np.array([_first_peak(e)[0] for e in env])
+    return k * survey.dt_s, float(np.median(np.abs(per - k))) * survey.dt_s
+
+
+def time_zero(direct_wave_s: float, offset_m: float, v_m_s: float) -> float:
+    """Time zero (when the pulse's peak leaves the surface) from the direct wave's envelope peak.
+
+    The direct wave mixes the air wave (``offset / c``) and the ground wave
+    (``offset / v``); its envelope peaks between them, taken half-way.
+    """
+    return direct_wave_s - 0.5 * offset_m * (1.0 / C0 + 1.0 / v_m_s)
 
 
 def trace_positions(survey, trace_spacing_m: float | None = None) -> np.ndarray:
@@ -149,38 +136,77 @@ def trace_positions(survey, trace_spacing_m: float | None = None) -> np.ndarray:
     return np.asarray(d, dtype=float)
 
 
-def pick_arrivals(envelope: np.ndarray, dt_s: float, box, *, level: float = 0.5, min_rel: float = 0.15):
-    """Arrival per trace of ``box`` = [trace_start, t_start_s, trace_end, t_end_s] in an envelope ``(traces, samples)``.
+def pick_arrivals(envelope: np.ndarray, dt_s: float, box, *, apex_trace: float | None = None,
+                  apex_time_s: float | None = None, period_s: float | None = None, min_rel: float = 0.15):
+    """Arrivals of the hyperbola in ``box`` = [trace_start, t_start_s, trace_end, t_end_s], tracked from its apex.
 
-    In each trace, the first local maximum (parabola-refined) reaching ``level`` of
-    that trace's largest value within the box's rows. Traces whose largest value is
-    under ``min_rel`` of the box's strongest trace are skipped (the tails fade into
-    noise). Returns ``(trace indices, times s, amplitudes, rise times s)``; the rise
-    time is from the envelope's onset (a tenth of the peak) to its peak.
+    The apex: the envelope peak within half a period of (``apex_trace``, ``apex_time_s``)
+    when given (the detector's apex), else the earliest strong first peak in the box.
+    From there, trace by trace outwards, the envelope peak (parabola-refined) nearest
+    the hyperbola's continuation (the last pick plus the last step's rise), within
+    ``-0.25 .. +0.35`` periods of it, until the peak falls under ``min_rel`` of the
+    apex's or leaves the box. ``period_s`` defaults to a tenth of the box height.
+    Returns ``(trace indices, times s, amplitudes)`` in trace order.
     """
     n, ns = envelope.shape
-    i0, ta, i1, tb = box
+    i0, ta, i1, tb = (float(v) for v in box)
     c0, c1 = int(max(math.floor(i0), 0)), int(min(math.ceil(i1), n - 1))
     r0, r1 = int(max(math.floor(ta / dt_s), 0)), int(min(math.ceil(tb / dt_s), ns - 1))
-    empty = np.zeros(0, int), np.zeros(0), np.zeros(0), np.zeros(0)
+    empty = np.zeros(0, int), np.zeros(0), np.zeros(0)
     if c1 < c0 or r1 - r0 < 3:
         return empty
-    block = envelope[c0 : c1 + 1, r0 : r1 + 1]
-    peak = block.max(axis=1)
-    strongest = float(peak.max()) if peak.size else 0.0
-    tr, tt, aa, rise = [], [], [], []
-    for j, e in enumerate(block):
-        if strongest <= 0 or peak[j] < min_rel * strongest:
-            continue
-        y, v = _first_peak(e, level)
-        full = envelope[c0 + j]
-        rise.append((r0 + y - _onset(full, r0 + y, ONSET_FRACTION)) * dt_s)
-        tr.append(c0 + j)
-        tt.append((r0 + y) * dt_s)
-        aa.append(v)
-    if not tr:
-        return empty
-    return np.asarray(tr, int), np.asarray(tt), np.asarray(aa), np.asarray(rise)
+    period = period_s or 0.1 * (tb - ta)
+
+    def peak_in(trace, lo_s, hi_s, near_s=None):
+        """The envelope's local maximum in the window (the one nearest ``near_s``, else the largest)."""
+        k0, k1 = max(int(math.floor(lo_s / dt_s)), r0), min(int(math.ceil(hi_s / dt_s)), r1)
+        if k1 - k0 < 2:
+            return None
+        seg = envelope[trace, k0 - 1 : k1 + 2] if k0 >= 1 and k1 + 2 <= ns else envelope[trace, k0 : k1 + 1]
+        off = k0 - 1 if k0 >= 1 and k1 + 2 <= ns else k0
+        inner = np.nonzero((seg[1:-1] >= seg[:-2]) & (seg[1:-1] > seg[2:]))[0] + 1
+        if inner.size == 0:
+            return None
+        if near_s is None:
+            k = int(inner[np.argmax(seg[inner])])
+        else:
+            k = int(inner[np.argmin(np.abs((off + inner) * dt_s - near_s))])
+        y = float(k)
+        den = seg[k - 1] - 2 * seg[k] + seg[k + 1]
+        if den < 0:
+            y += 0.5 * (seg[k - 1] - seg[k + 1]) / den
+        return (off + y) * dt_s, float(seg[k])
+
+    start = None
+    if apex_trace is not None and apex_time_s is not None:
+        j = int(np.clip(round(apex_trace), c0, c1))
+        p = peak_in(j, apex_time_s - 0.5 * period, apex_time_s + 0.5 * period)
+        start = (j, p) if p else None
+    if start is None:  # the earliest strong first peak in the box
+        block = envelope[c0 : c1 + 1, r0 : r1 + 1]
+        peak = block.max(axis=1)
+        strong = np.nonzero(peak >= 0.5 * peak.max())[0] if peak.max() > 0 else np.zeros(0, int)
+        if strong.size == 0:
+            return empty
+        firsts = [(_first_peak(block[j])[0], j) for j in strong]
+        y, j = min(firsts)
+        start = (c0 + j, ((r0 + y) * dt_s, float(block[j, int(round(y))])))
+    j0, (t_a, amp0) = start
+    picks = {j0: (t_a, amp0)}
+    for step in (-1, 1):
+        hist, j = [t_a], j0 + step
+        while c0 <= j <= c1:
+            # continue the hyperbola: the last step's slope carried on (it steepens slowly)
+            pred = hist[-1] + (max(hist[-1] - hist[-2], 0.0) if len(hist) > 1 else 0.0)
+            p = peak_in(j, pred - 0.25 * period, pred + 0.35 * period, near_s=pred)
+            if p is None or p[1] < min_rel * amp0:
+                break
+            picks[j] = p
+            hist.append(p[0])
+            j += step
+    order = sorted(picks)
+    return (np.asarray(order, int), np.asarray([picks[j][0] for j in order]),
+            np.asarray([picks[j][1] for j in order]))
 
 
 def _circle_path(x, h, x0, zc, r):
@@ -216,23 +242,36 @@ def _travel(p, x, h, with_radius):
     return _circle_path(x, h, x0, zc, p[3]) / v
 
 
-def _solve(x, t, t0, h, with_radius, scale, x_guess, t_apex):
+def _robust_solve(fun, p0, lo, hi, **kw):
+    """Least squares under the narrow Cauchy loss, started at ``p0`` and from a broad soft-L1 solve; the lower cost wins."""
+    direct = least_squares(fun, p0, bounds=(lo, hi), loss="cauchy", f_scale=1.0, x_scale="jac", **kw)
+    broad = least_squares(fun, p0, bounds=(lo, hi), loss="soft_l1", f_scale=5.0, x_scale="jac", **kw)
+    refined = least_squares(fun, broad.x, bounds=(lo, hi), loss="cauchy", f_scale=1.0, x_scale="jac", **kw)
+    return refined if refined.cost < direct.cost else direct
+
+
+def _t0(p, t0, dw, h):
+    """Time zero: fixed, or from the direct wave's peak with this parameter set's speed."""
+    return t0 if dw is None else time_zero(dw, h, p[2])
+
+
+def _solve(x, t, t0, dw, h, with_radius, scale, x_guess, t_apex):
     v_lo, v_hi = C0 / math.sqrt(EPS_RANGE[1]), C0 / math.sqrt(EPS_RANGE[0])
     span = max(float(x.max() - x.min()), 1e-3)
     best = None
     for eps_guess in (4.0, 9.0, 20.0):  # a few starts: the misfit is not convex in v
         v = C0 / math.sqrt(eps_guess)
-        z = max(0.5 * v * max(t_apex - t0, 1e-12), 1e-3)
+        z = max(0.5 * v * max(t_apex - _t0([0, 0, v], t0, dw, h), 1e-12), 1e-3)
         p0 = [x_guess, z, v] + ([0.3 * z] if with_radius else [])
         lo = [x.min() - span, 1e-4, v_lo] + ([0.0] if with_radius else [])
         hi = [x.max() + span, 50.0, v_hi] + ([50.0] if with_radius else [])
         p0 = np.clip(p0, np.asarray(lo) + 1e-9, np.asarray(hi) - 1e-9)
 
         def res(p):
-            return (t0 + _travel(p, x, h, with_radius) - t) / scale
+            return (_t0(p, t0, dw, h) + _travel(p, x, h, with_radius) - t) / scale
 
         try:
-            sol = least_squares(res, p0, bounds=(lo, hi), loss="soft_l1", f_scale=1.0, x_scale="jac")
+            sol = _robust_solve(res, p0, lo, hi)
         except ValueError:
             continue
         if with_radius and sol.x[3] > sol.x[1]:  # the top would lie above the surface
@@ -255,31 +294,37 @@ def _sigmas(sol, scale):
         return np.full(sol.x.size, np.inf), None
 
 
-def fit_hyperbola(x_m, t_s, *, t0_s: float, offset_m: float = 0.0, frequency_hz: float | None = None,
-                  model: str = "auto", traces=None) -> HyperbolaFit:
+def fit_hyperbola(x_m, t_s, *, t0_s: float | None = None, direct_wave_s: float | None = None,
+                  offset_m: float = 0.0, frequency_hz: float | None = None, model: str = "auto",
+                  traces=None) -> HyperbolaFit:
     """Fit the picks ``(x_m, t_s)`` of one hyperbola (see the module docstring).
+
+    Time zero: ``t0_s`` when known, else from the direct wave's envelope peak
+    ``direct_wave_s`` (:func:`time_zero`, solved with the speed); one of them is needed.
 
     ``frequency_hz`` sets the robust loss's scale (a quarter period; else a tenth of
     the picks' time spread). ``traces`` (the picks' trace indices) give ``apex_trace``.
     """
     if model not in MODELS:
         raise InvalidDataError(f"unknown hyperbola model {model!r}; choose one of {', '.join(MODELS)}")
+    if (t0_s is None) == (direct_wave_s is None):
+        raise InvalidDataError("give either the time zero t0_s or the direct wave's peak direct_wave_s")
     x = np.asarray(x_m, dtype=float)
     t = np.asarray(t_s, dtype=float)
     good = np.isfinite(x) & np.isfinite(t)
     x, t = x[good], t[good]
     tr = None if traces is None else np.asarray(traces, dtype=float)[good]
     if x.size < 5 or np.ptp(x) <= 0:
-        return HyperbolaFit(ok=False, reason=f"{x.size} usable picks (5 spread along the profile needed)", t0_s=t0_s)
-    scale = 0.25 / frequency_hz if frequency_hz else max(0.1 * float(np.ptp(t)), 1e-12)
+        return HyperbolaFit(ok=False, reason=f"{x.size} usable picks (5 spread along the profile needed)")
+    scale = 0.05 / frequency_hz if frequency_hz else max(0.1 * float(np.ptp(t)), 1e-12)
     k = int(np.argmin(t))
     fits = {}
     for m in (("point", "cylinder") if model == "auto" else (model,)):
-        sol = _solve(x, t, t0_s, offset_m, m == "cylinder", scale, float(x[k]), float(t[k]))
+        sol = _solve(x, t, t0_s, direct_wave_s, offset_m, m == "cylinder", scale, float(x[k]), float(t[k]))
         if sol is not None:
             fits[m] = sol
     if not fits:
-        return HyperbolaFit(ok=False, reason="the fit did not converge", t0_s=t0_s, n_picks=int(x.size))
+        return HyperbolaFit(ok=False, reason="the fit did not converge", n_picks=int(x.size))
     choice = "point" if "point" in fits else "cylinder"
     if "cylinder" in fits and "point" in fits:
         sig_c, _ = _sigmas(fits["cylinder"], scale)
@@ -298,26 +343,159 @@ def fit_hyperbola(x_m, t_s, *, t0_s: float, offset_m: float = 0.0, frequency_hz:
         s_depth = math.sqrt(max(cov[1, 1] + cov[3, 3] - 2 * cov[1, 3], 0.0))
     else:
         s_depth = float(sig[1])
-    resid = (t0_s + _travel(sol.x, x, offset_m, choice == "cylinder") - t)
+    t0 = _t0(sol.x, t0_s, direct_wave_s, offset_m)
+    resid = (t0 + _travel(sol.x, x, offset_m, choice == "cylinder") - t)
     apex_trace = float(np.interp(x0, x, tr)) if tr is not None and np.all(np.diff(x) >= 0) else float("nan")
-    apex_time = t0_s + float(_travel(sol.x, np.array([x0]), offset_m, choice == "cylinder")[0])
+    apex_time = t0 + float(_travel(sol.x, np.array([x0]), offset_m, choice == "cylinder")[0])
     return HyperbolaFit(ok=True, model=choice, x0_m=x0, depth_m=zc - r, radius_m=r, v_m_s=v, eps_r=eps,
-                        sigma_x0_m=float(sig[0]), sigma_depth_m=s_depth, sigma_eps_r=float(s_eps), t0_s=t0_s,
+                        sigma_x0_m=float(sig[0]), sigma_depth_m=s_depth, sigma_eps_r=float(s_eps), t0_s=t0,
                         apex_trace=apex_trace, apex_time_s=apex_time,
                         rms_s=float(np.sqrt(np.mean(resid**2))), n_picks=int(x.size))
 
 
-def fit_boxes(survey, boxes, *, trace_spacing_m: float | None = None, t0_s: float | None = None,
+def fit_boxes(survey, boxes, *, apexes=None, trace_spacing_m: float | None = None, t0_s: float | None = None,
               model: str = "auto", remove_background: bool = True) -> list[HyperbolaFit]:
     """:func:`fit_hyperbola` for every box ``[trace_start, t_start_s, trace_end, t_end_s]`` of ``survey``.
 
-    Time zero comes from the direct wave unless ``t0_s`` is given; positions from the
-    file unless ``trace_spacing_m`` is given. Before picking, the median of the traces
-    outside every box (the direct wave and flat layers, no hyperbola) is removed,
-    when at least a tenth of the traces (8 or more) lie outside the boxes.
+    ``apexes``: ``(trace, time_s)`` per box where the tracking starts (the detector's
+    apexes; default: found in the box). Time zero comes from the direct wave unless
+    ``t0_s`` is given; positions from the file unless ``trace_spacing_m`` is given.
+    Before picking, the median of the traces outside every box (the direct wave and
+    flat layers, no hyperbola) is removed, when at least a tenth of the traces (8 or
+    more) lie outside the boxes.
     """
     x = trace_positions(survey, trace_spacing_m)
-    onset = time_zero_from_direct_wave(survey)[0] if t0_s is None else None
+    dw = direct_wave_time(survey)[0] if t0_s is None else None
+    env = _record_envelope(survey, boxes, remove_background)
+    period = 1.0 / survey.frequency_hz if survey.frequency_hz else None
+    out = []
+    for k, b in enumerate(boxes):
+        b = [float(v) for v in b]
+        a = apexes[k] if apexes is not None else (None, None)
+        tr, tt, _ = pick_arrivals(env, survey.dt_s, b, apex_trace=a[0], apex_time_s=a[1], period_s=period)
+        out.append(fit_hyperbola(x[tr], tt, t0_s=t0_s, direct_wave_s=dw, offset_m=survey.offset_m,
+                                 frequency_hz=survey.frequency_hz, model=model, traces=tr))
+    return out
+
+
+def fit_record(survey, boxes, *, apexes=None, trace_spacing_m: float | None = None, t0_s: float | None = None,
+               model: str = "cylinder", min_picks: int = 5) -> tuple[list[HyperbolaFit], dict]:
+    """All hyperbolas of a record fitted together: one wave speed (and time zero), each target its own
+    ``x0``, centre depth and radius (``model="cylinder"``) or none (``"point"``).
+
+    One host speed for all targets is what a homogeneous host gives, and it keeps the
+    radius of each target apart from the speed, which a single hyperbola of limited
+    aperture cannot. Picks as :func:`fit_boxes`. Returns the per-target fits (all
+    sharing ``eps_r``) and ``{"eps_r", "sigma_eps_r", "n_targets", "t0_s", "rms_s"}``.
+    """
+    if model not in ("point", "cylinder"):
+        raise InvalidDataError(f"joint fit model must be 'point' or 'cylinder', got {model!r}")
+    x = trace_positions(survey, trace_spacing_m)
+    dw = direct_wave_time(survey)[0] if t0_s is None else None
+    env = _record_envelope(survey, boxes)
+    period = 1.0 / survey.frequency_hz if survey.frequency_hz else None
+    picks = []
+    for k, b in enumerate(boxes):
+        a = apexes[k] if apexes is not None else (None, None)
+        tr, tt, _ = pick_arrivals(env, survey.dt_s, [float(v) for v in b], apex_trace=a[0], apex_time_s=a[1],
+                                  period_s=period)
+        picks.append((tr, tt) if tr.size >= min_picks and np.ptp(x[tr]) > 0 else None)
+    used = [k for k, pk in enumerate(picks) if pk is not None]
+    fail = HyperbolaFit(ok=False, reason=f"fewer than {min_picks} picks")
+    if not used:
+        return [fail for _ in boxes], {"eps_r": float("nan"), "sigma_eps_r": float("nan"), "n_targets": 0}
+    h = survey.offset_m
+    scale = 0.05 / survey.frequency_hz if survey.frequency_hz else 1e-10
+    per = 3 if model == "cylinder" else 2
+    xs = [x[picks[k][0]] for k in used]
+    ts = [picks[k][1] for k in used]
+    v_lo, v_hi = C0 / math.sqrt(EPS_RANGE[1]), C0 / math.sqrt(EPS_RANGE[0])
+
+    def unpack(p):
+        return p[0], [p[1 + per * i : 1 + per * (i + 1)] for i in range(len(used))]
+
+    def residuals(p):
+        v, tg = unpack(p)
+        t0 = t0_s if dw is None else time_zero(dw, h, v)
+        out = []
+        for xi, ti, q in zip(xs, ts, tg):
+            path = _circle_path(xi, h, q[0], q[1], q[2]) if model == "cylinder" else \
+                np.hypot(xi - h / 2 - q[0], q[1]) + np.hypot(xi + h / 2 - q[0], q[1])
+            out.append((t0 + path / v - ti) / scale)
+        return np.concatenate(out)
+
+    # sparsity: each target's residuals depend on v and its own parameters
+    n_res = sum(len(t) for t in ts)
+    sparsity = np.zeros((n_res, 1 + per * len(used)), dtype=np.int8)
+    sparsity[:, 0] = 1
+    row = 0
+    for i, t in enumerate(ts):
+        sparsity[row : row + len(t), 1 + per * i : 1 + per * (i + 1)] = 1
+        row += len(t)
+    # starts: each target fitted alone (point model), with their median speed and with a few fixed speeds
+    singles = [fit_hyperbola(xi, ti, t0_s=t0_s, direct_wave_s=dw, offset_m=h, frequency_hz=survey.frequency_hz,
+                             model="point") for xi, ti in zip(xs, ts)]
+    v_single = [f.v_m_s for f in singles if f.ok]
+    starts = ([float(np.median(v_single))] if v_single else []) + [C0 / math.sqrt(e) for e in (4.0, 9.0, 20.0)]
+    best = None
+    for v in starts:
+        t0g = t0_s if dw is None else time_zero(dw, h, v)
+        p0, lo, hi = [v], [v_lo], [v_hi]
+        for xi, ti, sf in zip(xs, ts, singles):
+            k = int(np.argmin(ti))
+            z = max(0.5 * v * max(ti[k] - t0g, 1e-12), 1e-3)
+            x0g = sf.x0_m if sf.ok else float(xi[k])
+            span = max(float(np.ptp(xi)), 1e-3)
+            p0 += [x0g, z] + ([0.2 * z] if model == "cylinder" else [])
+            lo += [float(xi.min()) - span, 1e-4] + ([0.0] if model == "cylinder" else [])
+            hi += [float(xi.max()) + span, 50.0] + ([50.0] if model == "cylinder" else [])
+        p0 = np.clip(p0, np.asarray(lo) + 1e-9, np.asarray(hi) - 1e-9)
+        try:
+            sol = _robust_solve(residuals, p0, lo, hi, jac_sparsity=sparsity, max_nfev=200 * len(p0))
+        except ValueError:
+            continue
+        if best is None or sol.cost < best.cost:
+            best = sol
+    if best is None:
+        return [HyperbolaFit(ok=False, reason="the joint fit did not converge") for _ in boxes], \
+            {"eps_r": float("nan"), "sigma_eps_r": float("nan"), "n_targets": 0}
+    jac = best.jac.toarray() if hasattr(best.jac, "toarray") else best.jac
+    r = best.fun * scale
+    s2 = float(np.sum(r**2) / max(r.size - best.x.size, 1))
+    j = jac * scale
+    try:
+        cov = np.linalg.pinv(j.T @ j) * s2
+    except np.linalg.LinAlgError:
+        cov = np.full((best.x.size, best.x.size), np.inf)
+    v, tg = unpack(best.x)
+    eps = (C0 / v) ** 2
+    s_eps = 2 * eps * math.sqrt(max(cov[0, 0], 0.0)) / v
+    t0 = t0_s if dw is None else time_zero(dw, h, v)
+    fits = [fail] * len(boxes)
+    fits = list(fits)
+    for i, k in enumerate(used):
+        q = tg[i]
+        rr = float(q[2]) if model == "cylinder" else 0.0
+        b = 1 + per * i
+        if model == "cylinder":
+            s_depth = math.sqrt(max(cov[b + 1, b + 1] + cov[b + 2, b + 2] - 2 * cov[b + 1, b + 2], 0.0))
+        else:
+            s_depth = math.sqrt(max(cov[b + 1, b + 1], 0.0))
+        tr, tt = picks[k]
+        pth = _circle_path(np.array([q[0]]), h, q[0], q[1], rr) if model == "cylinder" else \
+            np.array([np.hypot(h / 2, q[1]) * 2])
+        res_i = residuals(best.x)[sum(len(t) for t in ts[:i]) : sum(len(t) for t in ts[: i + 1])] * scale
+        fits[k] = HyperbolaFit(ok=True, model=model, x0_m=float(q[0]), depth_m=float(q[1]) - rr, radius_m=rr,
+                               v_m_s=v, eps_r=eps, sigma_x0_m=math.sqrt(max(cov[b, b], 0.0)), sigma_depth_m=s_depth,
+                               sigma_eps_r=s_eps, t0_s=t0, apex_trace=float(np.interp(q[0], x[tr], tr)),
+                               apex_time_s=t0 + float(pth[0]) / v, rms_s=float(np.sqrt(np.mean(res_i**2))),
+                               n_picks=int(tr.size))
+    return fits, {"eps_r": eps, "sigma_eps_r": s_eps, "n_targets": len(used), "t0_s": t0,
+                  "rms_s": float(np.sqrt(np.mean(r**2)))}
+
+
+def _record_envelope(survey, boxes, remove_background: bool = True) -> np.ndarray:
+    """Envelope for picking: the median of the traces outside every box removed (when enough lie outside)."""
     data = np.asarray(survey.data, dtype=np.float64)
     if remove_background:  # the direct wave and flat layers: the median of the traces outside every box
         outside = np.ones(survey.n_traces, bool)
@@ -325,19 +503,7 @@ def fit_boxes(survey, boxes, *, trace_spacing_m: float | None = None, t0_s: floa
             outside[int(max(math.floor(b[0]), 0)) : int(math.ceil(b[2])) + 1] = False
         if outside.sum() >= max(8, survey.n_traces // 10):
             data = data - np.median(data[outside], axis=0, keepdims=True)
-    env = _envelope(data, survey.dt_s, survey.frequency_hz)
-    out = []
-    for b in boxes:
-        b = [float(v) for v in b]
-        # from the box top down; the hyperbola's first lobe lies at its top
-        tr, tt, amp, rise = pick_arrivals(env, survey.dt_s, b)
-        t0 = t0_s
-        if t0 is None:  # peaks are picked: time zero of the peak = onset + the pulse's rise on its strongest traces
-            strong = amp >= np.median(amp) if amp.size else amp.astype(bool)
-            t0 = onset + (float(np.median(rise[strong])) if strong.any() else 0.0)
-        out.append(fit_hyperbola(x[tr], tt, t0_s=t0, offset_m=survey.offset_m, frequency_hz=survey.frequency_hz,
-                                 model=model, traces=tr))
-    return out
+    return _envelope(data, survey.dt_s, survey.frequency_hz)
 
 
 def combine_permittivity(fits) -> tuple[float, float, int]:
