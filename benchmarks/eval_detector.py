@@ -1,6 +1,6 @@
 """Detector evaluation table (the reference's Table 1 format) on held-out records.
 
-    python benchmarks/eval_detector.py WEIGHTS.pt [MORE.pt ...] [--n 60] [--seed 777] [--out benchmarks/results]
+    python benchmarks/eval_detector.py WEIGHTS.pt|default [MORE.pt ...] [--n 60] [--seed 777] [--runtime onnx]
 
 Sets (no training or tuning touches them):
 * ``survey``: survey-scale forward-model B-scans ``survey_sample(seed, i)``, i < n
@@ -53,21 +53,24 @@ def records(kind: str, n: int, seed: int, gprmax_survey=None):
         yield from labelled_records(ROOT / "datasets" / "gprmax400.h5", n=n, last=True)
 
 
-def draw_worst(det, per_record, args):
-    from gpr3d.simulation.surveys import survey_sample
+def draw_worst(det, per_record, args, kind):
     from gpr3d.viz.bscan import save_bscan_png
 
     order = sorted(per_record, key=lambda r: (r["apex_found"] - r["false"]) / max(r["n_true"], 1))
     out = ROOT / "docs" / "figures" / "detections"
     out.mkdir(parents=True, exist_ok=True)
-    for r in order[: args.worst]:
-        s, lab = survey_sample(args.seed, r["record"])
+    worst = {r["record"] for r in order[: args.worst]}
+    for k, (s, lab) in enumerate(records(kind, args.n, args.seed, args.gprmax_survey)):
+        if k not in worst:
+            continue
+        r = next(x for x in per_record if x["record"] == k)
         res = det.detect(s, score_threshold=args.score)
         vis = [x for x in lab["labels"] if x["visible"]]
-        save_bscan_png(s.dewow().remove_background(), out / f"worst_survey_{args.seed}_{r['record']}.png",
+        name = f"worst_survey_{args.seed}_{k}.png" if kind == "survey" else f"worst_{kind}_{k}.png"
+        save_bscan_png(s.dewow().remove_background(), out / name,
                        cmap="gray", boxes=[t["box"] for t in res["targets"]] + [x["box"] for x in vis],
                        apexes=[(t["apex_trace"], t["apex_time_s"]) for t in res["targets"]],
-                       title=f"held-out record {r['record']}: {r['apex_found']}/{r['n_true']} apexes found, "
+                       title=f"{kind} record {k}: {r['apex_found']}/{r['n_true']} apexes found, "
                              f"{r['false']} false (boxes: detections first, then truth)")
 
 
@@ -80,19 +83,21 @@ def main(argv=None):
     p.add_argument("--gprmax-survey", default=str(ROOT / "datasets" / "gprmax_survey.h5"),
                    help="the held-out gprMax survey set: packed file or gpr3d simulate folder")
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--runtime", default="torch", choices=("auto", "torch", "onnx"),
+                   help="torch (default) or onnx ('default' weights only: the shipped export)")
     p.add_argument("--score", type=float, default=0.5, help="score threshold for apex recall / false targets")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
-    p.add_argument("--worst", type=int, default=0, help="draw the K records of the survey set with the lowest "
-                   "apex recall (first weights) into docs/figures/detections/worst_*.png")
+    p.add_argument("--worst", type=int, default=0, help="draw the K records of the survey and gprmax_survey sets "
+                   "with the lowest apex recall (first weights) into docs/figures/detections/worst_*.png")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
     from gpr3d.detection.evaluate import evaluate_detector
-    from gpr3d.detection.infer import Detector
+    from gpr3d.detection.infer import load_detector
     from gpr3d.detection.models import count_parameters
 
     rows = []
     for w in args.weights:
-        det = Detector.load(w)
+        det = load_detector(None if w == "default" else w, engine=args.runtime)
         prov = det.provenance
         for kind in args.sets:
             if kind == "gprmax400" and not (ROOT / "datasets" / "gprmax400.h5").exists():
@@ -107,12 +112,13 @@ def main(argv=None):
                          "true_targets": m["n_true"], "mAP@0.5": m["mAP@0.5"], "mAP@0.75": m["mAP@0.75"],
                          "AR@10": m["AR@10"], "AR@100": m["AR@100"], "apex_recall": m["apex_recall"],
                          "false_per_true": m["false_per_true"], "cpu_s_per_window": m["s_per_window"],
-                         "train_steps": prov.get("steps_done", prov.get("config", {}).get("steps")), "train_s": prov.get("train_wall_s"),
-                         "train_device": prov.get("device"), "params_M": count_parameters(det.model) / 1e6,
+                         "train_steps": prov.get("steps_done", prov.get("config", {}).get("steps")),
+                         "train_s": prov.get("train_wall_s"), "train_device": prov.get("device"),
+                         "params_M": count_parameters(det.model) / 1e6 if det.model is not None else None,
                          "eval_wall_s": time.perf_counter() - t})
             print(json.dumps(rows[-1]), flush=True)
-            if args.worst and kind == "survey" and w == args.weights[0]:
-                draw_worst(det, m["rows"], args)
+            if args.worst and kind in ("survey", "gprmax_survey") and w == args.weights[0]:
+                draw_worst(det, m["rows"], args, kind)
     head = ["model", "set", "records", "true_targets", "mAP@0.75", "mAP@0.5", "AR@10", "AR@100", "apex_recall",
             "false_per_true", "cpu_s_per_window", "params_M", "train_steps", "train_s", "train_device"]
     lines = [f"Host CPU: {cpu_name()}, {args.threads} threads; score threshold {args.score} for apex recall; "
