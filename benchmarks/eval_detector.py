@@ -115,12 +115,15 @@ def main(argv=None):
                          "train_steps": prov.get("steps_done", prov.get("config", {}).get("steps")),
                          "train_s": prov.get("train_wall_s"), "train_device": prov.get("device"),
                          "params_M": count_parameters(det.model) / 1e6 if det.model is not None else None,
-                         "eval_wall_s": time.perf_counter() - t})
+                         "eval_wall_s": time.perf_counter() - t,
+                         "apex_recall_by_kind": " ".join(f"{k}:{v['recall']:.2f}({v['n']})"
+                                                         for k, v in m["apex_recall_by_kind"].items())})
             print(json.dumps(rows[-1]), flush=True)
             if args.worst and kind in ("survey", "gprmax_survey") and w == args.weights[0]:
                 draw_worst(det, m["rows"], args, kind)
     head = ["model", "set", "records", "true_targets", "mAP@0.75", "mAP@0.5", "AR@10", "AR@100", "apex_recall",
-            "false_per_true", "cpu_s_per_window", "params_M", "train_steps", "train_s", "train_device"]
+            "false_per_true", "apex_recall_by_kind", "cpu_s_per_window", "params_M", "train_steps", "train_s",
+            "train_device"]
     lines = [f"Host CPU: {cpu_name()}, {args.threads} threads; score threshold {args.score} for apex recall; "
              f"survey set seed {args.seed}, n {args.n}", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]

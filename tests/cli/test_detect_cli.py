@@ -69,10 +69,15 @@ def test_eval_detector_on_a_dataset_folder_matches_the_library(tmp_path):
     assert r.returncode == 0, r.stderr
     m = evaluate_detector(Detector.load(), labelled_records(ds), score_threshold=0.5)
     assert f"{m['n_records']} records, {m['n_true']} targets" in r.stdout
-    row = r.stdout.strip().splitlines()[-1].split("|")
+    lines = r.stdout.strip().splitlines()
+    row = lines[lines.index("|---|---|---|---|---|---|---|") + 1].split("|")
     assert float(row[1]) == pytest.approx(m["mAP@0.75"], abs=6e-4)
     assert float(row[4]) == pytest.approx(m["AR@100"], abs=6e-4)
     assert m["n_true"] >= 3 and m["n_records"] == 2
+    by_kind = m["apex_recall_by_kind"]
+    assert sum(v["n"] for v in by_kind.values()) == m["n_true"]
+    assert sum(v["found"] for v in by_kind.values()) == round(m["apex_recall"] * m["n_true"])
+    assert lines[-1].startswith("apex recall by kind: ")
 
 
 @pytest.mark.parametrize("args, msg", [

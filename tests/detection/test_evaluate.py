@@ -30,4 +30,6 @@ def test_apex_matching_one_to_one():
     found = [[51, 10.1e-9], [52, 10.0e-9], [100, 13e-9]]  # two claim the first; the third is 1 ns late
     got = apex_matches(true, found, [0.9, 0.8, 0.7], max_traces=3, max_s=0.25e-9)
     assert got == (1, 2)
+    found, false, hit = apex_matches(true, found, [0.9, 0.8, 0.7], max_traces=3, max_s=0.25e-9, return_found=True)
+    assert (found, false) == (1, 2) and list(hit) == [True, False]
     assert apex_matches(true, [], [], max_traces=3, max_s=1e-9) == (0, 0)

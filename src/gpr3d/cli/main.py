@@ -334,6 +334,8 @@ def cmd_eval(args):
     print("|---|---|---|---|---|---|---|")
     print(f"| {m['mAP@0.75']:.3f} | {m['mAP@0.5']:.3f} | {m['AR@10']:.3f} | {m['AR@100']:.3f} | "
           f"{m['apex_recall']:.3f} | {m['false_per_true']:.3f} | {m['s_per_window']:.3f} |")
+    print("apex recall by kind: " + ", ".join(f"{k} {v['recall']:.2f} ({v['found']}/{v['n']})"
+                                              for k, v in m["apex_recall_by_kind"].items()))
     return 0
 
 

@@ -60,8 +60,12 @@ def coco_metrics(gt_boxes: list[np.ndarray], det_boxes: list[np.ndarray], det_sc
             "AR@10": float(s[7]), "AR@100": float(s[8])}
 
 
-def apex_matches(true_apexes, found_apexes, found_scores, *, max_traces: float, max_s: float) -> tuple[int, int]:
-    """``(true apexes found, false detections)``: one-to-one greedy matching by score."""
+def apex_matches(true_apexes, found_apexes, found_scores, *, max_traces: float, max_s: float,
+                 return_found: bool = False):
+    """``(true apexes found, false detections)``: one-to-one greedy matching by score.
+
+    With ``return_found`` a third item: a boolean per true apex, found or not.
+    """
     true = np.asarray(true_apexes, float).reshape(-1, 2)
     found = np.asarray(found_apexes, float).reshape(-1, 2)
     used = np.zeros(len(true), bool)
@@ -76,6 +80,8 @@ def apex_matches(true_apexes, found_apexes, found_scores, *, max_traces: float, 
                 used[cand[np.argmin(d_tr[cand] / max_traces + d_t[cand] / max_s)]] = True
                 continue
         false += 1
+    if return_found:
+        return int(used.sum()), false, used
     return int(used.sum()), false
 
 
@@ -84,6 +90,7 @@ def evaluate_detector(detector, records, *, score_threshold: float = 0.5, apex_t
     """Metrics of ``detector`` over ``records`` (iterable of ``(Survey, labels)``), with per-record rows."""
     gts, dboxes, dscores, rows = [], [], [], []
     found_total = true_total = false_total = 0
+    by_kind: dict = {}
     t_windows = n_windows = 0.0
     for k, (survey, labels) in enumerate(records):
         vis = [lab for lab in labels["labels"] if lab.get("visible", True)]
@@ -98,9 +105,13 @@ def evaluate_detector(detector, records, *, score_threshold: float = 0.5, apex_t
         dscores.append(np.asarray([t["score"] for t in tg], float))
         sel = [t for t in tg if t["score"] >= score_threshold]
         quarter = 0.25 / (survey.frequency_hz or 1e9)
-        found, false = apex_matches([[lab["apex_trace"], lab["apex_time_s"]] for lab in vis],
-                                    [[t["apex_trace"], t["apex_time_s"]] for t in sel], [t["score"] for t in sel],
-                                    max_traces=apex_traces, max_s=quarter)
+        found, false, hit = apex_matches([[lab["apex_trace"], lab["apex_time_s"]] for lab in vis],
+                                         [[t["apex_trace"], t["apex_time_s"]] for t in sel], [t["score"] for t in sel],
+                                         max_traces=apex_traces, max_s=quarter, return_found=True)
+        for lab, h in zip(vis, hit):
+            n_f = by_kind.setdefault(lab.get("kind", "target"), [0, 0])
+            n_f[0] += int(h)
+            n_f[1] += 1
         found_total += found
         true_total += len(vis)
         false_total += false
@@ -112,5 +123,6 @@ def evaluate_detector(detector, records, *, score_threshold: float = 0.5, apex_t
     m = coco_metrics(gts, dboxes, dscores)
     m.update({"apex_recall": found_total / max(true_total, 1), "false_per_true": false_total / max(true_total, 1),
               "n_records": len(rows), "n_true": true_total, "s_per_window": t_windows / max(n_windows, 1),
-              "score_threshold": score_threshold, "rows": rows})
+              "score_threshold": score_threshold, "rows": rows,
+              "apex_recall_by_kind": {k: {"found": f, "n": n, "recall": f / n} for k, (f, n) in sorted(by_kind.items())}})
     return m
