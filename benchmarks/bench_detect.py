@@ -29,9 +29,10 @@ def main():
     args = p.parse_args()
     src = DZT if DZT.exists() else ROOT / "src" / "gpr3d" / "data" / "FILE____032.DZT"
     env = dict(os.environ, OMP_NUM_THREADS=str(args.threads))
-    import numba.misc.numba_sysinfo as si
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from _report import cpu_name
 
-    cpu = si.get_sysinfo().get("CPU Name")
+    cpu = cpu_name()
     lines = ["| runtime | median s | min s | in-process s (windows + merge + apexes) | targets | runs | host CPU |",
              "|---|---|---|---|---|---|---|"]
     found = {}

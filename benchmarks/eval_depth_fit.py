@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from _report import cpu_name, write_table  # noqa: E402
 MODELS = ("point", "cylinder", "auto", "joint point", "joint cylinder")
 
 
@@ -48,15 +50,6 @@ def gprmax_example(work: Path):
             (work / f"cylinder_Bscan_2D{i}.h5").unlink(missing_ok=True)
     # the input file's Ricker is 1.5 GHz; gprMax outputs carry no antenna frequency
     return gpr3d.read(merged).replace(frequency_hz=1.5e9)
-
-
-def cpu_name() -> str:
-    try:
-        import numba.misc.numba_sysinfo as si
-
-        return si.get_sysinfo().get("CPU Name", "")
-    except Exception:  # noqa: BLE001
-        return ""
 
 
 def main(argv=None):
@@ -130,12 +123,8 @@ def main(argv=None):
                 sh = [abs(r[4].depth_m - r[2]) for r in ok if r[2] < 0.3]
                 lines.append(f"| {model} | {kind} | {len(g)} | {len(ok)} | {mape:.3f} | {rmape:.3f} | {mae:.4f} | "
                              f"{np.mean(sh) if sh else math.nan:.4f} |")
-    table = "\n".join(lines)
-    print(table)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "depth_fit.md").write_text(table + "\n\ncommand: python benchmarks/eval_depth_fit.py "
-                                      + " ".join(sys.argv[1:] if argv is None else argv) + "\n")
+    write_table(out, "depth_fit.md", "\n".join(lines), "eval_depth_fit.py", argv)
 
 
 if __name__ == "__main__":

@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import platform
 import sys
 import time
 from pathlib import Path
@@ -28,15 +27,8 @@ from pathlib import Path
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def cpu_name() -> str:
-    try:
-        import numba.misc.numba_sysinfo as si
-
-        return si.get_sysinfo().get("CPU Name", platform.processor())
-    except Exception:
-        return platform.processor() or platform.machine()
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from _report import cpu_name, write_table  # noqa: E402
 
 
 def records(kind: str, n: int, seed: int, gprmax_survey=None):
@@ -133,12 +125,8 @@ def main(argv=None):
             v = r.get(h)
             cells.append(f"{v:.3f}" if isinstance(v, float) else str(v))
         lines.append("| " + " | ".join(cells) + " |")
-    table = "\n".join(lines)
-    print(table)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "detector_eval.md").write_text(table + "\n\ncommand: python benchmarks/eval_detector.py "
-                                          + " ".join(sys.argv[1:] if argv is None else argv) + "\n")
+    write_table(out, "detector_eval.md", "\n".join(lines), "eval_detector.py", argv)
     with open(out / "detector_eval.csv", "w", newline="") as f:
         wr = csv.DictWriter(f, fieldnames=list(rows[0].keys()) if rows else head)
         wr.writeheader()

@@ -1,0 +1,28 @@
+"""What the benchmark scripts share: the host CPU's name and writing a result table beside its command."""
+
+from __future__ import annotations
+
+import platform
+import sys
+from pathlib import Path
+
+
+def cpu_name() -> str:
+    """The host CPU as LLVM names it (e.g. ``znver4``, ``sapphirerapids``), via numba."""
+    try:
+        import numba.misc.numba_sysinfo as si
+
+        return si.get_sysinfo().get("CPU Name") or platform.processor() or platform.machine()
+    except Exception:  # noqa: BLE001 - numba missing or its probe failing must not stop a benchmark
+        return platform.processor() or platform.machine()
+
+
+def write_table(out_dir, name: str, table: str, script: str, argv=None) -> Path:
+    """Print ``table`` and write it to ``out_dir/name`` with the command that reproduces it."""
+    print(table)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    args = sys.argv[1:] if argv is None else list(argv)
+    path = out / name
+    path.write_text(f"{table}\n\ncommand: python benchmarks/{script} {' '.join(args)}\n")
+    return path
