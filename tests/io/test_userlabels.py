@@ -133,3 +133,7 @@ def test_bad_label_files_name_the_problem(tmp_path, records, doc, msg):
         read_user_labels(tmp_path / "bad.xml")
     with pytest.raises(GPR3DError, match="COCO .*VOC"):
         read_user_labels(tmp_path / "rec.h5")
+    (tmp_path / "map.xml").write_text("<annotation><filename>rec.h5</filename><gpr3d_pixel_map><s_per_px>fast"
+                                      "</s_per_px></gpr3d_pixel_map></annotation>")
+    with pytest.raises(GPR3DError, match="<s_per_px> = 'fast' is not a number"):
+        read_user_labels(tmp_path / "map.xml")

@@ -222,9 +222,8 @@ def _read_voc(path: Path, pixel_map):
         file_name = (root.findtext("path") or file_name).strip()
     extra = {}
     pm_el = root.find("gpr3d_pixel_map")
-    if pm_el is not None:
-        extra["gpr3d_pixel_map"] = {c.tag: c.text for c in pm_el}
-        extra["gpr3d_pixel_map"] = {k: float(v) for k, v in extra["gpr3d_pixel_map"].items()}
+    if pm_el is not None:  # <gpr3d_pixel_map><s_per_px>1e-10</s_per_px>...</gpr3d_pixel_map>
+        extra["gpr3d_pixel_map"] = {c.tag: num(pm_el, c.tag) for c in pm_el}
     return [_load(path.parent, file_name, {"file_name": file_name, **extra}, width, height, pixel_map, boxes, names,
                   path.name)]
 
