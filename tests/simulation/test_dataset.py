@@ -150,3 +150,30 @@ def test_records_of_different_lengths_pack_and_read_back(tmp_path):
         [from_dir[1][0].n_traces, from_dir[2][0].n_traces]
     with pytest.raises(gpr3d.GPR3DError, match="not a gpr3d simulate dataset"):
         list(labelled_records(tmp_path))
+
+
+def test_survey_preset_sample_runs_following_models_and_cleans_up(tmp_path, monkeypatch):
+    """--preset survey: the sample is built from antenna-following models, its work folder removed when done."""
+    pytest.importorskip("gprMax")
+    import gpr3d.simulation.surveys as surveys
+    from gpr3d.simulation.dataset import simulate_sample
+    from gpr3d.simulation.scene import Antenna, Medium, Scene, Target
+
+    def tiny(seed, index, host=None):
+        s = Scene(medium=Medium("concrete", 6.0, 0.005), antenna=Antenna(2.0e9, 0.02), width_m=0.3, depth_m=0.08,
+                  n_traces=4, trace_step_m=0.02, x_start_m=0.1, time_window_s=1.8e-9, seed=seed)
+        s.targets = [Target("rebar", x_m=0.13, depth_m=0.03, radius_m=0.008)]
+        return s
+
+    monkeypatch.setattr(surveys, "sample_gprmax_survey_scene", tiny)
+    cfg = {"out": str(tmp_path), "seed": 7, "engine": "gprmax", "preset": "survey", "image_height": 64}
+    res = simulate_sample(cfg, 0)
+    d = tmp_path / "samples" / "000000"
+    assert not res["skipped"] and all((d / f).exists() for f in ("scene.json", "bscan.h5", "labels.json", "image.png"))
+    assert not (tmp_path / "work" / "000000").exists()
+    lab = json.loads((d / "labels.json").read_text())
+    assert lab["simulation"]["runner"] == "following" and lab["n_traces"] == 4
+    s = gpr3d.read(d / "bscan.h5")
+    # the labelled apex lies on the record's trace nearest the rebar (x = 0.13 m: trace 1.5 at 0.1 + 0.02 i)
+    assert lab["labels"][0]["apex_trace"] == pytest.approx((0.13 - s.positions_xyz[0, 0]) / 0.02, abs=0.2)
+    assert simulate_sample(cfg, 0)["skipped"]  # a finished sample is not built again

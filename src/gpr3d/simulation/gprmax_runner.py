@@ -133,7 +133,6 @@ def _snapped(scene: Scene) -> Scene:
     """A copy of ``scene`` with the trace step, start and tx-rx offset on whole cells."""
     scene = copy.deepcopy(scene)
     dx = scene.dx
-    scene.dx_m = dx  # fixed, so that a JSON round trip gives the same grid
     scene.trace_step_m = max(round(scene.trace_step_m / dx), 1) * dx
     scene.x_start_m = round(scene.x_start_m / dx) * dx
     scene.antenna.offset_m = 2 * max(round(scene.antenna.offset_m / 2 / dx), 1) * dx
