@@ -77,6 +77,7 @@ def test_user_windows_carry_the_user_boxes(user_set):
     (["--labels", "{missing}"], "no such file"),
     (["--labels", "{user}", "--labels-fraction", "1.5"], "--labels-fraction must lie in 0..1"),
     (["--labels", "{user}", "--pixel-map", "t0_s=0"], "needs s_per_px"),
+    (["--packed", "{missing}"], "no such file"),
 ])
 def test_fine_tuning_bad_arguments_one_line(tmp_path, user_set, args, msg):
     args = [a.format(missing=tmp_path / "none.json", user=user_set) for a in args]

@@ -288,6 +288,10 @@ def cmd_train(args):
                       workers=args.workers, checkpoint_every=args.checkpoint_every, init=args.init,
                       packed=args.packed, packed_fraction=args.packed_fraction, packed_holdout=args.packed_holdout,
                       labels=args.labels, labels_fraction=args.labels_fraction, pixel_map=args.pixel_map)
+    if cfg.packed:  # a wrong packed file (or hold-out) fails in one line before any model is built
+        from gpr3d.detection.data import PackedSource
+
+        PackedSource(cfg.packed, holdout=cfg.packed_holdout)
     if cfg.labels:  # a wrong label file fails in one line before any model is built
         from gpr3d.io.userlabels import read_user_labels
 
@@ -500,7 +504,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--labels-fraction", type=float, default=0.5, help="share of windows from --labels (0.5)")
     sp.add_argument("--pixel-map", default=None,
                     help="time axis of labelled pictures: s_per_px=SECONDS[,t0_s=..,traces_per_px=..,trace0=..]")
-    sp.add_argument("--packed", default=None, help="mix records of a packed dataset in (e.g. datasets/gprmax400.h5)")
+    sp.add_argument("--packed", nargs="+", default=None,
+                    help="mix records of packed datasets in, each FILE or FILE:N (its last N held out; default "
+                         "--packed-holdout), e.g. datasets/gprmax400.h5 datasets/gprmax_survey_train.h5:0")
     sp.add_argument("--packed-fraction", type=float, default=0.2, help="share of windows from --packed (0.2)")
     sp.add_argument("--packed-holdout", type=int, default=60, help="last records of --packed kept out (60)")
     sp.add_argument("--no-progress", action="store_true", help="no progress bar")

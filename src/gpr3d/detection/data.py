@@ -71,22 +71,37 @@ def collate(batch):
 
 
 class PackedSource:
-    """Records of a packed labelled dataset (:class:`gpr3d.io.packed.PackedDataset`), its last ``holdout`` left out.
+    """Records of packed labelled datasets (:class:`gpr3d.io.packed.PackedDataset`), the last ``holdout`` of each left out.
 
-    ``source(i)`` cycles through the kept records.
+    ``path``: one file or a list; an item ``"FILE:N"`` holds out the last ``N`` records of
+    that file instead of ``holdout``. ``source(i)`` cycles through all kept records.
     """
 
     def __init__(self, path, *, holdout: int = 0):
         from gpr3d.core.errors import GPR3DError
         from gpr3d.io.packed import PackedDataset
 
-        self.ds = PackedDataset(path)
-        self.n = len(self.ds) - holdout
-        if self.n < 1:
-            raise GPR3DError(f"{path}: {len(self.ds)} records; none left after holding out {holdout}")
+        items = [path] if isinstance(path, (str, bytes)) or not hasattr(path, "__iter__") else list(path)
+        self.parts = []
+        for item in items:
+            name, keep_out = str(item), holdout
+            head, sep, tail = name.rpartition(":")
+            if sep and tail.isdigit():
+                name, keep_out = head, int(tail)
+            ds = PackedDataset(name)
+            n = len(ds) - keep_out
+            if n < 1:
+                raise GPR3DError(f"{name}: {len(ds)} records; none left after holding out {keep_out}")
+            self.parts.append((ds, n))
+        self.n = sum(n for _, n in self.parts)
 
     def __call__(self, i: int):
-        return self.ds[int(i) % self.n]
+        i = int(i) % self.n
+        for ds, n in self.parts:
+            if i < n:
+                return ds[i]
+            i -= n
+        raise AssertionError("unreachable")  # pragma: no cover
 
 
 class RecordsSource:

@@ -50,9 +50,10 @@ class TrainConfig:
     checkpoint_every: int = 100
     window: dict = field(default_factory=lambda: WindowConfig().to_dict())
     init: str | None = None  #: weights file to start from (fine-tuning) instead of a fresh model
-    packed: str | None = None  #: a packed labelled dataset (e.g. datasets/gprmax400.h5) mixed into the records
+    #: packed labelled datasets mixed into the records: a file or a list, each "FILE" or "FILE:N" (N held out)
+    packed: str | list | None = None
     packed_fraction: float = 0.2  #: share of the windows drawn from ``packed``
-    packed_holdout: int = 60  #: its last records, kept out of training (the evaluation uses them)
+    packed_holdout: int = 60  #: the last records of each, kept out of training (the evaluation uses them)
     labels: str | None = None  #: the user's own labelled B-scans (COCO .json, VOC .xml or folder) mixed in
     labels_fraction: float = 0.5  #: share of the windows drawn from ``labels``
     pixel_map: str | None = None  #: time axis of labelled pictures (screenshots): "s_per_px=...,t0_s=..."
