@@ -323,6 +323,8 @@ def cmd_eval(args):
             raise GPR3DError(f"--data {src}: no such file or folder")
         if src.is_file():
             PackedDataset(src)  # a wrong file fails here, in one line, before the model loads
+        elif not (src / "samples").is_dir():
+            raise GPR3DError(f"--data {src}: neither a packed dataset nor a gpr3d simulate folder (no samples/)")
         records = labelled_records(src, n=args.n)
         what = f"{src} ({'first ' + str(args.n) if args.n else 'all'} records)"
     else:

@@ -353,6 +353,21 @@ def fit_hyperbola(x_m, t_s, *, t0_s: float | None = None, direct_wave_s: float |
                         rms_s=float(np.sqrt(np.mean(resid**2))), n_picks=int(x.size))
 
 
+def _record_picks(survey, boxes, apexes, trace_spacing_m, t0_s, remove_background=True):
+    """Positions, the direct wave's peak (None when ``t0_s`` is given) and the picks ``(traces, times)`` per box."""
+    x = trace_positions(survey, trace_spacing_m)
+    dw = direct_wave_time(survey)[0] if t0_s is None else None
+    env = _record_envelope(survey, boxes, remove_background)
+    period = 1.0 / survey.frequency_hz if survey.frequency_hz else None
+    picks = []
+    for k, b in enumerate(boxes):
+        a = apexes[k] if apexes is not None else (None, None)
+        tr, tt, _ = pick_arrivals(env, survey.dt_s, [float(v) for v in b], apex_trace=a[0], apex_time_s=a[1],
+                                  period_s=period)
+        picks.append((tr, tt))
+    return x, dw, picks
+
+
 def fit_boxes(survey, boxes, *, apexes=None, trace_spacing_m: float | None = None, t0_s: float | None = None,
               model: str = "auto", remove_background: bool = True) -> list[HyperbolaFit]:
     """:func:`fit_hyperbola` for every box ``[trace_start, t_start_s, trace_end, t_end_s]`` of ``survey``.
@@ -364,18 +379,9 @@ def fit_boxes(survey, boxes, *, apexes=None, trace_spacing_m: float | None = Non
     flat layers, no hyperbola) is removed, when at least a tenth of the traces (8 or
     more) lie outside the boxes.
     """
-    x = trace_positions(survey, trace_spacing_m)
-    dw = direct_wave_time(survey)[0] if t0_s is None else None
-    env = _record_envelope(survey, boxes, remove_background)
-    period = 1.0 / survey.frequency_hz if survey.frequency_hz else None
-    out = []
-    for k, b in enumerate(boxes):
-        b = [float(v) for v in b]
-        a = apexes[k] if apexes is not None else (None, None)
-        tr, tt, _ = pick_arrivals(env, survey.dt_s, b, apex_trace=a[0], apex_time_s=a[1], period_s=period)
-        out.append(fit_hyperbola(x[tr], tt, t0_s=t0_s, direct_wave_s=dw, offset_m=survey.offset_m,
-                                 frequency_hz=survey.frequency_hz, model=model, traces=tr))
-    return out
+    x, dw, picks = _record_picks(survey, boxes, apexes, trace_spacing_m, t0_s, remove_background)
+    return [fit_hyperbola(x[tr], tt, t0_s=t0_s, direct_wave_s=dw, offset_m=survey.offset_m,
+                          frequency_hz=survey.frequency_hz, model=model, traces=tr) for tr, tt in picks]
 
 
 def fit_record(survey, boxes, *, apexes=None, trace_spacing_m: float | None = None, t0_s: float | None = None,
@@ -390,16 +396,8 @@ def fit_record(survey, boxes, *, apexes=None, trace_spacing_m: float | None = No
     """
     if model not in ("point", "cylinder"):
         raise InvalidDataError(f"joint fit model must be 'point' or 'cylinder', got {model!r}")
-    x = trace_positions(survey, trace_spacing_m)
-    dw = direct_wave_time(survey)[0] if t0_s is None else None
-    env = _record_envelope(survey, boxes)
-    period = 1.0 / survey.frequency_hz if survey.frequency_hz else None
-    picks = []
-    for k, b in enumerate(boxes):
-        a = apexes[k] if apexes is not None else (None, None)
-        tr, tt, _ = pick_arrivals(env, survey.dt_s, [float(v) for v in b], apex_trace=a[0], apex_time_s=a[1],
-                                  period_s=period)
-        picks.append((tr, tt) if tr.size >= min_picks and np.ptp(x[tr]) > 0 else None)
+    x, dw, picks = _record_picks(survey, boxes, apexes, trace_spacing_m, t0_s)
+    picks = [(tr, tt) if tr.size >= min_picks and np.ptp(x[tr]) > 0 else None for tr, tt in picks]
     used = [k for k, pk in enumerate(picks) if pk is not None]
     fail = HyperbolaFit(ok=False, reason=f"fewer than {min_picks} picks")
     if not used:
@@ -472,7 +470,8 @@ def fit_record(survey, boxes, *, apexes=None, trace_spacing_m: float | None = No
     s_eps = 2 * eps * math.sqrt(max(cov[0, 0], 0.0)) / v
     t0 = t0_s if dw is None else time_zero(dw, h, v)
     fits = [fail] * len(boxes)
-    fits = list(fits)
+    res_all = residuals(best.x) * scale
+    ends = np.cumsum([0] + [len(t) for t in ts])
     for i, k in enumerate(used):
         q = tg[i]
         rr = float(q[2]) if model == "cylinder" else 0.0
@@ -484,7 +483,7 @@ def fit_record(survey, boxes, *, apexes=None, trace_spacing_m: float | None = No
         tr, tt = picks[k]
         pth = _circle_path(np.array([q[0]]), h, q[0], q[1], rr) if model == "cylinder" else \
             np.array([np.hypot(h / 2, q[1]) * 2])
-        res_i = residuals(best.x)[sum(len(t) for t in ts[:i]) : sum(len(t) for t in ts[: i + 1])] * scale
+        res_i = res_all[ends[i] : ends[i + 1]]
         fits[k] = HyperbolaFit(ok=True, model=model, x0_m=float(q[0]), depth_m=float(q[1]) - rr, radius_m=rr,
                                v_m_s=v, eps_r=eps, sigma_x0_m=math.sqrt(max(cov[b, b], 0.0)), sigma_depth_m=s_depth,
                                sigma_eps_r=s_eps, t0_s=t0, apex_trace=float(np.interp(q[0], x[tr], tr)),
