@@ -22,6 +22,11 @@ Stages so far (each later stage of the system adds its own):
    migrated from the data inside the detected boxes only, with the rest as the
    noise map (``gpr3d reconstruct --mask detect``). Needs the ``dl`` extra
    (PyTorch); without it the stage is skipped with a one-line hint.
+6. **Permittivity and depth** — from the data alone: DepthNet, the hyperbola fit
+   and their hybrid estimate the host's eps_r and every detected target's depth
+   (against the true eps_r 9 and the true depths of the pipes); the masked
+   migration of stage 5 runs with the hybrid's eps_r, not the truth; the real
+   recording's estimate is shown beside its header's eps_r.
 
 Everything goes to ``out_dir``: PNG figures, the processed survey as gpr3d HDF5,
 ``config.json`` and ``summary.json`` (all written atomically).
@@ -130,7 +135,7 @@ def _random_motion_stage(out: Path, cfg: DemoConfig, log) -> dict:
     save_bscan_png(shown.gain_tpow(power=1.0), out / "random_walk_bscan.png", cmap="gray",
                    title="random-motion survey, first 800 traces (time zero, background removed, t-gain)")
     rate = survey.n_traces / t_fwd
-    log(f"[3/5] random-motion survey: {survey.n_traces} A-scans x {n_samples} samples from the forward model "
+    log(f"[3/6] random-motion survey: {survey.n_traces} A-scans x {n_samples} samples from the forward model "
         f"in {t_fwd * 1e3:.0f} ms ({rate:,.0f} A-scans/s); path {survey.distances_m[-1]:.1f} m")
     return {"n_traces": survey.n_traces, "n_samples": n_samples, "forward_s": t_fwd, "ascans_per_s": rate,
             "path_m": float(survey.distances_m[-1]), "files": ["random_walk_survey.h5", "random_walk.tum",
@@ -160,7 +165,7 @@ def _reconstruction_stage(out: Path, log) -> dict:
         else:
             log(f"      {name:<16} not found")
     g = result["grid"]
-    log(f"[4/5] 3D reconstruction: {survey.n_traces} traces -> {g.nx} x {g.ny} x {g.nd} voxels in {wall:.1f} s "
+    log(f"[4/6] 3D reconstruction: {survey.n_traces} traces -> {g.nx} x {g.ny} x {g.nd} voxels in {wall:.1f} s "
         f"(migration {result['timings_s']['migrate']:.1f} s, {result['updates_per_s'] / 1e9:.2f} G updates/s); "
         f"{len(result['targets'])} targets, {ev['false_targets']} false")
     return {"wall_s": wall, "grid": g.to_dict(), "updates_per_s": result["updates_per_s"],
@@ -173,7 +178,7 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
     from gpr3d.core.survey import Survey
 
     if not (available("torch") and available("torchvision")):
-        log("[5/5] detection skipped: PyTorch is not installed (pip install 'gpr3d[dl]')")
+        log("[5/6] detection skipped: PyTorch is not installed (pip install 'gpr3d[dl]')")
         return {"skipped": "torch not installed"}
     from gpr3d.detection.infer import load_detector
     from gpr3d.io.detections import write_detections
@@ -200,15 +205,18 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
                    boxes=[tg["box"] for tg in real_found["targets"]],
                    apexes=[(tg["apex_trace"], tg["apex_time_s"]) for tg in real_found["targets"]],
                    title=f"{Path(real_path).name}: {len(real_found['targets'])} detections (score >= 0.5)")
-    log(f"[5/5] detection: {len(boxes)} hyperbolas in the {survey.n_traces}-trace survey ({found['n_windows']} "
+    log(f"[5/6] detection: {len(boxes)} hyperbolas in the {survey.n_traces}-trace survey ({found['n_windows']} "
         f"windows in {t_det:.1f} s), {len(real_found['targets'])} in {Path(real_path).name}")
     row = {"n_boxes": len(boxes), "detect_s": t_det, "n_windows": found["n_windows"],
            "real_detections": len(real_found["targets"])}
     if not boxes:
-        log("      no boxes: masked migration skipped")
+        log("      no boxes: depth estimation and masked migration skipped")
         return row
+    depth = _depth_rows(survey, found, real, real_found, log)
+    row["depth"] = depth
+    eps_est = depth["random_walk"]["eps_r"]
     t = time.perf_counter()
-    result = reconstruct(survey, ReconstructConfig(spacing_m=0.02, max_depth_m=0.8), boxes=boxes)
+    result = reconstruct(survey, ReconstructConfig(eps_r=eps_est, spacing_m=0.02, max_depth_m=0.8), boxes=boxes)
     wall = time.perf_counter() - t
     write_reconstruction(result, out / "reconstruction_masked", source="random_walk_survey.h5")
     names = ["L leg along x", "L leg along y", "diagonal pipe", "rebar at x=0.2", "rebar at x=1.85"]
@@ -219,12 +227,74 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
                 f"{r['completeness'] * 100:3.0f} %")
         else:
             log(f"      {name:<16} not found")
-    log(f"      migrated inside the detected boxes only in {wall:.1f} s: {len(result['targets'])} targets, "
-        f"{ev['false_targets']} false (noise map in reconstruction_masked/)")
-    row.update({"masked_wall_s": wall, "masked_targets": len(result["targets"]),
+    log(f"      migrated inside the detected boxes only, with the estimated eps_r {eps_est:.2f}, in {wall:.1f} s: "
+        f"{len(result['targets'])} targets, {ev['false_targets']} false (noise map in reconstruction_masked/)")
+    row.update({"masked_eps_r": eps_est, "masked_eps_r_source": "estimated (hybrid)", "masked_wall_s": wall, "masked_targets": len(result["targets"]),
                 "masked_false_targets": ev["false_targets"], "masked_truth": ev["truth"],
                 "folder": "reconstruction_masked"})
     return row
+
+
+def _true_top_depth(point_xy, pipes) -> float:
+    """Depth of the top of the buried pipe nearest (in 3D: the first echo) to the surface point ``point_xy``."""
+    import numpy as np
+
+    p = np.array([point_xy[0], point_xy[1], 0.0])
+    best = (np.inf, np.nan)
+    for pp in pipes:
+        a, b = np.asarray(pp.p0, float), np.asarray(pp.p1, float)
+        u = np.clip(np.dot(p - a, b - a) / max(np.dot(b - a, b - a), 1e-12), 0, 1)
+        q = a + u * (b - a)
+        best = min(best, (float(np.linalg.norm(p - q)) - pp.radius_m, -q[2] - pp.radius_m))
+    return best[1]
+
+
+def _depth_rows(survey, found, real, real_found, log) -> dict:
+    """Host eps_r and target depths estimated from the data (DepthNet, fit, hybrid) against the truth."""
+    import numpy as np
+
+    from gpr3d.inversion.depthnet import DepthEstimator
+    from gpr3d.inversion.estimate import estimate_depths
+
+    est = DepthEstimator.load()
+    pipes = demo_scene().pipes
+    truth_eps = demo_scene().eps_r
+    out = {"random_walk": {"eps_r_true": truth_eps}}
+    for m in ("net", "fit", "hybrid"):
+        r = estimate_depths(survey, found["targets"], method=m, estimator=est)
+        errs = []
+        for t, e in zip(found["targets"], r["targets"]):
+            xy = survey.positions_xyz[int(t["apex_trace"]), :2]
+            if np.isfinite(e["depth_m"]):
+                errs.append(e["depth_m"] - _true_top_depth(xy, pipes))
+        out["random_walk"][m] = {"eps_r": r["permittivity"]["eps_r"], "sigma_eps_r": r["permittivity"]["sigma_eps_r"],
+                                 "depth_mae_m": float(np.mean(np.abs(errs))) if errs else None,
+                                 "depth_median_abs_m": float(np.median(np.abs(errs))) if errs else None,
+                                 "n_depths": len(errs)}
+        if m == "hybrid":
+            out["random_walk"]["eps_r"] = r["permittivity"]["eps_r"]
+            out["random_walk"]["targets"] = [{"apex_trace": t["apex_trace"], "depth_m": e["depth_m"],
+                                              "depth_true_m": _true_top_depth(survey.positions_xyz[int(t["apex_trace"]), :2], pipes)}
+                                             for t, e in zip(found["targets"], r["targets"])]
+    rw = out["random_walk"]
+    log(f"[6/6] depth from the data (random-motion survey, {len(found['targets'])} detections; true eps_r "
+        f"{truth_eps:g}; depth error against the nearest pipe's top, median / mean):")
+    for m in ("net", "fit", "hybrid"):
+        e = rw[m]
+        depth = (f"{e['depth_median_abs_m'] * 100:.1f} / {e['depth_mae_m'] * 100:.1f} cm"
+                 if e["depth_mae_m"] is not None else "n/a")
+        log(f"      {m:<7} eps_r {e['eps_r']:5.2f} +- {e['sigma_eps_r']:.2f}, depth {depth}")
+    if real_found["targets"] and real.distances_m is not None:
+        r = estimate_depths(real, real_found["targets"], method="hybrid", estimator=est)
+        p = r["permittivity"]
+        out["real"] = {"eps_r": p["eps_r"], "sigma_eps_r": p["sigma_eps_r"], "eps_r_header": real.eps_r,
+                       "net": p.get("net", {}).get("eps_r"), "fit": p.get("fit", {}).get("eps_r"),
+                       "depth_m": [e["depth_m"] for e in r["targets"]]}
+        log(f"      real recording: eps_r {p['eps_r']:.2f} +- {p['sigma_eps_r']:.2f} (hybrid; header says "
+            f"{real.eps_r:g})")
+    elif real.distances_m is None:
+        out["real"] = {"skipped": "the recording has no trace positions"}
+    return out
 
 
 def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=print) -> dict:
@@ -249,7 +319,7 @@ def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=prin
     t = time.perf_counter()
     proc = _process(raw, cfg)
     t_proc = time.perf_counter() - t
-    log(f"[1/5] read {Path(src).name}: {raw}")
+    log(f"[1/6] read {Path(src).name}: {raw}")
     log(f"      processed ({', '.join(h['step'] for h in proc.history)}) in {t_proc * 1e3:.0f} ms")
     save_bscan_png(raw, out / "real_raw.png", cmap=cfg.cmap, title=f"{Path(src).name}: raw")
     save_bscan_png(proc, out / "real_processed.png", cmap=cfg.cmap, title=f"{Path(src).name}: processed")
@@ -296,7 +366,7 @@ def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=prin
     save_bscan_png(syn, out / "synthetic_raw.png", cmap=cfg.cmap, title="synthetic point targets: raw")
     save_bscan_png(syn_proc, out / "synthetic_processed.png", cmap="hot", boxes=boxes,
                    title="synthetic point targets: processed (boxes: windows around the found apexes)")
-    log(f"[2/5] synthetic B-scan {syn.shape}: apex time errors "
+    log(f"[2/6] synthetic B-scan {syn.shape}: apex time errors "
         + ", ".join(f"{r['apex_time_error_s'] * 1e9:+.2f} ns" for r in rows)
         + f" (time zero estimated at {t0_est * 1e9:.2f} ns)")
     summary["stages"]["synthetic"] = {

@@ -141,3 +141,13 @@ def test_demo_end_to_end(tmp_path):
             "reconstruction"} <= names
     assert (tmp_path / "d" / "reconstruction" / "targets.json").exists()
     assert not [n for n in names if n.endswith(".part")]
+    det = summary["stages"]["detection"]
+    if "skipped" not in det:  # PyTorch installed: depth from the data, and the masked migration uses it
+        depth = det["depth"]["random_walk"]
+        assert depth["eps_r_true"] == 9.0
+        for m in ("net", "fit", "hybrid"):
+            assert 1.0 <= depth[m]["eps_r"] <= 81.0 and depth[m]["n_depths"] > 0
+        assert det["masked_eps_r"] == depth["hybrid"]["eps_r"] == depth["eps_r"]
+        cfg = json.loads((tmp_path / "d" / "reconstruction_masked" / "config.json").read_text())
+        assert cfg["eps_r"] == pytest.approx(depth["eps_r"])
+        assert det["depth"]["real"]["eps_r_header"] == 6.0

@@ -34,7 +34,9 @@ def pipe_survey(tmp_path_factory):
 
 def test_reconstruct_with_a_tum_trajectory(pipe_survey):
     d, top = pipe_survey
-    r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--out", d / "out", "--max-depth", "0.7")
+    r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--out", d / "out", "--max-depth", "0.7",
+                "--eps-r", "file")
+    assert "eps_r 6 (the file header)" in r.stdout
     assert r.returncode == 0, r.stderr
     out = d / "out"
     for name in ("volume.h5", "volume.vti", "targets.json", "config.json", "top.png", "front.png", "view3d.png"):
@@ -71,14 +73,15 @@ def test_boxes_make_a_noise_map(pipe_survey, tmp_path):
     boxes = {"targets": [{"box": [0, 2e-9, 2499, 12e-9]}]}
     (tmp_path / "b.json").write_text(json.dumps(boxes))
     r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--boxes", tmp_path / "b.json",
-                "--out", tmp_path / "o", "--max-depth", "0.7")
+                "--out", tmp_path / "o", "--max-depth", "0.7", "--eps-r", "6")
     assert r.returncode == 0, r.stderr
     with h5py.File(tmp_path / "o" / "volume.h5") as f:
         assert "noise_map" in f and f["noise_map"].shape == f["envelope"].shape
 
 
 @pytest.mark.parametrize("extra, words", [
-    (["--eps-r", "-3"], "eps_r must be a relative permittivity >= 1"),
+    (["--eps-r", "-3"], "--eps-r must be a relative permittivity >= 1 or 'file', got '-3'"),
+    (["--eps-r", "six"], "--eps-r must be a relative permittivity >= 1 or 'file', got 'six'"),
     (["--spacing", "0"], "spacing_m must be positive"),
     (["--boxes", "{box}"], "no 'targets' list"),
     (["--boxes", "{ns_box}"], "box 0 [10, 5, 40, 9] lies outside the data"),
@@ -100,7 +103,7 @@ def test_mask_detect_migrates_the_detected_boxes(pipe_survey, tmp_path):
     d, top = pipe_survey
     out = tmp_path / "o"
     r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--mask", "detect", "--out", out,
-                "--max-depth", "0.7")
+                "--max-depth", "0.7", "--eps-r", "file")
     assert r.returncode == 0, r.stderr
     det = json.loads((out / "detections.json").read_text())
     assert det["n_traces"] == 2500 and det["targets"]
@@ -113,3 +116,25 @@ def test_mask_detect_migrates_the_detected_boxes(pipe_survey, tmp_path):
     assert any(abs(t["depth_m"] - top) < 0.05 for t in lines), lines
     r = run_cli("reconstruct", d / "line.h5", "--mask", "detect", "--boxes", out / "detections.json", "--out", out)
     assert r.returncode == 1 and "not both" in r.stderr
+
+
+def test_without_eps_r_the_velocity_is_estimated_from_the_data_and_said(pipe_survey, tmp_path):
+    pytest.importorskip("torchvision")
+    d, top = pipe_survey
+    out = tmp_path / "o"
+    r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--out", out, "--max-depth", "0.7",
+                "--depth", "net")
+    assert r.returncode == 0, r.stderr
+    line = [x for x in r.stdout.splitlines() if x.startswith("eps_r ")][0]
+    assert "estimated from the data (net" in line and "the file's header says 6" in line
+    cfg = json.loads((out / "config.json").read_text())
+    assert cfg["eps_r_source"] == "estimated (net)"
+    assert cfg["eps_r"] == pytest.approx(float(line.split()[1]), abs=0.006)
+    assert 4.0 < cfg["eps_r"] < 9.0  # the truth is 6; a random walk's B-scan bends its hyperbolas
+
+
+def test_eps_r_file_needs_a_header(pipe_survey, tmp_path):
+    d, _ = pipe_survey
+    Survey(data=np.zeros((10, 64), np.float32), dt_s=1e-10, positions_xyz=np.zeros((10, 3))).save(tmp_path / "n.h5")
+    r = run_cli("reconstruct", tmp_path / "n.h5", "--out", tmp_path / "o", "--eps-r", "file")
+    assert r.returncode == 1 and "gives no eps_r" in r.stderr and len(r.stderr.strip().splitlines()) == 1

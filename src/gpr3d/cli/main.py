@@ -10,6 +10,7 @@ import argparse
 import json
 import sys
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 from gpr3d import __version__
@@ -190,19 +191,50 @@ def cmd_reconstruct(args):
 
     if args.mask == "detect" and args.boxes:
         raise GPR3DError("give --boxes or --mask detect, not both")
-    detector = _detector(args) if args.mask == "detect" else None  # weights checked before the work starts
+    eps_given = _eps_argument(args.eps_r)
+    estimate = eps_given is None
+    # weights checked before the work starts
+    detector = _detector(args) if args.mask == "detect" or (estimate and not args.boxes) else None
+    depthnet = _depthnet(args) if estimate and args.depth in ("hybrid", "net") else None
     survey = read(args.input, format=args.format, channel=args.channel)
     if args.poses:
         survey = attach_poses(survey, read_trajectory(args.poses), by="index")
-    cfg = ReconstructConfig(eps_r=args.eps_r, spacing_m=args.spacing, max_depth_m=args.max_depth,
+    if survey.positions_xyz is None:
+        raise GPR3DError("the survey has no antenna positions: give --poses (a TUM file, one pose per trace)")
+    if eps_given == "file" and survey.eps_r is None:
+        raise GPR3DError(f"--eps-r file: {args.input} gives no eps_r; give a number or leave --eps-r out to estimate it")
+    cfg = ReconstructConfig(eps_r=survey.eps_r if eps_given == "file" else eps_given,
+                            spacing_m=args.spacing, max_depth_m=args.max_depth,
                             aperture_deg=None if args.aperture <= 0 else args.aperture, threshold=args.threshold,
                             min_line_m=args.min_line, engine=args.engine,
                             time_zero="none" if args.no_time_zero else "peak")
     boxes = read_boxes(args.boxes) if args.boxes else None
+    found = None
+    if args.boxes:
+        from gpr3d.io.detections import read_detections
+        from gpr3d.migration.masking import check_boxes
+
+        boxes = check_boxes(boxes, survey.n_traces, survey.n_samples * survey.dt_s)  # before any estimate
+        found = {"input": str(args.input), "targets": [dict(t, box=b) for t, b in
+                                                       zip(read_detections(args.boxes)[0]["targets"], boxes)]}
+    if detector is not None:
+        found = detector.detect(survey, score_threshold=args.score, input_name=str(args.input))
+    if estimate:
+        _add_depths(survey, found, args.depth, depthnet, args.trace_spacing)
+        if "permittivity" not in found:
+            raise GPR3DError(f"{args.input}: eps_r cannot be estimated without trace positions; give --eps-r "
+                             "or --trace-spacing")
+        p = found["permittivity"]
+        cfg = replace(cfg, eps_r=float(p["eps_r"]))
+        parts = "; ".join(f"{k} {p[k]['eps_r']:.2f}" for k in ("net", "fit") if k in p and p[k]["eps_r"] == p[k]["eps_r"])
+        header = f"; the file's header says {survey.eps_r:g}" if survey.eps_r else ""
+        print(f"eps_r {p['eps_r']:.2f} +- {p['sigma_eps_r']:.2f} estimated from the data ({args.depth}"
+              f"{': ' + parts if parts else ''}){header}")
+    else:
+        print(f"eps_r {cfg.eps_r:g} ({'the file header' if eps_given == 'file' else 'given'})")
     if args.mask == "detect":
         from gpr3d.io.detections import write_detections
 
-        found = detector.detect(survey, score_threshold=args.score, input_name=str(args.input))
         Path(args.out).mkdir(parents=True, exist_ok=True)
         write_detections([found], Path(args.out) / "detections.json")
         boxes = [t["box"] for t in found["targets"]]
@@ -210,6 +242,7 @@ def cmd_reconstruct(args):
         if not boxes:
             raise GPR3DError("the detector found no hyperbolas: nothing to migrate (try a lower --score)")
     result = reconstruct(survey, cfg, boxes=boxes)
+    result["eps_r_source"] = f"estimated ({args.depth})" if estimate else ("file header" if eps_given == "file" else "given")
     files = write_reconstruction(result, args.out, source=str(args.input))
     g = result["grid"]
     print(f"migrated {result['n_traces']} traces onto {g.nx} x {g.ny} x {g.nd} voxels in "
@@ -219,6 +252,19 @@ def cmd_reconstruct(args):
         print(f"  {t.kind:5s} depth {t.depth_m:.2f} m  score {t.score:.2f}  {pts}")
     print(f"wrote {', '.join(files)} to {args.out}/")
     return 0
+
+
+def _eps_argument(value):
+    """``--eps-r``: None (estimate from the data), ``"file"`` (the header's) or a number >= 1."""
+    if value is None or value == "file":
+        return value
+    try:
+        eps = float(value)
+    except ValueError:
+        raise GPR3DError(f"--eps-r must be a relative permittivity >= 1 or 'file', got {value!r}") from None
+    if not (eps >= 1.0 and eps < 1e4):
+        raise GPR3DError(f"--eps-r must be a relative permittivity >= 1 or 'file', got {value!r}")
+    return eps
 
 
 def _check_suffix(path, suffixes, what):
@@ -241,15 +287,24 @@ def cmd_detect(args):
     _check_suffix(args.out, (".json",), "--out")
     _check_suffix(args.overlay, (".png",), "--overlay")
     det = _detector(args)  # weights checked before the recording is read
+    depthnet = _depthnet(args) if args.depth in ("hybrid", "net") else None
     surveys = read_all(args.input, format=args.format)
     results = [det.detect(s, score_threshold=args.score, input_name=str(args.input)) for s in surveys]
+    if args.depth != "none":
+        for s, r in zip(surveys, results):
+            _add_depths(s, r, args.depth, depthnet, args.trace_spacing)
     write_detections(results, args.out)
     for r in results:
         ch = f" channel {r['channel']}" if len(results) > 1 else ""
         print(f"{args.input}{ch}: {len(r['targets'])} targets in {r['n_traces']} traces "
               f"({r['n_windows']} windows, {r['wall_s']:.2f} s)")
+        perm = r.get("permittivity")
+        if perm:
+            print(f"  host eps_r {perm['eps_r']:.2f} +- {perm['sigma_eps_r']:.2f} ({perm['method']})")
         for t in r["targets"]:
-            print(f"  trace {t['apex_trace']:5d}  {t['apex_time_s'] * 1e9:8.2f} ns  score {t['score']:.2f}")
+            extra = f"  depth {t['depth_m']:.3f} m" if t.get("depth_m") is not None else ""
+            extra += f"  x {t['x_m']:.2f} m" if t.get("x_m") is not None else ""
+            print(f"  trace {t['apex_trace']:5d}  {t['apex_time_s'] * 1e9:8.2f} ns  score {t['score']:.2f}{extra}")
     if args.overlay:
         from gpr3d.viz.bscan import save_bscan_png
 
@@ -259,6 +314,72 @@ def cmd_detect(args):
                        apexes=[(t["apex_trace"], t["apex_time_s"]) for t in results[0]["targets"]],
                        title=f"{Path(args.input).name}: {len(results[0]['targets'])} detections (score >= {args.score})")
     print(f"wrote {args.out}" + (f" and {args.overlay}" if args.overlay else ""))
+    return 0
+
+
+def _depthnet(args):
+    from gpr3d.inversion.depthnet import DepthEstimator
+
+    return DepthEstimator.load(args.depthnet, device=args.device)
+
+
+def _add_depths(survey, result: dict, method: str, depthnet, trace_spacing_m) -> None:
+    """Host eps_r and each target's depth (and position) into a ``detect`` result, in place."""
+    import math
+
+    from gpr3d.inversion.estimate import estimate_depths
+
+    if trace_spacing_m is None and survey.distances_m is None:
+        warnings.warn(f"{result['input']}: the file has no trace positions; no depths or eps_r "
+                      "(give --trace-spacing)")
+        return
+    if not result["targets"] and method == "fit":
+        return
+    est = estimate_depths(survey, result["targets"], method=method, estimator=depthnet,
+                          trace_spacing_m=trace_spacing_m)
+    p = est["permittivity"]
+    result["permittivity"] = {"eps_r": p["eps_r"], "sigma_eps_r": p["sigma_eps_r"], "method": method,
+                              **{k: p[k] for k in ("net", "fit") if k in p}}
+    for t, e in zip(result["targets"], est["targets"]):
+        t["x_m"] = e["x_m"]
+        t["depth_m"] = e["depth_m"] if math.isfinite(e["depth_m"]) else None
+        t["sigma_depth_m"] = e["sigma_depth_m"] if math.isfinite(e["sigma_depth_m"]) else None
+
+
+def cmd_depth(args):
+    from gpr3d.io.detections import read_detections
+    from gpr3d.io.registry import read
+
+    if args.trace_spacing is not None and not args.trace_spacing > 0:
+        raise GPR3DError(f"--trace-spacing must be a positive number of metres, got {args.trace_spacing}")
+    det = _detector(args) if not args.boxes else None
+    depthnet = _depthnet(args) if args.method in ("hybrid", "net") else None
+    survey = read(args.input, format=args.format, channel=args.channel)
+    if args.boxes:
+        chans = read_detections(args.boxes)
+        if not 0 <= args.channel < len(chans):
+            raise GPR3DError(f"{args.boxes}: has {len(chans)} channel(s); no channel {args.channel}")
+        found = {"input": str(args.input), "targets": chans[args.channel]["targets"]}
+    else:
+        found = det.detect(survey, score_threshold=args.score, input_name=str(args.input))
+    if survey.distances_m is None and args.trace_spacing is None:
+        raise GPR3DError(f"{args.input}: the file has no trace positions; give --trace-spacing (m)")
+    _add_depths(survey, found, args.method, depthnet, args.trace_spacing)
+    p = found["permittivity"]
+    print(f"{args.input}: host eps_r {p['eps_r']:.2f} +- {p['sigma_eps_r']:.2f} ({args.method}"
+          + "".join(f"; {k} {p[k]['eps_r']:.2f}" for k in ("net", "fit") if k in p) + ")")
+    print("| target | trace | x m | apex ns | depth to top m | +- m |")
+    print("|---|---|---|---|---|---|")
+    for k, t in enumerate(found["targets"]):
+        d, sd = t.get("depth_m"), t.get("sigma_depth_m")
+        print(f"| {k} | {t.get('apex_trace', '')} | {t['x_m']:.3f} | "
+              f"{t['apex_time_s'] * 1e9 if t.get('apex_time_s') is not None else float('nan'):.2f} | "
+              f"{d if d is not None else float('nan'):.3f} | {sd if sd is not None else float('nan'):.3f} |")
+    if args.out:
+        from gpr3d.io.detections import write_detections
+
+        write_detections([found], args.out)
+        print(f"wrote {args.out}")
     return 0
 
 
@@ -273,8 +394,60 @@ def _labels_provenance(labels) -> dict:
     return {"labels": str(p), "labels_sha256": {f.name: hashlib.sha256(f.read_bytes()).hexdigest() for f in files}}
 
 
+def cmd_train_depthnet(args):
+    """``gpr3d train depthnet``: forward-model records (and packed gprMax ones) prepared once, then trained."""
+    from dataclasses import asdict
+
+    from gpr3d.inversion.depthnet import (DepthTrainConfig, cache_depth_records, load_depth_records, save_depthnet,
+                                          train_depthnet, validate_depthnet)
+    from gpr3d.simulation.surveys import SurveySource
+
+    if args.records < 1:
+        raise GPR3DError(f"--records must be at least 1, got {args.records}")
+    if args.max_seconds is not None and not args.max_seconds > 0:
+        raise GPR3DError(f"--max-seconds must be positive, got {args.max_seconds}")
+    from gpr3d.inversion.depthnet import DepthConfig
+
+    net = DepthConfig(arch=args.arch, width=args.width)
+    cfg = DepthTrainConfig(out=args.out, steps=args.steps or 2000, batch=args.batch or 16, lr=args.lr,
+                           optimiser=args.optimiser, seed=args.seed, device=args.device,
+                           checkpoint_every=args.checkpoint_every, net=asdict(net))
+    packed = []
+    if args.packed:
+        from gpr3d.detection.data import PackedSource
+
+        for item in args.packed:  # each checked in one line before any work
+            part = PackedSource(item, holdout=args.packed_holdout).parts[0]
+            packed.append((Path(item.rpartition(":")[0] if ":" in item else item).stem, part))
+    out = Path(args.out)
+    seed = 2000 if args.data_seed is None else args.data_seed  # apart from the detector's (1000) and tests' (777)
+    folders = [cache_depth_records(SurveySource(seed), range(args.records), out / f"records_forward_{seed}")]
+    for name, (ds, n) in packed:
+        folders.append(cache_depth_records(lambda i, ds=ds: ds[i], range(n), out / f"records_{name}"))
+    records = load_depth_records(folders[0])
+    for f in folders[1:]:  # each packed set repeated to about a quarter of the forward records (at least once)
+        recs = load_depth_records(f)
+        records += recs * max(1, round(args.records / 4 / max(len(recs), 1)))
+    res = train_depthnet(cfg, records, progress=not args.no_progress, max_seconds=args.max_seconds)
+    val = validate_depthnet(res["model"], res["net"], SurveySource(seed + 1), 40)
+    weights = out / "depthnet.pt"
+    cmd = "gpr3d " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("gpr3d") else "gpr3d train depthnet"
+    save_depthnet(res["model"], res["net"], weights,
+                  provenance={"command": cmd, "config": asdict(cfg), "train_wall_s": res["wall_s"],
+                              "steps_done": res["steps"], "parameters": res["parameters"],
+                              "data": [f"survey_sample(seed={seed}, i < {args.records})"] + list(args.packed or []),
+                              "validation": val})
+    print(f"trained DepthNet ({res['parameters']} parameters) for {res['steps']} steps in {res['wall_s']:.0f} s; "
+          f"validation eps_r relative RMSE {val['eps_rel_rmse']:.3f}, depth MAE {val['depth_mae_m']:.3f} m; "
+          f"wrote {weights}")
+    return 0
+
+
 def cmd_train(args):
     from dataclasses import asdict
+
+    if args.what == "depthnet":
+        return cmd_train_depthnet(args)
 
     from gpr3d.detection.train import TrainConfig, train_detector
     from gpr3d.detection.weights import save_weights
@@ -282,8 +455,9 @@ def cmd_train(args):
 
     if args.max_seconds is not None and not args.max_seconds > 0:
         raise GPR3DError(f"--max-seconds must be positive, got {args.max_seconds}")
-    cfg = TrainConfig(out=args.out, model=args.model, steps=args.steps, batch=args.batch, lr=args.lr,
-                      optimiser=args.optimiser, warmup=args.warmup, seed=args.seed, data_seed=args.data_seed,
+    cfg = TrainConfig(out=args.out, model=args.model, steps=args.steps or 3000, batch=args.batch or 8, lr=args.lr,
+                      optimiser=args.optimiser, warmup=args.warmup, seed=args.seed,
+                      data_seed=1000 if args.data_seed is None else args.data_seed,
                       device=args.device,
                       workers=args.workers, checkpoint_every=args.checkpoint_every, init=args.init,
                       packed=args.packed, packed_fraction=args.packed_fraction, packed_holdout=args.packed_holdout,
@@ -308,9 +482,8 @@ def cmd_train(args):
     return 0
 
 
-def cmd_eval(args):
-    from gpr3d.detection.evaluate import evaluate_detector
-
+def _eval_records(args):
+    """The labelled records ``gpr3d eval`` judges on, and their description (checked before any model loads)."""
     if args.n is not None and args.n < 1:
         raise GPR3DError(f"--n must be at least 1, got {args.n}")
     if args.seed < 0:
@@ -325,14 +498,26 @@ def cmd_eval(args):
             PackedDataset(src)  # a wrong file fails here, in one line, before the model loads
         elif not (src / "samples").is_dir():
             raise GPR3DError(f"--data {src}: neither a packed dataset nor a gpr3d simulate folder (no samples/)")
-        records = labelled_records(src, n=args.n)
-        what = f"{src} ({'first ' + str(args.n) if args.n else 'all'} records)"
-    else:
-        from gpr3d.simulation.surveys import survey_sample
+        return labelled_records(src, n=args.n), f"{src} ({'first ' + str(args.n) if args.n else 'all'} records)"
+    from gpr3d.simulation.surveys import survey_sample
 
-        n = args.n or 60
-        records = (survey_sample(args.seed, i) for i in range(n))
-        what = f"held-out survey-scale forward-model set (seed {args.seed})"
+    n = args.n or 60
+    return (survey_sample(args.seed, i) for i in range(n)), f"held-out survey-scale forward-model set (seed {args.seed})"
+
+
+def cmd_eval(args):
+    records, what = _eval_records(args)
+    if args.what == "depth":
+        from gpr3d.inversion.depthnet import DepthEstimator
+        from gpr3d.inversion.evaluate import depth_rows, depth_table
+
+        est = DepthEstimator.load(args.depthnet, device=args.device)
+        rows = depth_rows(records, estimator=est)
+        print(f"{what}: {len({r['record'] for r in rows})} records, labelled boxes")
+        print("\n".join(depth_table(rows)))
+        return 0
+    from gpr3d.detection.evaluate import evaluate_detector
+
     det = _detector(args)
     m = evaluate_detector(det, records, score_threshold=args.score)
     print(f"{what}: {m['n_records']} records, {m['n_true']} targets")
@@ -377,6 +562,14 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--runtime", default="auto", choices=("auto", "torch", "onnx"),
                         help="auto (default: ONNX Runtime for the shipped model on the CPU, else PyTorch), "
                              "torch, or onnx (an .onnx export; no PyTorch import, faster start)")
+
+    def add_depth_args(sp, flag):
+        sp.add_argument(flag, default="hybrid", choices=("hybrid", "net", "fit") + (("none",) if flag == "--depth" else ()),
+                        help="host eps_r and depths: hybrid (default: DepthNet refined by the hyperbola fit), "
+                             "net (DepthNet), fit (classical hyperbola fit)" + (", none" if flag == "--depth" else ""))
+        sp.add_argument("--depthnet", default=None, help="DepthNet weights (default: the shipped ones)")
+        sp.add_argument("--trace-spacing", type=float, default=None,
+                        help="trace spacing in metres (default: the file's positions)")
 
     def add_input(sp):
         sp.add_argument("input", help="radar file (DZT, DT1/HD, RD3/RAD, gprMax .h5/.out, gpr3d .h5)")
@@ -453,7 +646,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_input(sp)
     sp.add_argument("--out", required=True, help="output folder")
     sp.add_argument("--poses", default=None, help="TUM trajectory, one pose per trace in trace order")
-    sp.add_argument("--eps-r", type=float, default=None, help="relative permittivity (default: the file's)")
+    sp.add_argument("--eps-r", default=None,
+                    help="relative permittivity, or 'file' for the header's (default: estimated from the data, "
+                         "see --depth)")
     sp.add_argument("--boxes", default=None, help="JSON boxes (gpr3d detect output or a list): migrate only these")
     sp.add_argument("--spacing", type=float, default=0.02, help="voxel size in metres (default 0.02)")
     sp.add_argument("--max-depth", type=float, default=None, help="deepest voxel (m; default: the time window)")
@@ -466,6 +661,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--mask", choices=("none", "detect"), default="none",
                     help="detect: run the detector on the trace sequence and migrate only its boxes")
     add_detector_args(sp)
+    add_depth_args(sp, "--depth")
 
     sp = add("detect", cmd_detect, "find hyperbolas in a radar file (boxes, scores, apexes as JSON)",
              "examples:\n  gpr3d detect FILE____032.DZT --out det.json --overlay det.png\n"
@@ -477,24 +673,42 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--out", required=True, help="JSON file to write")
     sp.add_argument("--overlay", default=None, help="PNG of the B-scan with the boxes drawn (first channel)")
     add_detector_args(sp)
+    add_depth_args(sp, "--depth")
 
-    sp = add("train", cmd_train, "train a hyperbola detector on survey-scale synthetic B-scans (resumable)",
+    sp = add("depth", cmd_depth, "host permittivity and the depth of every detected target (table)",
+             "examples:\n  gpr3d depth FILE____032.DZT\n  gpr3d depth line.h5 --boxes det.json --method fit "
+             "--trace-spacing 0.01\n\ndepth: to the top of the target below the surface (m); x: along the profile")
+    add_input(sp)
+    sp.add_argument("--boxes", default=None, help="detections (gpr3d detect output) instead of running the detector")
+    sp.add_argument("--out", default=None, help="also write the detections with depths as JSON")
+    add_detector_args(sp)
+    add_depth_args(sp, "--method")
+
+    sp = add("train", cmd_train, "train the hyperbola detector or DepthNet on survey-scale B-scans (resumable)",
              "examples:\n  gpr3d train detector --out det_run --steps 3000 --batch 8          (CPU)\n"
+             "  gpr3d train depthnet --out dn_run --packed datasets/gprmax400.h5 datasets/gprmax_survey_train.h5:0\n"
              "  gpr3d train detector --out det_run --steps 6000 --batch 16 --device cuda --workers 12\n"
              "  gpr3d train detector --init default --labels my_bscans/coco.json --steps 300 --out ft   "
              "(fine-tune on your labels)\n"
              "re-run the same command to resume after a kill; weights go to OUT/weights.pt")
-    sp.add_argument("what", choices=("detector",), help="what to train")
+    sp.add_argument("what", choices=("detector", "depthnet"), help="what to train")
     sp.add_argument("--out", required=True, help="run folder (checkpoint.pt, losses.csv, weights.pt)")
     sp.add_argument("--model", default="frcnn_lean", help="frcnn_lean (default), frcnn_r18/r50/r101, "
                     "frcnn_mobilenet, retinanet_r18, fcos_r18, ssdlite")
-    sp.add_argument("--steps", type=int, default=3000, help="optimiser steps (default 3000)")
-    sp.add_argument("--batch", type=int, default=8, help="windows per step (default 8)")
+    sp.add_argument("--steps", type=int, default=None, help="optimiser steps (default 3000; depthnet 2000)")
+    sp.add_argument("--batch", type=int, default=None, help="windows per step (default 8; depthnet 16)")
+    sp.add_argument("--arch", default="resnet10n",
+                    help="depthnet encoder: resnet10n (default, trains on CPU), resnet18/34/50/101 (the reference)")
+    sp.add_argument("--width", type=int, default=24, help="depthnet: first-stage channels of resnet10n (24)")
+    sp.add_argument("--records", type=int, default=1500,
+                    help="depthnet: forward-model records to train on (prepared once into OUT; default 1500)")
     sp.add_argument("--lr", type=float, default=None, help="learning rate (default: the optimiser's)")
-    sp.add_argument("--optimiser", default="adamw", help="adamw (default), sgd, reference (the paper's SGD)")
+    sp.add_argument("--optimiser", default="adamw",
+                    help="adamw (default), sgd (detector), reference (the paper's SGD: lr 4e-5, momentum 0.9)")
     sp.add_argument("--warmup", type=int, default=200, help="steps of linear learning-rate warm-up (default 200)")
     sp.add_argument("--seed", type=int, default=0, help="initialisation seed")
-    sp.add_argument("--data-seed", type=int, default=1000, help="synthetic records survey_sample(SEED, i)")
+    sp.add_argument("--data-seed", type=int, default=None,
+                    help="synthetic records survey_sample(SEED, i) (default 1000; depthnet 2000)")
     sp.add_argument("--device", default="cpu", help="cpu (default), cuda, cuda:N")
     sp.add_argument("--workers", type=int, default=0, help="data-loading processes (default 0)")
     sp.add_argument("--checkpoint-every", type=int, default=100, help="steps between checkpoints")
@@ -513,10 +727,12 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--packed-holdout", type=int, default=60, help="last records of --packed kept out (60)")
     sp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
-    sp = add("eval", cmd_eval, "evaluate a detector on held-out survey-scale synthetic B-scans (COCO metrics)",
+    sp = add("eval", cmd_eval, "evaluate the detector (COCO metrics) or the depth estimates on held-out B-scans",
              "examples:\n  gpr3d eval detector --n 60 --seed 777\n  gpr3d eval detector --data datasets/gprmax_survey.h5\n"
-             "the full comparison table: python benchmarks/eval_detector.py WEIGHTS.pt ...")
-    sp.add_argument("what", choices=("detector",), help="what to evaluate")
+             "  gpr3d eval depth --data datasets/gprmax_survey.h5      (DepthNet, fit and hybrid)\n"
+             "the full tables: python benchmarks/eval_detector.py WEIGHTS.pt ...; python benchmarks/eval_depth.py")
+    sp.add_argument("what", choices=("detector", "depth"), help="what to evaluate")
+    sp.add_argument("--depthnet", default=None, help="depth: DepthNet weights (default: the shipped ones)")
     sp.add_argument("--n", type=int, default=None, help="records (default: 60 drawn, or all of --data)")
     sp.add_argument("--seed", type=int, default=777, help="seed of the held-out set (training uses 1000)")
     sp.add_argument("--data", default=None,

@@ -45,6 +45,7 @@ from scipy.signal import hilbert
 
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.units import C0
+from gpr3d.io.coco import BOX_PAD_PERIODS
 
 __all__ = ["HyperbolaFit", "direct_wave_time", "time_zero", "pick_arrivals", "fit_hyperbola", "fit_boxes",
            "combine_permittivity", "fit_record", "trace_positions", "MODELS"]
@@ -361,9 +362,17 @@ def _record_picks(survey, boxes, apexes, trace_spacing_m, t0_s, remove_backgroun
     period = 1.0 / survey.frequency_hz if survey.frequency_hz else None
     picks = []
     for k, b in enumerate(boxes):
-        a = apexes[k] if apexes is not None else (None, None)
-        tr, tt, _ = pick_arrivals(env, survey.dt_s, [float(v) for v in b], apex_trace=a[0], apex_time_s=a[1],
-                                  period_s=period)
+        b = [float(v) for v in b]
+        # starts tried in turn until one tracks 5 picks: the given apex, the box's centre under its top
+        # (the label rule's apex: BOX_PAD_PERIODS periods below the top), the earliest strong peak in the box
+        starts = [apexes[k]] if apexes is not None else []
+        if period:
+            starts.append((0.5 * (b[0] + b[2]), b[1] + BOX_PAD_PERIODS * period))
+        starts.append((None, None))
+        for a in starts:
+            tr, tt, _ = pick_arrivals(env, survey.dt_s, b, apex_trace=a[0], apex_time_s=a[1], period_s=period)
+            if tr.size >= 5:
+                break
         picks.append((tr, tt))
     return x, dw, picks
 

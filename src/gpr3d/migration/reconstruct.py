@@ -188,8 +188,9 @@ def write_reconstruction(result: dict, out_dir, *, source: str = "") -> list[str
         Path(written).replace(tmp)
     atomic_write_text(out / "targets.json", json.dumps(targets_to_json(result["targets"]), indent=1))
     atomic_write_text(out / "config.json", json.dumps({"gpr3d": __version__, "source": source,
-                                                       "eps_r": result["eps_r"], "config": result["config"],
-                                                       "grid": g.to_dict(), "timings_s": result["timings_s"]},
+                                                       "eps_r": result["eps_r"],
+                                                       "eps_r_source": result.get("eps_r_source", "given"),
+                                                       "config": result["config"], "grid": g.to_dict(), "timings_s": result["timings_s"]},
                                                       indent=1))
     _figures(result, out)
     return sorted(p.name for p in out.iterdir())
