@@ -184,3 +184,22 @@ def test_bad_weight_files_get_one_line(tmp_path):
     (tmp_path / "junk.onnx").write_bytes(b"junk")
     with pytest.raises(FormatError, match="not a readable ONNX DepthNet"):
         DepthEstimator.load(tmp_path / "junk.onnx")
+
+
+def test_a_time_crop_shows_the_same_times_and_keeps_the_targets_inside():
+    from gpr3d.inversion.depthnet import crop_time
+
+    s, lab = hyperbola_record(spacing=0.01, depth=0.3)
+    late = dict(lab["labels"][0], apex_time_s=15e-9, depth_m=0.6)
+    rec = prepare_depth_record(s, {"eps_r": 9.0, "labels": [lab["labels"][0], late]}, size=224)
+    c = crop_time(rec, 0.5)
+    assert c.window_s == pytest.approx(rec.window_s * 112 / 223)
+    assert c.direct_frac * c.window_s == pytest.approx(rec.direct_frac * rec.window_s)  # same direct-wave time
+    assert [x["depth_m"] for x in c.labels] == [0.3]  # the apex at 15 ns lies past the cut (10 ns)
+    # row k of the crop shows the time k * c.s_per_row of the original
+    k = np.arange(224)
+    src = k * c.s_per_row / rec.s_per_row
+    expect = np.array([np.interp(src, np.arange(224), row) for row in rec.proc[::20]])
+    np.testing.assert_allclose(c.proc[::20], expect, atol=1e-5)
+    # and the window in metres shrinks with the time window
+    assert c.depth_scale_m == pytest.approx(rec.depth_scale_m * c.window_s / rec.window_s)

@@ -7,7 +7,7 @@ import pytest
 
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.units import C0
-from gpr3d.inversion.estimate import FIT_MODEL_ERROR, depth_from_apex, estimate_depths
+from gpr3d.inversion.estimate import FIT_BIAS, FIT_MODEL_ERROR, depth_from_apex, estimate_depths
 from tests.inversion.test_depthnet import hyperbola_record
 
 
@@ -43,23 +43,28 @@ def test_the_fit_alone_gives_the_point_diffractor_back():
     assert r["targets"][0]["x_m"] == pytest.approx(1.0, abs=1e-6)
 
 
-def test_hybrid_weighs_network_and_fit_by_their_uncertainties_and_takes_depth_from_the_apex():
+def test_hybrid_refines_the_network_with_the_bias_corrected_fit_only_where_they_agree():
     s, targets = _record()
     fit = estimate_depths(s, targets, method="fit")["permittivity"]
-    net = FixedNet(eps=12.0, sigma=1.0, depth=0.9)
+    fc = fit["eps_r"] / (1 + FIT_BIAS)  # the point diffractor's fit is exact: ~9 / 0.872
+    assert fc == pytest.approx(9.0 / (1 + FIT_BIAS), rel=0.02)
+    net = FixedNet(eps=11.0, sigma=1.0, depth=0.9)
     r = estimate_depths(s, targets, method="hybrid", estimator=net)
     p = r["permittivity"]
-    s_fit = math.hypot(fit["sigma_eps_r"], FIT_MODEL_ERROR * fit["eps_r"])
-    w1, w2 = 1 / 1.0**2, 1 / s_fit**2
-    assert p["eps_r"] == pytest.approx((w1 * 12.0 + w2 * fit["eps_r"]) / (w1 + w2), rel=1e-9)
+    assert p["fit_agrees"] is True  # |10.3 - 11| < 2 sigma
+    w1, w2 = 1.0, 1 / math.hypot(fit["sigma_eps_r"] / (1 + FIT_BIAS), FIT_MODEL_ERROR * fc) ** 2
+    assert p["eps_r"] == pytest.approx((w1 * 11.0 + w2 * fc) / (w1 + w2), rel=1e-9)
     assert p["sigma_eps_r"] == pytest.approx(1 / math.sqrt(w1 + w2), rel=1e-9)
-    assert fit["eps_r"] < p["eps_r"] < 12.0
-    # depth from the data's apex time with that eps_r: 0.3 m scaled by sqrt(9 / eps)
-    assert r["targets"][0]["depth_m"] == pytest.approx(0.3 * math.sqrt(9.0 / p["eps_r"]), rel=0.02)
+    # the network's depth rescaled to the refined eps_r (same travel time)
+    assert r["targets"][0]["depth_m"] == pytest.approx(0.9 * math.sqrt(11.0 / p["eps_r"]), rel=1e-9)
     assert r["targets"][0]["depth_m_net"] == 0.9
+    # a fit far from the network (more than two of its sigmas) is left out
+    far = estimate_depths(s, targets, method="hybrid", estimator=FixedNet(eps=20.0, sigma=1.0, depth=0.5))
+    assert far["permittivity"]["fit_agrees"] is False
+    assert far["permittivity"]["eps_r"] == 20.0 and far["targets"][0]["depth_m"] == 0.5
     # the network alone: its own numbers
     n = estimate_depths(s, targets, method="net", estimator=net)
-    assert n["permittivity"]["eps_r"] == 12.0 and n["targets"][0]["depth_m"] == 0.9
+    assert n["permittivity"]["eps_r"] == 11.0 and n["targets"][0]["depth_m"] == 0.9
 
 
 def test_unknown_method_is_refused():

@@ -565,7 +565,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     def add_depth_args(sp, flag):
         sp.add_argument(flag, default="hybrid", choices=("hybrid", "net", "fit") + (("none",) if flag == "--depth" else ()),
-                        help="host eps_r and depths: hybrid (default: DepthNet refined by the hyperbola fit), "
+                        help="host eps_r and depths: hybrid (default: DepthNet refined by the hyperbola fit "
+                             "where they agree), "
                              "net (DepthNet), fit (classical hyperbola fit)" + (", none" if flag == "--depth" else ""))
         sp.add_argument("--depthnet", default=None, help="DepthNet weights (default: the shipped ones)")
         sp.add_argument("--trace-spacing", type=float, default=None,
