@@ -100,9 +100,11 @@ def test_eval_depth_matches_the_library(tmp_path):
     (["--optimiser", "lbfgs"], "unknown optimiser 'lbfgs'"),
     (["--batch", "1"], "--batch must be an integer >= 2"),
     (["--arch", "vgg16"], "unknown DepthNet encoder 'vgg16'"),
+    (["--init", "default"], "ships DepthNet as ONNX"),
+    (["--init", "{missing}"], "no such DepthNet weights file"),
 ])
 def test_train_depthnet_bad_arguments_one_line(tmp_path, args, msg):
-    args = [a.format(missing=tmp_path / "missing.h5") for a in args]
+    args = [a.format(missing=tmp_path / ("missing.pt" if "--init" in args else "missing.h5")) for a in args]
     r = run_cli("train", "depthnet", "--out", tmp_path / "run", *args)
     assert r.returncode == 1 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert not (tmp_path / "run" / "checkpoint.pt").exists()

@@ -156,6 +156,17 @@ def test_training_learns_permittivity_and_depth_and_weights_round_trip(tmp_path)
     np.testing.assert_allclose(e3, e2, rtol=1e-3)
     assert [len(q) for q in q3] == [1, 0, 3]
     np.testing.assert_allclose(np.concatenate(q3), np.concatenate(q2), rtol=1e-3, atol=1e-5)
+    # training can start from saved weights (a different net is refused)
+    cont = DepthTrainConfig(out=str(tmp_path / "cont"), steps=2, batch=8, lr=1e-9, net=net, init=str(path))
+    res3 = train_depthnet(cont, recs, progress=False, log=lambda *a: None)
+    start = dict(model2.named_parameters())
+    for name, p in res3["model"].named_parameters():  # lr 1e-9: the parameters are still the saved ones
+        np.testing.assert_allclose(p.detach().numpy(), start[name].detach().numpy(), atol=1e-6, err_msg=name)
+    from gpr3d.core.errors import GPR3DError
+
+    with pytest.raises(GPR3DError, match="width 8, not resnet10n width 16"):
+        train_depthnet(DepthTrainConfig(out=str(tmp_path / "c2"), steps=2, batch=8, init=str(path),
+                                        net=dict(net, width=16)), recs, progress=False, log=lambda *a: None)
     out = est2.estimate(None, [], record=recs[0])
     assert out["sigma_eps_r"] >= 0.2 * out["eps_r"] - 1e-9 and out["depth_m"] == []
     # running the same training again resumes at its end instead of starting over

@@ -404,6 +404,9 @@ def cmd_train_depthnet(args):
 
     if args.records < 1:
         raise GPR3DError(f"--records must be at least 1, got {args.records}")
+    if args.init == "default":
+        raise GPR3DError("--init default: the package ships DepthNet as ONNX; start from its PyTorch twin, "
+                         "references/depthnet/default_depthnet.pt")
     if args.max_seconds is not None and not args.max_seconds > 0:
         raise GPR3DError(f"--max-seconds must be positive, got {args.max_seconds}")
     from gpr3d.inversion.depthnet import DepthConfig
@@ -411,7 +414,11 @@ def cmd_train_depthnet(args):
     net = DepthConfig(arch=args.arch, width=args.width)
     cfg = DepthTrainConfig(out=args.out, steps=args.steps or 2000, batch=args.batch or 16, lr=args.lr,
                            optimiser=args.optimiser, seed=args.seed, device=args.device,
-                           checkpoint_every=args.checkpoint_every, net=asdict(net))
+                           checkpoint_every=args.checkpoint_every, net=asdict(net), init=args.init)
+    if cfg.init:  # a wrong file fails here, in one line, before the records are prepared
+        from gpr3d.inversion.depthnet import load_depthnet
+
+        load_depthnet(cfg.init)
     packed = []
     if args.packed:
         from gpr3d.detection.data import PackedSource

@@ -10,9 +10,9 @@ from __future__ import annotations
 import importlib
 from types import ModuleType
 
-from gpr3d.core.errors import MissingDependencyError
+from gpr3d.core.errors import GPR3DError, InvalidDataError, MissingDependencyError
 
-__all__ = ["EXTRAS", "require", "available"]
+__all__ = ["EXTRAS", "require", "available", "resolve_device"]
 
 #: module name -> (pip extra, what it is used for)
 EXTRAS: dict[str, tuple[str, str]] = {
@@ -48,3 +48,16 @@ def require(module: str) -> ModuleType:
         raise MissingDependencyError(
             f"{module} is not installed{why}: pip install {target}"
         ) from exc
+
+
+def resolve_device(name: str):
+    """``torch.device`` for ``cpu``, ``cuda``, ``cuda:N`` or ``mps``, or a one-line error."""
+    torch = require("torch")
+    ok = name in ("cpu", "cuda", "mps") or (name.startswith("cuda:") and name[5:].isdigit())
+    if not ok:
+        raise InvalidDataError(f"--device must be cpu, cuda, cuda:N or mps, got {name!r}")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise GPR3DError(f"--device {name}: CUDA is not available on this machine (use --device cpu)")
+    if name == "mps" and not torch.backends.mps.is_available():
+        raise GPR3DError("--device mps: MPS is not available on this machine (use --device cpu)")
+    return torch.device(name)

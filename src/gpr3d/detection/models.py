@@ -20,8 +20,8 @@ from __future__ import annotations
 
 from functools import partial
 
-from gpr3d.core.deps import require
-from gpr3d.core.errors import GPR3DError, InvalidDataError
+from gpr3d.core.deps import require, resolve_device  # noqa: F401 - resolve_device kept here for callers
+from gpr3d.core.errors import InvalidDataError
 
 __all__ = ["MODELS", "build_model", "count_parameters", "resolve_device"]
 
@@ -115,16 +115,3 @@ def build_model(name: str = "frcnn_lean", *, image_size: int = 256):
 
 def count_parameters(model) -> int:
     return int(sum(p.numel() for p in model.parameters()))
-
-
-def resolve_device(name: str):
-    """``torch.device`` for ``cpu``, ``cuda``, ``cuda:N`` or ``mps``, or a one-line error."""
-    torch = require("torch")
-    ok = name in ("cpu", "cuda", "mps") or (name.startswith("cuda:") and name[5:].isdigit())
-    if not ok:
-        raise InvalidDataError(f"--device must be cpu, cuda, cuda:N or mps, got {name!r}")
-    if name.startswith("cuda") and not torch.cuda.is_available():
-        raise GPR3DError(f"--device {name}: CUDA is not available on this machine (use --device cpu)")
-    if name == "mps" and not torch.backends.mps.is_available():
-        raise GPR3DError("--device mps: MPS is not available on this machine (use --device cpu)")
-    return torch.device(name)

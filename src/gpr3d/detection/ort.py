@@ -26,34 +26,13 @@ from gpr3d.core.errors import FormatError
 from gpr3d.detection.infer import Detector
 from gpr3d.detection.windows import WindowConfig
 from gpr3d.io.atomic import atomic_path
+from gpr3d.io.onnxweights import fp16_initializers
 
 __all__ = ["export_onnx", "OnnxDetector", "onnx_nms", "DEFAULT_ONNX", "OPSET"]
 
 DEFAULT_ONNX = Path(__file__).with_name("default_detector.onnx")
 OPSET = 17
 _META = "gpr3d.detector"
-
-
-def _fp16_initializers(model_proto):
-    """Store float32 initializers as float16, each followed by a Cast back to float32 (in place)."""
-    from onnx import TensorProto, helper, numpy_helper
-
-    g = model_proto.graph
-    casts, keep = [], []
-    for init in g.initializer:
-        if init.data_type != TensorProto.FLOAT or int(np.prod(init.dims or [1])) < 16:
-            keep.append(init)  # small tensors (shapes, thresholds) stay as they are
-            continue
-        arr = numpy_helper.to_array(init)
-        half = numpy_helper.from_array(arr.astype(np.float16), init.name + "__fp16")
-        keep.append(half)
-        casts.append(helper.make_node("Cast", [half.name], [init.name], to=TensorProto.FLOAT,
-                                      name=init.name + "__cast"))
-    del g.initializer[:]
-    g.initializer.extend(keep)
-    nodes = list(g.node)
-    del g.node[:]
-    g.node.extend(casts + nodes)
 
 
 def export_onnx(weights=None, out=DEFAULT_ONNX) -> dict:
@@ -80,7 +59,7 @@ def export_onnx(weights=None, out=DEFAULT_ONNX) -> dict:
         torch.onnx.export(model, ([example],), str(tmp), opset_version=OPSET, input_names=["image"],
                           output_names=["boxes", "labels", "scores"], dynamo=False)
         proto = onnx.load(str(tmp))
-        _fp16_initializers(proto)
+        fp16_initializers(proto)
         del proto.metadata_props[:]
         entry = proto.metadata_props.add()
         entry.key, entry.value = _META, json.dumps(meta)

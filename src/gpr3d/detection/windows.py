@@ -23,7 +23,7 @@ from scipy.signal import hilbert
 from gpr3d.core.deps import require
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.io.coco import BOX_PAD_PERIODS, PixelMap
-from gpr3d.processing.image import hot_rgb, normalise_window, resample_rows
+from gpr3d.processing.image import network_view, record_scale, render_channels as render
 
 __all__ = ["WindowConfig", "Window", "prepare", "windows", "make_window", "record_scale", "rows_interval", "render",
            "merge", "apex_of_box", "window_targets"]
@@ -66,46 +66,10 @@ class Window:
 
 
 def prepare(survey, cfg: WindowConfig | None = None) -> np.ndarray:
-    """Processed data ``(n_traces, rows)`` float32 of a record: the detector's view of it."""
+    """Processed data ``(n_traces, rows)`` float32 of a record: the detector's view of it
+    (:func:`gpr3d.processing.image.network_view` with the window's settings)."""
     cfg = cfg or WindowConfig()
-    data = np.asarray(survey.data, dtype=np.float64)
-    if not np.all(np.isfinite(data)):
-        raise InvalidDataError("the record holds NaN/inf samples; detection needs finite data")
-    if data.shape[0] < 2 or data.shape[1] < 8:
-        raise InvalidDataError(f"a {data.shape[0]} x {data.shape[1]} record is too small to detect in")
-    if cfg.dewow:
-        # remove the low-frequency wow: a running mean over about one period of the antenna
-        f = survey.frequency_hz or 1.0 / (data.shape[1] * survey.dt_s / 20)
-        w = int(np.clip(round(1.0 / (f * survey.dt_s)), 3, data.shape[1] // 2 | 1))
-        data = data - uniform_filter1d(data, w, axis=1, mode="nearest")
-    if cfg.background:
-        data = data - data.mean(axis=0, keepdims=True)
-    factor = data.shape[1] / cfg.rows
-    if factor > 1.5:  # anti-alias before the time axis shrinks
-        data = uniform_filter1d(data, int(round(factor)), axis=1, mode="nearest")
-    out = resample_rows(data.astype(np.float32), cfg.rows).astype(np.float64)
-    if cfg.equalise:
-        rms = np.sqrt(np.mean(out**2, axis=0))
-        rms = uniform_filter1d(rms, max(3, cfg.rows // 16), mode="nearest")
-        floor = 0.05 * float(np.max(rms)) if rms.size else 0.0
-        out = out / np.maximum(rms, floor if floor > 0 else 1.0)
-    return out.astype(np.float32)
-
-
-def render(block: np.ndarray, style: str = "channels", *, scale: float | None = None) -> np.ndarray:
-    """Image ``(3, rows, cols)`` float32 in [0, 1] of a processed block ``(cols traces, rows)``."""
-    x = normalise_window(np.asarray(block, dtype=np.float32).T, scale=scale)  # (rows, cols) in [-1, 1]
-    env = np.abs(hilbert(x, axis=0)).astype(np.float32)
-    if style == "hot":
-        return np.ascontiguousarray(hot_rgb(np.clip(env, 0, 1)).transpose(2, 0, 1).astype(np.float32) / 255.0)
-    rows = x.shape[0]
-    tg = x * np.linspace(0.5, 1.5, rows, dtype=np.float32)[:, None]
-    return np.stack([0.5 + 0.5 * x, np.clip(env, 0, 1), 0.5 + 0.5 * np.clip(tg, -1, 1)]).astype(np.float32)
-
-
-def record_scale(processed: np.ndarray) -> float:
-    """The amplitude that every window of one record is normalised by (99.5th percentile of |data|)."""
-    return float(np.percentile(np.abs(processed), 99.5)) or 1.0
+    return network_view(survey, cfg.rows, dewow=cfg.dewow, background=cfg.background, equalise=cfg.equalise)
 
 
 def make_window(processed: np.ndarray, start: int, cfg: WindowConfig, s_per_row: float, scale: float) -> Window:

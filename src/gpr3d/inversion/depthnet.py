@@ -16,7 +16,7 @@ picture, whatever the radar, and depths are learnt as fractions ``depth / D``.
 Trace positions come from the file (wheel, GPS) or a given spacing
 (:func:`gpr3d.inversion.hyperbola.trace_positions`); the columns are sampled from
 the traces (box-filtered first where several traces fall in one column).
-The rows are the detector's processing (:func:`gpr3d.detection.windows.prepare`).
+The rows are the processing every network sees (:func:`gpr3d.processing.image.network_view`).
 Time zero is not given to the network; it sees the direct wave's peak time as a
 fraction of ``T`` (:func:`gpr3d.inversion.hyperbola.direct_wave_time`), from the data.
 
@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from gpr3d import __version__
-from gpr3d.core.deps import require
+from gpr3d.core.deps import require, resolve_device
 from gpr3d.core.errors import FormatError, GPR3DError, InvalidDataError
 from gpr3d.core.units import C0
 from gpr3d.io.atomic import atomic_path, atomic_write_text
@@ -105,10 +105,10 @@ class DepthRecord:
 def prepare_depth_record(survey, labels: dict | None = None, *, size: int = 224,
                          trace_spacing_m: float | None = None) -> DepthRecord:
     """A :class:`DepthRecord` of ``survey`` (labels: the simulator's dict, for training)."""
-    from gpr3d.detection.windows import WindowConfig, prepare, record_scale
     from gpr3d.inversion.hyperbola import direct_wave_time, trace_positions
+    from gpr3d.processing.image import network_view, record_scale
 
-    proc = prepare(survey, WindowConfig(rows=size))
+    proc = network_view(survey, size)
     x = np.asarray(trace_positions(survey, trace_spacing_m), dtype=np.float64)
     x = x - x[0]
     x = x + np.arange(x.size) * 1e-9  # strictly increasing (a cart standing still repeats positions)
@@ -145,13 +145,13 @@ def _smoothed(rec: DepthRecord, width_m: float, size: int) -> np.ndarray:
 
 def depth_window(rec: DepthRecord, centre_m: float, cfg: DepthConfig, *, smoothed: np.ndarray | None = None):
     """The window centred at ``centre_m`` along the profile: ``(image (3, size, size) float32, left_m, width_m)``."""
-    from gpr3d.detection.windows import render
+    from gpr3d.processing.image import render_channels
 
     width = cfg.alpha * rec.depth_scale_m
     left = centre_m - width / 2
     sm = _smoothed(rec, width, cfg.size) if smoothed is None else smoothed
     block = _columns(rec, left, width, cfg.size, sm)
-    return render(block, "channels", scale=rec.scale), left, width
+    return render_channels(block, "channels", scale=rec.scale), left, width
 
 
 def box_to_window(rec: DepthRecord, box, left_m: float, width_m: float, size: int) -> list[float]:
@@ -308,6 +308,7 @@ class DepthTrainConfig:
     device: str = "cpu"
     checkpoint_every: int = 100
     net: dict = field(default_factory=lambda: asdict(DepthConfig()))
+    init: str | None = None  #: a DepthNet .pt to start from (continued training, fine-tuning) instead of a fresh net
 
     def __post_init__(self):
         if self.optimiser not in OPTIMISERS:
@@ -376,8 +377,6 @@ def train_depthnet(cfg: DepthTrainConfig, records: list[DepthRecord], *, log=pri
     torch = require("torch")
     from tqdm import tqdm
 
-    from gpr3d.detection.models import resolve_device
-
     records = [r for r in records if math.isfinite(r.eps_r)]
     if not records:
         raise GPR3DError("no records with a known eps_r to train DepthNet on")
@@ -386,7 +385,14 @@ def train_depthnet(cfg: DepthTrainConfig, records: list[DepthRecord], *, log=pri
     device = resolve_device(cfg.device)
     net_cfg = DepthConfig(**cfg.net)
     torch.manual_seed(cfg.seed)
-    model = build_depthnet(net_cfg).to(device)
+    model = build_depthnet(net_cfg)
+    if cfg.init:
+        start, start_net, _ = load_depthnet(cfg.init)
+        if start_net != net_cfg:
+            raise GPR3DError(f"--init {cfg.init}: a DepthNet {start_net.arch} width {start_net.width}, not "
+                             f"{net_cfg.arch} width {net_cfg.width}")
+        model.load_state_dict(start.state_dict())
+    model = model.to(device)
     lr = cfg.lr or {"adamw": 1e-3, "reference": 4e-5}[cfg.optimiser]
     if cfg.optimiser == "adamw":
         opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
@@ -484,8 +490,6 @@ def save_depthnet(model, net: DepthConfig, path, *, provenance: dict | None = No
 def load_depthnet(path, *, device: str = "cpu"):
     """``(model in eval mode, DepthConfig, provenance)`` from a DepthNet weights file (``.pt``)."""
     torch = require("torch")
-    from gpr3d.detection.models import resolve_device
-
     p = Path(path)
     if not p.is_file():
         raise FormatError(p, "no such DepthNet weights file")
@@ -595,7 +599,7 @@ def export_depthnet_onnx(weights, out) -> dict:
     require("onnxruntime")
     import hashlib
 
-    from gpr3d.detection.ort import _fp16_initializers
+    from gpr3d.io.onnxweights import fp16_initializers
 
     model, net, prov = load_depthnet(weights)
     rng = np.random.default_rng(0)
@@ -611,7 +615,7 @@ def export_depthnet_onnx(weights, out) -> dict:
                           dynamic_axes={"images": {0: "B"}, "rois": {0: "K"}, "direct": {0: "B"},
                                         "eps": {0: "B"}, "depth": {0: "K"}})
         proto = onnx.load(str(tmp))
-        _fp16_initializers(proto)
+        fp16_initializers(proto)
         del proto.metadata_props[:]
         entry = proto.metadata_props.add()
         entry.key, entry.value = _META, json.dumps(meta)

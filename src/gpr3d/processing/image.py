@@ -1,15 +1,22 @@
-"""B-scans as images: the rendering that datasets, detectors and figures share.
+"""B-scans as images: the rendering that datasets, networks and figures share.
 
 :func:`bscan_image` is the 'hot' colour rendering of a whole record (the reference
 paper's labelling images, and ``image.png`` of every simulated sample);
-:func:`normalise_window` turns a block of traces into the detector's input.
+:func:`network_view` is the processing every network sees (dewow, mean trace removed,
+rows resampled and equalised) and :func:`render_channels` its 3-channel image
+(the detector's windows, DepthNet's); :func:`normalise_window` scales a block.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.ndimage import uniform_filter1d
+from scipy.signal import hilbert
 
-__all__ = ["bscan_image", "resample_rows", "normalise_window", "hot_rgb"]
+from gpr3d.core.errors import InvalidDataError
+
+__all__ = ["bscan_image", "resample_rows", "normalise_window", "hot_rgb", "network_view", "render_channels",
+           "record_scale"]
 
 
 def resample_rows(data: np.ndarray, n_out: int) -> np.ndarray:
@@ -52,3 +59,52 @@ def bscan_image(survey, height: int) -> np.ndarray:
     img = np.abs(resample_rows(x, height).T)  # (height, n_traces)
     scale = np.percentile(img, 99.5) or 1.0
     return hot_rgb(img / scale)
+
+
+def network_view(survey, rows: int, *, dewow: bool = True, background: bool = True,
+                 equalise: bool = True) -> np.ndarray:
+    """Processed data ``(n_traces, rows)`` float32 of a record, as the networks see it.
+
+    Dewow (a running mean over about one antenna period removed), the mean trace
+    removed, the whole time window resampled to ``rows`` rows (anti-aliased), each row
+    divided by its RMS across the record (deep echoes as bright as shallow). Time zero
+    does not move: row ``r`` is the time ``r * T / (rows - 1)`` from the first sample.
+    """
+    data = np.asarray(survey.data, dtype=np.float64)
+    if not np.all(np.isfinite(data)):
+        raise InvalidDataError("the record holds NaN/inf samples; detection needs finite data")
+    if data.shape[0] < 2 or data.shape[1] < 8:
+        raise InvalidDataError(f"a {data.shape[0]} x {data.shape[1]} record is too small to detect in")
+    if dewow:
+        # remove the low-frequency wow: a running mean over about one period of the antenna
+        f = survey.frequency_hz or 1.0 / (data.shape[1] * survey.dt_s / 20)
+        w = int(np.clip(round(1.0 / (f * survey.dt_s)), 3, data.shape[1] // 2 | 1))
+        data = data - uniform_filter1d(data, w, axis=1, mode="nearest")
+    if background:
+        data = data - data.mean(axis=0, keepdims=True)
+    factor = data.shape[1] / rows
+    if factor > 1.5:  # anti-alias before the time axis shrinks
+        data = uniform_filter1d(data, int(round(factor)), axis=1, mode="nearest")
+    out = resample_rows(data.astype(np.float32), rows).astype(np.float64)
+    if equalise:
+        rms = np.sqrt(np.mean(out**2, axis=0))
+        rms = uniform_filter1d(rms, max(3, rows // 16), mode="nearest")
+        floor = 0.05 * float(np.max(rms)) if rms.size else 0.0
+        out = out / np.maximum(rms, floor if floor > 0 else 1.0)
+    return out.astype(np.float32)
+
+
+def render_channels(block: np.ndarray, style: str = "channels", *, scale: float | None = None) -> np.ndarray:
+    """Image ``(3, rows, cols)`` float32 in [0, 1] of a processed block ``(cols traces, rows)``."""
+    x = normalise_window(np.asarray(block, dtype=np.float32).T, scale=scale)  # (rows, cols) in [-1, 1]
+    env = np.abs(hilbert(x, axis=0)).astype(np.float32)
+    if style == "hot":
+        return np.ascontiguousarray(hot_rgb(np.clip(env, 0, 1)).transpose(2, 0, 1).astype(np.float32) / 255.0)
+    rows = x.shape[0]
+    tg = x * np.linspace(0.5, 1.5, rows, dtype=np.float32)[:, None]
+    return np.stack([0.5 + 0.5 * x, np.clip(env, 0, 1), 0.5 + 0.5 * np.clip(tg, -1, 1)]).astype(np.float32)
+
+
+def record_scale(processed: np.ndarray) -> float:
+    """The amplitude that every window of one record is normalised by (99.5th percentile of |data|)."""
+    return float(np.percentile(np.abs(processed), 99.5)) or 1.0
