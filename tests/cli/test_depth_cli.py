@@ -38,6 +38,22 @@ def test_depth_table_with_the_fit_gives_the_diffractor_back(diffractor, tmp_path
     assert res["targets"][0]["depth_m"] == pytest.approx(0.3, abs=0.005)
 
 
+def test_depth_checks_the_boxes_it_is_given(diffractor, tmp_path):
+    d, lab = diffractor
+    (tmp_path / "bad.json").write_text("[1, 2]")
+    r = run_cli("depth", d / "line.h5", "--boxes", tmp_path / "bad.json", "--method", "fit")
+    assert r.returncode == 1 and "box 0 must be 4 numbers" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    # a junk apex is dropped (the box's own is used); a box past the record's end is cut to it
+    box = list(lab["labels"][0]["box"])
+    box[2] += 5000
+    (tmp_path / "odd.json").write_text(json.dumps([{"box": box, "apex_trace": "x", "apex_time_s": None}]))
+    out = tmp_path / "o.json"
+    r = run_cli("depth", d / "line.h5", "--boxes", tmp_path / "odd.json", "--method", "fit", "--out", out)
+    assert r.returncode == 0, r.stderr
+    t = json.loads(out.read_text())["targets"][0]
+    assert t["box"][2] == 200.0 and "apex_trace" not in t
+
+
 def test_depth_without_positions_needs_a_spacing(diffractor, tmp_path):
     from gpr3d.core.survey import Survey
 

@@ -214,9 +214,9 @@ def cmd_reconstruct(args):
         from gpr3d.io.detections import read_detections
         from gpr3d.migration.masking import check_boxes
 
-        boxes = check_boxes(boxes, survey.n_traces, survey.n_samples * survey.dt_s)  # before any estimate
-        found = {"input": str(args.input), "targets": [dict(t, box=b) for t, b in
-                                                       zip(read_detections(args.boxes)[0]["targets"], boxes)]}
+        check_boxes(boxes, survey.n_traces, survey.n_samples * survey.dt_s)  # one line, before any estimate
+        found = {"input": str(args.input),
+                 "targets": _checked_targets(args.boxes, read_detections(args.boxes)[0]["targets"], survey)}
     if detector is not None:
         found = detector.detect(survey, score_threshold=args.score, input_name=str(args.input))
     if estimate:
@@ -346,6 +346,29 @@ def _add_depths(survey, result: dict, method: str, depthnet, trace_spacing_m) ->
         t["sigma_depth_m"] = e["sigma_depth_m"] if math.isfinite(e["sigma_depth_m"]) else None
 
 
+def _checked_targets(path, targets, survey) -> list[dict]:
+    """Targets read from a detections file, their boxes checked against the record (one line naming the first
+    bad one); an apex that is not a pair of finite numbers is dropped (the box's own is used)."""
+    import math
+
+    from gpr3d.migration.masking import check_boxes
+
+    try:
+        boxes = check_boxes([t["box"] for t in targets], survey.n_traces, survey.n_samples * survey.dt_s)
+    except GPR3DError as exc:
+        raise GPR3DError(f"{path}: {exc}") from None
+    out = []
+    n, window = survey.n_traces, (survey.n_samples - 1) * survey.dt_s
+    for t, b in zip(targets, boxes):  # boxes reaching past the record are cut to it
+        t = dict(t, box=[max(b[0], 0.0), max(b[1], 0.0), min(b[2], n - 1.0), min(b[3], window)])
+        a = (t.get("apex_trace"), t.get("apex_time_s"))
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in a):
+            t.pop("apex_trace", None)
+            t.pop("apex_time_s", None)
+        out.append(t)
+    return out
+
+
 def cmd_depth(args):
     from gpr3d.io.detections import read_detections
     from gpr3d.io.registry import read
@@ -359,7 +382,8 @@ def cmd_depth(args):
         chans = read_detections(args.boxes)
         if not 0 <= args.channel < len(chans):
             raise GPR3DError(f"{args.boxes}: has {len(chans)} channel(s); no channel {args.channel}")
-        found = {"input": str(args.input), "targets": chans[args.channel]["targets"]}
+        found = {"input": str(args.input), "targets": _checked_targets(args.boxes, chans[args.channel]["targets"],
+                                                                      survey)}
     else:
         found = det.detect(survey, score_threshold=args.score, input_name=str(args.input))
     if survey.distances_m is None and args.trace_spacing is None:
