@@ -38,7 +38,7 @@ def test_bad_weight_files_give_one_line(tmp_path):
     save_weights(m, "frcnn_lean", WindowConfig().to_dict(), tmp_path / "mismatch.pt")
     with pytest.raises(FormatError, match="do not fit model 'frcnn_lean'"):
         load_weights(tmp_path / "mismatch.pt")
-    with pytest.raises(FormatError, match="no such weights file"):
+    with pytest.raises(FormatError, match="no such detector weights file"):
         load_weights(tmp_path / "absent.pt")
 
 

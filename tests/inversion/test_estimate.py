@@ -2,21 +2,11 @@
 
 import math
 
-import numpy as np
 import pytest
 
 from gpr3d.core.errors import InvalidDataError
-from gpr3d.core.units import C0
-from gpr3d.inversion.estimate import FIT_BIAS, FIT_MODEL_ERROR, depth_from_apex, estimate_depths
+from gpr3d.inversion.estimate import FIT_BIAS, FIT_MODEL_ERROR, estimate_depths
 from tests.inversion.test_depthnet import hyperbola_record
-
-
-@pytest.mark.parametrize("eps, depth, h", [(9.0, 0.3, 0.0), (4.0, 1.2, 0.5), (20.0, 0.05, 0.06)])
-def test_depth_from_apex_inverts_the_bistatic_travel_time(eps, depth, h):
-    v = C0 / math.sqrt(eps)
-    t = 1e-9 + 2 * math.hypot(depth, h / 2) / v
-    assert depth_from_apex(t, 1e-9, eps, h) == pytest.approx(depth, abs=1e-9)
-    assert math.isnan(depth_from_apex(0.5e-9, 1e-9, eps, h))  # before time zero: no depth
 
 
 class FixedNet:

@@ -26,7 +26,7 @@ from gpr3d.core.errors import FormatError
 from gpr3d.detection.infer import Detector
 from gpr3d.detection.windows import WindowConfig
 from gpr3d.io.atomic import atomic_path
-from gpr3d.io.onnxweights import fp16_initializers
+from gpr3d.io.onnxweights import finish_export
 
 __all__ = ["export_onnx", "OnnxDetector", "onnx_nms", "DEFAULT_ONNX", "OPSET"]
 
@@ -43,7 +43,7 @@ def export_onnx(weights=None, out=DEFAULT_ONNX) -> dict:
     test window (each box against its nearest).
     """
     torch = require("torch")
-    onnx = require("onnx")
+    require("onnx")  # a one-line hint when missing
     ort = require("onnxruntime")
     from gpr3d.detection.weights import DEFAULT_WEIGHTS, load_weights
 
@@ -58,13 +58,7 @@ def export_onnx(weights=None, out=DEFAULT_ONNX) -> dict:
     with atomic_path(out, suffix=".onnx.part") as tmp:
         torch.onnx.export(model, ([example],), str(tmp), opset_version=OPSET, input_names=["image"],
                           output_names=["boxes", "labels", "scores"], dynamo=False)
-        proto = onnx.load(str(tmp))
-        fp16_initializers(proto)
-        del proto.metadata_props[:]
-        entry = proto.metadata_props.add()
-        entry.key, entry.value = _META, json.dumps(meta)
-        onnx.checker.check_model(proto)
-        onnx.save(proto, str(tmp))
+        finish_export(tmp, _META, meta)
         # the graph must give PyTorch's answer (float16 weights in both)
         sess = ort.InferenceSession(str(tmp), providers=["CPUExecutionProvider"])
         got = sess.run(None, {"image": example.numpy()})

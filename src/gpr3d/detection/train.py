@@ -11,7 +11,6 @@ refused, so two runs never mix). At the end the weights are exported with
 from __future__ import annotations
 
 import json
-import math
 import os
 import time
 from dataclasses import asdict, dataclass, field
@@ -20,6 +19,7 @@ from pathlib import Path
 from gpr3d import __version__
 from gpr3d.core.deps import require
 from gpr3d.core.errors import GPR3DError, InvalidDataError
+from gpr3d.core.training import optimiser_step, warmup_cosine
 from gpr3d.detection.models import MODELS, resolve_device
 from gpr3d.detection.windows import WindowConfig
 from gpr3d.io.atomic import atomic_path, atomic_write_text
@@ -98,15 +98,6 @@ def _optimiser(cfg: TrainConfig, params):
     return torch.optim.SGD(params, lr=lr, momentum=0.9, weight_decay=wd)
 
 
-def _schedule(cfg: TrainConfig):
-    def f(step):
-        if step < cfg.warmup:
-            return (step + 1) / cfg.warmup
-        p = (step - cfg.warmup) / max(cfg.steps - cfg.warmup, 1)
-        return 0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min(p, 1.0)))
-    return f
-
-
 def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print,
                    max_seconds: float | None = None) -> dict:
     """Train ``cfg.model`` on windows of ``source(i) -> (Survey, labels)``; returns a summary.
@@ -152,7 +143,7 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
             f"{cfg.labels_fraction:.0%} of the windows")
         source = MixedSource(source, user, cfg.labels_fraction)
     opt = _optimiser(cfg, [p for p in model.parameters() if p.requires_grad])
-    sched = torch.optim.lr_scheduler.LambdaLR(opt, _schedule(cfg))
+    sched = torch.optim.lr_scheduler.LambdaLR(opt, warmup_cosine(cfg.warmup, cfg.steps))
     step = 0
     if ckpt_path.exists():
         try:
@@ -195,13 +186,7 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
             targets = [{k: v.to(device) for k, v in t.items()} for t in targets]
             losses = model(images, targets)
             loss = sum(losses.values())
-            if not torch.isfinite(loss):
-                raise GPR3DError(f"training diverged at step {step} (loss {float(loss)}); lower --lr")
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(model.parameters(), 10.0)
-            opt.step()
-            sched.step()
+            optimiser_step(model, opt, sched, loss, step)
             step += 1
             terms = ";".join(f"{k}={float(v.detach()):.5f}" for k, v in losses.items())
             logf.write(f"{step},{opt.param_groups[0]['lr']:.3g},{float(loss.detach()):.5f},"

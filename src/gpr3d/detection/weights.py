@@ -16,6 +16,7 @@ from pathlib import Path
 from gpr3d.core.deps import require
 from gpr3d.core.errors import FormatError
 from gpr3d.io.atomic import atomic_path
+from gpr3d.io.weights import half_state_dict, read_weights_file
 
 __all__ = ["save_weights", "load_weights", "DEFAULT_WEIGHTS"]
 
@@ -26,8 +27,7 @@ DEFAULT_WEIGHTS = Path(__file__).with_name("default_detector.pt")
 def save_weights(model, name: str, window: dict, path, *, provenance: dict | None = None) -> None:
     """Write ``model``'s weights (float16 for floating tensors) atomically."""
     torch = require("torch")
-    sd = {k: (v.detach().half() if v.is_floating_point() else v.detach()).cpu() for k, v in model.state_dict().items()}
-    obj = {"format": FORMAT, "version": 1, "model": name, "window": dict(window), "state_dict": sd,
+    obj = {"format": FORMAT, "version": 1, "model": name, "window": dict(window), "state_dict": half_state_dict(model),
            "provenance": provenance or {}}
     with atomic_path(path, suffix=".pt.part") as tmp:
         torch.save(obj, tmp)
@@ -35,22 +35,12 @@ def save_weights(model, name: str, window: dict, path, *, provenance: dict | Non
 
 def load_weights(path=None, *, device: str = "cpu"):
     """``(model in eval mode, WindowConfig, provenance)`` from a weights file (default: the shipped one)."""
-    torch = require("torch")
     from gpr3d.detection.models import MODELS, build_model, resolve_device
     from gpr3d.detection.windows import WindowConfig
 
     dev = resolve_device(device)
     p = Path(path) if path is not None else DEFAULT_WEIGHTS
-    if not p.is_file():
-        raise FormatError(p, "no such weights file")
-    try:
-        obj = torch.load(p, map_location="cpu", weights_only=True)
-    except Exception as exc:
-        raise FormatError(p, f"not a readable weights file ({type(exc).__name__}: {str(exc).splitlines()[0][:120]})")
-    if not isinstance(obj, dict) or obj.get("format") != FORMAT:
-        raise FormatError(p, "not a gpr3d detector weights file")
-    if obj.get("version") != 1:
-        raise FormatError(p, f"weights format version {obj.get('version')!r} is not supported (expected 1)")
+    obj = read_weights_file(p, FORMAT, "detector")
     name = obj.get("model")
     if name not in MODELS:
         raise FormatError(p, f"unknown model {name!r} in the weights file")

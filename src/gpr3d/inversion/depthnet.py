@@ -38,9 +38,11 @@ import numpy as np
 
 from gpr3d import __version__
 from gpr3d.core.deps import require, resolve_device
+from gpr3d.core.training import optimiser_step, warmup_cosine
 from gpr3d.core.errors import FormatError, GPR3DError, InvalidDataError
 from gpr3d.core.units import C0
 from gpr3d.io.atomic import atomic_path, atomic_write_text
+from gpr3d.io.weights import half_state_dict, read_weights_file
 
 __all__ = ["ARCHS", "DepthConfig", "DepthRecord", "prepare_depth_record", "depth_window", "window_targets_m", "crop_time",
            "build_depthnet", "DepthTrainConfig", "train_depthnet", "save_depthnet", "load_depthnet",
@@ -398,14 +400,7 @@ def train_depthnet(cfg: DepthTrainConfig, records: list[DepthRecord], *, log=pri
         opt = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=1e-4)
     else:
         opt = torch.optim.SGD(model.parameters(), lr=lr, momentum=0.9, weight_decay=5e-5)
-    warm = min(100, max(cfg.steps // 10, 1))
-
-    def sched_f(step):
-        if step < warm:
-            return (step + 1) / warm
-        return 0.02 + 0.98 * 0.5 * (1 + math.cos(math.pi * min((step - warm) / max(cfg.steps - warm, 1), 1.0)))
-
-    sched = torch.optim.lr_scheduler.LambdaLR(opt, sched_f)
+    sched = torch.optim.lr_scheduler.LambdaLR(opt, warmup_cosine(min(100, max(cfg.steps // 10, 1)), cfg.steps))
     ckpt = out / "checkpoint.pt"
     key = {k: v for k, v in asdict(cfg).items() if k not in ("out", "device", "checkpoint_every")}
     step = 0
@@ -451,13 +446,7 @@ def train_depthnet(cfg: DepthTrainConfig, records: list[DepthRecord], *, log=pri
             teps = torch.tensor([it[4] for it in items], dtype=torch.float32, device=device)
             eps, q = model(images, rois, direct)
             loss, le, ld = _loss(eps, q[:-1], teps, tq, cfg)
-            if not torch.isfinite(loss):
-                raise GPR3DError(f"DepthNet training diverged at step {step}; lower --lr")
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(model.parameters(), 10.0)
-            opt.step()
-            sched.step()
+            optimiser_step(model, opt, sched, loss, step, what="DepthNet training")
             step += 1
             logf.write(f"{step},{opt.param_groups[0]['lr']:.3g},{float(loss.detach()):.5f},{le:.5f},{ld:.5f},"
                        f"{time.perf_counter() - t0:.1f}\n")
@@ -481,26 +470,16 @@ def train_depthnet(cfg: DepthTrainConfig, records: list[DepthRecord], *, log=pri
 def save_depthnet(model, net: DepthConfig, path, *, provenance: dict | None = None) -> None:
     """Write DepthNet's weights (float16) with its configuration and provenance, atomically."""
     torch = require("torch")
-    sd = {k: (v.detach().half() if v.is_floating_point() else v.detach()).cpu() for k, v in model.state_dict().items()}
-    obj = {"format": FORMAT, "version": 1, "net": asdict(net), "state_dict": sd, "provenance": provenance or {}}
+    obj = {"format": FORMAT, "version": 1, "net": asdict(net), "state_dict": half_state_dict(model),
+           "provenance": provenance or {}}
     with atomic_path(path, suffix=".pt.part") as tmp:
         torch.save(obj, tmp)
 
 
 def load_depthnet(path, *, device: str = "cpu"):
     """``(model in eval mode, DepthConfig, provenance)`` from a DepthNet weights file (``.pt``)."""
-    torch = require("torch")
     p = Path(path)
-    if not p.is_file():
-        raise FormatError(p, "no such DepthNet weights file")
-    try:
-        obj = torch.load(p, map_location="cpu", weights_only=True)
-    except Exception as exc:
-        raise FormatError(p, f"not a readable weights file ({type(exc).__name__})")
-    if not isinstance(obj, dict) or obj.get("format") != FORMAT:
-        raise FormatError(p, "not a gpr3d DepthNet weights file")
-    if obj.get("version") != 1:
-        raise FormatError(p, f"DepthNet weights version {obj.get('version')!r} is not supported (expected 1)")
+    obj = read_weights_file(p, FORMAT, "DepthNet")
     net = DepthConfig(**obj["net"])
     model = build_depthnet(net)
     try:
@@ -595,11 +574,11 @@ def export_depthnet_onnx(weights, out) -> dict:
     the window's depth).
     """
     torch = require("torch")
-    onnx = require("onnx")
+    require("onnx")  # a one-line hint when missing
     require("onnxruntime")
     import hashlib
 
-    from gpr3d.io.onnxweights import fp16_initializers
+    from gpr3d.io.onnxweights import finish_export
 
     model, net, prov = load_depthnet(weights)
     rng = np.random.default_rng(0)
@@ -614,13 +593,7 @@ def export_depthnet_onnx(weights, out) -> dict:
                           output_names=["eps", "depth"], dynamo=False,
                           dynamic_axes={"images": {0: "B"}, "rois": {0: "K"}, "direct": {0: "B"},
                                         "eps": {0: "B"}, "depth": {0: "K"}})
-        proto = onnx.load(str(tmp))
-        fp16_initializers(proto)
-        del proto.metadata_props[:]
-        entry = proto.metadata_props.add()
-        entry.key, entry.value = _META, json.dumps(meta)
-        onnx.checker.check_model(proto)
-        onnx.save(proto, str(tmp))
+        finish_export(tmp, _META, meta)
         sess, _, _ = _onnx_session(Path(tmp))
         got = sess.run(None, {"images": images, "rois": rois, "direct": direct})
         with torch.no_grad():

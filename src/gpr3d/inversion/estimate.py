@@ -28,9 +28,8 @@ import math
 import numpy as np
 
 from gpr3d.core.errors import InvalidDataError
-from gpr3d.core.units import C0
 
-__all__ = ["METHODS", "estimate_depths", "depth_from_apex"]
+__all__ = ["METHODS", "estimate_depths"]
 
 METHODS = ("hybrid", "net", "fit")
 #: the record-level fit's mean relative error of eps_r on the gprMax training twin (16 records)
@@ -38,13 +37,6 @@ FIT_BIAS = -0.128
 #: relative uncertainty added to the fit's (bias-corrected) eps_r before it is combined: its RMS relative
 #: error on the same records
 FIT_MODEL_ERROR = 0.25
-
-
-def depth_from_apex(apex_time_s: float, t0_s: float, eps_r: float, offset_m: float) -> float:
-    """Depth of a reflector's top below the surface from its apex time: the ray tx -> top -> rx."""
-    v = C0 / math.sqrt(eps_r)
-    half = 0.5 * v * (apex_time_s - t0_s)
-    return math.sqrt(max(half * half - 0.25 * offset_m * offset_m, 0.0)) if half > 0 else float("nan")
 
 
 def _combine(a, sa, b, sb):

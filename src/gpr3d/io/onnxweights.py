@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["fp16_initializers"]
+__all__ = ["fp16_initializers", "finish_export"]
 
 
 def fp16_initializers(model_proto):
@@ -33,3 +33,19 @@ def fp16_initializers(model_proto):
     nodes = list(g.node)
     del g.node[:]
     g.node.extend(casts + nodes)
+
+
+def finish_export(path, key: str, meta: dict) -> None:
+    """An ONNX file just exported at ``path``: weights to float16, ``meta`` (JSON) under ``key`` in its
+    metadata, checked and saved in place."""
+    import json
+
+    import onnx
+
+    proto = onnx.load(str(path))
+    fp16_initializers(proto)
+    del proto.metadata_props[:]
+    entry = proto.metadata_props.add()
+    entry.key, entry.value = key, json.dumps(meta)
+    onnx.checker.check_model(proto)
+    onnx.save(proto, str(path))
