@@ -8,7 +8,8 @@ import pytest
 
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.survey import Survey
-from gpr3d.detection.windows import Window, WindowConfig, apex_of_box, merge, prepare, window_targets, windows
+from gpr3d.detection.windows import (Window, WindowConfig, apex_of_box, merge, prepare, width_rate, window_targets,
+                                    windows)
 from gpr3d.io.coco import BOX_PAD_PERIODS, PixelMap
 
 
@@ -91,6 +92,38 @@ def test_apex_from_box_rule_and_from_data_at_the_record_edge():
     tr2, _ = apex_of_box(proc2, [0, apex_t2 - 1e-9, apex2 + 25, apex_t2 + 4e-9], spr, frequency_hz=f,
                          n_traces=s2.n_traces)
     assert abs(tr2 - apex2) <= 2
+
+
+def test_cut_boxes_take_their_width_from_the_record_s_whole_boxes():
+    """Under the label rule a box's width over its height (less the pads) is one number per record, whatever the
+    target's depth and radius; a box cut by the record's edge then gives its apex from its height."""
+    from gpr3d.simulation.labels import label_scene
+    from gpr3d.simulation.scene import Antenna, Medium, Scene, Target
+
+    scene = Scene(medium=Medium("concrete", 7.0, 0.005), antenna=Antenna(1.5e9, 0.02), width_m=1.0, depth_m=0.4,
+                  n_traces=150, trace_step_m=0.005, x_start_m=0.1, time_window_s=8e-9,
+                  targets=[Target("rebar", x_m=0.12, depth_m=0.05, radius_m=0.008),      # cut by the first trace
+                           Target("rebar", x_m=0.30, depth_m=0.04, radius_m=0.006),
+                           Target("steel_pipe", x_m=0.45, depth_m=0.10, radius_m=0.03),
+                           Target("void", x_m=0.60, depth_m=0.07, radius_m=0.02),
+                           Target("pvc_pipe", x_m=0.82, depth_m=0.09, radius_m=0.02)])  # cut by the last trace
+    n_samples, dt = 801, 1e-11
+    labels = label_scene(scene, n_samples, dt)
+    boxes = [lab["box"] for lab in labels]
+    cut = [lab for lab in labels if lab["box"][0] == 0 or lab["box"][2] == scene.n_traces - 1]
+    assert len(cut) == 2 and all(lab["visible"] for lab in labels)
+    t_end = (n_samples - 1) * dt
+    f = scene.antenna.frequency_hz
+    rate = width_rate(boxes, scene.n_traces, t_end, f)
+    v = 299792458.0 / math.sqrt(7.0)  # the rule's rate: v tan45 / (dx (1/cos45 - 1)), up to whole traces
+    assert rate == pytest.approx(v / (0.005 * (math.sqrt(2) - 1)), rel=0.05)
+    blank = np.zeros((scene.n_traces, 256))
+    spr = t_end / 255
+    for lab in cut:
+        tr, t = apex_of_box(blank, lab["box"], spr, frequency_hz=f, n_traces=scene.n_traces, width_per_s=rate)
+        assert abs(tr - lab["apex_trace"]) <= 1.5 and t == pytest.approx(lab["apex_time_s"])
+    assert width_rate([b for b in boxes if b[0] == 0], scene.n_traces, t_end, f) is None  # no whole box: no rate
+    assert width_rate(boxes, scene.n_traces, t_end, None) is None
 
 
 def test_prepare_keeps_time_from_the_first_sample():

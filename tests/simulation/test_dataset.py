@@ -177,3 +177,29 @@ def test_survey_preset_sample_runs_following_models_and_cleans_up(tmp_path, monk
     # the labelled apex lies on the record's trace nearest the rebar (x = 0.13 m: trace 1.5 at 0.1 + 0.02 i)
     assert lab["labels"][0]["apex_trace"] == pytest.approx((0.13 - s.positions_xyz[0, 0]) / 0.02, abs=0.2)
     assert simulate_sample(cfg, 0)["skipped"]  # a finished sample is not built again
+
+
+def test_start_index_and_time_limit_build_part_of_a_set_and_resume(tmp_path):
+    """--start builds start..n-1 only (two machines can share one set); --max-seconds stops with every finished
+    sample kept and the rest left for the next run; together they give the samples of one straight run."""
+    pytest.importorskip("distributed")
+    import json
+
+    from gpr3d.simulation.dataset import SimulateConfig, build_dataset
+
+    quiet = {"progress": False, "log": lambda *_: None}
+    part = build_dataset(SimulateConfig(out=str(tmp_path / "a"), n=5, start=3, engine="forward", workers=1), **quiet)
+    assert part["built"] == 2 and sorted(p.name for p in (tmp_path / "a" / "samples").iterdir()) == ["000003", "000004"]
+    cut = build_dataset(SimulateConfig(out=str(tmp_path / "a"), n=5, engine="forward", workers=1, max_seconds=1e-3),
+                        **quiet)
+    assert cut["left"] >= 1 and cut["built"] + cut["left"] <= 3  # stopped before samples 0-2 all finished
+    rest = build_dataset(SimulateConfig(out=str(tmp_path / "a"), n=5, engine="forward", workers=1), **quiet)
+    assert rest["in_manifest"] == 5 and rest["built"] <= 3
+    build_dataset(SimulateConfig(out=str(tmp_path / "b"), n=5, engine="forward", workers=1), **quiet)
+    for i in range(5):  # the same labels as one uninterrupted run
+        a = json.loads((tmp_path / "a" / "samples" / f"{i:06d}" / "labels.json").read_text())
+        b = json.loads((tmp_path / "b" / "samples" / f"{i:06d}" / "labels.json").read_text())
+        assert a["labels"] == b["labels"] and a["eps_r"] == b["eps_r"]
+    for bad, msg in (({"start": 5}, "--start"), ({"start": -1}, "--start"), ({"max_seconds": 0.0}, "--max-seconds")):
+        with pytest.raises(gpr3d.GPR3DError, match=msg):
+            build_dataset(SimulateConfig(out=str(tmp_path / "c"), n=5, engine="forward", **bad), **quiet)

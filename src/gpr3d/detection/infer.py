@@ -15,7 +15,7 @@ import numpy as np
 
 from gpr3d.core.deps import require
 from gpr3d.core.errors import InvalidDataError
-from gpr3d.detection.windows import WindowConfig, apex_of_box, merge, prepare, rows_interval, windows
+from gpr3d.detection.windows import WindowConfig, apex_of_box, merge, prepare, rows_interval, width_rate, windows
 
 __all__ = ["Detector", "load_detector", "ENGINES"]
 
@@ -102,15 +102,18 @@ class Detector:
         # apexes from data whose rows keep the pulse's shape (equalising the rows distorts it)
         plain = prepare(survey, replace(self.window, equalise=False)) if self.window.equalise else proc
         t_end = (survey.n_samples - 1) * survey.dt_s
-        targets = []
+        kept = []
         for b, s in sorted(zip(boxes, scores), key=lambda p: -p[1]):
-            if s < score_threshold:
-                continue
             b = [float(np.clip(b[0], 0, survey.n_traces - 1)), float(np.clip(b[1], 0, t_end)),
                  float(np.clip(b[2], 0, survey.n_traces - 1)), float(np.clip(b[3], 0, t_end))]
-            if b[2] <= b[0] or b[3] <= b[1]:
-                continue
-            at, att = apex_of_box(plain, b, s_per_row, frequency_hz=survey.frequency_hz, n_traces=survey.n_traces)
+            if s >= score_threshold and b[2] > b[0] and b[3] > b[1]:
+                kept.append((b, s))
+        # cut boxes take their width from the record's whole ones (one wave speed, one trace step)
+        rate = width_rate([b for b, s in kept if s >= 0.5], survey.n_traces, t_end, survey.frequency_hz)
+        targets = []
+        for b, s in kept:
+            at, att = apex_of_box(plain, b, s_per_row, frequency_hz=survey.frequency_hz, n_traces=survey.n_traces,
+                                  width_per_s=rate)
             t = {"box": b, "score": float(s), "apex_trace": int(round(at)), "apex_time_s": float(att)}
             if survey.positions_xyz is not None and survey.distances_m is not None:
                 t["x_m"] = float(np.interp(at, np.arange(survey.n_traces), survey.distances_m))

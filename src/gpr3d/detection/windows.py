@@ -26,6 +26,7 @@ from gpr3d.io.coco import BOX_PAD_PERIODS, PixelMap
 from gpr3d.processing.image import network_view, record_scale, render_channels as render
 
 __all__ = ["WindowConfig", "Window", "prepare", "windows", "make_window", "record_scale", "rows_interval", "render",
+           "width_rate",
            "merge", "apex_of_box", "window_targets"]
 
 
@@ -164,29 +165,56 @@ def merge(per_window: list[tuple[Window, np.ndarray, np.ndarray]], n_traces: int
     return boxes_a[keep], np.asarray(scores)[keep]
 
 
+def width_rate(boxes, n_traces: int, t_end_s: float, frequency_hz: float | None) -> float | None:
+    """Traces of box width per second of box height beyond the two pads, from the record's whole boxes.
+
+    Under the label rule (``docs/labels.md``) a box reaches ``(depth + radius) tan 45 deg``
+    either side of the apex and down to the arrival there, so its width over its height
+    less ``2 BOX_PAD_PERIODS / f`` is ``v tan(45) / (dx (1 / cos(45) - 1))`` for every target
+    of one record, whatever its depth and radius (one wave speed ``v``, one trace step
+    ``dx``). The median over the boxes that neither edge of the record nor its end cuts;
+    ``None`` when there are none or the frequency is unknown.
+    """
+    if not frequency_hz:
+        return None
+    b = np.asarray(boxes, dtype=float).reshape(-1, 4)
+    pad2 = 2 * BOX_PAD_PERIODS / frequency_hz
+    h = b[:, 3] - b[:, 1] - pad2
+    whole = (b[:, 0] > 0.5) & (b[:, 2] < n_traces - 1.5) & (b[:, 3] < 0.99 * t_end_s) & (h > 0.2 * pad2)
+    if not whole.any():
+        return None
+    return float(np.median((b[whole, 2] - b[whole, 0]) / h[whole]))
+
+
 def apex_of_box(processed: np.ndarray, box, s_per_row: float, *, frequency_hz: float | None = None,
-                n_traces: int | None = None) -> tuple[float, float]:
+                n_traces: int | None = None, width_per_s: float | None = None) -> tuple[float, float]:
     """Apex ``(trace, time_s)`` of the hyperbola in ``box`` (times from the first sample).
 
     Boxes follow the label rule (``docs/labels.md``): symmetric about the apex in
     traces, their top ``BOX_PAD_PERIODS / f`` before the apex. So the apex trace is
-    the box's centre, unless the box is cut by the record's first or last trace;
-    then it is the trace of earliest strong arrival (envelope above half its box
-    maximum) in the box. The apex time is the box top plus the pad when the
-    antenna frequency is known, else the envelope peak on the apex trace in the
-    box's upper part.
+    the box's centre, unless the box is cut by the record's first or last trace.
+    Then, given the record's ``width_per_s`` (:func:`width_rate`), the box's height
+    gives its whole width, and the apex lies half of it in from the uncut side;
+    without it (or for a box cut on both sides, or by the record's end), the apex
+    is the trace of earliest strong arrival (envelope above half its box maximum).
+    The apex time is the box top plus the pad when the antenna frequency is known,
+    else the envelope peak on the apex trace in the box's upper part.
     """
     i0, ta, i1, tb = (float(v) for v in box)
     n, rows = processed.shape
     n_traces = n if n_traces is None else n_traces
+    left, right = i0 <= 0.5, i1 >= n_traces - 1.5
+    if width_per_s and frequency_hz and left != right and tb < 0.99 * (rows - 1) * s_per_row:
+        half = 0.5 * width_per_s * max(tb - ta - 2 * BOX_PAD_PERIODS / frequency_hz, 0.0)
+        trace = float(np.clip(i1 - half if left else i0 + half, 0, n_traces - 1))
+        return trace, ta + BOX_PAD_PERIODS / frequency_hz
     c0, c1 = int(np.clip(np.floor(i0), 0, n - 1)), int(np.clip(np.ceil(i1), 0, n - 1))
     r0, r1 = int(np.clip(np.floor(ta / s_per_row), 0, rows - 1)), int(np.clip(np.ceil(tb / s_per_row), 0, rows - 1))
     trace = 0.5 * (i0 + i1)
     env = None
     if c1 >= c0 and r1 > r0:
         env = np.abs(hilbert(processed[c0 : c1 + 1].astype(np.float64), axis=1))[:, r0 : r1 + 1]
-    cut = i0 <= 0.5 or i1 >= n_traces - 1.5
-    if cut and env is not None and env.max() > 0:
+    if (left or right) and env is not None and env.max() > 0:
         top = env[:, : max(2, (env.shape[1] + 1) // 2)]
         strong = top >= 0.5 * top.max()
         first = np.where(strong.any(axis=1), np.argmax(strong, axis=1), top.shape[1] + 5).astype(float)

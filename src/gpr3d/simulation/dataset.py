@@ -62,6 +62,8 @@ class SimulateConfig:
     image_height: int = 256
     preset: str = "standard"
     host: str | None = None  #: force "concrete" or "soil"
+    start: int = 0  #: first scene index: indices start..n-1 are built
+    max_seconds: float | None = None  #: stop waiting after this long; finished samples stay, the rest resume later
 
 
 def _scene_for(cfg_dict: dict, index: int):
@@ -200,6 +202,10 @@ def build_dataset(cfg: SimulateConfig, *, progress: bool = True, log=print) -> d
     """Build (or finish) the dataset described by ``cfg``; returns a summary with throughput."""
     if cfg.n < 1:
         raise GPR3DError(f"--n must be >= 1, got {cfg.n}")
+    if not 0 <= cfg.start < cfg.n:
+        raise GPR3DError(f"--start must lie in 0..{cfg.n - 1} (below --n), got {cfg.start}")
+    if cfg.max_seconds is not None and not cfg.max_seconds > 0:
+        raise GPR3DError(f"--max-seconds must be > 0, got {cfg.max_seconds}")
     if cfg.preset not in PRESETS:
         raise GPR3DError(f"unknown preset {cfg.preset!r} (use {', '.join(PRESETS)})")
     if cfg.engine == "gprmax":
@@ -219,12 +225,14 @@ def build_dataset(cfg: SimulateConfig, *, progress: bool = True, log=print) -> d
     if removed:
         log(f"removed {removed} half-built sample(s) from an interrupted run")
     done = _finished(out)
-    todo = [i for i in range(cfg.n) if i not in done]
-    log(f"{cfg.n} samples: {len(done & set(range(cfg.n)))} already built, {len(todo)} to build "
+    wanted = range(cfg.start, cfg.n)
+    todo = [i for i in wanted if i not in done]
+    log(f"{len(wanted)} samples: {len(done & set(wanted))} already built, {len(todo)} to build "
         f"({cfg.engine}, {'scheduler ' + cfg.scheduler if cfg.scheduler else f'{cfg.workers} local worker(s)'})")
     t0 = time.perf_counter()
     walls: list[float] = []
     failures: list[dict] = []
+    stopped = 0
     if todo:
         distributed = require("distributed")
         client, cluster = _client(cfg)
@@ -237,16 +245,21 @@ def build_dataset(cfg: SimulateConfig, *, progress: bool = True, log=print) -> d
                 from tqdm import tqdm
 
                 bar = tqdm(total=len(todo), unit="sample", desc="simulate")
-            for fut in distributed.as_completed(futures):
-                try:
-                    res = fut.result()
-                    walls.append(res["wall_s"])
-                except Exception as exc:  # noqa: BLE001 - one bad scene must not stop the others
-                    idx = todo[futures.index(fut)]
-                    failures.append({"index": idx, "error": f"{type(exc).__name__}: {exc}"[:500]})
-                    log(f"sample {idx} failed: {failures[-1]['error']}")
-                if bar:
-                    bar.update(1)
+            try:
+                for fut in distributed.as_completed(futures, timeout=cfg.max_seconds):
+                    try:
+                        res = fut.result()
+                        walls.append(res["wall_s"])
+                    except Exception as exc:  # noqa: BLE001 - one bad scene must not stop the others
+                        idx = todo[futures.index(fut)]
+                        failures.append({"index": idx, "error": f"{type(exc).__name__}: {exc}"[:500]})
+                        log(f"sample {idx} failed: {failures[-1]['error']}")
+                    if bar:
+                        bar.update(1)
+            except distributed.TimeoutError:  # --max-seconds: the unfinished samples resume on the next run
+                stopped = sum(not f.done() for f in futures)
+                client.cancel(futures)
+                log(f"--max-seconds {cfg.max_seconds:g} reached: {stopped} sample(s) left for the next run")
             if bar:
                 bar.close()
         finally:
@@ -255,12 +268,12 @@ def build_dataset(cfg: SimulateConfig, *, progress: bool = True, log=print) -> d
                 cluster.close()
     elapsed = time.perf_counter() - t0
     manifest = write_manifest(out, cfg)
-    built = len(todo) - len(failures)
+    built = len(walls)
     if failures:
         atomic_write_text(out / "failures.json", json.dumps(failures, indent=1))
     elif (out / "failures.json").exists():
         (out / "failures.json").unlink()
-    summary = {"n": cfg.n, "built": built, "failed": failures, "elapsed_s": elapsed,
+    summary = {"n": cfg.n, "built": built, "failed": failures, "left": stopped, "elapsed_s": elapsed,
                "samples_per_s": built / elapsed if built and elapsed > 0 else None,
                "mean_sample_wall_s": float(np.mean(walls)) if walls else None,
                "in_manifest": manifest["n_samples"]}

@@ -77,13 +77,15 @@ def build_gprmax_scene(scene: Scene, *, x0: float = 0.0, width: float | None = N
     else:
         s.add(g.Box(p1=(0, 0, 0), p2=(width, ys, INF), material_id="host"))
 
-    def inside(cx, r):  # does a circle at world x = cx reach into the model (more than a sliver)?
+    def inside(cx, depth, r):  # does a circle (world x, depth of its top) reach into the model more than a sliver?
+        if ys - depth <= 2 * dx:  # its top (height ys - depth above the floor) within two cells of the floor
+            return False
         if not local:
             return True
         return cx + r > x0 + 2 * dx and cx - r < x0 + width - 2 * dx
 
-    targets = [t for t in scene.targets if inside(t.x_m, t.radius_m)]
-    stones = [(k, st) for k, st in enumerate(scene.stones) if inside(st.x_m, st.radius_m)]
+    targets = [t for t in scene.targets if inside(t.x_m, t.depth_m, t.radius_m)]
+    stones = [(k, st) for k, st in enumerate(scene.stones) if inside(st.x_m, st.depth_m, st.radius_m)]
     used = {t.material for t in targets} | {t.fill for t in targets if t.fill}
     for name in sorted(used - {"pec"}):
         er, se = MATERIALS[name]
