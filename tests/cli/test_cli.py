@@ -151,3 +151,37 @@ def test_demo_end_to_end(tmp_path):
         cfg = json.loads((tmp_path / "d" / "reconstruction_masked" / "config.json").read_text())
         assert cfg["eps_r"] == pytest.approx(depth["eps_r"])
         assert det["depth"]["real"]["eps_r_header"] == 6.0
+    pose = summary["stages"]["pose"]  # the fused path beats chained odometry that a gap and gross errors break
+    assert {"pose_fused.tum", "pose_vo_alone.tum", "pose_truth.tum", "pose_paths.png"} <= names
+    assert pose["path_m"] > 12 and pose["vo_rejected"] >= pose["vo_outliers"] > 0
+    if "fused_ape_m" in pose:
+        assert pose["fused_ape_m"] < 0.005 * pose["path_m"] and pose["fused_ape_m"] < 0.5 * pose["vo_alone_ape_m"]
+
+
+def test_pose_simulate_then_fuse_writes_a_trajectory_close_to_the_truth(tmp_path):
+    pytest.importorskip("evo")
+    from gpr3d.io.trajectory import read_tum
+    from gpr3d.pose.metrics import ape
+
+    rig = tmp_path / "rig"
+    r = run_cli("pose", "simulate", "--out", rig, "--duration", "40", "--seed", "2")
+    assert r.returncode == 0, r.stderr
+    r = run_cli("pose", "fuse", "--imu", rig / "imu.csv", "--odometry", rig / "odometry.tum", "--wheel",
+                rig / "wheel.csv", "--rig", rig / "rig.json", "--still", "2", "--out", tmp_path / "a.tum",
+                "--truth", rig / "truth.tum", "--figure", tmp_path / "p.png")
+    assert r.returncode == 0, r.stderr
+    est, truth = read_tum(tmp_path / "a.tum"), read_tum(rig / "truth.tum")
+    path = float(np.sum(np.linalg.norm(np.diff(truth.positions_xyz, axis=0), axis=1)))
+    assert path > 8 and ape(est, truth)["rmse"] < 0.005 * path
+    assert (tmp_path / "p.png").stat().st_size > 10_000
+    # without the rig's mounts and latency the same data fuse worse: the file's values are used
+    r = run_cli("pose", "fuse", "--imu", rig / "imu.csv", "--odometry", rig / "odometry.tum", "--still", "2",
+                "--out", tmp_path / "b.tum")
+    assert r.returncode == 0, r.stderr
+    assert ape(read_tum(tmp_path / "b.tum"), truth)["rmse"] > 1.5 * ape(est, truth)["rmse"]
+    for bad, msg in ((["--imu", rig / "wheel.csv"], "IMU CSV header lacks"),
+                     (["--imu", rig / "imu.csv", "--odometry", rig / "odometry.tum", "--odometry-sigma", "a,b,c"],
+                      "--odometry-sigma"),
+                     (["--imu", rig / "imu.csv", "--flat-ground", "-1"], "--flat-ground")):
+        r = run_cli("pose", "fuse", *bad, "--out", tmp_path / "x.tum")
+        assert r.returncode != 0 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr

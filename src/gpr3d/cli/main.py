@@ -26,6 +26,7 @@ examples:
   gpr3d convert LINE01.DZT line01.sgy          (.h5 gpr3d HDF5, .sgy/.segy SEG-Y, .png figure)
   gpr3d detect LINE01.DZT --out det.json --overlay det.png
   gpr3d reconstruct survey.h5 --mask detect --out rec
+  gpr3d pose fuse --imu imu.csv --odometry cam.tum --wheel wheel.csv --rig rig.json --out antenna.tum
 """
 
 
@@ -157,11 +158,90 @@ def cmd_simulate(args):
 
     cfg = SimulateConfig(out=args.out, n=args.n, seed=args.seed, engine=args.engine, workers=args.workers,
                          scheduler=args.scheduler, image_height=args.image_height, preset=args.preset,
-                         host=args.host)
+                         host=args.host, start=args.start, max_seconds=args.max_seconds)
     summary = build_dataset(cfg, progress=not args.no_progress)
     if summary["samples_per_s"]:
         print(f"throughput: {summary['samples_per_s'] * 3600:.0f} samples/hour "
               f"({summary['mean_sample_wall_s']:.1f} s per sample per worker)")
+    return 0
+
+
+def cmd_pose(args):
+    from gpr3d.io.inertial import (read_imu_csv, read_rig, read_wheel_csv, relative_from_camera_poses,
+                                   write_imu_csv, write_rig, write_wheel_csv)
+    from gpr3d.io.trajectory import read_trajectory, write_tum
+
+    out = Path(args.out)
+    if args.action == "simulate":
+        from scipy.spatial.transform import Rotation
+
+        from gpr3d.core.trajectory import Trajectory
+        from gpr3d.pose.rig import RigConfig, simulate_rig
+
+        if not args.duration >= 20:
+            raise GPR3DError(f"--duration must be at least 20 s, got {args.duration}")
+        run = simulate_rig(RigConfig(duration_s=args.duration, vo_gap=(args.duration / 2, 2.0)), seed=args.seed)
+        out.mkdir(parents=True, exist_ok=True)
+        cfg = run.config
+        write_imu_csv(run.imu, out / "imu.csv")
+        keep = run.vo.valid.copy()  # frames whose motion from the one before is known; lost ones are left out
+        keep[0] = True
+        Rc, pc = run.vo.chained()
+        cam = Trajectory(run.vo.t_s[keep], pc[keep], Rotation.from_matrix(Rc[keep]).as_quat()[:, [3, 0, 1, 2]])
+        write_tum(cam, out / "odometry.tum")
+        write_wheel_csv(*run.wheel(), out / "wheel.csv")
+        write_tum(run.truth_trajectory(), out / "truth.tum")
+        write_rig(out / "rig.json", imu_T_camera=cfg.imu_T_camera, imu_T_antenna=cfg.imu_T_antenna,
+                  camera_time_offset_s=cfg.camera_time_offset_s)
+        print(f"wrote imu.csv, odometry.tum (camera poses), wheel.csv, truth.tum (antenna) and rig.json to {out}/: "
+              f"{run.path_length_m:.1f} m in {args.duration:g} s, odometry lost for 2 s at {args.duration / 2:g} s "
+              f"({int(keep.sum())} odometry frames)")
+        return 0
+    if not args.imu:
+        raise GPR3DError("pose fuse needs --imu FILE.csv")
+    if not args.still > 0:
+        raise GPR3DError(f"--still must be the positive number of seconds the cart stands at the start, got {args.still}")
+    if args.flat_ground is not None and not args.flat_ground > 0:
+        raise GPR3DError(f"--flat-ground must be a positive height tolerance in metres, got {args.flat_ground}")
+    imu = read_imu_csv(args.imu)
+    rig = read_rig(args.rig) if args.rig else {}
+    vo = None
+    if args.odometry:
+        try:
+            sig = [float(v) for v in args.odometry_sigma.split(",")]
+        except ValueError:
+            sig = []
+        if len(sig) != 3 or min(sig) <= 0:
+            raise GPR3DError(f"--odometry-sigma takes ROT_DEG,TRANS_FRAC,TRANS_FLOOR_M (three positive numbers), "
+                             f"got {args.odometry_sigma!r}")
+        vo = relative_from_camera_poses(read_trajectory(args.odometry), rot_sigma_deg=sig[0], trans_frac=sig[1],
+                                        trans_floor_m=sig[2])
+    wheel = read_wheel_csv(args.wheel) if args.wheel else None
+    from gpr3d.pose.eskf import EskfConfig, fuse
+
+    cfg = EskfConfig(init_still_s=args.still, flat_ground_sigma_m=args.flat_ground, **rig)
+    res = fuse(imu, vo, cfg, wheel=wheel)
+    traj = res.antenna_trajectory()
+    write_tum(traj, out)
+    msg = (f"wrote {out}: {len(traj)} antenna poses; odometry frames used {int(res.vo_used.sum())}, gated out "
+           f"{int(res.vo_rejected.sum())}; zero-velocity updates {res.zupt_count}")
+    if args.truth:
+        from gpr3d.pose.metrics import ape
+
+        a = ape(traj, read_trajectory(args.truth))
+        msg += f"; APE against {Path(args.truth).name}: {a['rmse'] * 100:.1f} cm RMS over {a['n']} poses"
+    if args.figure:
+        from gpr3d.viz.maps import save_paths_png
+
+        paths = {"fused": traj.positions_xyz}
+        if args.truth:
+            from gpr3d.pose.metrics import aligned_positions
+
+            paths = {"truth": read_trajectory(args.truth).positions_xyz,
+                     "fused (aligned)": aligned_positions(traj, read_trajectory(args.truth))}
+        save_paths_png(args.figure, paths, title=f"antenna path: {Path(args.imu).name}")
+        msg += f"; figure {args.figure}"
+    print(msg)
     return 0
 
 
@@ -655,7 +735,34 @@ def build_parser() -> argparse.ArgumentParser:
                          "survey (survey-scale scans of the held-out gprMax set, 100-200 traces each)")
     sp.add_argument("--host", choices=("concrete", "soil"), default=None, help="only this host medium")
     sp.add_argument("--image-height", type=int, default=256, help="rows of the detector images (default 256)")
+    sp.add_argument("--start", type=int, default=0,
+                    help="first scene index (build start..n-1; e.g. to share one set between machines)")
+    sp.add_argument("--max-seconds", type=float, default=None,
+                    help="stop after this long, keeping every finished sample (re-run to resume)")
     sp.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    sp = add("pose", cmd_pose, "antenna poses from an IMU, visual odometry and a survey wheel (error-state EKF)",
+             "examples:\n  gpr3d pose simulate --out rig1                 (a synthetic cart's recordings and truth)\n"
+             "  gpr3d pose fuse --imu rig1/imu.csv --odometry rig1/odometry.tum --wheel rig1/wheel.csv \\\n"
+             "      --rig rig1/rig.json --still 2 --out antenna.tum --truth rig1/truth.tum --figure paths.png\n"
+             "IMU CSV: t,ax,ay,az,gx,gy,gz (s, m/s^2, rad/s); wheel CSV: t,distance (s, m); odometry: a TUM file "
+             "of camera poses\n(a jump in its frame times is lost tracking); rig JSON: imu_T_camera, imu_T_antenna "
+             "(4 x 4), camera_time_offset_s.")
+    sp.add_argument("action", choices=("fuse", "simulate"), help="fuse recordings, or simulate a rig's recordings")
+    sp.add_argument("--out", required=True, help="fuse: the antenna trajectory (TUM); simulate: a folder")
+    sp.add_argument("--imu", default=None, help="IMU samples (CSV)")
+    sp.add_argument("--odometry", default=None, help="visual odometry: camera poses (TUM or CSV trajectory)")
+    sp.add_argument("--odometry-sigma", default="0.03,0.01,0.0005",
+                    help="odometry's error per frame: ROT_DEG,TRANS_FRAC,TRANS_FLOOR_M (default 0.03,0.01,0.0005)")
+    sp.add_argument("--wheel", default=None, help="survey wheel: forward distance (CSV t,distance)")
+    sp.add_argument("--rig", default=None, help="mounts and camera latency (JSON); default: all at the IMU, none")
+    sp.add_argument("--still", type=float, default=1.0, help="seconds the cart stands still at the start (1)")
+    sp.add_argument("--flat-ground", type=float, default=None, metavar="SIGMA_M",
+                    help="the ground is flat: hold the IMU at its start height within this (m)")
+    sp.add_argument("--truth", default=None, help="a true antenna trajectory to report the APE against (evo)")
+    sp.add_argument("--figure", default=None, help="PNG plan view of the path")
+    sp.add_argument("--duration", type=float, default=90.0, help="simulate: seconds of motion (90)")
+    sp.add_argument("--seed", type=int, default=0, help="simulate: seed")
 
     sp = add("dataset", cmd_dataset, "pack a simulated dataset into one file, or export a packed one as COCO",
              "examples:\n  gpr3d dataset pack gprmax400 datasets/gprmax400.h5\n"

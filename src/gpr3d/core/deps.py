@@ -19,7 +19,7 @@ EXTRAS: dict[str, tuple[str, str]] = {
     "gprMax": ("sim", "FDTD simulation of GPR scenes"),
     "torch": ("dl", "detection and DepthNet networks"),
     "torchvision": ("dl", "detection networks"),
-    "open3d": ("pose", "RGB-D visual odometry"),
+    "open3d": ("rgbd", "RGB-D visual odometry"),
     "evo": ("pose", "trajectory metrics"),
     "dask": ("scale", "parallel dataset building"),
     "distributed": ("scale", "parallel dataset building"),

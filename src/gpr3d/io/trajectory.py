@@ -13,7 +13,6 @@ import io as _io
 import numpy as np
 
 from gpr3d.core.errors import FormatError, InvalidDataError
-from gpr3d.core.poses import slerp
 from gpr3d.core.trajectory import Trajectory
 from gpr3d.io._common import check_file
 from gpr3d.io.atomic import atomic_write_text
@@ -119,12 +118,13 @@ def read_xyz_track(path) -> np.ndarray:
     return _rows(p, p.read_text(encoding="utf-8", errors="replace"), 3, "x y z")
 
 
-def attach_poses(survey, traj: Trajectory, *, by: str = "index"):
+def attach_poses(survey, traj: Trajectory, *, by: str = "index", latency_s: float = 0.0):
     """A new Survey whose traces carry poses from ``traj``.
 
     ``by="index"``: one pose per trace, in trace order (counts must match).
     ``by="time"``: poses interpolated at the survey's timestamps (linear positions,
     slerp orientations); traces outside the trajectory's time span are an error.
+    ``latency_s`` (with ``by="time"``): the radar's clock runs this much behind the trajectory's.
     """
     if by == "index":
         if len(traj) != survey.n_traces:
@@ -133,20 +133,8 @@ def attach_poses(survey, traj: Trajectory, *, by: str = "index"):
     elif by == "time":
         if survey.timestamps_s is None:
             raise InvalidDataError("survey has no timestamps to interpolate poses at")
-        ts = traj.timestamps_s
-        if np.any(np.diff(ts) <= 0):
-            raise InvalidDataError("trajectory timestamps must increase strictly")
-        t = survey.timestamps_s
-        if t.min() < ts[0] or t.max() > ts[-1]:
-            raise InvalidDataError(
-                f"survey times [{t.min():.3f}, {t.max():.3f}] s fall outside the trajectory [{ts[0]:.3f}, {ts[-1]:.3f}] s"
-            )
-        frac = np.interp(t, ts, np.arange(ts.size))
-        i0 = np.minimum(np.floor(frac).astype(int), ts.size - 1)
-        i1 = np.minimum(i0 + 1, ts.size - 1)
-        w = frac - i0
-        pos = traj.positions_xyz[i0] * (1 - w[:, None]) + traj.positions_xyz[i1] * w[:, None]
-        q = slerp(traj.orientations_quat_wxyz[i0], traj.orientations_quat_wxyz[i1], w)
+        at = traj.at(survey.timestamps_s, latency_s=latency_s)
+        pos, q, t = at.positions_xyz, at.orientations_quat_wxyz, at.timestamps_s
     else:
         raise InvalidDataError(f"by must be 'index' or 'time', got {by!r}")
     out = survey.replace(positions_xyz=pos, orientations_quat_wxyz=q, timestamps_s=t)

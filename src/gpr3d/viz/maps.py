@@ -6,7 +6,7 @@ import numpy as np
 
 from gpr3d.viz._figures import plot_to_png, pyplot
 
-__all__ = ["plot_survey_map", "save_survey_map_png"]
+__all__ = ["plot_survey_map", "save_survey_map_png", "plot_paths", "save_paths_png"]
 
 
 def plot_survey_map(positions_xyz, ax=None, *, pipes=(), spheres=(), title=None, color_by=None):
@@ -41,3 +41,24 @@ def plot_survey_map(positions_xyz, ax=None, *, pipes=(), spheres=(), title=None,
 
 def save_survey_map_png(path, positions_xyz, *, dpi=120, **kwargs) -> None:
     plot_to_png(path, plot_survey_map, positions_xyz, figsize=(6.5, 6), dpi=dpi, **kwargs)
+
+
+def plot_paths(paths: dict, ax=None, *, title=None):
+    """Top views of several paths (name -> (n, 3) positions) on one axes, e.g. truth, odometry and fused."""
+    if ax is None:
+        _, ax = pyplot().subplots(figsize=(6, 6))
+    styles = ["k-", "C3--", "C0-", "C2:", "C1-."]
+    for (name, p), st in zip(paths.items(), styles * 3):
+        p = np.asarray(p)
+        ax.plot(p[:, 0], p[:, 1], st, lw=1.2, label=name)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(loc="best", fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return ax
+
+
+def save_paths_png(path, paths: dict, *, dpi=120, **kwargs) -> None:
+    plot_to_png(path, plot_paths, paths, figsize=(6.5, 6), dpi=dpi, **kwargs)

@@ -1,0 +1,141 @@
+"""IMU and survey-wheel recordings as CSV, and the rig file (mounts and latency) that ``gpr3d pose`` reads.
+
+* IMU CSV: a header naming ``t, ax, ay, az, gx, gy, gz`` (seconds, m/s^2 specific force, rad/s), one sample a row.
+* Wheel CSV: a header naming ``t, distance`` (seconds on the IMU clock, forward metres).
+* Rig JSON: ``{"imu_T_camera": 4x4, "imu_T_antenna": 4x4, "camera_time_offset_s": s}`` (CONVENTIONS.md).
+
+Visual odometry comes as a TUM trajectory of camera poses (:func:`gpr3d.io.trajectory.read_tum`);
+:func:`relative_from_camera_poses` turns it into frame-to-frame motions, and a jump in the frame times
+(lost tracking) into a gap.
+"""
+
+from __future__ import annotations
+
+import csv
+import io as _io
+import json
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from gpr3d.core.errors import FormatError, InvalidDataError
+from gpr3d.core.trajectory import Trajectory
+from gpr3d.io._common import check_file
+from gpr3d.io.atomic import atomic_write_text
+
+__all__ = ["read_imu_csv", "write_imu_csv", "read_wheel_csv", "write_wheel_csv", "read_rig", "write_rig",
+           "relative_from_camera_poses"]
+
+IMU_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
+
+
+def _read_columns(path, names: tuple, what: str) -> np.ndarray:
+    p = check_file(path)
+    reader = csv.reader(_io.StringIO(p.read_text(encoding="utf-8", errors="replace")))
+    try:
+        header = [h.strip().lower() for h in next(reader)]
+    except StopIteration:
+        raise FormatError(p, "empty CSV") from None
+    missing = [n for n in names if n not in header]
+    if missing:
+        raise FormatError(p, f"{what} CSV header lacks column(s) {missing} (has {header})")
+    idx = [header.index(n) for n in names]
+    rows = []
+    for lineno, row in enumerate(reader, 2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        try:
+            rows.append([float(row[i]) for i in idx])
+        except (ValueError, IndexError):
+            raise FormatError(p, f"line {lineno}: bad or missing number") from None
+    if len(rows) < 2:
+        raise FormatError(p, f"holds {len(rows)} {what} sample(s); two at least are needed")
+    arr = np.asarray(rows)
+    if not np.all(np.isfinite(arr)):
+        raise FormatError(p, "holds NaN/inf values")
+    return arr
+
+
+def read_imu_csv(path):
+    """Read IMU samples (:class:`gpr3d.pose.imu.ImuSamples`; units are checked there)."""
+    from gpr3d.pose.imu import ImuSamples
+
+    a = _read_columns(path, IMU_COLUMNS, "IMU")
+    try:
+        return ImuSamples(a[:, 0], a[:, 1:4], a[:, 4:7])
+    except InvalidDataError as exc:
+        raise FormatError(check_file(path), str(exc)) from None
+
+
+def write_imu_csv(imu, path) -> None:
+    buf = _io.StringIO()
+    buf.write(",".join(IMU_COLUMNS) + "\n")
+    for t, a, g in zip(imu.t_s, imu.accel, imu.gyro):
+        buf.write(f"{t:.6f},{a[0]:.7g},{a[1]:.7g},{a[2]:.7g},{g[0]:.7g},{g[1]:.7g},{g[2]:.7g}\n")
+    atomic_write_text(path, buf.getvalue())
+
+
+def read_wheel_csv(path) -> tuple[np.ndarray, np.ndarray]:
+    a = _read_columns(path, ("t", "distance"), "wheel")
+    return a[:, 0], a[:, 1]
+
+
+def write_wheel_csv(t_s, distance_m, path) -> None:
+    atomic_write_text(path, "t,distance\n" + "".join(f"{t:.6f},{d:.4f}\n" for t, d in zip(t_s, distance_m)))
+
+
+def read_rig(path) -> dict:
+    p = check_file(path)
+    try:
+        d = json.loads(p.read_text())
+    except json.JSONDecodeError as exc:
+        raise FormatError(p, f"not JSON ({exc.msg}, line {exc.lineno})") from None
+    out = {}
+    for key in ("imu_T_camera", "imu_T_antenna"):
+        if key in d:
+            T = np.asarray(d[key], dtype=float)
+            if T.shape != (4, 4):
+                raise FormatError(p, f"{key} must be a 4 x 4 matrix, got shape {T.shape}")
+            out[key] = T
+    if "camera_time_offset_s" in d:
+        out["camera_time_offset_s"] = float(d["camera_time_offset_s"])
+    unknown = set(d) - {"imu_T_camera", "imu_T_antenna", "camera_time_offset_s"}
+    if unknown:
+        raise FormatError(p, f"unknown rig key(s) {sorted(unknown)}")
+    return out
+
+
+def write_rig(path, *, imu_T_camera, imu_T_antenna, camera_time_offset_s: float) -> None:
+    atomic_write_text(path, json.dumps({"imu_T_camera": np.asarray(imu_T_camera).tolist(),
+                                        "imu_T_antenna": np.asarray(imu_T_antenna).tolist(),
+                                        "camera_time_offset_s": camera_time_offset_s}, indent=1))
+
+
+def relative_from_camera_poses(traj: Trajectory, *, rot_sigma_deg: float = 0.03, trans_frac: float = 0.01,
+                               trans_floor_m: float = 5e-4, gap_factor: float = 1.5):
+    """Frame-to-frame camera motions (:class:`gpr3d.pose.imu.RelativePoses`) from odometry's camera poses.
+
+    Each motion gets the covariance of the noise figures given (rotation per axis; translation a share of
+    the step plus a floor). A frame interval longer than ``gap_factor`` times the median is lost tracking:
+    the motion across it is unknown.
+    """
+    from gpr3d.pose.imu import RelativePoses
+
+    t = traj.timestamps_s
+    if t.size < 2:
+        raise InvalidDataError("odometry holds fewer than two frames")
+    R = Rotation.from_quat(traj.orientations_quat_wxyz[:, [1, 2, 3, 0]]).as_matrix()
+    p = traj.positions_xyz
+    n = t.size
+    R_rel = np.tile(np.eye(3), (n, 1, 1))
+    p_rel = np.zeros((n, 3))
+    cov = np.tile(np.eye(6), (n, 1, 1))
+    R_rel[1:] = np.einsum("nji,njk->nik", R[:-1], R[1:])
+    p_rel[1:] = np.einsum("nji,nj->ni", R[:-1], p[1:] - p[:-1])
+    st = trans_frac * np.linalg.norm(p_rel, axis=1) + trans_floor_m
+    sr = np.deg2rad(rot_sigma_deg)
+    cov[:, :3, :3] = np.eye(3) * sr**2
+    cov[:, 3:, 3:] = np.eye(3)[None] * (st**2)[:, None, None]
+    dt = np.diff(t)
+    valid = np.concatenate([[False], dt <= gap_factor * np.median(dt)])
+    return RelativePoses(t, R_rel, p_rel, cov, valid)

@@ -1,0 +1,333 @@
+"""Error-state EKF: the IMU propagates, visual odometry's relative poses correct (loosely coupled).
+
+Nominal state: position ``p``, velocity ``v`` (world), attitude ``R`` (world from IMU), accelerometer and
+gyro biases. Error state (15): ``dp, dv, dtheta, dba, dbg`` with the attitude error on the right,
+``R_true = R Exp(dtheta)``. Visual odometry gives the camera's motion between consecutive frames; the
+filter keeps a clone of the pose at the previous frame (stochastic cloning, 6 more error states), so a
+relative measurement constrains the motion since then, not a drifting absolute pose. Also:
+
+* gravity alignment and the gyro bias from the still first ``init_still_s`` seconds;
+* zero-velocity updates where the IMU is quiet and odometry sees no motion;
+* Mahalanobis gating of odometry (chi-square, 6 degrees of freedom), so gross errors are rejected;
+* the camera-IMU extrinsics, the camera's time offset, and the IMU-antenna lever arm.
+
+The world frame is gravity-aligned (z up) with its origin and heading at the IMU's start pose.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
+
+from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.trajectory import Trajectory
+from gpr3d.pose.imu import GRAVITY, ImuNoise, ImuSamples, RelativePoses, skew, so3_exp, so3_log
+
+__all__ = ["EskfConfig", "FusionResult", "fuse", "camera_to_imu_motion"]
+
+P_, V_, TH_, BA_, BG_ = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
+CP_, CTH_ = slice(15, 18), slice(18, 21)  # the clone's position and attitude errors
+
+
+def _check_pose(T, name: str) -> np.ndarray:
+    T = np.asarray(T, dtype=float)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise InvalidDataError(f"{name} must be a finite 4 x 4 pose, got shape {T.shape}")
+    R = T[:3, :3]
+    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise InvalidDataError(f"{name}: its 3 x 3 block is not a rotation")
+    return T
+
+
+@dataclass
+class EskfConfig:
+    """Settings of :func:`fuse`."""
+
+    imu_noise: ImuNoise = field(default_factory=ImuNoise)
+    imu_T_camera: np.ndarray = field(default_factory=lambda: np.eye(4))
+    imu_T_antenna: np.ndarray = field(default_factory=lambda: np.eye(4))
+    camera_time_offset_s: float = 0.0  #: IMU time of a frame = its camera stamp + this
+    init_still_s: float = 1.0  #: the cart stands still this long at the start (gravity, gyro bias)
+    gate_prob: float = 0.999  #: odometry with a larger Mahalanobis distance is rejected
+    zupt: bool = True
+    zupt_window_s: float = 0.25
+    zupt_speed_m_s: float = 0.01  #: odometry speed under which the cart may be still
+    zupt_sigma_m_s: float = 0.003
+    sigma_accel_bias: float = 0.1  #: m/s^2, prior
+    sigma_gyro_bias: float = 0.002  #: rad/s, prior beyond the still-start estimate
+    vo_cov_scale: float = 1.0  #: multiplies odometry's covariance
+    #: survey wheel (``fuse(..., wheel=...)``): its distance error per frame, as a share of the distance (slip,
+    #: wheel size) and a floor (encoder resolution), in m
+    wheel_sigma_frac: float = 0.01
+    wheel_sigma_m: float = 0.001
+    #: the ground is flat: the IMU stays at its start height within this (m), at every frame; None: not assumed
+    flat_ground_sigma_m: float | None = None
+
+    def __post_init__(self):
+        self.imu_T_camera = _check_pose(self.imu_T_camera, "imu_T_camera")
+        self.imu_T_antenna = _check_pose(self.imu_T_antenna, "imu_T_antenna")
+        if not 0.0 < self.gate_prob < 1.0:
+            raise InvalidDataError(f"gate_prob must lie in (0, 1), got {self.gate_prob!r}")
+        for name in ("init_still_s", "zupt_window_s", "zupt_sigma_m_s", "sigma_accel_bias", "sigma_gyro_bias",
+                     "vo_cov_scale", "flat_ground_sigma_m", "wheel_sigma_frac", "wheel_sigma_m"):
+            v = getattr(self, name)
+            if v is None and name == "flat_ground_sigma_m":
+                continue
+            if not v > 0:
+                raise InvalidDataError(f"{name} must be positive, got {v!r}")
+
+
+@dataclass
+class FusionResult:
+    """Fused IMU poses at every IMU sample, the pose covariance at every frame, and what was used."""
+
+    t_s: np.ndarray
+    p: np.ndarray
+    v: np.ndarray
+    R: np.ndarray
+    accel_bias: np.ndarray
+    gyro_bias: np.ndarray
+    frame_t_s: np.ndarray  #: IMU time of each odometry frame
+    frame_cov: np.ndarray  #: (m, 6, 6) covariance of (dtheta, dp) after each frame's update
+    frame_index: np.ndarray  #: IMU sample index of the first sample after each frame
+    frame_p: np.ndarray  #: position at each frame, after its update
+    frame_R: np.ndarray
+    vo_used: np.ndarray  #: per frame: the relative pose was applied
+    vo_rejected: np.ndarray  #: per frame: gated out
+    zupt_count: int
+    imu_T_antenna: np.ndarray
+
+    def antenna_trajectory(self) -> Trajectory:
+        """Antenna poses (world from antenna) at the IMU times, as a :class:`~gpr3d.core.trajectory.Trajectory`."""
+        Ta = self.imu_T_antenna
+        R = self.R @ Ta[:3, :3]
+        p = self.p + self.R @ Ta[:3, 3]
+        q = Rotation.from_matrix(R).as_quat()[:, [3, 0, 1, 2]]
+        return Trajectory(self.t_s, p, q)
+
+
+def camera_to_imu_motion(R_c, p_c, cov_c, imu_T_camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The IMU's motion between two frames from the camera's (``imu_T_camera`` fixed), with its covariance."""
+    Rbc, pbc = imu_T_camera[:3, :3], imu_T_camera[:3, 3]
+    R_b = Rbc @ R_c @ Rbc.T
+    p_b = Rbc @ p_c + pbc - R_b @ pbc
+    J = np.zeros((6, 6))
+    J[:3, :3] = Rbc
+    J[3:, :3] = R_b @ skew(pbc) @ Rbc
+    J[3:, 3:] = Rbc
+    return R_b, p_b, J @ cov_c @ J.T
+
+
+class _Filter:
+    def __init__(self, cfg: EskfConfig, R0, bg0):
+        self.cfg = cfg
+        self.p, self.v, self.R = np.zeros(3), np.zeros(3), R0
+        self.ba, self.bg = np.zeros(3), bg0
+        self.P = np.zeros((21, 21))
+        # position and heading define the frame (known exactly); roll/pitch carry the accelerometer bias
+        tilt = cfg.sigma_accel_bias / GRAVITY
+        self.P[:15, :15] = np.diag([1e-8] * 3 + [1e-4] * 3 + [tilt**2, tilt**2, 1e-8] + [cfg.sigma_accel_bias**2] * 3
+                                   + [cfg.sigma_gyro_bias**2] * 3)
+        self.pc, self.Rc = self.p.copy(), self.R.copy()
+        self.clone()
+        n = cfg.imu_noise
+        self.q = np.array([n.accel_noise**2, n.gyro_noise**2, n.accel_bias_walk**2, n.gyro_bias_walk**2])
+
+    def propagate(self, f_m, w_m, dt):
+        f = f_m - self.ba
+        w = w_m - self.bg
+        dR = so3_exp(w * dt)
+        R_mid = self.R @ so3_exp(0.5 * w * dt)
+        a = R_mid @ f + np.array([0.0, 0.0, -GRAVITY])
+        self.p = self.p + self.v * dt + 0.5 * a * dt * dt
+        self.v = self.v + a * dt
+        F = np.eye(15)
+        F[P_, V_] = np.eye(3) * dt
+        F[V_, TH_] = -R_mid @ skew(f) * dt
+        F[V_, BA_] = -R_mid * dt
+        F[TH_, TH_] = dR.T
+        F[TH_, BG_] = -np.eye(3) * dt
+        self.R = self.R @ dR
+        P = self.P
+        P[:15, :15] = F @ P[:15, :15] @ F.T
+        P[:15, 15:] = F @ P[:15, 15:]
+        P[15:, :15] = P[:15, 15:].T
+        qa, qg, qba, qbg = self.q * dt
+        idx = np.arange(3)
+        P[3 + idx, 3 + idx] += qa
+        P[6 + idx, 6 + idx] += qg
+        P[9 + idx, 9 + idx] += qba
+        P[12 + idx, 12 + idx] += qbg
+        self.P = 0.5 * (P + P.T)
+
+    def clone(self):
+        self.pc, self.Rc = self.p.copy(), self.R.copy()
+        core = np.r_[0:3, 6:9]
+        P = self.P
+        P[15:, :] = 0.0
+        P[:, 15:] = 0.0
+        P[15:, :15] = P[core, :15]
+        P[:15, 15:] = P[:15, core]
+        P[15:, 15:] = P[np.ix_(core, core)]
+
+    def _correct(self, H, r, Rm, gate: float | None) -> bool:
+        P = self.P
+        S = H @ P @ H.T + Rm
+        S = 0.5 * (S + S.T)
+        try:
+            Si = np.linalg.inv(S)
+        except np.linalg.LinAlgError:
+            return False
+        if gate is not None and float(r @ Si @ r) > gate:
+            return False
+        K = P @ H.T @ Si
+        dx = K @ r
+        IKH = np.eye(21) - K @ H
+        P = IKH @ P @ IKH.T + K @ Rm @ K.T
+        self.P = 0.5 * (P + P.T)  # round-off would otherwise build up an asymmetry the next gains amplify
+        self.p = self.p + dx[P_]
+        self.v = self.v + dx[V_]
+        self.R = self.R @ so3_exp(dx[TH_])
+        self.ba = self.ba + dx[BA_]
+        self.bg = self.bg + dx[BG_]
+        self.pc = self.pc + dx[CP_]
+        self.Rc = self.Rc @ so3_exp(dx[CTH_])
+        return True
+
+    def update_relative(self, R_z, p_z, cov, gate: float) -> bool:
+        dR = self.Rc.T @ self.R
+        h_p = self.Rc.T @ (self.p - self.pc)
+        r = np.concatenate([so3_log(dR.T @ R_z), p_z - h_p])
+        H = np.zeros((6, 21))
+        H[:3, TH_] = np.eye(3)
+        H[:3, CTH_] = -dR.T
+        H[3:, P_] = self.Rc.T
+        H[3:, CP_] = -self.Rc.T
+        H[3:, CTH_] = skew(h_p)
+        return self._correct(H, r, cov, gate)
+
+    def update_forward(self, distance_m: float, sigma_m: float) -> bool:
+        """The survey wheel: the IMU's forward travel since the clone (along the clone's x axis) is ``distance_m``.
+
+        The wheel is taken to run on the IMU's fore-aft line; over one frame the chord and the arc agree to
+        second order in the turn."""
+        h = self.Rc.T @ (self.p - self.pc)
+        H = np.zeros((1, 21))
+        H[0, P_] = self.Rc.T[0]
+        H[0, CP_] = -self.Rc.T[0]
+        H[0, CTH_] = skew(h)[0]
+        return self._correct(H, np.array([distance_m - h[0]]), np.array([[sigma_m**2]]), float(chi2.ppf(0.999, 1)))
+
+    def update_height(self, sigma_z: float):
+        """A cart on flat ground: the IMU stays at its start height (0 in the filter's world)."""
+        H = np.zeros((1, 21))
+        H[0, 2] = 1.0
+        self._correct(H, np.array([-self.p[2]]), np.array([[sigma_z**2]]), None)
+
+    def update_still(self, sigma: float):
+        H = np.zeros((3, 21))
+        H[:, V_] = np.eye(3)
+        self._correct(H, -self.v, np.eye(3) * sigma**2, None)
+
+
+def _align(imu: ImuSamples, still_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Roll and pitch from gravity, and the gyro bias, over the still first ``still_s`` seconds."""
+    sel = imu.t_s <= imu.t_s[0] + still_s
+    if sel.sum() < 10:
+        raise InvalidDataError(f"gravity alignment needs at least 10 IMU samples in the first {still_s:g} s")
+    f = imu.accel[sel]
+    spread = float(np.linalg.norm(f.std(0)))
+    if spread > 0.5:
+        raise InvalidDataError(f"the cart is not still in the first {still_s:g} s (accelerometer spread "
+                               f"{spread:.2f} m/s^2): start the recording at rest, or lower init_still_s")
+    u = f.mean(0) / np.linalg.norm(f.mean(0))
+    pitch = np.arctan2(-u[0], np.hypot(u[1], u[2]))
+    roll = np.arctan2(u[1], u[2])
+    R0 = Rotation.from_euler("ZYX", [0.0, pitch, roll]).as_matrix()
+    return R0, imu.gyro[sel].mean(0)
+
+
+def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = None, *,
+         wheel: tuple | None = None) -> FusionResult:
+    """Fuse IMU samples with visual odometry (or none: IMU alone) into poses at every IMU sample.
+
+    ``wheel``: ``(t_s, distance_m)``, a survey wheel's forward distance on the IMU clock (non-decreasing);
+    its travel between odometry frames is applied at every frame, through gaps in odometry too.
+    """
+    cfg = cfg or EskfConfig()
+    if wheel is not None:
+        wt, wd = (np.asarray(a, dtype=float).reshape(-1) for a in wheel)
+        if wt.size != wd.size or wt.size < 2 or np.any(np.diff(wt) <= 0) or not np.all(np.isfinite(wd)):
+            raise InvalidDataError("wheel: give (times, distances) of one length, times increasing, no NaN")
+        if np.any(np.diff(wd) < -1e-9):
+            raise InvalidDataError("wheel: the distance decreases; pass the wheel's forward count")
+    R0, bg0 = _align(imu, cfg.init_still_s)
+    flt = _Filter(cfg, R0, bg0)
+    gate = float(chi2.ppf(cfg.gate_prob, 6))
+    n = imu.t_s.size
+    if vo is not None:
+        ft = vo.t_s + cfg.camera_time_offset_s
+        keep = (ft >= imu.t_s[0]) & (ft <= imu.t_s[-1])
+        frames = np.nonzero(keep)[0]
+    else:
+        ft, frames = np.zeros(0), np.zeros(0, int)
+    out_p, out_v, out_R = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3, 3))
+    out_ba, out_bg = np.empty((n, 3)), np.empty((n, 3))
+    m = frames.size
+    f_cov, f_idx, f_p, f_R = np.zeros((m, 6, 6)), np.zeros(m, int), np.zeros((m, 3)), np.zeros((m, 3, 3))
+    used, rejected = np.zeros(m, bool), np.zeros(m, bool)
+    win = max(3, int(round(cfg.zupt_window_s * imu.rate_hz)))
+    sa = cfg.imu_noise.accel_noise * np.sqrt(imu.rate_hz)
+    sg = cfg.imu_noise.gyro_noise * np.sqrt(imu.rate_hz)
+    vo_speed = np.inf
+    zupts = 0
+    fi = 0
+    t_now = imu.t_s[0]
+
+    def record(i):
+        out_p[i], out_v[i], out_R[i], out_ba[i], out_bg[i] = flt.p, flt.v, flt.R, flt.ba, flt.bg
+
+    def step_to(t_target, i):
+        nonlocal t_now
+        dt = t_target - t_now
+        if dt > 0:
+            j = min(i + 1, n - 1)
+            flt.propagate(0.5 * (imu.accel[i] + imu.accel[j]), 0.5 * (imu.gyro[i] + imu.gyro[j]), dt)
+            t_now = t_target
+
+    record(0)
+    for i in range(n - 1):
+        t_next = imu.t_s[i + 1]
+        while fi < m and ft[frames[fi]] <= t_next:
+            k = frames[fi]
+            step_to(ft[k], i)
+            if vo.valid[k] and fi > 0 and frames[fi - 1] == k - 1:
+                R_b, p_b, cov_b = camera_to_imu_motion(vo.R[k], vo.p[k], vo.cov[k] * cfg.vo_cov_scale, cfg.imu_T_camera)
+                ok = flt.update_relative(R_b, p_b, cov_b, gate)
+                used[fi], rejected[fi] = ok, not ok
+                dtk = vo.t_s[k] - vo.t_s[k - 1]
+                vo_speed = np.linalg.norm(p_b) / dtk if ok else np.inf
+            else:
+                vo_speed = np.inf
+            if wheel is not None and fi > 0:
+                d0, d1 = np.interp([ft[frames[fi - 1]], ft[k]], wt, wd)
+                flt.update_forward(d1 - d0, cfg.wheel_sigma_frac * (d1 - d0) + cfg.wheel_sigma_m)
+            if cfg.flat_ground_sigma_m is not None:
+                flt.update_height(cfg.flat_ground_sigma_m)
+            flt.clone()
+            f_cov[fi] = flt.P[np.r_[6:9, 0:3]][:, np.r_[6:9, 0:3]]
+            f_idx[fi], f_p[fi], f_R[fi] = i + 1, flt.p, flt.R
+            fi += 1
+        step_to(t_next, i)
+        if cfg.zupt and vo_speed < cfg.zupt_speed_m_s and i + 1 >= win:
+            a = imu.accel[i + 2 - win : i + 2]
+            g = imu.gyro[i + 2 - win : i + 2]
+            if np.all(a.std(0) < 3 * sa) and np.all(g.std(0) < 3 * sg):
+                flt.update_still(cfg.zupt_sigma_m_s)
+                zupts += 1
+        record(i + 1)
+    return FusionResult(imu.t_s, out_p, out_v, out_R, out_ba, out_bg, ft[frames], f_cov, f_idx, f_p, f_R, used, rejected,
+                        zupts, cfg.imu_T_antenna)

@@ -1,0 +1,192 @@
+"""The error-state EKF against the synthetic rig's exact truth."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.trajectory import Trajectory
+from gpr3d.pose.eskf import EskfConfig, _Filter, camera_to_imu_motion, fuse
+from gpr3d.pose.imu import ImuNoise, ImuSamples, so3_exp, so3_log
+from gpr3d.pose.metrics import nees_bounds
+from gpr3d.pose.rig import RigConfig, nees_runs, simulate_rig
+
+QUIET = ImuNoise(1e-12, 1e-12, 1e-12, 1e-12)
+
+
+def _truth_in_filter_frame(run, t):
+    return run.truth_in_filter_frame(t)
+
+
+def test_noise_free_imu_integrates_to_the_truth():
+    """The rig's analytic IMU (specific force, body rates from Euler rates) and the filter's propagation agree:
+    dead reckoning over 20 s of turns, stops and uneven ground stays within a millimetre."""
+    cfg = RigConfig(duration_s=20, accel_bias_sigma=1e-12, gyro_bias_sigma=1e-12, imu_noise=QUIET)
+    run = simulate_rig(cfg, seed=1)
+    g = run.truth(run.imu.t_s)
+    f = _Filter(EskfConfig(), g["R"][0], np.zeros(3))
+    f.p, f.v = g["p"][0].copy(), g["v"][0].copy()
+    imu = run.imu
+    for i in range(imu.t_s.size - 1):
+        f.propagate(0.5 * (imu.accel[i] + imu.accel[i + 1]), 0.5 * (imu.gyro[i] + imu.gyro[i + 1]),
+                    imu.t_s[i + 1] - imu.t_s[i])
+    assert np.linalg.norm(f.p - g["p"][-1]) < 1e-3
+    assert np.linalg.norm(so3_log(f.R.T @ g["R"][-1])) < 1e-5
+    assert np.linalg.norm(g["p"][-1] - g["p"][0]) > 2.0  # it did travel
+
+
+def test_camera_motion_maps_to_the_imu_motion_with_its_covariance():
+    cfg = RigConfig(duration_s=20, vo_rot_deg=1e-12, vo_trans_frac=1e-12, vo_trans_floor_m=1e-12, vo_outlier_rate=0)
+    run = simulate_rig(cfg, seed=2)
+    tau = run.vo.t_s + cfg.camera_time_offset_s
+    g = run.truth(tau)
+    for k in (60, 150, 250):
+        R_b, p_b, _ = camera_to_imu_motion(run.vo.R[k], run.vo.p[k], run.vo.cov[k], cfg.imu_T_camera)
+        assert np.allclose(R_b, g["R"][k - 1].T @ g["R"][k], atol=1e-9)
+        assert np.allclose(p_b, g["R"][k - 1].T @ (g["p"][k] - g["p"][k - 1]), atol=1e-9)
+    # the covariance: noise drawn in the camera frame, mapped, against the returned covariance
+    rng = np.random.default_rng(0)
+    R_c, p_c = so3_exp([0.1, -0.2, 0.3]), np.array([0.05, -0.02, 0.3])
+    cov_c = np.diag([1e-4, 2e-4, 3e-4, 1e-4, 4e-4, 2e-4])
+    R_b, p_b, cov_b = camera_to_imu_motion(R_c, p_c, cov_c, cfg.imu_T_camera)
+    errs = []
+    for n in rng.multivariate_normal(np.zeros(6), cov_c, 20000):
+        Rn, pn, _ = camera_to_imu_motion(R_c @ so3_exp(n[:3]), p_c + n[3:], cov_c, cfg.imu_T_camera)
+        errs.append(np.concatenate([so3_log(R_b.T @ Rn), pn - p_b]))
+    emp = np.cov(np.asarray(errs).T)
+    assert np.allclose(emp, cov_b, atol=0.05 * np.abs(cov_b).max())
+
+
+@pytest.fixture(scope="module")
+def run60():
+    cfg = RigConfig(duration_s=60)
+    run = simulate_rig(cfg, seed=5)
+    return cfg, run, fuse(run.imu, run.vo, run.filter_config())
+
+
+def test_fusion_tracks_the_truth_and_rejects_odometry_outliers(run60):
+    cfg, run, res = run60
+    R_t, p_t = _truth_in_filter_frame(run, run.imu.t_s)
+    err = np.linalg.norm(res.p - p_t, axis=1)
+    assert run.path_length_m > 12
+    assert np.sqrt(np.mean(err**2)) < 0.005 * run.path_length_m  # without any alignment
+    # every gross odometry error is gated out, and almost no good frame is
+    out = run.vo_outliers[np.searchsorted(run.vo.t_s + cfg.camera_time_offset_s, res.frame_t_s)]
+    assert out.sum() >= 5 and np.all(res.vo_rejected[out])
+    assert res.vo_rejected[~out].mean() < 0.01
+    # the biases are learnt
+    assert np.all(np.abs(res.gyro_bias[-1] - run.gyro_bias[-1]) < 3e-4)
+    assert np.all(np.abs(res.accel_bias[-1] - run.accel_bias[-1]) < 0.03)
+
+
+def test_fusion_is_better_than_odometry_alone():
+    """Against the truth from the true start pose (no alignment): odometry alone drifts in tilt and heading, the
+    fusion holds tilt to gravity and heading to the gyro. Better on every path, by a third or more overall."""
+    fused, alone = [], []
+    for seed in (6, 7, 8):
+        cfg = RigConfig(duration_s=60, vo_outlier_rate=0.0)
+        run = simulate_rig(cfg, seed=seed)
+        res = fuse(run.imu, run.vo, run.filter_config())
+        R_t, p_t = run.truth_in_filter_frame(run.vo.t_s + cfg.camera_time_offset_s)
+        Rc, pc = run.vo.chained()  # camera poses in the first camera frame -> IMU poses in the filter's world
+        Tbc = cfg.imu_T_camera
+        Rb = Rc @ Tbc[:3, :3].T
+        pb = pc - Rb @ Tbc[:3, 3]
+        Rb0 = R_t[0] @ Rb[0].T  # odometry given the true start pose, as the filter's gravity alignment gives it
+        p_vo = (Rb0 @ pb.T).T + (p_t[0] - Rb0 @ pb[0])
+        alone.append(np.sqrt(np.mean(np.linalg.norm(p_vo - p_t, axis=1) ** 2)))
+        fused.append(np.sqrt(np.mean(np.linalg.norm(res.frame_p - p_t, axis=1) ** 2)))
+    assert all(f < a for f, a in zip(fused, alone)), (fused, alone)
+    assert sum(fused) < 0.7 * sum(alone), (fused, alone)
+
+
+def test_nees_stays_within_its_bounds():
+    """Five noise draws on one path: the NEES of the pose, averaged over the runs, lies inside its two-sided
+    95 % bounds at nearly 95 % of the frames, as a consistent filter's does."""
+    runs = 5
+    vals = nees_runs(RigConfig(duration_s=30), runs)
+    avg = np.mean(vals, axis=0)[30:]  # after the first two seconds
+    lo, hi = nees_bounds(runs)
+    inside = np.mean((avg >= lo) & (avg <= hi))
+    assert inside > 0.85, (inside, float(np.median(avg)))
+    assert 0.5 * 6 < np.median(avg) < 1.5 * 6
+
+
+def test_imu_bridges_a_gap_in_odometry():
+    cfg = RigConfig(duration_s=40, vo_gap=(20.0, 2.0), vo_outlier_rate=0.0, stops=0)
+    run = simulate_rig(cfg, seed=8)
+    res = fuse(run.imu, run.vo, run.filter_config())
+    R_t, p_t = _truth_in_filter_frame(run, run.imu.t_s)
+    err = np.linalg.norm(res.p - p_t, axis=1)
+    i0, i1 = np.searchsorted(run.imu.t_s, [20.0, 22.0])
+    assert run.truth.dist(22.0) - run.truth.dist(20.0) > 0.3  # the cart moved in the gap
+    assert err[i1] - err[i0] < 0.05
+    assert not res.vo_used[(res.frame_t_s >= 20.0) & (res.frame_t_s < 22.0)].any()
+
+
+def test_still_cart_gets_zero_velocity_updates(run60):
+    cfg, run, res = run60
+    still = run.truth(run.imu.t_s)["speed"] == 0.0
+    assert res.zupt_count > 100
+    assert np.median(np.linalg.norm(res.v[still], axis=1)) < 0.003
+
+
+def test_antenna_trajectory_carries_the_lever_arm(run60):
+    cfg, run, res = run60
+    traj = res.antenna_trajectory()
+    assert isinstance(traj, Trajectory) and len(traj) == run.imu.t_s.size
+    R = Rotation.from_quat(traj.orientations_quat_wxyz[:, [1, 2, 3, 0]]).as_matrix()
+    back = traj.positions_xyz - np.einsum("nij,j->ni", res.R, cfg.imu_T_antenna[:3, 3])
+    assert np.allclose(back, res.p, atol=1e-9) and np.allclose(R, res.R @ cfg.imu_T_antenna[:3, :3], atol=1e-9)
+
+
+def test_bad_inputs_give_one_line():
+    t = np.arange(0, 2, 0.005)
+    acc = np.tile([0.0, 0.0, 9.81], (t.size, 1))
+    gyr = np.zeros((t.size, 3))
+    with pytest.raises(InvalidDataError, match="in g"):
+        ImuSamples(t, acc / 9.81, gyr)
+    with pytest.raises(InvalidDataError, match="deg/s"):
+        ImuSamples(t, acc, gyr + 57.0)
+    with pytest.raises(InvalidDataError, match="must increase"):
+        ImuSamples(t[::-1], acc, gyr)
+    bad = acc.copy()
+    bad[5, 1] = np.nan
+    with pytest.raises(InvalidDataError, match="NaN"):
+        ImuSamples(t, bad, gyr)
+    moving = acc + np.random.default_rng(0).normal(0, 2.0, acc.shape)
+    with pytest.raises(InvalidDataError, match="not still"):
+        fuse(ImuSamples(t, moving, gyr), None, EskfConfig())
+    with pytest.raises(InvalidDataError, match="not a rotation"):
+        EskfConfig(imu_T_camera=np.diag([1.0, 1.0, 2.0, 1.0]))
+
+
+def test_flat_ground_holds_the_height():
+    """On a flat patch, a cart that stays on the ground: the height pseudo-measurement takes out the vertical
+    drift that odometry's noise leaves, and the position error drops."""
+    run = simulate_rig(RigConfig(duration_s=60, area=((0.0, 4.0), (0.0, 4.0)), turn_rate_rad_s=1.0), seed=4)
+    _, p_t = run.truth_in_filter_frame(run.imu.t_s)
+    free = fuse(run.imu, run.vo, run.filter_config())
+    flat = fuse(run.imu, run.vo, run.filter_config(flat_ground_sigma_m=0.01))
+    ez_free, ez_flat = (np.abs(r.p[:, 2] - p_t[:, 2]).mean() for r in (free, flat))
+    assert ez_flat < 0.01 and ez_flat < 0.5 * ez_free
+    e_free, e_flat = (np.linalg.norm(r.p - p_t, axis=1).mean() for r in (free, flat))
+    assert e_flat < e_free
+    with pytest.raises(InvalidDataError, match="flat_ground_sigma_m must be positive"):
+        run.filter_config(flat_ground_sigma_m=0.0)
+
+
+def test_survey_wheel_shortens_the_drift_across_an_odometry_gap():
+    cfg = RigConfig(duration_s=40, vo_gap=(20.0, 5.0), vo_outlier_rate=0.0, stops=0)
+    run = simulate_rig(cfg, seed=8)
+    _, p_t = run.truth_in_filter_frame(run.imu.t_s)
+    i0, i1 = np.searchsorted(run.imu.t_s, [20.0, 25.0])
+    drift = []
+    for wheel in (None, run.wheel()):
+        res = fuse(run.imu, run.vo, run.filter_config(), wheel=wheel)
+        e = np.linalg.norm(res.p - p_t, axis=1)
+        drift.append(e[i1] - e[i0])
+    assert drift[1] < 0.9 * drift[0], drift
+    t, d = run.wheel()
+    with pytest.raises(InvalidDataError, match="decreases"):
+        fuse(run.imu, run.vo, run.filter_config(), wheel=(t, d[::-1]))

@@ -1,0 +1,50 @@
+"""Survey-wheel triggering and poses at trace times against hand cases."""
+
+import numpy as np
+import pytest
+
+from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.poses import quat_from_yaw, yaw_from_quat
+from gpr3d.core.trajectory import Trajectory
+from gpr3d.pose.rig import RigConfig, simulate_rig
+from gpr3d.pose.sync import trajectory_triggers, wheel_trigger_times
+
+
+def test_wheel_fires_every_spacing_and_not_while_still():
+    # 0.5 m/s for 4 s, still for 2 s, 0.25 m/s for 4 s
+    t = np.linspace(0, 10, 10001)
+    d = np.where(t < 4, 0.5 * t, np.where(t < 6, 2.0, 2.0 + 0.25 * (t - 6)))
+    trig = wheel_trigger_times(t, d, 0.1)
+    assert trig.size == 30  # 2 m + 1 m of travel
+    assert np.allclose(trig[:20], 0.2 * np.arange(1, 21), atol=1e-6)  # 0.1 m / 0.5 m/s
+    assert np.allclose(trig[20:], 6.0 + 0.4 * np.arange(1, 11), atol=1e-6)  # 0.1 m / 0.25 m/s after the stop
+    assert not np.any((trig > 4.0 + 1e-9) & (trig < 6.0))
+    with pytest.raises(InvalidDataError, match="decreases"):
+        wheel_trigger_times(t, d.max() - d, 0.1)
+    with pytest.raises(InvalidDataError, match="positive distance"):
+        wheel_trigger_times(t, d, 0.0)
+
+
+def test_poses_at_trace_times_interpolate_and_shift_by_latency():
+    t = np.linspace(0.0, 10.0, 11)
+    yaw = 0.1 * t  # turning at 0.1 rad/s while moving 1 m/s along x
+    traj = Trajectory(t, np.c_[t, np.zeros_like(t), np.zeros_like(t)], quat_from_yaw(yaw))
+    at = traj.at([2.5, 7.25])
+    assert np.allclose(at.positions_xyz[:, 0], [2.5, 7.25]) and np.allclose(yaw_from_quat(at.orientations_quat_wxyz),
+                                                                            [0.25, 0.725])
+    late = traj.at([2.5], latency_s=0.5)  # the radar's clock half a second behind
+    assert late.timestamps_s[0] == 2.5 and late.positions_xyz[0, 0] == pytest.approx(3.0)
+    with pytest.raises(InvalidDataError, match="1 of 2 times fall outside"):
+        traj.at([5.0, 10.5])
+    assert np.allclose(traj.path_length_m(), t)
+
+
+def test_rig_path_triggers_match_its_distance():
+    run = simulate_rig(RigConfig(duration_s=30, area=((0, 3), (0, 3)), turn_rate_rad_s=1.0), seed=3)
+    traj = run.truth_trajectory()
+    trig = trajectory_triggers(traj, 0.02)
+    s = np.interp(trig, traj.timestamps_s, traj.path_length_m())  # the antenna's path (its lever arm swings on turns)
+    assert trig.size == int(traj.path_length_m()[-1] / 0.02 + 1e-9)
+    assert np.allclose(np.diff(s), 0.02, atol=1e-6) and s[0] == pytest.approx(0.02)
+    g = run.truth(run.imu.t_s)
+    assert g["p"][:, 0].min() > -0.5 and g["p"][:, 0].max() < 3.5  # it stays over its patch
