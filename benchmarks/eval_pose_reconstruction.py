@@ -25,29 +25,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _report import cpu_name, write_table  # noqa: E402
 from eval_reconstruction import back_projection, grid3d, scene, simulate, summarize  # noqa: E402
 
-from gpr3d.core.trajectory import Trajectory  # noqa: E402
 from gpr3d.migration.masking import image_envelope  # noqa: E402
 from gpr3d.migration.metrics import truth_lines_from_pipes  # noqa: E402
 from gpr3d.migration.targets import extract_targets  # noqa: E402
 from gpr3d.pose.eskf import fuse  # noqa: E402
-from gpr3d.pose.imu import so3_exp  # noqa: E402
 from gpr3d.pose.metrics import ape  # noqa: E402
 from gpr3d.pose.rig import RigConfig, simulate_rig  # noqa: E402
 from gpr3d.pose.sync import trajectory_triggers  # noqa: E402
 
 NAMES = ["L leg 1 (x)", "L leg 2 (y)", "diagonal", "rebar 1", "rebar 2", "rebar 3"]
-
-
-def to_site(traj: Trajectory, run) -> Trajectory:
-    """The fusion's world (origin and heading at the IMU's start) into the site frame by the true start pose."""
-    g0 = run.truth(np.array([run.imu.t_s[0]]))
-    R0 = g0["R"][0]
-    Rz = so3_exp([0.0, 0.0, np.arctan2(R0[1, 0], R0[0, 0])])
-    from scipy.spatial.transform import Rotation
-
-    R = Rz @ Rotation.from_quat(traj.orientations_quat_wxyz[:, [1, 2, 3, 0]]).as_matrix()
-    return Trajectory(traj.timestamps_s, traj.positions_xyz @ Rz.T + g0["p"][0],
-                      Rotation.from_matrix(R).as_quat()[:, [3, 0, 1, 2]])
 
 
 def main(argv=None):
@@ -70,7 +56,7 @@ def main(argv=None):
         t0 = time.perf_counter()
         res = fuse(run.imu, run.vo, run.filter_config(**kw), wheel=wheel)
         wall = time.perf_counter() - t0
-        poses = to_site(res.antenna_trajectory(), run).at(trig)
+        poses = run.to_world(res.antenna_trajectory()).at(trig)
         err = np.linalg.norm(poses.positions_xyz - true_poses.positions_xyz, axis=1)
         fusions[label] = {"poses": poses, "err": err, "ape": ape(poses, true_poses)["rmse"], "wall": wall,
                           "rejected": int(res.vo_rejected.sum())}

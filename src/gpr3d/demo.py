@@ -8,14 +8,20 @@ Stages so far (each later stage of the system adds its own):
 2. **Synthetic data** — an analytic B-scan of point targets with known apexes,
    the same processing, and a check that the processed hyperbola apexes sit
    where the travel-time equation puts them.
-3. **Random-motion survey** — the fast forward model simulates a cart wandering
-   over a 2 m x 2 m patch of soil (an L-shaped pipe, a diagonal pipe, two
-   rebars), with clutter and noise: every A-scan from its own 6-DoF pose. The
-   survey (with its poses) and its TUM trajectory are written for the stages
-   that follow.
-4. **3D reconstruction** — back projection of that survey from its antenna poses
-   into a voxel grid, target extraction, and the errors of the extracted
-   targets against the true pipes (what ``gpr3d reconstruct`` does).
+3. **Random-motion survey** — the synthetic cart rig wanders over a 2 m x 2 m
+   patch of soil (an L-shaped pipe, a diagonal pipe, two rebars) for 200 s,
+   steering to random waypoints, with stops; its survey wheel fires a trace
+   every centimetre of the antenna's path, and the fast forward model makes each
+   A-scan at the antenna's true 6-DoF pose, with clutter and noise. The poses the
+   survey carries are estimated, as a user's would be: the visual-inertial
+   fusion of its IMU, visual odometry (with gross errors), survey wheel and flat
+   ground, put into the site frame by the marked start. The survey, its
+   estimated TUM trajectory and the true one are written for the stages that
+   follow.
+4. **3D reconstruction** — back projection of that survey from its estimated
+   antenna poses into a voxel grid, target extraction, and the errors of the
+   extracted targets against the true pipes (what ``gpr3d reconstruct`` does),
+   beside the same from the true poses: what the pose error costs.
 5. **Detection** — the shipped Faster R-CNN finds the hyperbolas in the
    random-motion survey's trace sequence (B-scans of consecutive traces) and in
    the real recording; overlays show its boxes and apexes; the survey is then
@@ -66,7 +72,9 @@ class DemoConfig:
     synthetic_targets_xz: list = field(default_factory=lambda: [[0.3, 0.15], [0.9, 0.35]])
     synthetic_noise: float = 0.002
     cmap: str = "gray"
-    walk_traces: int = 8000
+    walk_seconds: float = 200.0  #: the random-motion cart's run (about 0.4 m/s, with stops)
+    walk_turn_rate: float = 1.0  #: rad/s, the most it turns by (steering to random waypoints in the patch)
+    trace_spacing_m: float = 0.01  #: its survey wheel fires a trace every this much of the antenna's path
     walk_seed: int = 0
 
 
@@ -109,73 +117,129 @@ def demo_scene():
     )
 
 
+def _survey_poses(cfg: DemoConfig, log):
+    """The cart's true antenna poses at its survey wheel's traces, and the poses the visual-inertial fusion
+    estimates for them (what a user has), in the site frame."""
+    import numpy as np
+
+    from gpr3d.pose.eskf import fuse
+    from gpr3d.pose.rig import RigConfig, simulate_rig
+    from gpr3d.pose.sync import trajectory_triggers
+
+    # the antenna 0.3 m behind the IMU at its height (the ground); the cart steers over the 2 m x 2 m patch
+    rig = RigConfig(duration_s=cfg.walk_seconds, area=((0.0, 2.0), (0.0, 2.0)), turn_rate_rad_s=cfg.walk_turn_rate,
+                    stops=max(3, int(cfg.walk_seconds // 60)),
+                    imu_T_antenna=np.array([[1.0, 0, 0, -0.3], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]))
+    run = simulate_rig(rig, seed=cfg.walk_seed)
+    truth = run.truth_trajectory()
+    trig = trajectory_triggers(truth, cfg.trace_spacing_m)
+    t = time.perf_counter()
+    res = fuse(run.imu, run.vo, run.filter_config(flat_ground_sigma_m=0.01), wheel=run.wheel())
+    wall = time.perf_counter() - t
+    est = run.to_world(res.antenna_trajectory()).at(trig)
+    true = truth.at(trig)
+    err = np.linalg.norm(est.positions_xyz - true.positions_xyz, axis=1)
+    info = {"rig_seconds": rig.duration_s, "imu_hz": rig.imu_rate_hz, "camera_hz": rig.camera_rate_hz,
+            "fuse_s": wall, "vo_outliers": int(run.vo_outliers.sum()), "vo_rejected": int(res.vo_rejected.sum()),
+            "antenna_error_mean_m": float(err.mean()), "antenna_error_max_m": float(err.max())}
+    return true, est, info
+
+
 def _random_motion_stage(out: Path, cfg: DemoConfig, log) -> dict:
+    from gpr3d.core.deps import available
     from gpr3d.core.survey import Survey
     from gpr3d.io.trajectory import write_tum
     from gpr3d.simulation.forward import forward_model
-    from gpr3d.simulation.paths import random_walk
     from gpr3d.viz.bscan import save_bscan_png
     from gpr3d.viz.maps import save_survey_map_png
 
     scene = demo_scene()
-    traj = random_walk(cfg.walk_traces, area=((0.0, 2.0), (0.0, 2.0)), step_m=0.01, seed=cfg.walk_seed)
+    true, est, pose = _survey_poses(cfg, log)
     f, n_samples, window = 500e6, 512, 40e-9
     kw = dict(offset_m=0.1, frequency_hz=f, n_samples=n_samples, time_window_s=window, air_wave=1.0,
               ground_wave=0.5, clutter=30, noise=0.002, seed=cfg.walk_seed)
-    forward_model(scene, traj.positions_xyz[:8], traj.orientations_quat_wxyz[:8], **kw)  # compile once
+    forward_model(scene, true.positions_xyz[:8], true.orientations_quat_wxyz[:8], **kw)  # compile once
     t = time.perf_counter()
-    data = forward_model(scene, traj.positions_xyz, traj.orientations_quat_wxyz, **kw)
+    data = forward_model(scene, true.positions_xyz, true.orientations_quat_wxyz, **kw)  # the ground's truth
     t_fwd = time.perf_counter() - t
-    survey = Survey(data=data, dt_s=window / n_samples, timestamps_s=traj.timestamps_s,
-                    positions_xyz=traj.positions_xyz, orientations_quat_wxyz=traj.orientations_quat_wxyz,
+    # the survey carries the poses the fusion estimated, as a user's would; the truth goes beside it
+    survey = Survey(data=data, dt_s=window / n_samples, timestamps_s=est.timestamps_s,
+                    positions_xyz=est.positions_xyz, orientations_quat_wxyz=est.orientations_quat_wxyz,
                     offset_m=0.1, frequency_hz=f, eps_r=scene.eps_r,
                     metadata={"format": "forward", "antenna": "forward model, 500 MHz",
+                              "poses": "visual-inertial fusion (IMU, odometry, survey wheel, flat ground)",
                               "scene": {"eps_r": scene.eps_r, "pipes": [p.__dict__ for p in scene.pipes]},
                               "truth_t0_s": 2 ** 0.5 / f})
     survey.save(out / "random_walk_survey.h5")
-    write_tum(traj, out / "random_walk.tum")
-    save_survey_map_png(out / "random_walk_map.png", traj.positions_xyz, pipes=scene.pipes,
-                        title=f"random-motion survey: {len(traj)} traces over the buried pipes")
+    write_tum(est, out / "random_walk.tum")
+    write_tum(true, out / "random_walk_truth.tum")
+    save_survey_map_png(out / "random_walk_map.png", true.positions_xyz, pipes=scene.pipes,
+                        title=f"random-motion survey: {len(true)} traces over the buried pipes")
     shown = survey[: min(800, survey.n_traces)].time_zero(method="peak", search_s=6e-9).remove_background()
     save_bscan_png(shown.gain_tpow(power=1.0), out / "random_walk_bscan.png", cmap="gray",
                    title="random-motion survey, first 800 traces (time zero, background removed, t-gain)")
     rate = survey.n_traces / t_fwd
+    path = float(true.path_length_m()[-1])
+    if available("evo"):
+        from gpr3d.pose.metrics import ape
+
+        pose["fused_ape_m"] = ape(est, true)["rmse"]
     log(f"[3/7] random-motion survey: {survey.n_traces} A-scans x {n_samples} samples from the forward model "
-        f"in {t_fwd * 1e3:.0f} ms ({rate:,.0f} A-scans/s); path {survey.distances_m[-1]:.1f} m")
+        f"in {t_fwd * 1e3:.0f} ms ({rate:,.0f} A-scans/s); a trace every {cfg.trace_spacing_m * 100:g} cm of "
+        f"the antenna's {path:.1f} m path")
+    log(f"      antenna poses from the visual-inertial fusion ({pose['rig_seconds']:.0f} s of IMU and odometry, "
+        f"{pose['vo_rejected']} frames gated out, {pose['fuse_s']:.1f} s): error at the traces mean "
+        f"{pose['antenna_error_mean_m'] * 100:.1f} cm, max {pose['antenna_error_max_m'] * 100:.1f} cm"
+        + (f", APE {pose['fused_ape_m'] * 100:.1f} cm" if "fused_ape_m" in pose else ""))
     return {"n_traces": survey.n_traces, "n_samples": n_samples, "forward_s": t_fwd, "ascans_per_s": rate,
-            "path_m": float(survey.distances_m[-1]), "files": ["random_walk_survey.h5", "random_walk.tum",
-                                                                "random_walk_map.png", "random_walk_bscan.png"]}
+            "path_m": path, "poses": pose,
+            "files": ["random_walk_survey.h5", "random_walk.tum", "random_walk_truth.tum", "random_walk_map.png",
+                      "random_walk_bscan.png"]}
 
 
 def _reconstruction_stage(out: Path, log) -> dict:
     from gpr3d.core.survey import Survey
+    from gpr3d.io.trajectory import read_tum
     from gpr3d.migration.metrics import evaluate_targets, truth_lines_from_pipes
     from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct, write_reconstruction
 
     survey = Survey.load(out / "random_walk_survey.h5")
-    t = time.perf_counter()
-    result = reconstruct(survey, ReconstructConfig(spacing_m=0.02, max_depth_m=0.8))
-    wall = time.perf_counter() - t
-    write_reconstruction(result, out / "reconstruction", source="random_walk_survey.h5")
+    true = read_tum(out / "random_walk_truth.tum")
     pipes = demo_scene().pipes
     names = ["L leg along x", "L leg along y", "diagonal pipe", "rebar at x=0.2", "rebar at x=1.85"]
-    ev = evaluate_targets(result["targets"], truth_lines_from_pipes(pipes))
-    rows = []
-    for name, row in zip(names, ev["truth"]):
-        rows.append({"target": name, **row})
-        if "position_error_m" in row:
-            log(f"      {name:<16} position {row['position_error_m'] * 100:4.1f} cm, depth "
-                f"{row['depth_error_m'] * 100:4.1f} cm, orientation {row['orientation_error_deg']:4.1f} deg, "
-                f"complete {row['completeness'] * 100:3.0f} %")
-        else:
-            log(f"      {name:<16} not found")
-    g = result["grid"]
-    log(f"[4/7] 3D reconstruction: {survey.n_traces} traces -> {g.nx} x {g.ny} x {g.nd} voxels in {wall:.1f} s "
-        f"(migration {result['timings_s']['migrate']:.1f} s, {result['updates_per_s'] / 1e9:.2f} G updates/s); "
-        f"{len(result['targets'])} targets, {ev['false_targets']} false")
-    return {"wall_s": wall, "grid": g.to_dict(), "updates_per_s": result["updates_per_s"],
-            "n_targets": len(result["targets"]), "false_targets": ev["false_targets"], "truth": rows,
-            "folder": "reconstruction"}
+    rows = {}
+    for key, s, folder in (("estimated", survey, "reconstruction"),
+                           ("true", survey.replace(positions_xyz=true.positions_xyz,
+                                                   orientations_quat_wxyz=true.orientations_quat_wxyz), None)):
+        t = time.perf_counter()
+        result = reconstruct(s, ReconstructConfig(spacing_m=0.02, max_depth_m=0.8))
+        wall = time.perf_counter() - t
+        if folder:
+            write_reconstruction(result, out / folder, source="random_walk_survey.h5")
+        ev = evaluate_targets(result["targets"], truth_lines_from_pipes(pipes))
+        rows[key] = {"wall_s": wall, "n_targets": len(result["targets"]), "false_targets": ev["false_targets"],
+                     "truth": [{"target": n, **r} for n, r in zip(names, ev["truth"])],
+                     "updates_per_s": result["updates_per_s"], "grid": result["grid"].to_dict()}
+        if key == "estimated":
+            g, mig = result["grid"], result["timings_s"]["migrate"]
+    log(f"[4/7] 3D reconstruction: {survey.n_traces} traces -> {g.nx} x {g.ny} x {g.nd} voxels in "
+        f"{rows['estimated']['wall_s']:.1f} s (migration {mig:.1f} s, "
+        f"{rows['estimated']['updates_per_s'] / 1e9:.2f} G updates/s); targets from the fused poses "
+        "(from the true poses):")
+    for i, name in enumerate(names):
+        cells = []
+        for key in ("estimated", "true"):
+            r = rows[key]["truth"][i]
+            cells.append(f"position {r['position_error_m'] * 100:4.1f} cm, depth {r['depth_error_m'] * 100:4.1f} cm, "
+                         f"orientation {r['orientation_error_deg']:4.1f} deg, complete {r['completeness'] * 100:3.0f} %"
+                         if "position_error_m" in r else "not found")
+        log(f"      {name:<16} {cells[0]}  ({cells[1]})")
+    log(f"      {rows['estimated']['n_targets']} targets, {rows['estimated']['false_targets']} false "
+        f"({rows['true']['n_targets']}, {rows['true']['false_targets']} false from the true poses)")
+    est = rows["estimated"]
+    return {"wall_s": est["wall_s"], "grid": est["grid"], "updates_per_s": est["updates_per_s"],
+            "n_targets": est["n_targets"], "false_targets": est["false_targets"], "truth": est["truth"],
+            "poses": "estimated (visual-inertial fusion)", "with_true_poses": rows["true"], "folder": "reconstruction"}
 
 
 def _detection_stage(out: Path, real_path: str, log) -> dict:
@@ -217,7 +281,9 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
     if not boxes:
         log("      no boxes: depth estimation and masked migration skipped")
         return row
-    depth = _depth_rows(survey, found, real, real_found, log)
+    from gpr3d.io.trajectory import read_tum
+
+    depth = _depth_rows(survey, found, real, real_found, log, read_tum(out / "random_walk_truth.tum").positions_xyz[:, :2])
     row["depth"] = depth
     eps_est = depth["random_walk"]["eps_r"]
     t = time.perf_counter()
@@ -258,8 +324,9 @@ def _true_top_depth(point_xy, apex_time_s, pipes, *, t0_s, v_m_s, offset_m, tole
     return best[1] if best[0] <= tolerance_s else float("nan")
 
 
-def _depth_rows(survey, found, real, real_found, log) -> dict:
-    """Host eps_r and target depths estimated from the data (DepthNet, fit, hybrid) against the truth."""
+def _depth_rows(survey, found, real, real_found, log, true_xy) -> dict:
+    """Host eps_r and target depths estimated from the data (DepthNet, fit, hybrid) against the truth
+    (``true_xy``: the antenna's true positions at the traces, which the truth of each echo needs)."""
     import numpy as np
 
     from gpr3d.inversion.depthnet import DepthEstimator
@@ -270,7 +337,7 @@ def _depth_rows(survey, found, real, real_found, log) -> dict:
     truth_eps = demo_scene().eps_r
     kw = dict(t0_s=survey.metadata["truth_t0_s"], v_m_s=299792458.0 / truth_eps**0.5, offset_m=survey.offset_m,
               tolerance_s=1.0 / survey.frequency_hz)
-    truth = [_true_top_depth(survey.positions_xyz[int(t["apex_trace"]), :2], t["apex_time_s"], pipes, **kw)
+    truth = [_true_top_depth(true_xy[int(t["apex_trace"])], t["apex_time_s"], pipes, **kw)
              for t in found["targets"]]
     out = {"random_walk": {"eps_r_true": truth_eps, "n_matched": int(np.sum(np.isfinite(truth)))}}
     for m in ("net", "fit", "hybrid"):

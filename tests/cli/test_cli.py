@@ -129,15 +129,21 @@ def test_demo_end_to_end(tmp_path):
         assert abs(row["apex_time_error_s"]) < 0.1e-9  # two samples
         assert abs(row["apex_trace_found"] - row["apex_trace_true"]) <= 1
     walk = summary["stages"]["random_motion"]
-    assert walk["n_traces"] == 8000 and walk["ascans_per_s"] > 0
+    # a trace every 1 cm of the antenna's path: the count follows the path length
+    assert walk["n_traces"] == pytest.approx(100 * walk["path_m"], abs=2) and walk["path_m"] > 50
+    poses = walk["poses"]  # the survey's poses are the fusion's, a few cm off the truth
+    assert 0.005 < poses["antenna_error_mean_m"] < 0.1 and poses["vo_rejected"] >= poses["vo_outliers"] > 0
     rec = summary["stages"]["reconstruction"]
-    found = [row for row in rec["truth"] if "position_error_m" in row]
-    assert len(found) >= 3  # both legs of the L and more
-    for row in found:
-        assert row["position_error_m"] < 0.05 and row["depth_error_m"] < 0.05
+    assert rec["poses"].startswith("estimated")
+    for key, rows, tol in (("fused poses", rec["truth"], 0.08), ("true poses", rec["with_true_poses"]["truth"], 0.03)):
+        found = [row for row in rows[:3] if "position_error_m" in row]
+        assert len(found) == 3, key  # both legs of the L and the diagonal
+        for row in found:
+            assert row["position_error_m"] < tol and row["depth_error_m"] < 0.05, (key, row)
     names = {p.name for p in (tmp_path / "d").iterdir()}
     assert {"summary.json", "config.json", "real_raw.png", "real_processed.png", "real_processed.h5",
-            "synthetic_processed.png", "random_walk_survey.h5", "random_walk.tum", "random_walk_map.png",
+            "synthetic_processed.png", "random_walk_survey.h5", "random_walk.tum", "random_walk_truth.tum",
+            "random_walk_map.png",
             "reconstruction"} <= names
     assert (tmp_path / "d" / "reconstruction" / "targets.json").exists()
     assert not [n for n in names if n.endswith(".part")]

@@ -190,3 +190,18 @@ def test_survey_wheel_shortens_the_drift_across_an_odometry_gap():
     t, d = run.wheel()
     with pytest.raises(InvalidDataError, match="decreases"):
         fuse(run.imu, run.vo, run.filter_config(), wheel=(t, d[::-1]))
+
+
+def test_fused_antenna_path_carried_to_the_site_frame_by_the_start_pose(run60):
+    """``RigRun.to_world``: the fused antenna poses, put into the rig's world by the true start pose, follow the
+    true antenna within the filter's drift without any alignment (the start differs only by the tilt estimate
+    across the lever arm; a wrong heading or a lever arm left out would
+    put them metres or decimetres off)."""
+    cfg, run, res = run60
+    est = run.to_world(res.antenna_trajectory())
+    true = run.truth_trajectory()
+    err = np.linalg.norm(est.positions_xyz - true.positions_xyz, axis=1)
+    assert err[0] < 2e-3 and np.sqrt(np.mean(err**2)) < 0.005 * run.path_length_m
+    Re = Rotation.from_quat(est.orientations_quat_wxyz[:, [1, 2, 3, 0]])
+    Rt = Rotation.from_quat(true.orientations_quat_wxyz[:, [1, 2, 3, 0]])
+    assert np.degrees(np.max((Re.inv() * Rt).magnitude())) < 1.5

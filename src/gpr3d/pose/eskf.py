@@ -122,45 +122,71 @@ def camera_to_imu_motion(R_c, p_c, cov_c, imu_T_camera) -> tuple[np.ndarray, np.
 
 
 class _Filter:
+    """The filter proper. Its error state is right-invariant (Barrau and Bonnabel's invariant EKF on SE_2(3),
+    with biases as in Hartley et al.): ``R_true = Exp(dtheta) R``, ``v_true = Exp(dtheta) v + dv``,
+    ``p_true = Exp(dtheta) p + dp`` with ``dtheta`` in the world frame, and the same for the clone. The
+    directions the data cannot see (a turn about gravity, a shift of the whole path) are then fixed vectors of
+    the error state, not functions of the estimate, so an update cannot gain spurious information about them:
+    the covariance stays consistent over long runs, where the body-frame (standard) error state becomes
+    overconfident in heading and position."""
+
     def __init__(self, cfg: EskfConfig, R0, bg0):
         self.cfg = cfg
         self.p, self.v, self.R = np.zeros(3), np.zeros(3), R0
         self.ba, self.bg = np.zeros(3), bg0
         self.P = np.zeros((21, 21))
-        # position and heading define the frame (known exactly); roll/pitch carry the accelerometer bias
-        tilt = cfg.sigma_accel_bias / GRAVITY
-        self.P[:15, :15] = np.diag([1e-8] * 3 + [1e-4] * 3 + [tilt**2, tilt**2, 1e-8] + [cfg.sigma_accel_bias**2] * 3
-                                   + [cfg.sigma_gyro_bias**2] * 3)
-        self.pc, self.Rc = self.p.copy(), self.R.copy()
+        # position and heading define the frame (known exactly). The still start's roll and pitch err by the
+        # accelerometer bias across gravity: tilt error (body frame) = [g_b]x ba / g^2, fully correlated with it
+        sb = cfg.sigma_accel_bias
+        g_b = R0.T @ np.array([0.0, 0.0, GRAVITY])
+        M = skew(g_b) / GRAVITY**2
+        Pb = np.diag([1e-8] * 3 + [1e-4] * 3 + [1e-8] * 3 + [sb**2] * 3 + [cfg.sigma_gyro_bias**2] * 3)
+        Pb[TH_, TH_] += sb**2 * M @ M.T
+        Pb[TH_, BA_] = sb**2 * M
+        Pb[BA_, TH_] = Pb[TH_, BA_].T
+        T = np.eye(15)
+        T[TH_, TH_] = R0  # body-frame attitude error -> world frame
+        self.P[:15, :15] = T @ Pb @ T.T
         self.clone()
         n = cfg.imu_noise
         self.q = np.array([n.accel_noise**2, n.gyro_noise**2, n.accel_bias_walk**2, n.gyro_bias_walk**2])
+        self._g = skew([0.0, 0.0, -GRAVITY])
 
     def propagate(self, f_m, w_m, dt):
         f = f_m - self.ba
         w = w_m - self.bg
+        R, v, p = self.R, self.v, self.p
+        # error dynamics (continuous, at the step's start), then Phi = I + A dt + (A dt)^2 / 2
+        A = np.zeros((15, 15))
+        A[P_, V_] = np.eye(3)
+        A[P_, BG_] = -skew(p) @ R
+        A[V_, TH_] = self._g
+        A[V_, BA_] = -R
+        A[V_, BG_] = -skew(v) @ R
+        A[TH_, BG_] = -R
+        Ad = A * dt
+        F = np.eye(15) + Ad + 0.5 * Ad @ Ad
+        # white noise of the gyro and accelerometer enters through the pose's adjoint
+        G = np.zeros((15, 6))
+        G[P_, :3] = -skew(p) @ R
+        G[V_, :3] = -skew(v) @ R
+        G[V_, 3:] = -R
+        G[TH_, :3] = -R
+        qa, qg, qba, qbg = self.q * dt
+        Q = G @ np.diag([qg] * 3 + [qa] * 3) @ G.T
+        idx = np.arange(3)
+        Q[9 + idx, 9 + idx] += qba
+        Q[12 + idx, 12 + idx] += qbg
+        # the nominal state: midpoint attitude for the specific force
         dR = so3_exp(w * dt)
-        R_mid = self.R @ so3_exp(0.5 * w * dt)
-        a = R_mid @ f + np.array([0.0, 0.0, -GRAVITY])
-        self.p = self.p + self.v * dt + 0.5 * a * dt * dt
-        self.v = self.v + a * dt
-        F = np.eye(15)
-        F[P_, V_] = np.eye(3) * dt
-        F[V_, TH_] = -R_mid @ skew(f) * dt
-        F[V_, BA_] = -R_mid * dt
-        F[TH_, TH_] = dR.T
-        F[TH_, BG_] = -np.eye(3) * dt
-        self.R = self.R @ dR
+        a = R @ so3_exp(0.5 * w * dt) @ f + np.array([0.0, 0.0, -GRAVITY])
+        self.p = p + v * dt + 0.5 * a * dt * dt
+        self.v = v + a * dt
+        self.R = R @ dR
         P = self.P
-        P[:15, :15] = F @ P[:15, :15] @ F.T
+        P[:15, :15] = F @ P[:15, :15] @ F.T + Q
         P[:15, 15:] = F @ P[:15, 15:]
         P[15:, :15] = P[:15, 15:].T
-        qa, qg, qba, qbg = self.q * dt
-        idx = np.arange(3)
-        P[3 + idx, 3 + idx] += qa
-        P[6 + idx, 6 + idx] += qg
-        P[9 + idx, 9 + idx] += qba
-        P[12 + idx, 12 + idx] += qbg
         self.P = 0.5 * (P + P.T)
 
     def clone(self):
@@ -188,25 +214,35 @@ class _Filter:
         IKH = np.eye(21) - K @ H
         P = IKH @ P @ IKH.T + K @ Rm @ K.T
         self.P = 0.5 * (P + P.T)  # round-off would otherwise build up an asymmetry the next gains amplify
-        self.p = self.p + dx[P_]
-        self.v = self.v + dx[V_]
-        self.R = self.R @ so3_exp(dx[TH_])
+        E = so3_exp(dx[TH_])
+        self.R = E @ self.R
+        self.v = E @ self.v + dx[V_]
+        self.p = E @ self.p + dx[P_]
         self.ba = self.ba + dx[BA_]
         self.bg = self.bg + dx[BG_]
-        self.pc = self.pc + dx[CP_]
-        self.Rc = self.Rc @ so3_exp(dx[CTH_])
+        Ec = so3_exp(dx[CTH_])
+        self.Rc = Ec @ self.Rc
+        self.pc = Ec @ self.pc + dx[CP_]
         return True
+
+    def _h_position(self, rows: np.ndarray) -> np.ndarray:
+        """Jacobian of ``rows @ Rc^T (p - pc)`` (the motion since the clone, in the clone's frame)."""
+        A = rows @ self.Rc.T
+        H = np.zeros((A.shape[0], 21))
+        H[:, P_] = A
+        H[:, CP_] = -A
+        H[:, TH_] = -A @ skew(self.p)
+        H[:, CTH_] = A @ skew(self.p)
+        return H
 
     def update_relative(self, R_z, p_z, cov, gate: float) -> bool:
         dR = self.Rc.T @ self.R
         h_p = self.Rc.T @ (self.p - self.pc)
         r = np.concatenate([so3_log(dR.T @ R_z), p_z - h_p])
         H = np.zeros((6, 21))
-        H[:3, TH_] = np.eye(3)
-        H[:3, CTH_] = -dR.T
-        H[3:, P_] = self.Rc.T
-        H[3:, CP_] = -self.Rc.T
-        H[3:, CTH_] = skew(h_p)
+        H[:3, TH_] = self.R.T
+        H[:3, CTH_] = -self.R.T
+        H[3:] = self._h_position(np.eye(3))
         return self._correct(H, r, cov, gate)
 
     def update_forward(self, distance_m: float, sigma_m: float) -> bool:
@@ -215,22 +251,30 @@ class _Filter:
         The wheel is taken to run on the IMU's fore-aft line; over one frame the chord and the arc agree to
         second order in the turn."""
         h = self.Rc.T @ (self.p - self.pc)
-        H = np.zeros((1, 21))
-        H[0, P_] = self.Rc.T[0]
-        H[0, CP_] = -self.Rc.T[0]
-        H[0, CTH_] = skew(h)[0]
+        H = self._h_position(np.array([[1.0, 0.0, 0.0]]))
         return self._correct(H, np.array([distance_m - h[0]]), np.array([[sigma_m**2]]), float(chi2.ppf(0.999, 1)))
 
     def update_height(self, sigma_z: float):
         """A cart on flat ground: the IMU stays at its start height (0 in the filter's world)."""
         H = np.zeros((1, 21))
         H[0, 2] = 1.0
+        H[0, TH_] = -skew(self.p)[2]
         self._correct(H, np.array([-self.p[2]]), np.array([[sigma_z**2]]), None)
 
     def update_still(self, sigma: float):
         H = np.zeros((3, 21))
         H[:, V_] = np.eye(3)
+        H[:, TH_] = -skew(self.v)
         self._correct(H, -self.v, np.eye(3) * sigma**2, None)
+
+    def pose_cov(self) -> np.ndarray:
+        """Covariance of the pose in the usual (body-frame) convention: ``(Log(R^T R_true), p_true - p)``."""
+        J = np.zeros((6, 6))
+        J[:3, :3] = self.R.T
+        J[3:, :3] = -skew(self.p)
+        J[3:, 3:] = np.eye(3)
+        idx = np.r_[6:9, 0:3]
+        return J @ self.P[np.ix_(idx, idx)] @ J.T
 
 
 def _align(imu: ImuSamples, still_s: float) -> tuple[np.ndarray, np.ndarray]:
@@ -318,7 +362,7 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
             if cfg.flat_ground_sigma_m is not None:
                 flt.update_height(cfg.flat_ground_sigma_m)
             flt.clone()
-            f_cov[fi] = flt.P[np.r_[6:9, 0:3]][:, np.r_[6:9, 0:3]]
+            f_cov[fi] = flt.pose_cov()
             f_idx[fi], f_p[fi], f_R[fi] = i + 1, flt.p, flt.R
             fi += 1
         step_to(t_next, i)

@@ -224,6 +224,17 @@ class RigRun:
         Rz = so3_exp([0.0, 0.0, -np.arctan2(R0[1, 0], R0[0, 0])])
         return Rz @ g["R"], (g["p"] - g0["p"][0]) @ Rz.T
 
+    def to_world(self, traj: Trajectory) -> Trajectory:
+        """A trajectory in the filter's world (origin and heading at the IMU's start, as
+        :func:`gpr3d.pose.eskf.fuse` sets it) carried into the rig's world by the true start pose: the start
+        a surveyor marks on site, so that estimated and true poses share the site frame."""
+        g0 = self.truth(np.array([self.imu.t_s[0]]))
+        R0 = g0["R"][0]
+        Rz = so3_exp([0.0, 0.0, np.arctan2(R0[1, 0], R0[0, 0])])
+        R = Rz @ Rotation.from_quat(traj.orientations_quat_wxyz[:, [1, 2, 3, 0]]).as_matrix()
+        return Trajectory(traj.timestamps_s, traj.positions_xyz @ Rz.T + g0["p"][0],
+                          Rotation.from_matrix(R).as_quat()[:, [3, 0, 1, 2]])
+
     def filter_config(self, **kw):
         """The :class:`~gpr3d.pose.eskf.EskfConfig` that matches the rig's mounts, latency and still start."""
         from gpr3d.pose.eskf import EskfConfig
