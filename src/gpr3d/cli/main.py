@@ -193,29 +193,69 @@ def cmd_pose(args):
         write_tum(run.truth_trajectory(), out / "truth.tum")
         write_rig(out / "rig.json", imu_T_camera=cfg.imu_T_camera, imu_T_antenna=cfg.imu_T_antenna,
                   camera_time_offset_s=cfg.camera_time_offset_s)
-        print(f"wrote imu.csv, odometry.tum (camera poses), wheel.csv, truth.tum (antenna) and rig.json to {out}/: "
-              f"{run.path_length_m:.1f} m in {args.duration:g} s, odometry lost for 2 s at {args.duration / 2:g} s "
-              f"({int(keep.sum())} odometry frames)")
+        wrote = "imu.csv, odometry.tum (camera poses), wheel.csv, truth.tum (antenna) and rig.json"
+        if args.bag:
+            import shutil
+
+            from gpr3d.io.rosbag import write_bag
+
+            if (out / "bag").exists():
+                shutil.rmtree(out / "bag")
+            write_bag(out / "bag", imu=run.imu, trajectory=cam)
+            wrote += ", bag/ (ROS 2: /imu, /odometry)"
+        print(f"wrote {wrote} to {out}/: {run.path_length_m:.1f} m in {args.duration:g} s, odometry lost for 2 s at "
+              f"{args.duration / 2:g} s ({int(keep.sum())} odometry frames)")
         return 0
-    if not args.imu:
-        raise GPR3DError("pose fuse needs --imu FILE.csv")
+    if args.bag is True:
+        raise GPR3DError("pose fuse --bag needs the bag's path")
+    if args.bag and args.imu:
+        raise GPR3DError("give --bag or --imu, not both")
+    if not (args.imu or args.bag):
+        raise GPR3DError("pose fuse needs --imu FILE.csv or --bag BAG")
+    if args.bag and args.odometry:
+        raise GPR3DError("with --bag, odometry comes from the bag (--odometry-topic, or --colour-topic and "
+                         "--depth-topic); leave out --odometry")
     if not args.still > 0:
         raise GPR3DError(f"--still must be the positive number of seconds the cart stands at the start, got {args.still}")
     if args.flat_ground is not None and not args.flat_ground > 0:
         raise GPR3DError(f"--flat-ground must be a positive height tolerance in metres, got {args.flat_ground}")
-    imu = read_imu_csv(args.imu)
+    try:
+        sig = [float(v) for v in args.odometry_sigma.split(",")]
+    except ValueError:
+        sig = []
+    if len(sig) != 3 or min(sig) <= 0:
+        raise GPR3DError(f"--odometry-sigma takes ROT_DEG,TRANS_FRAC,TRANS_FLOOR_M (three positive numbers), "
+                         f"got {args.odometry_sigma!r}")
+    if bool(args.colour_topic) != bool(args.depth_topic):
+        raise GPR3DError("RGB-D odometry needs both --colour-topic and --depth-topic")
+    if args.colour_topic and not args.bag:
+        raise GPR3DError("--colour-topic and --depth-topic read a bag: give --bag")
     rig = read_rig(args.rig) if args.rig else {}
     vo = None
-    if args.odometry:
-        try:
-            sig = [float(v) for v in args.odometry_sigma.split(",")]
-        except ValueError:
-            sig = []
-        if len(sig) != 3 or min(sig) <= 0:
-            raise GPR3DError(f"--odometry-sigma takes ROT_DEG,TRANS_FRAC,TRANS_FLOOR_M (three positive numbers), "
-                             f"got {args.odometry_sigma!r}")
-        vo = relative_from_camera_poses(read_trajectory(args.odometry), rot_sigma_deg=sig[0], trans_frac=sig[1],
-                                        trans_floor_m=sig[2])
+    source = args.imu or args.bag
+    if args.bag:
+        from gpr3d.io.rosbag import bag_topics, iter_bag_rgbd, read_bag_camera_info, read_bag_imu, read_bag_trajectory
+
+        imu = read_bag_imu(args.bag, args.imu_topic)
+        if args.colour_topic:
+            from gpr3d.pose.vo import require_open3d, rgbd_odometry
+
+            require_open3d()
+            intr = read_bag_camera_info(args.bag, args.camera_info_topic)
+            vo, rep = rgbd_odometry(iter_bag_rgbd(args.bag, args.colour_topic, args.depth_topic), intr)
+            lost = ", ".join(f"{k} {v}" for k, v in rep["lost"].items()) or "none"
+            print(f"RGB-D odometry: {rep['registered']} of {rep['frames'] - 1} frame pairs registered (lost: {lost}), "
+                  f"{rep['s_per_frame'] * 1e3:.0f} ms a frame")
+        elif args.odometry_topic or any(m in ("geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Odometry",
+                                              "geometry_msgs/msg/PoseWithCovarianceStamped")
+                                        for _, m, _ in bag_topics(args.bag)):
+            vo = relative_from_camera_poses(read_bag_trajectory(args.bag, args.odometry_topic), rot_sigma_deg=sig[0],
+                                            trans_frac=sig[1], trans_floor_m=sig[2])
+    else:
+        imu = read_imu_csv(args.imu)
+        if args.odometry:
+            vo = relative_from_camera_poses(read_trajectory(args.odometry), rot_sigma_deg=sig[0], trans_frac=sig[1],
+                                            trans_floor_m=sig[2])
     wheel = read_wheel_csv(args.wheel) if args.wheel else None
     from gpr3d.pose.eskf import EskfConfig, fuse
 
@@ -239,7 +279,7 @@ def cmd_pose(args):
 
             paths = {"truth": read_trajectory(args.truth).positions_xyz,
                      "fused (aligned)": aligned_positions(traj, read_trajectory(args.truth))}
-        save_paths_png(args.figure, paths, title=f"antenna path: {Path(args.imu).name}")
+        save_paths_png(args.figure, paths, title=f"antenna path: {Path(source).name}")
         msg += f"; figure {args.figure}"
     print(msg)
     return 0
@@ -745,12 +785,24 @@ def build_parser() -> argparse.ArgumentParser:
              "examples:\n  gpr3d pose simulate --out rig1                 (a synthetic cart's recordings and truth)\n"
              "  gpr3d pose fuse --imu rig1/imu.csv --odometry rig1/odometry.tum --wheel rig1/wheel.csv \\\n"
              "      --rig rig1/rig.json --still 2 --out antenna.tum --truth rig1/truth.tum --figure paths.png\n"
+             "  gpr3d pose fuse --bag run.bag --colour-topic /camera/color/image_raw \\\n"
+             "      --depth-topic /camera/aligned_depth_to_color/image_raw --rig rig.json --out antenna.tum\n"
              "IMU CSV: t,ax,ay,az,gx,gy,gz (s, m/s^2, rad/s); wheel CSV: t,distance (s, m); odometry: a TUM file "
              "of camera poses\n(a jump in its frame times is lost tracking); rig JSON: imu_T_camera, imu_T_antenna "
              "(4 x 4), camera_time_offset_s.")
     sp.add_argument("action", choices=("fuse", "simulate"), help="fuse recordings, or simulate a rig's recordings")
     sp.add_argument("--out", required=True, help="fuse: the antenna trajectory (TUM); simulate: a folder")
     sp.add_argument("--imu", default=None, help="IMU samples (CSV)")
+    sp.add_argument("--bag", default=None,
+                    help="fuse: a ROS 1 .bag or ROS 2 bag folder with the IMU and odometry (instead of --imu, "
+                         "--odometry); simulate: also write the recordings as a ROS 2 bag (flag)",
+                    nargs="?", const=True)
+    sp.add_argument("--imu-topic", default=None, help="bag: the sensor_msgs/Imu topic (default: the only one)")
+    sp.add_argument("--odometry-topic", default=None,
+                    help="bag: camera poses (PoseStamped, PoseWithCovarianceStamped or Odometry; default: the only one)")
+    sp.add_argument("--colour-topic", default=None, help="bag: colour images for RGB-D odometry (Open3D)")
+    sp.add_argument("--depth-topic", default=None, help="bag: depth images (16UC1 mm or 32FC1 m) for RGB-D odometry")
+    sp.add_argument("--camera-info-topic", default=None, help="bag: the depth camera's CameraInfo (default: the only one)")
     sp.add_argument("--odometry", default=None, help="visual odometry: camera poses (TUM or CSV trajectory)")
     sp.add_argument("--odometry-sigma", default="0.03,0.01,0.0005",
                     help="odometry's error per frame: ROT_DEG,TRANS_FRAC,TRANS_FLOOR_M (default 0.03,0.01,0.0005)")
