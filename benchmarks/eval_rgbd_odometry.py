@@ -4,7 +4,7 @@ The synthetic cart rig drives for ``--duration`` seconds; its D435i-like camera 
 40 deg down, 0.65 m above a textured floor with boxes on it; depth noise 0.0025 z^2 m, millimetre steps) renders
 every frame at its true pose (``gpr3d.pose.render``), Open3D's RGB-D odometry registers each frame to the one
 before (``gpr3d.pose.vo.rgbd_odometry``), and the error-state EKF fuses those motions with the rig's IMU.
-Scenarios: ``textured`` (the whole floor textured) and ``plain patch`` (a 1.6 m x 1.6 m patch of plain floor
+Scenarios: ``textured`` (the whole floor textured) and ``plain patch`` (a 4 m x 4 m patch of plain floor
 where the camera looks half-way through the run: the odometry must report the frames it cannot register, and
 the IMU must carry the pose across).
 
@@ -37,7 +37,7 @@ from gpr3d.pose.rig import RigConfig, simulate_rig  # noqa: E402
 from gpr3d.pose.vo import rgbd_odometry  # noqa: E402
 
 
-def plain_patch_ahead(run, t, size=1.6):
+def plain_patch_ahead(run, t, size=4.0):
     """A square of plain floor centred where the camera looks at time ``t`` (0.8 m ahead of the IMU)."""
     g = run.truth(np.array([t]))
     c = g["p"][0] + g["R"][0] @ np.array([0.8, 0.0, 0.0])

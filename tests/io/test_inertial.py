@@ -54,3 +54,32 @@ def test_camera_poses_give_the_rig_s_motions_and_a_gap_where_frames_are_missing(
         k = idx[j]
         assert np.allclose(rel.R[j], run.vo.R[k], atol=1e-9) and np.allclose(rel.p[j], run.vo.p[k], atol=1e-9)
     assert rel.cov[5, 0, 0] == pytest.approx(np.deg2rad(0.03) ** 2)
+
+
+def test_euroc_imu_and_ground_truth_files(tmp_path):
+    """EuRoC MAV's column layout (gyro before accelerometer, nanosecond stamps, units in brackets) reads into the
+    same values as our own CSV."""
+    from gpr3d.io.trajectory import read_trajectory
+
+    run = simulate_rig(RigConfig(duration_s=10, still_start_s=1, still_end_s=1), seed=2)
+    imu = run.imu
+    t_ns = (1403636579758555392 + np.round(imu.t_s * 1e9)).astype(np.int64)
+    lines = ["#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+             "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]"]
+    lines += [f"{t}," + ",".join(repr(float(v)) for v in (*g, *a)) for t, g, a in zip(t_ns, imu.gyro, imu.accel)]
+    (tmp_path / "data.csv").write_text("\n".join(lines) + "\n")
+    back = read_imu_csv(tmp_path / "data.csv")
+    np.testing.assert_array_equal(back.accel, imu.accel)
+    np.testing.assert_array_equal(back.gyro, imu.gyro)
+    np.testing.assert_allclose(back.t_s - back.t_s[0], imu.t_s - imu.t_s[0], atol=1e-6)
+    assert back.t_s[0] == pytest.approx(1403636579.758555392)
+    tr = run.truth_trajectory(imu.t_s[::20])
+    rows = ["#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z [], "
+            "v_RS_R_x [m s^-1], v_RS_R_y [m s^-1], v_RS_R_z [m s^-1]"]
+    rows += [f"{t}," + ",".join(repr(float(v)) for v in (*p, *q, 0.0, 0.0, 0.0))
+             for t, p, q in zip(t_ns[::20], tr.positions_xyz, tr.orientations_quat_wxyz)]
+    (tmp_path / "gt.csv").write_text("\n".join(rows) + "\n")
+    gt = read_trajectory(tmp_path / "gt.csv")
+    np.testing.assert_array_equal(gt.positions_xyz, tr.positions_xyz)
+    np.testing.assert_allclose(np.abs(np.sum(gt.orientations_quat_wxyz * tr.orientations_quat_wxyz, 1)), 1.0)
+    np.testing.assert_allclose(np.diff(gt.timestamps_s), np.diff(tr.timestamps_s), atol=1e-6)

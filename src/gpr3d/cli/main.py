@@ -259,6 +259,19 @@ def cmd_pose(args):
     wheel = read_wheel_csv(args.wheel) if args.wheel else None
     from gpr3d.pose.eskf import EskfConfig, fuse
 
+    if args.estimate_offset:
+        if vo is None:
+            raise GPR3DError("--estimate-offset needs odometry (--odometry, or odometry in the bag)")
+        from gpr3d.pose.sync import estimate_time_offset
+
+        off = estimate_time_offset(imu, vo)
+        if off["at_search_edge"]:
+            raise GPR3DError(f"the camera-IMU offset lies beyond +-0.2 s (search edge {off['offset_s']:+.3f} s): "
+                             "check the two clocks")
+        print(f"camera-IMU time offset estimated: {off['offset_s'] * 1e3:+.1f} ms from {off['frames']} frames "
+              f"({off['turn_deg']:.0f} deg of turns)" + (f"; the rig file says {rig['camera_time_offset_s'] * 1e3:+.1f} ms"
+                                                          if "camera_time_offset_s" in rig else ""))
+        rig["camera_time_offset_s"] = off["offset_s"]
     cfg = EskfConfig(init_still_s=args.still, flat_ground_sigma_m=args.flat_ground, **rig)
     res = fuse(imu, vo, cfg, wheel=wheel)
     traj = res.antenna_trajectory()
@@ -809,6 +822,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--wheel", default=None, help="survey wheel: forward distance (CSV t,distance)")
     sp.add_argument("--rig", default=None, help="mounts and camera latency (JSON); default: all at the IMU, none")
     sp.add_argument("--still", type=float, default=1.0, help="seconds the cart stands still at the start (1)")
+    sp.add_argument("--estimate-offset", action="store_true",
+                    help="estimate the camera-IMU time offset from the turns (gyro vs odometry) and use it")
     sp.add_argument("--flat-ground", type=float, default=None, metavar="SIGMA_M",
                     help="the ground is flat: hold the IMU at its start height within this (m)")
     sp.add_argument("--truth", default=None, help="a true antenna trajectory to report the APE against (evo)")

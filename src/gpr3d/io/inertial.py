@@ -1,6 +1,7 @@
 """IMU and survey-wheel recordings as CSV, and the rig file (mounts and latency) that ``gpr3d pose`` reads.
 
-* IMU CSV: a header naming ``t, ax, ay, az, gx, gy, gz`` (seconds, m/s^2 specific force, rad/s), one sample a row.
+* IMU CSV: a header naming ``t, ax, ay, az, gx, gy, gz`` (seconds, m/s^2 specific force, rad/s), one sample a row;
+  or EuRoC MAV's ``imu0/data.csv`` (``#timestamp [ns], w_RS_S_x [rad s^-1], ..., a_RS_S_z [m s^-2]``).
 * Wheel CSV: a header naming ``t, distance`` (seconds on the IMU clock, forward metres).
 * Rig JSON: ``{"imu_T_camera": 4x4, "imu_T_antenna": 4x4, "camera_time_offset_s": s}`` (CONVENTIONS.md).
 
@@ -29,11 +30,32 @@ __all__ = ["read_imu_csv", "write_imu_csv", "read_wheel_csv", "write_wheel_csv",
 IMU_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
 
 
+#: EuRoC MAV (ASL) column names -> ours; its times are integer nanoseconds
+EUROC_NAMES = {"#timestamp": "t", "timestamp": "t", "w_rs_s_x": "gx", "w_rs_s_y": "gy", "w_rs_s_z": "gz",
+               "a_rs_s_x": "ax", "a_rs_s_y": "ay", "a_rs_s_z": "az", "p_rs_r_x": "x", "p_rs_r_y": "y",
+               "p_rs_r_z": "z", "q_rs_w": "qw", "q_rs_x": "qx", "q_rs_y": "qy", "q_rs_z": "qz"}
+
+
+def csv_header(names: list) -> tuple[list, float]:
+    """Column names lower-cased, with EuRoC's (``#timestamp [ns]``, ``w_RS_S_x [rad s^-1]``, ``p_RS_R_x [m]``...)
+    mapped to ours; and the factor that turns the time column into seconds (1e-9 for EuRoC's nanoseconds)."""
+    out, scale = [], 1.0
+    for h in names:
+        h = h.strip().lower()
+        base = h.split("[")[0].strip()
+        if base in EUROC_NAMES and (base.startswith("#") or "_rs_" in base or "[ns]" in h):
+            if EUROC_NAMES[base] == "t":
+                scale = 1e-9
+            h = EUROC_NAMES[base]
+        out.append(h)
+    return out, scale
+
+
 def _read_columns(path, names: tuple, what: str) -> np.ndarray:
     p = check_file(path)
     reader = csv.reader(_io.StringIO(p.read_text(encoding="utf-8", errors="replace")))
     try:
-        header = [h.strip().lower() for h in next(reader)]
+        header, t_scale = csv_header(next(reader))
     except StopIteration:
         raise FormatError(p, "empty CSV") from None
     missing = [n for n in names if n not in header]
@@ -53,6 +75,8 @@ def _read_columns(path, names: tuple, what: str) -> np.ndarray:
     arr = np.asarray(rows)
     if not np.all(np.isfinite(arr)):
         raise FormatError(p, "holds NaN/inf values")
+    if names[0] == "t" and t_scale != 1.0:
+        arr[:, 0] *= t_scale  # EuRoC nanoseconds (1e18: float64 keeps them to ~0.3 us)
     return arr
 
 

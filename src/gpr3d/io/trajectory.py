@@ -71,12 +71,15 @@ _CSV_NAMES = {
 
 
 def read_csv_trajectory(path) -> Trajectory:
-    """Read a CSV trajectory with a header naming columns t, x, y, z and (optionally) qw, qx, qy, qz."""
+    """Read a CSV trajectory with a header naming columns t, x, y, z and (optionally) qw, qx, qy, qz; EuRoC MAV's
+    ground truth (``#timestamp, p_RS_R_x [m], ..., q_RS_w [], ...``, nanoseconds) too."""
     p = check_file(path)
     text = p.read_text(encoding="utf-8", errors="replace")
     reader = csv.reader(_io.StringIO(text))
+    from gpr3d.io.inertial import csv_header
+
     try:
-        header = [h.strip().lower() for h in next(reader)]
+        header, t_scale = csv_header(next(reader))
     except StopIteration:
         raise FormatError(p, "empty CSV") from None
     cols = {}
@@ -103,6 +106,7 @@ def read_csv_trajectory(path) -> Trajectory:
     arr = np.asarray(rows)
     if not np.all(np.isfinite(arr)):
         raise FormatError(p, "holds NaN/inf values")
+    arr[:, 0] *= t_scale
     return Trajectory(arr[:, 0], arr[:, 1:4], arr[:, 4:8])
 
 
