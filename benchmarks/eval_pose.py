@@ -51,6 +51,12 @@ def scenario(name, cfg, runs):
         a, r = ape(est, ref), rpe(est, ref)
         row = {"path_m": run.path_length_m, "ape_m": a["rmse"], "rpe_m": r["mean"], "fuse_s": wall,
                "rejected": int(res.vo_rejected.sum()), "outliers": int(run.vo_outliers.sum())}
+        if name != "imu_only":  # the RTS smoother over the same run
+            t0 = time.perf_counter()
+            sm = fuse(run.imu, run.vo, run.filter_config(), smooth=True)
+            row["smooth_s"] = time.perf_counter() - t0
+            est_s = sm.antenna_trajectory()
+            row["sm_ape_m"], row["sm_rpe_m"] = ape(est_s, ref)["rmse"], rpe(est_s, ref)["mean"]
         if name != "imu_only":  # odometry alone: chained camera motions, carried to the antenna
             vo = run.vo_trajectory()
             ref_vo = run.truth_trajectory(vo.timestamps_s)
@@ -67,7 +73,7 @@ def scenario(name, cfg, runs):
     return {k: float(np.mean([r[k] for r in rows])) for k in keys}
 
 
-def nees_check(cfg, runs):
+def nees_check(cfg, runs, smooth=False):
     """Run-averaged NEES of the pose and of its parts (rotation, position, heading, horizontal position), by
     quarter of the run (medians over the frames), and the share of frames inside the 6-dof bounds."""
     from gpr3d.pose.eskf import fuse
@@ -76,7 +82,7 @@ def nees_check(cfg, runs):
     parts = []
     for s in range(runs):
         run = simulate_rig(cfg, seed=100 + s, motion_seed=7)
-        res = fuse(run.imu, run.vo, run.filter_config())
+        res = fuse(run.imu, run.vo, run.filter_config(), smooth=smooth)
         R_t, p_t = run.truth_in_filter_frame(res.frame_t_s)
         rows = []
         for k in range(len(R_t)):
@@ -112,17 +118,21 @@ def main(argv=None):
             "gap": RigConfig(duration_s=d, vo_gap=(d / 2, 2.0)),
             "imu_only": RigConfig(duration_s=d)}
     lines = [f"Host CPU: {cpu_name()}; {args.runs} runs of {d:g} s per scenario (means); IMU 200 Hz, camera 15 Hz",
-             "", "| scenario | path m | fused APE m | fused APE % path | VO alone APE m | VO alone APE % path | "
-             "fused RPE m/m | VO RPE m/m | outliers / rejected | drift across 2 s gap m (path m) | fuse s |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "", "| scenario | path m | fused APE m | fused APE % path | smoothed APE m (% path) | VO alone APE m | "
+             "VO alone APE % path | fused RPE m/m | smoothed RPE m/m | VO RPE m/m | outliers / rejected | drift across "
+             "2 s gap m (path m) | fuse s | fuse + smooth s |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, cfg in scen.items():
         m = scenario(name, cfg, args.runs)
         vo = (f"{m['vo_ape_m']:.3f} | {100 * m['vo_ape_m'] / m['path_m']:.2f} %" if "vo_ape_m" in m else "- | -")
         vrpe = f"{m['vo_rpe_m']:.4f}" if "vo_rpe_m" in m else "-"
         gap = f"{m['drift_gap_m']:.3f} ({m['gap_path_m']:.2f})" if "drift_gap_m" in m else "-"
-        lines.append(f"| {name} | {m['path_m']:.1f} | {m['ape_m']:.3f} | {100 * m['ape_m'] / m['path_m']:.2f} % | "
-                     f"{vo} | {m['rpe_m']:.4f} | {vrpe} | {m['outliers']:.1f} / {m['rejected']:.1f} | {gap} | "
-                     f"{m['fuse_s']:.2f} |")
+        sm = (f"{m['sm_ape_m']:.3f} ({100 * m['sm_ape_m'] / m['path_m']:.2f} %)" if "sm_ape_m" in m else "-")
+        smr = f"{m['sm_rpe_m']:.4f}" if "sm_rpe_m" in m else "-"
+        sms = f"{m['smooth_s']:.2f}" if "smooth_s" in m else "-"
+        lines.append(f"| {name} | {m['path_m']:.1f} | {m['ape_m']:.3f} | {100 * m['ape_m'] / m['path_m']:.2f} % | {sm} | "
+                     f"{vo} | {m['rpe_m']:.4f} | {smr} | {vrpe} | {m['outliers']:.1f} / {m['rejected']:.1f} | {gap} | "
+                     f"{m['fuse_s']:.2f} | {sms} |")
         print(lines[-1], flush=True)
     nr = args.nees_runs
     n = nees_check(RigConfig(duration_s=min(d, 60.0)), nr)
@@ -133,6 +143,10 @@ def main(argv=None):
               "| part (dof) | " + " | ".join(f"quarter {i + 1}" for i in range(4)) + " |", "|---|---|---|---|---|"]
     for j, name in enumerate(NEES_PARTS):
         lines.append(f"| {name} | " + " | ".join(f"{qv[j]:.2f}" for qv in n["quarters"]) + " |")
+    ns = nees_check(RigConfig(duration_s=min(d, 60.0)), nr, smooth=True)
+    for j, name in enumerate(NEES_PARTS):
+        if j in (0, 1, 2):
+            lines.append(f"| {name}, smoothed | " + " | ".join(f"{qv[j]:.2f}" for qv in ns["quarters"]) + " |")
     write_table(args.out, "pose.md", "\n".join(lines), "eval_pose.py", argv)
 
 

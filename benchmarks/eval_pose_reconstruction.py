@@ -5,7 +5,8 @@ diagonal pipe, three rebars) for ``--duration`` seconds: the synthetic rig's ran
 waypoints, with stops. Its survey wheel fires a trace every 2 cm of the antenna's path; the forward model makes
 each A-scan at the antenna's true pose. The same data are then migrated by 3D back projection from the true
 poses, and from the poses of the visual-inertial fusion (IMU + odometry with gross errors, error-state EKF;
-alone, with the flat-ground height, and with the survey wheel's distance too: 0.5 % scale error, 1 mm ticks),
+alone, with the flat-ground height, and with the survey wheel's distance too: 0.5 % scale error, 1 mm ticks;
+filtered, and smoothed by the RTS pass),
 put into the site frame by the cart's true start pose (the start a surveyor marks). The same target
 extraction and metrics run on both.
 
@@ -50,11 +51,14 @@ def main(argv=None):
     trig = trajectory_triggers(truth, 0.02)
     true_poses = truth.at(trig)
     fusions = {}
-    for label, kw, wheel in (("fused poses", {}, None),
-                             ("fused poses, flat ground", {"flat_ground_sigma_m": 0.01}, None),
-                             ("fused poses, flat ground, survey wheel", {"flat_ground_sigma_m": 0.01}, run.wheel())):
+    flat = {"flat_ground_sigma_m": 0.01}
+    for label, kw, wheel, smooth in (("fused poses", {}, None, False),
+                                     ("fused poses, flat ground", flat, None, False),
+                                     ("fused poses, flat ground, survey wheel", flat, run.wheel(), False),
+                                     ("smoothed poses", {}, None, True),
+                                     ("smoothed poses, flat ground, survey wheel", flat, run.wheel(), True)):
         t0 = time.perf_counter()
-        res = fuse(run.imu, run.vo, run.filter_config(**kw), wheel=wheel)
+        res = fuse(run.imu, run.vo, run.filter_config(**kw), wheel=wheel, smooth=smooth)
         wall = time.perf_counter() - t0
         poses = run.to_world(res.antenna_trajectory()).at(trig)
         err = np.linalg.norm(poses.positions_xyz - true_poses.positions_xyz, axis=1)

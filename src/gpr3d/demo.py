@@ -134,7 +134,7 @@ def _survey_poses(cfg: DemoConfig, log):
     truth = run.truth_trajectory()
     trig = trajectory_triggers(truth, cfg.trace_spacing_m)
     t = time.perf_counter()
-    res = fuse(run.imu, run.vo, run.filter_config(flat_ground_sigma_m=0.01), wheel=run.wheel())
+    res = fuse(run.imu, run.vo, run.filter_config(flat_ground_sigma_m=0.01), wheel=run.wheel(), smooth=True)
     wall = time.perf_counter() - t
     est = run.to_world(res.antenna_trajectory()).at(trig)
     true = truth.at(trig)
@@ -167,7 +167,7 @@ def _random_motion_stage(out: Path, cfg: DemoConfig, log) -> dict:
                     positions_xyz=est.positions_xyz, orientations_quat_wxyz=est.orientations_quat_wxyz,
                     offset_m=0.1, frequency_hz=f, eps_r=scene.eps_r,
                     metadata={"format": "forward", "antenna": "forward model, 500 MHz",
-                              "poses": "visual-inertial fusion (IMU, odometry, survey wheel, flat ground)",
+                              "poses": "visual-inertial fusion (IMU, odometry, survey wheel, flat ground; smoothed)",
                               "scene": {"eps_r": scene.eps_r, "pipes": [p.__dict__ for p in scene.pipes]},
                               "truth_t0_s": 2 ** 0.5 / f})
     survey.save(out / "random_walk_survey.h5")

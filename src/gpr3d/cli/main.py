@@ -273,7 +273,7 @@ def cmd_pose(args):
                                                           if "camera_time_offset_s" in rig else ""))
         rig["camera_time_offset_s"] = off["offset_s"]
     cfg = EskfConfig(init_still_s=args.still, flat_ground_sigma_m=args.flat_ground, **rig)
-    res = fuse(imu, vo, cfg, wheel=wheel)
+    res = fuse(imu, vo, cfg, wheel=wheel, smooth=args.smooth)
     traj = res.antenna_trajectory()
     write_tum(traj, out)
     msg = (f"wrote {out}: {len(traj)} antenna poses; odometry frames used {int(res.vo_used.sum())}, gated out "
@@ -822,6 +822,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--wheel", default=None, help="survey wheel: forward distance (CSV t,distance)")
     sp.add_argument("--rig", default=None, help="mounts and camera latency (JSON); default: all at the IMU, none")
     sp.add_argument("--still", type=float, default=1.0, help="seconds the cart stands still at the start (1)")
+    sp.add_argument("--smooth", action="store_true",
+                    help="fixed-interval smoothing after the filter (RTS): each pose also rests on later data")
     sp.add_argument("--estimate-offset", action="store_true",
                     help="estimate the camera-IMU time offset from the turns (gyro vs odometry) and use it")
     sp.add_argument("--flat-ground", type=float, default=None, metavar="SIGMA_M",

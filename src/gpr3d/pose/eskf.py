@@ -148,6 +148,8 @@ class _Filter:
         T[TH_, TH_] = R0  # body-frame attitude error -> world frame
         self.P[:15, :15] = T @ Pb @ T.T
         self.clone()
+        self.Phi = np.eye(15)
+        self.nodes: list | None = None  #: a list to record smoother nodes in (see ``fuse(..., smooth=True)``)
         n = cfg.imu_noise
         self.q = np.array([n.accel_noise**2, n.gyro_noise**2, n.accel_bias_walk**2, n.gyro_bias_walk**2])
         self._g = skew([0.0, 0.0, -GRAVITY])
@@ -183,11 +185,27 @@ class _Filter:
         self.p = p + v * dt + 0.5 * a * dt * dt
         self.v = v + a * dt
         self.R = R @ dR
+        self.Phi = F @ self.Phi
         P = self.P
         P[:15, :15] = F @ P[:15, :15] @ F.T + Q
         P[:15, 15:] = F @ P[:15, 15:]
         P[15:, :15] = P[:15, 15:].T
         self.P = 0.5 * (P + P.T)
+
+    def state(self) -> tuple:
+        return (self.p.copy(), self.v.copy(), self.R.copy(), self.ba.copy(), self.bg.copy(), self.pc.copy(),
+                self.Rc.copy())
+
+    def node_prior(self, t: float, i: int):
+        """Before the updates at time ``t`` (IMU interval ``i``): the prediction and the transition since the last
+        node, for the smoother."""
+        if self.nodes is not None:
+            self.nodes.append({"t": t, "i": i, "prior": self.state(), "P_prior": self.P.copy(), "Phi": self.Phi})
+        self.Phi = np.eye(15)
+
+    def node_posterior(self, clone_follows: bool):
+        if self.nodes is not None:
+            self.nodes[-1].update(post=self.state(), P_post=self.P.copy(), clone=clone_follows)
 
     def clone(self):
         self.pc, self.Rc = self.p.copy(), self.R.copy()
@@ -277,6 +295,48 @@ class _Filter:
         return J @ self.P[np.ix_(idx, idx)] @ J.T
 
 
+def _minus(a: tuple, b: tuple) -> np.ndarray:
+    """The right-invariant error ``a - b`` of two nominal states (21: p, v, theta, ba, bg, clone p, clone theta)."""
+    th = so3_log(a[2] @ b[2].T)
+    E = so3_exp(th)
+    thc = so3_log(a[6] @ b[6].T)
+    return np.concatenate([a[0] - E @ b[0], a[1] - E @ b[1], th, a[3] - b[3], a[4] - b[4],
+                           a[5] - so3_exp(thc) @ b[5], thc])
+
+
+def _plus(b: tuple, d: np.ndarray) -> tuple:
+    E, Ec = so3_exp(d[TH_]), so3_exp(d[CTH_])
+    return (E @ b[0] + d[P_], E @ b[1] + d[V_], E @ b[2], b[3] + d[BA_], b[4] + d[BG_], Ec @ b[5] + d[CP_], Ec @ b[6])
+
+
+def _rts(nodes: list) -> tuple[list, list, list, list]:
+    """Rauch-Tung-Striebel backwards over the filter's nodes (each update time): the smoothed states and
+    covariances, and each node's correction from its posterior and from its prior."""
+    n = len(nodes)
+    xs, Ps = [None] * n, [None] * n
+    eps, dlt = [np.zeros(21)] * n, [np.zeros(21)] * n
+    xs[-1], Ps[-1] = nodes[-1]["post"], nodes[-1]["P_post"]
+    dlt[-1] = _minus(xs[-1], nodes[-1]["prior"])
+    for j in range(n - 2, -1, -1):
+        a, b = nodes[j], nodes[j + 1]
+        A = np.zeros((21, 21))
+        A[:15, :15] = b["Phi"]
+        if a["clone"]:  # the clone restarts at the pose of node j
+            A[15:18, 0:3] = np.eye(3)
+            A[18:21, 6:9] = np.eye(3)
+        else:
+            A[15:, 15:] = np.eye(6)
+        # C = P+ A^T (P-)^-1, by least squares: P- is near singular right after a clone
+        Ct = np.linalg.lstsq(b["P_prior"], A @ a["P_post"], rcond=1e-13)[0]
+        C = Ct.T
+        eps[j] = C @ _minus(xs[j + 1], b["prior"])
+        xs[j] = _plus(a["post"], eps[j])
+        P = a["P_post"] + C @ (Ps[j + 1] - b["P_prior"]) @ C.T
+        Ps[j] = 0.5 * (P + P.T)
+        dlt[j] = _minus(xs[j], a["prior"])
+    return xs, Ps, eps, dlt
+
+
 def _align(imu: ImuSamples, still_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Roll and pitch from gravity, and the gyro bias, over the still first ``still_s`` seconds."""
     sel = imu.t_s <= imu.t_s[0] + still_s
@@ -295,8 +355,12 @@ def _align(imu: ImuSamples, still_s: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = None, *,
-         wheel: tuple | None = None) -> FusionResult:
+         wheel: tuple | None = None, smooth: bool = False) -> FusionResult:
     """Fuse IMU samples with visual odometry (or none: IMU alone) into poses at every IMU sample.
+
+    ``smooth``: after the filter's forward pass, a Rauch-Tung-Striebel pass backwards over every update (the
+    fixed-interval smoother: each pose then rests on the data after it too, as offline GPR processing
+    allows); the IMU-rate poses between updates take the corrections interpolated in time.
 
     ``wheel``: ``(t_s, distance_m)``, a survey wheel's forward distance on the IMU clock (non-decreasing);
     its travel between odometry frames is applied at every frame, through gaps in odometry too.
@@ -342,12 +406,15 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
             flt.propagate(0.5 * (imu.accel[i] + imu.accel[j]), 0.5 * (imu.gyro[i] + imu.gyro[j]), dt)
             t_now = t_target
 
+    if smooth:
+        flt.nodes = []
     record(0)
     for i in range(n - 1):
         t_next = imu.t_s[i + 1]
         while fi < m and ft[frames[fi]] <= t_next:
             k = frames[fi]
             step_to(ft[k], i)
+            flt.node_prior(ft[k], i)
             if vo.valid[k] and fi > 0 and frames[fi - 1] == k - 1:
                 R_b, p_b, cov_b = camera_to_imu_motion(vo.R[k], vo.p[k], vo.cov[k] * cfg.vo_cov_scale, cfg.imu_T_camera)
                 ok = flt.update_relative(R_b, p_b, cov_b, gate)
@@ -361,6 +428,7 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
                 flt.update_forward(d1 - d0, cfg.wheel_sigma_frac * (d1 - d0) + cfg.wheel_sigma_m)
             if cfg.flat_ground_sigma_m is not None:
                 flt.update_height(cfg.flat_ground_sigma_m)
+            flt.node_posterior(clone_follows=True)
             flt.clone()
             f_cov[fi] = flt.pose_cov()
             f_idx[fi], f_p[fi], f_R[fi] = i + 1, flt.p, flt.R
@@ -370,8 +438,37 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
             a = imu.accel[i + 2 - win : i + 2]
             g = imu.gyro[i + 2 - win : i + 2]
             if np.all(a.std(0) < 3 * sa) and np.all(g.std(0) < 3 * sg):
+                flt.node_prior(t_next, i)
                 flt.update_still(cfg.zupt_sigma_m_s)
+                flt.node_posterior(clone_follows=False)
                 zupts += 1
         record(i + 1)
+    if smooth and flt.nodes:
+        xs, Ps, eps, dlt = _rts(flt.nodes)
+        tn = np.array([nd["t"] for nd in flt.nodes])
+        # the correction at each IMU sample: from the last node at or before it (its posterior's correction) to
+        # the next node (its prior's), linear in time
+        j = np.searchsorted(tn, imu.t_s, side="right") - 1
+        for q in range(n):
+            jj = j[q]
+            if jj < 0:
+                d = dlt[0]
+            elif jj >= len(tn) - 1:
+                d = eps[-1]
+            else:
+                w = (imu.t_s[q] - tn[jj]) / max(tn[jj + 1] - tn[jj], 1e-12)
+                d = (1 - w) * eps[jj] + w * dlt[jj + 1]
+            x = _plus((out_p[q], out_v[q], out_R[q], out_ba[q], out_bg[q], np.zeros(3), np.eye(3)), d)
+            out_p[q], out_v[q], out_R[q], out_ba[q], out_bg[q] = x[:5]
+        fnodes = [q for q, nd in enumerate(flt.nodes) if nd["clone"]]
+        for fi_, q in enumerate(fnodes):
+            x = xs[q]
+            f_p[fi_], f_R[fi_] = x[0], x[2]
+            J = np.zeros((6, 6))
+            J[:3, :3] = x[2].T
+            J[3:, :3] = -skew(x[0])
+            J[3:, 3:] = np.eye(3)
+            idx = np.r_[6:9, 0:3]
+            f_cov[fi_] = J @ Ps[q][np.ix_(idx, idx)] @ J.T
     return FusionResult(imu.t_s, out_p, out_v, out_R, out_ba, out_bg, ft[frames], f_cov, f_idx, f_p, f_R, used, rejected,
                         zupts, cfg.imu_T_antenna)
