@@ -74,3 +74,15 @@ def test_bad_camera_or_pose_gives_one_line():
         FloorScene(boxes=[(0, 0, 0.1, -0.1, 0.2)])
     d435 = CameraIntrinsics.d435i(320)
     assert (d435.width, d435.height) == (320, 240) and d435.fx == pytest.approx(191.0)
+
+
+def test_plain_patch_is_plain_and_the_rest_textured():
+    scene = FloorScene(seed=2, plain=[((-1.0, 1.0), (-1.0, 1.0))])
+    x = np.array([0.0, 0.5, 2.0, 3.0])
+    y = np.array([0.0, -0.5, 2.0, 3.0])
+    c = scene.colour_at(x, y, np.full(4, scene.floor_z_m))
+    assert np.all(c[:2] == 0.5) and np.all(c[2:] != 0.5)
+    rng = np.random.default_rng(0)
+    inside, d = render_rgbd(scene, INTR, _down(0.0, 0.0, 0.0), rng=rng)  # 0.3 m above the patch's middle
+    outside, _ = render_rgbd(scene, INTR, _down(2.5, 2.5, 0.0), rng=rng)
+    assert texture_share(inside, d) < 0.01 < 0.5 < texture_share(outside, d)
