@@ -26,7 +26,7 @@ from gpr3d.core.errors import GPR3DError, InvalidDataError
 from gpr3d.pose.imu import RelativePoses, so3_log
 from gpr3d.pose.render import CameraIntrinsics
 
-__all__ = ["OdometryConfig", "rgbd_odometry", "require_open3d", "texture_share"]
+__all__ = ["OdometryConfig", "rgbd_odometry", "rgbd_loop_closures", "require_open3d", "texture_share"]
 
 
 def require_open3d():
@@ -166,3 +166,73 @@ def rgbd_odometry(frames: Iterable, intr: CameraIntrinsics, cfg: OdometryConfig 
     report = {"frames": len(ts), "registered": int(np.sum(valid)), "lost": {k: v for k, v in reasons.items() if v},
               "s_per_frame": wall / max(1, len(ts) - 1)}
     return vo, report
+
+
+def rgbd_loop_closures(get_frame, res, intr: CameraIntrinsics, imu_T_camera, cfg: OdometryConfig | None = None, *,
+                       every_s: float = 1.0, radius_m: float = 0.4, max_angle_deg: float = 45.0,
+                       min_gap_s: float = 15.0, max_correction_m: float = 0.5) -> tuple[list, dict]:
+    """Loop closures from RGB-D frames: revisits found from the fused poses, measured by registration.
+
+    ``get_frame(k)`` returns frame ``k``'s ``(colour, depth)`` (frame indices of ``res``, a
+    :class:`~gpr3d.pose.eskf.FusionResult`). Frames ``every_s`` apart whose views of the ground (0.8 m ahead of
+    the IMU, by the fused poses) lie within ``radius_m`` and ``max_angle_deg`` of an earlier frame at least
+    ``min_gap_s`` before are registered to it with Open3D, started from the fused relative pose; a registration
+    that fails, sees too little texture, or moves the guess by more than ``max_correction_m`` is dropped.
+    Returns :class:`~gpr3d.pose.graph.LoopClosure` s (for :func:`gpr3d.pose.graph.close_loops`) and a report."""
+    from gpr3d.pose.eskf import camera_to_imu_motion
+    from gpr3d.pose.graph import LoopClosure
+
+    o3d = require_open3d()
+    cfg = cfg or OdometryConfig()
+    pin = o3d.camera.PinholeCameraIntrinsic(intr.width, intr.height, intr.fx, intr.fy, intr.cx, intr.cy)
+    opt = o3d.pipelines.odometry.OdometryOption()
+    opt.iteration_number_per_pyramid_level = o3d.utility.IntVector(list(cfg.iterations))
+    opt.depth_diff_max, opt.depth_min, opt.depth_max = cfg.depth_diff_max_m, cfg.depth_min_m, cfg.depth_max_m
+    jac = o3d.pipelines.odometry.RGBDOdometryJacobianFromHybridTerm()
+    Tbc = np.asarray(imu_T_camera, dtype=float)
+    t = res.frame_t_s
+    step = max(1, int(round(every_s / np.median(np.diff(t)))))
+    idx = np.arange(0, t.size, step)
+    look = res.frame_p[idx, :2] + 0.8 * res.frame_R[idx][:, :2, 0]
+    yaw = np.arctan2(res.frame_R[idx][:, 1, 0], res.frame_R[idx][:, 0, 0])
+    out, tried = [], 0
+    cache = {}
+
+    def image(k):
+        if k not in cache:
+            colour, depth = get_frame(k)
+            cache[k] = (_rgbd(o3d, colour, depth, cfg, intr, k), texture_share(colour, depth, cfg.texture_gradient))
+        return cache[k]
+
+    def cam_pose(k):
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = res.frame_R[k], res.frame_p[k]
+        return T @ Tbc
+
+    for b in range(idx.size):
+        early = np.nonzero(t[idx] < t[idx[b]] - min_gap_s)[0]
+        if early.size == 0:
+            continue
+        dist = np.linalg.norm(look[early] - look[b], axis=1)
+        dang = np.abs(np.angle(np.exp(1j * (yaw[early] - yaw[b]))))
+        ok = (dist < radius_m) & (dang < np.deg2rad(max_angle_deg))
+        if not ok.any():
+            continue
+        i, j = int(idx[early[ok][np.argmin(dist[ok])]]), int(idx[b])
+        tried += 1
+        (img_i, tex_i), (img_j, tex_j) = image(i), image(j)
+        if min(tex_i, tex_j) < cfg.min_texture:
+            continue
+        guess_motion = np.linalg.inv(cam_pose(i)) @ cam_pose(j)  # camera j in camera i, by the fusion
+        success, trans, info = o3d.pipelines.odometry.compute_rgbd_odometry(img_i, img_j, pin,
+                                                                            np.linalg.inv(guess_motion), jac, opt)
+        if not success or not np.all(np.isfinite(trans)):
+            continue
+        motion = np.linalg.inv(trans)
+        if np.linalg.norm(motion[:3, 3] - guess_motion[:3, 3]) > max_correction_m:
+            continue
+        cov = cfg.cov_scale * np.linalg.inv(0.5 * (info + info.T))
+        R_b, p_b, cov_b = camera_to_imu_motion(motion[:3, :3], motion[:3, 3], cov, Tbc)
+        out.append(LoopClosure(i, j, R_b, p_b, float(np.sqrt(max(np.max(np.diag(cov_b)[3:]), 1e-8))),
+                               float(np.sqrt(max(cov_b[2, 2], 1e-10)))))
+    return out, {"candidates": tried, "closures": len(out)}
