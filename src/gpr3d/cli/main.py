@@ -230,6 +230,8 @@ def cmd_pose(args):
         raise GPR3DError("RGB-D odometry needs both --colour-topic and --depth-topic")
     if args.colour_topic and not args.bag:
         raise GPR3DError("--colour-topic and --depth-topic read a bag: give --bag")
+    if args.loops and not args.colour_topic:
+        raise GPR3DError("--loops registers revisited RGB-D frames: give --bag with --colour-topic and --depth-topic")
     rig = read_rig(args.rig) if args.rig else {}
     vo = None
     source = args.imu or args.bag
@@ -274,6 +276,24 @@ def cmd_pose(args):
         rig["camera_time_offset_s"] = off["offset_s"]
     cfg = EskfConfig(init_still_s=args.still, flat_ground_sigma_m=args.flat_ground, **rig)
     res = fuse(imu, vo, cfg, wheel=wheel, smooth=args.smooth)
+    if args.loops:
+        import numpy as np
+
+        from gpr3d.pose.graph import close_loops
+        from gpr3d.pose.vo import loop_candidates, rgbd_loop_closures
+
+        pairs = loop_candidates(res)
+        # the fusion's frames are odometry's frames inside the IMU record: find each one's place in the bag
+        vo_idx = np.searchsorted(vo.t_s + cfg.camera_time_offset_s, res.frame_t_s - 1e-9)
+        need = {int(vo_idx[k]) for pair in pairs for k in pair}
+        kept = {k: (c, d) for k, (_, c, d) in enumerate(iter_bag_rgbd(args.bag, args.colour_topic, args.depth_topic))
+                if k in need}
+        closures, lrep = rgbd_loop_closures(lambda k: kept[int(vo_idx[k])], res, intr, cfg.imu_T_camera,
+                                            candidates=pairs)
+        grep_ = {}
+        res = close_loops(res, closures, report=grep_)
+        print(f"loop closures: {lrep['closures']} registered of {lrep['candidates']} revisits; "
+              f"{grep_.get('used', 0)} used, {grep_.get('gated', 0)} + {grep_.get('rejected', 0)} left out as wrong")
     traj = res.antenna_trajectory()
     write_tum(traj, out)
     msg = (f"wrote {out}: {len(traj)} antenna poses; odometry frames used {int(res.vo_used.sum())}, gated out "
@@ -822,6 +842,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--wheel", default=None, help="survey wheel: forward distance (CSV t,distance)")
     sp.add_argument("--rig", default=None, help="mounts and camera latency (JSON); default: all at the IMU, none")
     sp.add_argument("--still", type=float, default=1.0, help="seconds the cart stands still at the start (1)")
+    sp.add_argument("--loops", action="store_true",
+                    help="close loops where the cart revisits ground (RGB-D frames of a bag registered by Open3D)")
     sp.add_argument("--smooth", action="store_true",
                     help="fixed-interval smoothing after the filter (RTS): each pose also rests on later data")
     sp.add_argument("--estimate-offset", action="store_true",

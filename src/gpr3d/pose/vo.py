@@ -26,7 +26,7 @@ from gpr3d.core.errors import GPR3DError, InvalidDataError
 from gpr3d.pose.imu import RelativePoses, so3_log
 from gpr3d.pose.render import CameraIntrinsics
 
-__all__ = ["OdometryConfig", "rgbd_odometry", "rgbd_loop_closures", "require_open3d", "texture_share"]
+__all__ = ["OdometryConfig", "rgbd_odometry", "loop_candidates", "rgbd_loop_closures", "require_open3d", "texture_share"]
 
 
 def require_open3d():
@@ -168,17 +168,42 @@ def rgbd_odometry(frames: Iterable, intr: CameraIntrinsics, cfg: OdometryConfig 
     return vo, report
 
 
+def loop_candidates(res, *, every_s: float = 1.0, radius_m: float = 0.4, max_angle_deg: float = 45.0,
+                    min_gap_s: float = 15.0) -> list[tuple[int, int]]:
+    """Frame pairs ``(i, j)`` (``i`` earlier) of a fused trajectory that likely see the same ground: frames
+    ``every_s`` apart whose views (0.8 m ahead of the IMU) lie within ``radius_m`` and headings within
+    ``max_angle_deg``, at least ``min_gap_s`` apart; for each later frame the nearest earlier one."""
+    t = res.frame_t_s
+    if t.size < 2:
+        return []
+    step = max(1, int(round(every_s / np.median(np.diff(t)))))
+    idx = np.arange(0, t.size, step)
+    look = res.frame_p[idx, :2] + 0.8 * res.frame_R[idx][:, :2, 0]
+    yaw = np.arctan2(res.frame_R[idx][:, 1, 0], res.frame_R[idx][:, 0, 0])
+    out = []
+    for b in range(idx.size):
+        early = np.nonzero(t[idx] < t[idx[b]] - min_gap_s)[0]
+        if early.size == 0:
+            continue
+        dist = np.linalg.norm(look[early] - look[b], axis=1)
+        dang = np.abs(np.angle(np.exp(1j * (yaw[early] - yaw[b]))))
+        ok = (dist < radius_m) & (dang < np.deg2rad(max_angle_deg))
+        if ok.any():
+            out.append((int(idx[early[ok][np.argmin(dist[ok])]]), int(idx[b])))
+    return out
+
+
 def rgbd_loop_closures(get_frame, res, intr: CameraIntrinsics, imu_T_camera, cfg: OdometryConfig | None = None, *,
                        every_s: float = 1.0, radius_m: float = 0.4, max_angle_deg: float = 45.0,
-                       min_gap_s: float = 15.0, max_correction_m: float = 0.5) -> tuple[list, dict]:
+                       min_gap_s: float = 15.0, max_correction_m: float = 0.5,
+                       candidates: list | None = None) -> tuple[list, dict]:
     """Loop closures from RGB-D frames: revisits found from the fused poses, measured by registration.
 
     ``get_frame(k)`` returns frame ``k``'s ``(colour, depth)`` (frame indices of ``res``, a
-    :class:`~gpr3d.pose.eskf.FusionResult`). Frames ``every_s`` apart whose views of the ground (0.8 m ahead of
-    the IMU, by the fused poses) lie within ``radius_m`` and ``max_angle_deg`` of an earlier frame at least
-    ``min_gap_s`` before are registered to it with Open3D, started from the fused relative pose; a registration
-    that fails, sees too little texture, or moves the guess by more than ``max_correction_m`` is dropped.
-    Returns :class:`~gpr3d.pose.graph.LoopClosure` s (for :func:`gpr3d.pose.graph.close_loops`) and a report."""
+    :class:`~gpr3d.pose.eskf.FusionResult`). The pairs of :func:`loop_candidates` (or ``candidates``) are
+    registered with Open3D, started from the fused relative pose; a registration that fails, sees too little
+    texture, or moves the guess by more than ``max_correction_m`` is dropped. Returns
+    :class:`~gpr3d.pose.graph.LoopClosure` s (for :func:`gpr3d.pose.graph.close_loops`) and a report."""
     from gpr3d.pose.eskf import camera_to_imu_motion
     from gpr3d.pose.graph import LoopClosure
 
@@ -190,11 +215,6 @@ def rgbd_loop_closures(get_frame, res, intr: CameraIntrinsics, imu_T_camera, cfg
     opt.depth_diff_max, opt.depth_min, opt.depth_max = cfg.depth_diff_max_m, cfg.depth_min_m, cfg.depth_max_m
     jac = o3d.pipelines.odometry.RGBDOdometryJacobianFromHybridTerm()
     Tbc = np.asarray(imu_T_camera, dtype=float)
-    t = res.frame_t_s
-    step = max(1, int(round(every_s / np.median(np.diff(t)))))
-    idx = np.arange(0, t.size, step)
-    look = res.frame_p[idx, :2] + 0.8 * res.frame_R[idx][:, :2, 0]
-    yaw = np.arctan2(res.frame_R[idx][:, 1, 0], res.frame_R[idx][:, 0, 0])
     out, tried = [], 0
     cache = {}
 
@@ -209,16 +229,10 @@ def rgbd_loop_closures(get_frame, res, intr: CameraIntrinsics, imu_T_camera, cfg
         T[:3, :3], T[:3, 3] = res.frame_R[k], res.frame_p[k]
         return T @ Tbc
 
-    for b in range(idx.size):
-        early = np.nonzero(t[idx] < t[idx[b]] - min_gap_s)[0]
-        if early.size == 0:
-            continue
-        dist = np.linalg.norm(look[early] - look[b], axis=1)
-        dang = np.abs(np.angle(np.exp(1j * (yaw[early] - yaw[b]))))
-        ok = (dist < radius_m) & (dang < np.deg2rad(max_angle_deg))
-        if not ok.any():
-            continue
-        i, j = int(idx[early[ok][np.argmin(dist[ok])]]), int(idx[b])
+    if candidates is None:
+        candidates = loop_candidates(res, every_s=every_s, radius_m=radius_m, max_angle_deg=max_angle_deg,
+                                     min_gap_s=min_gap_s)
+    for i, j in candidates:
         tried += 1
         (img_i, tex_i), (img_j, tex_j) = image(i), image(j)
         if min(tex_i, tex_j) < cfg.min_texture:
