@@ -81,8 +81,8 @@ def _read_columns(path, names: tuple, what: str) -> np.ndarray:
 
 
 def read_imu_csv(path):
-    """Read IMU samples (:class:`gpr3d.pose.imu.ImuSamples`; units are checked there)."""
-    from gpr3d.pose.imu import ImuSamples
+    """Read IMU samples (:class:`gpr3d.core.inertial.ImuSamples`; units are checked there)."""
+    from gpr3d.core.inertial import ImuSamples
 
     a = _read_columns(path, IMU_COLUMNS, "IMU")
     try:
@@ -137,13 +137,13 @@ def write_rig(path, *, imu_T_camera, imu_T_antenna, camera_time_offset_s: float)
 
 def relative_from_camera_poses(traj: Trajectory, *, rot_sigma_deg: float = 0.03, trans_frac: float = 0.01,
                                trans_floor_m: float = 5e-4, gap_factor: float = 1.5):
-    """Frame-to-frame camera motions (:class:`gpr3d.pose.imu.RelativePoses`) from odometry's camera poses.
+    """Frame-to-frame camera motions (:class:`gpr3d.core.inertial.RelativePoses`) from odometry's camera poses.
 
     Each motion gets the covariance of the noise figures given (rotation per axis; translation a share of
     the step plus a floor). A frame interval longer than ``gap_factor`` times the median is lost tracking:
     the motion across it is unknown.
     """
-    from gpr3d.pose.imu import RelativePoses
+    from gpr3d.core.inertial import RelativePoses
 
     t = traj.timestamps_s
     if t.size < 2:

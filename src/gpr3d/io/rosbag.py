@@ -2,11 +2,11 @@
 
 Read from a bag (a ROS 1 ``.bag`` file or a ROS 2 bag folder):
 
-* ``sensor_msgs/Imu`` -> :class:`gpr3d.pose.imu.ImuSamples` (:func:`read_bag_imu`);
+* ``sensor_msgs/Imu`` -> :class:`gpr3d.core.inertial.ImuSamples` (:func:`read_bag_imu`);
 * ``geometry_msgs/PoseStamped``, ``geometry_msgs/PoseWithCovarianceStamped``, ``nav_msgs/Odometry`` ->
   :class:`~gpr3d.core.trajectory.Trajectory` (:func:`read_bag_trajectory`): visual odometry's camera poses, or a
   reference;
-* ``sensor_msgs/CameraInfo`` -> :class:`gpr3d.pose.render.CameraIntrinsics` (:func:`read_bag_camera_info`);
+* ``sensor_msgs/CameraInfo`` -> :class:`gpr3d.core.camera.CameraIntrinsics` (:func:`read_bag_camera_info`);
 * ``sensor_msgs/Image`` and ``sensor_msgs/CompressedImage`` (colour: ``rgb8``, ``bgr8``, ``rgba8``, ``bgra8``,
   ``mono8``, JPEG/PNG; depth: ``16UC1`` millimetres or ``32FC1`` metres) -> ``(t, colour, depth)`` frames for
   :func:`gpr3d.pose.vo.rgbd_odometry`, colour and depth paired by the nearest stamp (:func:`iter_bag_rgbd`).
@@ -87,7 +87,7 @@ def _messages(r, conns):
 
 def read_bag_imu(path, topic: str | None = None):
     """IMU samples (specific force m/s^2, rates rad/s; units are checked by ``ImuSamples``)."""
-    from gpr3d.pose.imu import ImuSamples
+    from gpr3d.core.inertial import ImuSamples
 
     r = _reader(path)
     try:
@@ -122,7 +122,7 @@ def read_bag_trajectory(path, topic: str | None = None) -> Trajectory:
 
 def read_bag_camera_info(path, topic: str | None = None):
     """The pinhole of the first CameraInfo message (its ``K`` matrix and image size)."""
-    from gpr3d.pose.render import CameraIntrinsics
+    from gpr3d.core.camera import CameraIntrinsics
 
     r = _reader(path)
     try:

@@ -19,37 +19,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gpr3d.core.camera import CameraIntrinsics
 from gpr3d.core.errors import InvalidDataError
 
 __all__ = ["CameraIntrinsics", "FloorScene", "render_rgbd", "rig_camera_poses"]
-
-
-@dataclass(frozen=True)
-class CameraIntrinsics:
-    """A pinhole camera (pixels); :meth:`d435i` gives the D435i's depth stream at 640 x 480 or scaled down."""
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-
-    def __post_init__(self):
-        if not (int(self.width) == self.width > 1 and int(self.height) == self.height > 1):
-            raise InvalidDataError(f"image size must be whole pixels > 1, got {self.width} x {self.height}")
-        if not (self.fx > 0 and self.fy > 0 and np.isfinite(self.cx) and np.isfinite(self.cy)):
-            raise InvalidDataError(f"focal lengths must be positive pixels, got fx={self.fx!r} fy={self.fy!r}")
-
-    @classmethod
-    def d435i(cls, width: int = 640) -> "CameraIntrinsics":
-        """The D435i depth stream's nominal pinhole (640 x 480, 87 x 58 deg field of view), scaled to ``width``."""
-        s = width / 640.0
-        return cls(int(width), int(round(480 * s)), 382.0 * s, 382.0 * s, 319.5 * s, 239.5 * s)
-
-    def as_dict(self) -> dict:
-        return {"width": self.width, "height": self.height, "fx": self.fx, "fy": self.fy, "cx": self.cx,
-                "cy": self.cy}
 
 
 def _texture(rng: np.random.Generator, n: int = 1024) -> np.ndarray:
