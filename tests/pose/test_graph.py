@@ -5,7 +5,7 @@ import pytest
 
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.pose.eskf import fuse
-from gpr3d.pose.graph import GraphConfig, LoopClosure, close_loops
+from gpr3d.pose.graph import GraphConfig, LoopClosure, close_loops, revisits
 from gpr3d.pose.metrics import ape
 from gpr3d.pose.rig import RigConfig, simulate_rig
 
@@ -64,3 +64,5 @@ def test_no_closures_change_nothing_and_bad_ones_give_one_line(patch_run):
         close_loops(res, [LoopClosure(0, res.frame_p.shape[0] + 5, np.eye(3), np.zeros(3))])
     with pytest.raises(InvalidDataError, match="keyframe_every"):
         GraphConfig(keyframe_every=0)
+    with pytest.raises(InvalidDataError, match="radius_m"):
+        revisits(res.frame_t_s, res.frame_p, res.frame_R, radius_m=-1.0)

@@ -24,7 +24,7 @@ from scipy.sparse import lil_matrix
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.pose.imu import so3_exp
 
-__all__ = ["LoopClosure", "GraphConfig", "close_loops"]
+__all__ = ["LoopClosure", "GraphConfig", "close_loops", "revisits"]
 
 
 @dataclass
@@ -57,6 +57,35 @@ class GraphConfig:
                 raise InvalidDataError(f"{name} must be a positive number, got {getattr(self, name)!r}")
         if not (int(self.keyframe_every) == self.keyframe_every >= 1):
             raise InvalidDataError(f"keyframe_every must be a whole number >= 1, got {self.keyframe_every!r}")
+
+
+def revisits(t_s, p, R, *, every_s: float = 1.0, radius_m: float = 0.4, max_angle_deg: float = 45.0,
+             min_gap_s: float = 15.0) -> list[tuple[int, int]]:
+    """Frame pairs ``(i, j)`` (``i`` earlier) of poses ``p`` (n, 3), ``R`` (n, 3, 3) at times ``t_s`` that likely
+    see the same ground: frames ``every_s`` apart whose views (0.8 m ahead of the IMU) lie within ``radius_m`` and
+    headings within ``max_angle_deg``, at least ``min_gap_s`` apart; for each later frame the nearest earlier."""
+    t = np.asarray(t_s, dtype=float)
+    if t.size < 2:
+        return []
+    for name, v in (("every_s", every_s), ("radius_m", radius_m), ("max_angle_deg", max_angle_deg)):
+        if not (np.isfinite(v) and v > 0):
+            raise InvalidDataError(f"{name} must be a positive number, got {v!r}")
+    step = max(1, int(round(every_s / np.median(np.diff(t)))))
+    idx = np.arange(0, t.size, step)
+    Rk = np.asarray(R)[idx]
+    look = np.asarray(p)[idx, :2] + 0.8 * Rk[:, :2, 0]
+    yaw = _yaw(Rk)
+    out = []
+    for b in range(idx.size):
+        early = np.nonzero(t[idx] < t[idx[b]] - min_gap_s)[0]
+        if early.size == 0:
+            continue
+        dist = np.linalg.norm(look[early] - look[b], axis=1)
+        dang = np.abs(_wrap(yaw[early] - yaw[b]))
+        ok = (dist < radius_m) & (dang < np.deg2rad(max_angle_deg))
+        if ok.any():
+            out.append((int(idx[early[ok][np.argmin(dist[ok])]]), int(idx[b])))
+    return out
 
 
 def _yaw(R) -> np.ndarray:

@@ -243,26 +243,14 @@ class RigRun:
         ``max_angle_deg`` of an earlier one at least ``min_gap_s`` before give the true relative pose with noise
         (``sigma_m`` each axis, ``sigma_deg``); ``outlier_rate`` of them are wrong by 0.2-1 m and 5-20 deg.
         ``frame_t_s``: the frames' IMU times (a ``FusionResult``'s ``frame_t_s``; the indices refer to it)."""
-        from gpr3d.pose.graph import LoopClosure
+        from gpr3d.pose.graph import LoopClosure, revisits
 
         t = np.asarray(frame_t_s, dtype=float)
         rng = np.random.default_rng(np.random.SeedSequence([seed, 31]))
-        step = max(1, int(round(every_s / np.median(np.diff(t)))))
-        idx = np.arange(0, t.size, step)
-        g = self.truth(t[idx])
-        look = g["p"][:, :2] + 0.8 * g["R"][:, :2, 0]
-        yaw = np.arctan2(g["R"][:, 1, 0], g["R"][:, 0, 0])
+        g = self.truth(t)
         out = []
-        for b in range(idx.size):
-            early = np.nonzero(t[idx] < t[idx[b]] - min_gap_s)[0]
-            if early.size == 0:
-                continue
-            dist = np.linalg.norm(look[early] - look[b], axis=1)
-            dang = np.abs(np.angle(np.exp(1j * (yaw[early] - yaw[b]))))
-            ok = (dist < radius_m) & (dang < np.deg2rad(max_angle_deg))
-            if not ok.any():
-                continue
-            a = early[ok][np.argmin(dist[ok])]
+        for a, b in revisits(t, g["p"], g["R"], every_s=every_s, radius_m=radius_m, max_angle_deg=max_angle_deg,
+                             min_gap_s=min_gap_s):
             Ri, pi, Rj, pj = g["R"][a], g["p"][a], g["R"][b], g["p"][b]
             R = Ri.T @ Rj @ so3_exp(rng.normal(0, np.deg2rad(sigma_deg), 3))
             p = Ri.T @ (pj - pi) + rng.normal(0, sigma_m, 3)
@@ -271,7 +259,7 @@ class RigRun:
                 u[2] = 0.0
                 p = p + rng.uniform(0.2, 1.0) * u / np.linalg.norm(u)
                 R = R @ so3_exp([0.0, 0.0, np.deg2rad(rng.uniform(5, 20)) * rng.choice([-1, 1])])
-            out.append(LoopClosure(int(idx[a]), int(idx[b]), R, p, sigma_m, np.deg2rad(sigma_deg)))
+            out.append(LoopClosure(a, b, R, p, sigma_m, np.deg2rad(sigma_deg)))
         return out
 
     def filter_config(self, **kw):

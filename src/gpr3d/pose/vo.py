@@ -83,6 +83,15 @@ def texture_share(colour, depth, gradient: float = 6.0) -> float:
     return float(np.mean(m[ok] > gradient)) if ok.any() else 0.0
 
 
+def _open3d_odometry(o3d, cfg: OdometryConfig, intr: CameraIntrinsics):
+    """Open3D's pinhole, odometry options and the hybrid (photometric + depth) Jacobian for ``cfg``."""
+    pin = o3d.camera.PinholeCameraIntrinsic(intr.width, intr.height, intr.fx, intr.fy, intr.cx, intr.cy)
+    opt = o3d.pipelines.odometry.OdometryOption()
+    opt.iteration_number_per_pyramid_level = o3d.utility.IntVector(list(cfg.iterations))
+    opt.depth_diff_max, opt.depth_min, opt.depth_max = cfg.depth_diff_max_m, cfg.depth_min_m, cfg.depth_max_m
+    return pin, opt, o3d.pipelines.odometry.RGBDOdometryJacobianFromHybridTerm()
+
+
 def _rgbd(o3d, colour, depth, cfg: OdometryConfig, intr: CameraIntrinsics, k: int):
     colour, depth = np.asarray(colour), np.asarray(depth)
     if colour.shape[:2] != (intr.height, intr.width) or depth.shape != (intr.height, intr.width):
@@ -112,11 +121,7 @@ def rgbd_odometry(frames: Iterable, intr: CameraIntrinsics, cfg: OdometryConfig 
 
     o3d = require_open3d()
     cfg = cfg or OdometryConfig()
-    pin = o3d.camera.PinholeCameraIntrinsic(intr.width, intr.height, intr.fx, intr.fy, intr.cx, intr.cy)
-    opt = o3d.pipelines.odometry.OdometryOption()
-    opt.iteration_number_per_pyramid_level = o3d.utility.IntVector(list(cfg.iterations))
-    opt.depth_diff_max, opt.depth_min, opt.depth_max = cfg.depth_diff_max_m, cfg.depth_min_m, cfg.depth_max_m
-    jac = o3d.pipelines.odometry.RGBDOdometryJacobianFromHybridTerm()
+    pin, opt, jac = _open3d_odometry(o3d, cfg, intr)
     ts, Rs, ps, covs, valid = [], [], [], [], []
     reasons = {"open3d failed": 0, "too little texture": 0, "degenerate information": 0, "implausible motion": 0}
     prev, prev_t, prev_tex, guess = None, None, 1.0, np.eye(4)
@@ -170,27 +175,11 @@ def rgbd_odometry(frames: Iterable, intr: CameraIntrinsics, cfg: OdometryConfig 
 
 def loop_candidates(res, *, every_s: float = 1.0, radius_m: float = 0.4, max_angle_deg: float = 45.0,
                     min_gap_s: float = 15.0) -> list[tuple[int, int]]:
-    """Frame pairs ``(i, j)`` (``i`` earlier) of a fused trajectory that likely see the same ground: frames
-    ``every_s`` apart whose views (0.8 m ahead of the IMU) lie within ``radius_m`` and headings within
-    ``max_angle_deg``, at least ``min_gap_s`` apart; for each later frame the nearest earlier one."""
-    t = res.frame_t_s
-    if t.size < 2:
-        return []
-    step = max(1, int(round(every_s / np.median(np.diff(t)))))
-    idx = np.arange(0, t.size, step)
-    look = res.frame_p[idx, :2] + 0.8 * res.frame_R[idx][:, :2, 0]
-    yaw = np.arctan2(res.frame_R[idx][:, 1, 0], res.frame_R[idx][:, 0, 0])
-    out = []
-    for b in range(idx.size):
-        early = np.nonzero(t[idx] < t[idx[b]] - min_gap_s)[0]
-        if early.size == 0:
-            continue
-        dist = np.linalg.norm(look[early] - look[b], axis=1)
-        dang = np.abs(np.angle(np.exp(1j * (yaw[early] - yaw[b]))))
-        ok = (dist < radius_m) & (dang < np.deg2rad(max_angle_deg))
-        if ok.any():
-            out.append((int(idx[early[ok][np.argmin(dist[ok])]]), int(idx[b])))
-    return out
+    """Revisits (:func:`gpr3d.pose.graph.revisits`) among the frames of a fused trajectory, by its poses."""
+    from gpr3d.pose.graph import revisits
+
+    return revisits(res.frame_t_s, res.frame_p, res.frame_R, every_s=every_s, radius_m=radius_m,
+                    max_angle_deg=max_angle_deg, min_gap_s=min_gap_s)
 
 
 def rgbd_loop_closures(get_frame, res, intr: CameraIntrinsics, imu_T_camera, cfg: OdometryConfig | None = None, *,
@@ -209,11 +198,7 @@ def rgbd_loop_closures(get_frame, res, intr: CameraIntrinsics, imu_T_camera, cfg
 
     o3d = require_open3d()
     cfg = cfg or OdometryConfig()
-    pin = o3d.camera.PinholeCameraIntrinsic(intr.width, intr.height, intr.fx, intr.fy, intr.cx, intr.cy)
-    opt = o3d.pipelines.odometry.OdometryOption()
-    opt.iteration_number_per_pyramid_level = o3d.utility.IntVector(list(cfg.iterations))
-    opt.depth_diff_max, opt.depth_min, opt.depth_max = cfg.depth_diff_max_m, cfg.depth_min_m, cfg.depth_max_m
-    jac = o3d.pipelines.odometry.RGBDOdometryJacobianFromHybridTerm()
+    pin, opt, jac = _open3d_odometry(o3d, cfg, intr)
     Tbc = np.asarray(imu_T_camera, dtype=float)
     out, tried = [], 0
     cache = {}
