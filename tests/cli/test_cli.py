@@ -192,7 +192,9 @@ def test_pose_simulate_then_fuse_writes_a_trajectory_close_to_the_truth(tmp_path
     for bad, msg in ((["--imu", rig / "wheel.csv"], "IMU CSV header lacks"),
                      (["--imu", rig / "imu.csv", "--odometry", rig / "odometry.tum", "--odometry-sigma", "a,b,c"],
                       "--odometry-sigma"),
-                     (["--imu", rig / "imu.csv", "--flat-ground", "-1"], "--flat-ground")):
+                     (["--imu", rig / "imu.csv", "--flat-ground", "-1"], "--flat-ground"),
+                     (["--imu", rig / "imu.csv", "--keyframe", "nan"], "--keyframe"),
+                     (["--imu", rig / "imu.csv", "--keyframe", "-0.1"], "--keyframe")):
         r = run_cli("pose", "fuse", *bad, "--out", tmp_path / "x.tum")
         assert r.returncode != 0 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
 

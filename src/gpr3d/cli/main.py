@@ -230,6 +230,8 @@ def cmd_pose(args):
         raise GPR3DError("RGB-D odometry needs both --colour-topic and --depth-topic")
     if args.colour_topic and not args.bag:
         raise GPR3DError("--colour-topic and --depth-topic read a bag: give --bag")
+    if not 0 <= args.keyframe <= 5:  # NaN fails too
+        raise GPR3DError(f"--keyframe must be a distance in metres between 0 (frame to frame) and 5, got {args.keyframe}")
     if args.loops and not args.colour_topic:
         raise GPR3DError("--loops registers revisited RGB-D frames: give --bag with --colour-topic and --depth-topic")
     rig = read_rig(args.rig) if args.rig else {}
@@ -240,14 +242,15 @@ def cmd_pose(args):
 
         imu = read_bag_imu(args.bag, args.imu_topic)
         if args.colour_topic:
-            from gpr3d.pose.vo import require_open3d, rgbd_odometry
+            from gpr3d.pose.vo import OdometryConfig, require_open3d, rgbd_odometry
 
             require_open3d()
             intr = read_bag_camera_info(args.bag, args.camera_info_topic)
-            vo, rep = rgbd_odometry(iter_bag_rgbd(args.bag, args.colour_topic, args.depth_topic), intr)
+            vo, rep = rgbd_odometry(iter_bag_rgbd(args.bag, args.colour_topic, args.depth_topic), intr,
+                                    OdometryConfig(keyframe_m=args.keyframe))
             lost = ", ".join(f"{k} {v}" for k, v in rep["lost"].items()) or "none"
-            print(f"RGB-D odometry: {rep['registered']} of {rep['frames'] - 1} frame pairs registered (lost: {lost}), "
-                  f"{rep['s_per_frame'] * 1e3:.0f} ms a frame")
+            print(f"RGB-D odometry: {rep['registered']} of {rep['frames'] - 1} frames registered to "
+                  f"{rep['keyframes']} keyframes (lost: {lost}), {rep['s_per_frame'] * 1e3:.0f} ms a frame")
         elif args.odometry_topic or any(m in ("geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Odometry",
                                               "geometry_msgs/msg/PoseWithCovarianceStamped")
                                         for _, m, _ in bag_topics(args.bag)):
@@ -836,6 +839,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--colour-topic", default=None, help="bag: colour images for RGB-D odometry (Open3D)")
     sp.add_argument("--depth-topic", default=None, help="bag: depth images (16UC1 mm or 32FC1 m) for RGB-D odometry")
     sp.add_argument("--camera-info-topic", default=None, help="bag: the depth camera's CameraInfo (default: the only one)")
+    sp.add_argument("--keyframe", type=float, default=0.1,
+                    help="RGB-D odometry: register frames to a keyframe renewed every this many metres (or 5 deg); "
+                         "0: frame to frame (default 0.1)")
     sp.add_argument("--odometry", default=None, help="visual odometry: camera poses (TUM or CSV trajectory)")
     sp.add_argument("--odometry-sigma", default="0.03,0.01,0.0005",
                     help="odometry's error per frame: ROT_DEG,TRANS_FRAC,TRANS_FLOOR_M (default 0.03,0.01,0.0005)")

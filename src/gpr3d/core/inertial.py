@@ -1,7 +1,8 @@
 """IMU samples and visual odometry's relative poses: the sensor data ``io`` reads and ``pose`` fuses.
 
 Frames and units (docs/CONVENTIONS.md): an IMU measures the specific force ``R^T (a - g)`` (m/s^2) and the
-angular rate (rad/s) in its own frame; odometry gives frame ``k``'s camera pose in frame ``k - 1``.
+angular rate (rad/s) in its own frame; odometry gives frame ``k``'s camera pose in frame ``k - 1`` (or in a
+keyframe before it).
 """
 
 from __future__ import annotations
@@ -61,12 +62,16 @@ class ImuSamples:
 
 @dataclass
 class RelativePoses:
-    """Visual odometry as relative camera motions between consecutive frames.
+    """Visual odometry as relative camera motions, each from a reference frame.
 
     ``t_s[k]`` is frame ``k``'s time (camera clock); for ``k >= 1`` ``R[k]``, ``p[k]`` are frame ``k``'s pose in
-    frame ``k - 1`` (``camera_{k-1} T camera_k``), ``cov[k]`` the 6 x 6 covariance of its error, rotation first
+    frame ``ref[k]`` (``camera_ref T camera_k``), ``cov[k]`` the 6 x 6 covariance of its error, rotation first
     (right perturbation ``R Exp(d_theta)``, then additive translation), and ``valid[k]`` is False where odometry
-    failed (no motion is known from frame ``k - 1`` to ``k``). Entry 0 is unused.
+    failed (no motion is known from frame ``ref[k]`` to ``k``). Entry 0 is unused.
+
+    ``ref`` (default ``k - 1``: frame to frame) lets odometry register frames to a keyframe: a frame's reference
+    is the previous frame (which thereby becomes the keyframe) or the previous frame's reference (the same
+    keyframe), so that one keyframe is live at a time.
     """
 
     t_s: np.ndarray
@@ -74,6 +79,7 @@ class RelativePoses:
     p: np.ndarray
     cov: np.ndarray
     valid: np.ndarray = field(default=None)
+    ref: np.ndarray = field(default=None)
 
     def __post_init__(self):
         self.t_s = _times(self.t_s, "visual odometry")
@@ -85,17 +91,39 @@ class RelativePoses:
         self.valid[0] = False
         bad = ~(np.isfinite(self.R).all((1, 2)) & np.isfinite(self.p).all(1) & np.isfinite(self.cov).all((1, 2)))
         self.valid &= ~bad
+        if self.ref is None:
+            self.ref = np.arange(n) - 1
+        else:
+            r = np.asarray(self.ref)
+            if r.shape != (n,) or not np.all(np.isfinite(r)) or np.any(r != np.round(r)):
+                raise InvalidDataError(f"visual odometry ref: expected {n} whole frame indices, got shape {r.shape}")
+            r = r.astype(int)
+            r[0] = -1
+            ok = (r[1:] == np.arange(n - 1)) | (r[1:] == r[:-1])
+            ok[0] = r[1] == 0
+            if not ok.all():
+                k = int(np.argmin(ok)) + 1
+                raise InvalidDataError(f"visual odometry ref: frame {k} refers to frame {r[k]}; a frame's reference "
+                                       f"must be the previous frame ({k - 1}) or the previous frame's reference")
+            self.ref = r
+
+    @property
+    def keyframes(self) -> bool:
+        """True when some motion refers to a frame other than the one before."""
+        return bool(np.any(self.ref[1:] != np.arange(self.t_s.size - 1)))
 
     def chained(self) -> tuple[np.ndarray, np.ndarray]:
-        """Camera poses ``camera_0 T camera_k`` from chaining the motions (a failed frame holds the pose)."""
+        """Camera poses ``camera_0 T camera_k`` from chaining the motions (a failed frame holds the pose of the
+        frame before)."""
         n = self.t_s.size
         R = np.empty((n, 3, 3))
         p = np.empty((n, 3))
         R[0], p[0] = np.eye(3), np.zeros(3)
         for k in range(1, n):
+            j = self.ref[k]
             if self.valid[k]:
-                p[k] = p[k - 1] + R[k - 1] @ self.p[k]
-                R[k] = R[k - 1] @ self.R[k]
+                p[k] = p[j] + R[j] @ self.p[k]
+                R[k] = R[j] @ self.R[k]
             else:
                 R[k], p[k] = R[k - 1], p[k - 1]
         return R, p

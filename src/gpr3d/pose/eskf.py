@@ -2,8 +2,8 @@
 
 Nominal state: position ``p``, velocity ``v`` (world), attitude ``R`` (world from IMU), accelerometer and
 gyro biases. Error state (15): ``dp, dv, dtheta, dba, dbg`` with the attitude error on the right,
-``R_true = R Exp(dtheta)``. Visual odometry gives the camera's motion between consecutive frames; the
-filter keeps a clone of the pose at the previous frame (stochastic cloning, 6 more error states), so a
+``R_true = R Exp(dtheta)``. Visual odometry gives the camera's motion since the previous frame or since a
+keyframe; the filter keeps a clone of the pose at that frame (stochastic cloning, 6 more error states), so a
 relative measurement constrains the motion since then, not a drifting absolute pose. Also:
 
 * gravity alignment and the gyro bias from the still first ``init_still_s`` seconds;
@@ -97,8 +97,12 @@ class FusionResult:
     frame_R: np.ndarray
     vo_used: np.ndarray  #: per frame: the relative pose was applied
     vo_rejected: np.ndarray  #: per frame: gated out
-    zupt_count: int
+    zupt_t_s: np.ndarray  #: IMU times of the zero-velocity updates
     imu_T_antenna: np.ndarray
+
+    @property
+    def zupt_count(self) -> int:
+        return int(self.zupt_t_s.size)
 
     def antenna_trajectory(self) -> Trajectory:
         """Antenna poses (world from antenna) at the IMU times, as a :class:`~gpr3d.core.trajectory.Trajectory`."""
@@ -203,9 +207,9 @@ class _Filter:
             self.nodes.append({"t": t, "i": i, "prior": self.state(), "P_prior": self.P.copy(), "Phi": self.Phi})
         self.Phi = np.eye(15)
 
-    def node_posterior(self, clone_follows: bool):
+    def node_posterior(self, clone_follows: bool, frame: bool):
         if self.nodes is not None:
-            self.nodes[-1].update(post=self.state(), P_post=self.P.copy(), clone=clone_follows)
+            self.nodes[-1].update(post=self.state(), P_post=self.P.copy(), clone=clone_follows, frame=frame)
 
     def clone(self):
         self.pc, self.Rc = self.p.copy(), self.R.copy()
@@ -391,7 +395,9 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
     sa = cfg.imu_noise.accel_noise * np.sqrt(imu.rate_hz)
     sg = cfg.imu_noise.gyro_noise * np.sqrt(imu.rate_hz)
     vo_speed = np.inf
-    zupts = 0
+    clone_frame, clone_t = -1, imu.t_s[0]  # the frame (and its IMU time) the filter's clone was taken at
+    since_key = (np.nan, np.zeros(3))  # (camera time, IMU motion from the live keyframe) of the last frame
+    zupts = []
     fi = 0
     t_now = imu.t_s[0]
 
@@ -415,21 +421,33 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
             k = frames[fi]
             step_to(ft[k], i)
             flt.node_prior(ft[k], i)
-            if vo.valid[k] and fi > 0 and frames[fi - 1] == k - 1:
+            if vo.valid[k] and fi > 0 and clone_frame == vo.ref[k]:
                 R_b, p_b, cov_b = camera_to_imu_motion(vo.R[k], vo.p[k], vo.cov[k] * cfg.vo_cov_scale, cfg.imu_T_camera)
                 ok = flt.update_relative(R_b, p_b, cov_b, gate)
                 used[fi], rejected[fi] = ok, not ok
-                dtk = vo.t_s[k] - vo.t_s[k - 1]
-                vo_speed = np.linalg.norm(p_b) / dtk if ok else np.inf
+                if ok:  # the speed over the last frame interval, through the keyframe's motion at the frame before
+                    # (a mean over a longer window lags where a still cart sets off: zero-velocity updates then
+                    # pull a moving cart to rest, and the covariance turns overconfident)
+                    t_j, p_j = since_key
+                    vo_speed = np.linalg.norm(p_b - p_j) / (vo.t_s[k] - t_j)
+                    since_key = (vo.t_s[k], p_b)
+                else:
+                    vo_speed = np.inf
             else:
                 vo_speed = np.inf
+            # the filter's clone stays at the live keyframe: it moves on when the next frame refers to this one
+            # (frame to frame: always)
+            reclone = k + 1 >= vo.ref.size or vo.ref[k + 1] == k or vo.ref[k + 1] != clone_frame
             if wheel is not None and fi > 0:
-                d0, d1 = np.interp([ft[frames[fi - 1]], ft[k]], wt, wd)
+                d0, d1 = np.interp([clone_t, ft[k]], wt, wd)
                 flt.update_forward(d1 - d0, cfg.wheel_sigma_frac * (d1 - d0) + cfg.wheel_sigma_m)
             if cfg.flat_ground_sigma_m is not None:
                 flt.update_height(cfg.flat_ground_sigma_m)
-            flt.node_posterior(clone_follows=True)
-            flt.clone()
+            flt.node_posterior(clone_follows=reclone, frame=True)
+            if reclone:
+                flt.clone()
+                clone_frame, clone_t = k, ft[k]
+                since_key = (vo.t_s[k], np.zeros(3))
             f_cov[fi] = flt.pose_cov()
             f_idx[fi], f_p[fi], f_R[fi] = i + 1, flt.p, flt.R
             fi += 1
@@ -440,8 +458,8 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
             if np.all(a.std(0) < 3 * sa) and np.all(g.std(0) < 3 * sg):
                 flt.node_prior(t_next, i)
                 flt.update_still(cfg.zupt_sigma_m_s)
-                flt.node_posterior(clone_follows=False)
-                zupts += 1
+                flt.node_posterior(clone_follows=False, frame=False)
+                zupts.append(t_next)
         record(i + 1)
     if smooth and flt.nodes:
         xs, Ps, eps, dlt = _rts(flt.nodes)
@@ -460,7 +478,7 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
                 d = (1 - w) * eps[jj] + w * dlt[jj + 1]
             x = _plus((out_p[q], out_v[q], out_R[q], out_ba[q], out_bg[q], np.zeros(3), np.eye(3)), d)
             out_p[q], out_v[q], out_R[q], out_ba[q], out_bg[q] = x[:5]
-        fnodes = [q for q, nd in enumerate(flt.nodes) if nd["clone"]]
+        fnodes = [q for q, nd in enumerate(flt.nodes) if nd["frame"]]
         for fi_, q in enumerate(fnodes):
             x = xs[q]
             f_p[fi_], f_R[fi_] = x[0], x[2]
@@ -471,4 +489,4 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
             idx = np.r_[6:9, 0:3]
             f_cov[fi_] = J @ Ps[q][np.ix_(idx, idx)] @ J.T
     return FusionResult(imu.t_s, out_p, out_v, out_R, out_ba, out_bg, ft[frames], f_cov, f_idx, f_p, f_R, used, rejected,
-                        zupts, cfg.imu_T_antenna)
+                        np.asarray(zupts, dtype=float), cfg.imu_T_antenna)

@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.trajectory import Trajectory
-from gpr3d.pose.imu import GRAVITY, ImuNoise, ImuSamples, RelativePoses, so3_exp
+from gpr3d.pose.imu import GRAVITY, ImuNoise, ImuSamples, RelativePoses, so3_exp, so3_log
 
 __all__ = ["RigConfig", "RigRun", "simulate_rig", "default_imu_T_camera", "default_imu_T_antenna", "nees_runs"]
 
@@ -70,6 +70,10 @@ class RigConfig:
     vo_rot_deg: float = 0.03  #: rotation error per frame (each axis)
     vo_outlier_rate: float = 0.01  #: share of frames with a gross error that odometry does not flag
     vo_gap: tuple | None = None  #: (start_s, length_s) of lost tracking
+    #: odometry against keyframes: a frame becomes the keyframe when it lies this far (m) or ``vo_keyframe_deg``
+    #: from the last one; None: frame to frame. Each motion's noise follows its length (from the keyframe)
+    vo_keyframe_m: float | None = None
+    vo_keyframe_deg: float = 5.0
     #: ((x0, x1), (y0, y1)): the cart wanders over this patch (steering to random waypoints in it) instead of
     #: turning at random; it starts near the patch's centre
     area: tuple | None = None
@@ -85,6 +89,10 @@ class RigConfig:
                 raise InvalidDataError(f"{name} must be positive, got {getattr(self, name)!r}")
         if self.camera_rate_hz > self.imu_rate_hz:
             raise InvalidDataError("camera_rate_hz must not exceed imu_rate_hz")
+        if self.vo_keyframe_m is not None and not self.vo_keyframe_m > 0:
+            raise InvalidDataError(f"vo_keyframe_m must be positive or None, got {self.vo_keyframe_m!r}")
+        if not self.vo_keyframe_deg > 0:
+            raise InvalidDataError(f"vo_keyframe_deg must be positive, got {self.vo_keyframe_deg!r}")
 
 
 class _Motion:
@@ -310,11 +318,22 @@ def simulate_rig(cfg: RigConfig | None = None, seed: int = 0, *, motion_seed: in
     p_rel = np.zeros((m, 3))
     cov = np.tile(np.eye(6), (m, 1, 1))
     valid = np.ones(m, bool)
+    lost = np.zeros(m, bool)
+    if cfg.vo_gap is not None:
+        g0, gl = cfg.vo_gap
+        lost = (tau >= g0) & (tau < g0 + gl)
+        after = np.nonzero(tau >= g0 + gl)[0]
+        valid[lost] = False
+        if after.size:
+            valid[after[0]] = False  # the motion into the first frame after the gap is unknown too
     outliers = np.zeros(m, bool)
+    ref = np.arange(m) - 1
+    key = 0
     sr = np.deg2rad(cfg.vo_rot_deg)
     for k in range(1, m):
-        Rt = Rc[k - 1].T @ Rc[k]
-        pt = Rc[k - 1].T @ (pc[k] - pc[k - 1])
+        ref[k] = key
+        Rt = Rc[key].T @ Rc[k]
+        pt = Rc[key].T @ (pc[k] - pc[key])
         st = cfg.vo_trans_frac * np.linalg.norm(pt) + cfg.vo_trans_floor_m
         R_rel[k] = Rt @ so3_exp(rng.normal(0, sr, 3))
         p_rel[k] = pt + rng.normal(0, st, 3)
@@ -324,15 +343,12 @@ def simulate_rig(cfg: RigConfig | None = None, seed: int = 0, *, motion_seed: in
             u = rng.normal(size=3)
             p_rel[k] += rng.uniform(0.05, 0.2) * u / np.linalg.norm(u)
             R_rel[k] = R_rel[k] @ so3_exp(np.deg2rad(rng.uniform(2, 5)) * rng.normal(size=3) / np.sqrt(3))
-    if cfg.vo_gap is not None:
-        g0, gl = cfg.vo_gap
-        lost = (tau >= g0) & (tau < g0 + gl)
-        after = np.nonzero(tau >= g0 + gl)[0]
-        valid[lost] = False
-        if after.size:
-            valid[after[0]] = False  # the motion into the first frame after the gap is unknown too
-        outliers &= valid
-    vo = RelativePoses(tc, R_rel, p_rel, cov, valid)
+        # a new keyframe when the view has moved on (every frame without keyframes), or when tracking is lost
+        if (cfg.vo_keyframe_m is None or lost[k] or np.linalg.norm(pt) > cfg.vo_keyframe_m
+                or np.linalg.norm(so3_log(Rt)) > np.deg2rad(cfg.vo_keyframe_deg)):
+            key = k
+    outliers &= valid
+    vo = RelativePoses(tc, R_rel, p_rel, cov, valid, ref)
     return RigRun(cfg, imu, vo, motion, ba, bg, outliers)
 
 

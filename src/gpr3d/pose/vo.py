@@ -1,7 +1,9 @@
 """Visual odometry from RGB-D frames through Open3D's RGB-D odometry (photometric and depth terms).
 
-Each frame is registered to the one before (Open3D's ``compute_rgbd_odometry`` with the hybrid Jacobian,
-started from the previous motion: a cart's motion changes little in 1/15 s). A registration is not used
+Each frame is registered to a keyframe (Open3D's ``compute_rgbd_odometry`` with the hybrid Jacobian,
+started from the last motion carried on: a cart's motion changes little in 1/15 s); the keyframe moves on
+once the camera has moved 10 cm or turned 5 deg from it (``keyframe_m``, ``keyframe_deg``; 0 registers frame
+to frame), so a cart that stands or creeps gathers no drift. A registration is not used
 blindly: it is marked lost, with the reason, when Open3D reports failure, when either image has too
 little texture for the photometric term (the share of pixels with depth whose intensity gradient, on the
 image halved against sensor noise, exceeds ``texture_gradient`` grey levels falls under ``min_texture``: a
@@ -58,10 +60,16 @@ class OdometryConfig:
     #: covariance = cov_scale * inverse(information): calibrated on rendered frames (D435i noise, 320 x 240),
     #: where it makes the relative motions' NEES average 6 (1800 frames, benchmarks/results/rgbd_odometry.md)
     cov_scale: float = 0.012
+    #: register each frame to a keyframe, which moves on to the newest frame once the camera lies ``keyframe_m``
+    #: or ``keyframe_deg`` from it (a still or slow cart then gathers no drift); 0: frame to frame
+    keyframe_m: float = 0.1
+    keyframe_deg: float = 5.0
 
     def __post_init__(self):
+        if not (np.isfinite(self.keyframe_m) and self.keyframe_m >= 0):
+            raise InvalidDataError(f"keyframe_m must be 0 (frame to frame) or positive, got {self.keyframe_m!r}")
         for name in ("depth_scale", "depth_max_m", "depth_diff_max_m", "max_speed_m_s", "max_turn_rad_s",
-                     "min_information", "texture_gradient", "cov_scale"):
+                     "min_information", "texture_gradient", "cov_scale", "keyframe_deg"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise InvalidDataError(f"{name} must be a positive number, got {v!r}")
@@ -113,20 +121,25 @@ def _rgbd(o3d, colour, depth, cfg: OdometryConfig, intr: CameraIntrinsics, k: in
 
 def rgbd_odometry(frames: Iterable, intr: CameraIntrinsics, cfg: OdometryConfig | None = None, *,
                   progress=None) -> tuple[RelativePoses, dict]:
-    """Frame-to-frame odometry of ``frames``: an iterable of ``(t_s, colour, depth)`` (camera clock).
+    """Odometry of ``frames``: an iterable of ``(t_s, colour, depth)`` (camera clock).
 
-    Returns the relative camera motions (frame ``k`` in frame ``k - 1``; frame 0 and every lost frame are
-    marked invalid) and a report: frames, lost frames by reason, seconds per frame."""
+    Each frame is registered to the live keyframe (``cfg.keyframe_m``; with 0, to the frame before), started
+    from the last motion carried one frame on. Returns the relative camera motions (frame ``k`` in its
+    keyframe ``ref[k]``; frame 0 and every lost frame are marked invalid, and a lost frame becomes the next
+    keyframe) and a report: frames, keyframes, lost frames by reason, seconds per registration."""
     import time
 
     o3d = require_open3d()
     cfg = cfg or OdometryConfig()
     pin, opt, jac = _open3d_odometry(o3d, cfg, intr)
-    ts, Rs, ps, covs, valid = [], [], [], [], []
+    ts, Rs, ps, covs, valid, refs = [], [], [], [], [], []
     reasons = {"open3d failed": 0, "too little texture": 0, "degenerate information": 0, "implausible motion": 0}
-    prev, prev_t, prev_tex, guess = None, None, 1.0, np.eye(4)
+    key = None  # (image, texture share, frame index, camera time) of the keyframe
+    prev_t = None
+    # the camera's last motion from the keyframe, and its motion over the last frame interval (for the guess)
+    from_key, step = np.eye(4), np.eye(4)
     n_pix = intr.width * intr.height
-    wall = 0.0
+    wall, registrations, keyframes = 0.0, 0, 0
     for k, (t, colour, depth) in enumerate(frames):
         t = float(t)
         if not np.isfinite(t) or (prev_t is not None and t <= prev_t):
@@ -134,17 +147,21 @@ def rgbd_odometry(frames: Iterable, intr: CameraIntrinsics, cfg: OdometryConfig 
         img = _rgbd(o3d, colour, depth, cfg, intr, k)
         tex = texture_share(colour, depth, cfg.texture_gradient)
         R, p, cov, ok = np.eye(3), np.zeros(3), np.eye(6), False
-        if prev is not None:
+        if key is not None:
+            kimg, ktex, kidx, kt = key
+            guess_motion = from_key @ step
             t0 = time.perf_counter()
-            success, trans, info = o3d.pipelines.odometry.compute_rgbd_odometry(prev, img, pin, guess, jac, opt)
+            # the transform maps points of the keyframe into this frame: the camera's motion is its inverse
+            success, trans, info = o3d.pipelines.odometry.compute_rgbd_odometry(kimg, img, pin,
+                                                                                np.linalg.inv(guess_motion), jac, opt)
             wall += time.perf_counter() - t0
-            dt = t - prev_t
-            # trans maps points of the earlier frame into the later one: the camera's motion is its inverse
-            motion = np.linalg.inv(trans) if success else np.eye(4)
+            registrations += 1
+            motion = np.linalg.inv(trans) if success and np.all(np.isfinite(trans)) else np.eye(4)
             lam = np.linalg.eigvalsh(0.5 * (info + info.T)) if success else np.zeros(6)
+            dt = t - kt
             if not success or not np.all(np.isfinite(trans)):
                 reasons["open3d failed"] += 1
-            elif min(tex, prev_tex) < cfg.min_texture:
+            elif min(tex, ktex) < cfg.min_texture:
                 reasons["too little texture"] += 1
             elif lam[0] < cfg.min_information * n_pix:
                 reasons["degenerate information"] += 1
@@ -154,22 +171,33 @@ def rgbd_odometry(frames: Iterable, intr: CameraIntrinsics, cfg: OdometryConfig 
             else:
                 R, p, ok = motion[:3, :3], motion[:3, 3], True
                 cov = cfg.cov_scale * np.linalg.inv(0.5 * (info + info.T))
-                guess = trans
-            if not ok:
-                guess = np.eye(4)
+            refs.append(kidx)
+            if ok:
+                step = np.linalg.inv(from_key) @ motion
+                from_key = motion
             if progress is not None:
                 progress(k)
+        else:
+            refs.append(-1)
         ts.append(t)
         Rs.append(R)
         ps.append(p)
         covs.append(cov)
         valid.append(ok)
-        prev, prev_t, prev_tex = img, t, tex
+        # a new keyframe: the first frame, a lost frame (tracking restarts from it), or a view that has moved on
+        if (key is None or not ok or cfg.keyframe_m == 0 or np.linalg.norm(p) > cfg.keyframe_m
+                or np.linalg.norm(so3_log(R)) > np.deg2rad(cfg.keyframe_deg)):
+            key = (img, tex, k, t)
+            keyframes += 1
+            from_key = np.eye(4)
+            if not ok:
+                step = np.eye(4)
+        prev_t = t
     if len(ts) < 2:
         raise InvalidDataError(f"odometry needs at least two frames, got {len(ts)}")
-    vo = RelativePoses(np.array(ts), np.array(Rs), np.array(ps), np.array(covs), np.array(valid))
-    report = {"frames": len(ts), "registered": int(np.sum(valid)), "lost": {k: v for k, v in reasons.items() if v},
-              "s_per_frame": wall / max(1, len(ts) - 1)}
+    vo = RelativePoses(np.array(ts), np.array(Rs), np.array(ps), np.array(covs), np.array(valid), np.array(refs))
+    report = {"frames": len(ts), "keyframes": keyframes, "registered": int(np.sum(valid)),
+              "lost": {k: v for k, v in reasons.items() if v}, "s_per_frame": wall / max(1, registrations)}
     return vo, report
 
 
