@@ -6,7 +6,7 @@ waypoints, with stops. Its survey wheel fires a trace every 2 cm of the antenna'
 each A-scan at the antenna's true pose. The same data are then migrated by 3D back projection from the true
 poses, and from the poses of the visual-inertial fusion (IMU + odometry with gross errors, error-state EKF;
 alone, with the flat-ground height, and with the survey wheel's distance too: 0.5 % scale error, 1 mm ticks;
-filtered, and smoothed by the RTS pass),
+filtered, and smoothed by the RTS pass; with loop closures; and with odometry registered to keyframes),
 put into the site frame by the cart's true start pose (the start a surveyor marks). The same target
 extraction and metrics run on both.
 
@@ -39,6 +39,13 @@ from gpr3d.pose.rig import RigConfig, simulate_rig  # noqa: E402
 from gpr3d.pose.sync import trajectory_triggers  # noqa: E402
 
 NAMES = ["L leg 1 (x)", "L leg 2 (y)", "diagonal", "rebar 1", "rebar 2", "rebar 3"]
+
+
+def _errors(run, r, trig, true_poses, wall, res):
+    poses = run.to_world(r.antenna_trajectory()).at(trig)
+    err = np.linalg.norm(poses.positions_xyz - true_poses.positions_xyz, axis=1)
+    return {"poses": poses, "err": err, "ape": ape(poses, true_poses)["rmse"], "wall": wall,
+            "rejected": int(res.vo_rejected.sum())}
 
 
 def main(argv=None):
@@ -80,10 +87,15 @@ def main(argv=None):
             variants.append((label + f", {len(closures)} loop closures", close_loops(res, closures),
                              wall + time.perf_counter() - t0))
         for name, r, w in variants:
-            poses = run.to_world(r.antenna_trajectory()).at(trig)
-            err = np.linalg.norm(poses.positions_xyz - true_poses.positions_xyz, axis=1)
-            fusions[name] = {"poses": poses, "err": err, "ape": ape(poses, true_poses)["rmse"], "wall": w,
-                             "rejected": int(res.vo_rejected.sum())}
+            fusions[name] = _errors(run, r, trig, true_poses, w, res)
+    # odometry registered to keyframes (10 cm / 5 deg), the same path and sensors otherwise, no loop closures
+    run_k = simulate_rig(dataclasses.replace(rig, vo_keyframe_m=0.1), seed=args.seed)
+    for label, kw, wheel, smooth in (("keyframe odometry, fused poses", {}, None, False),
+                                     ("keyframe odometry, smoothed poses, flat ground, survey wheel", flat,
+                                      run_k.wheel(), True)):
+        t0 = time.perf_counter()
+        res = fuse(run_k.imu, run_k.vo, run_k.filter_config(**kw), wheel=wheel, smooth=smooth)
+        fusions[label] = _errors(run_k, res, trig, true_poses, time.perf_counter() - t0, res)
 
     sc = scene()
     truth_lines = truth_lines_from_pipes(sc.pipes)

@@ -105,3 +105,37 @@ def test_world_frame_is_right_handed():
     axes = gprmax_to_world(np.eye(3))
     assert np.linalg.det(axes) == pytest.approx(1.0)
     np.testing.assert_allclose(axes[1], [0, 0, 1])  # gprMax y (vertical) -> world z (up)
+
+
+def test_gprmax3_merge_layout_without_the_gprmax_attribute(tmp_path):
+    """gprMax 3's merge tool writes only Iterations, dt, nrx and rxs/rxN/<component>: recognised by that structure,
+    read with its samples and time step, and with no positions (not every trace at the origin)."""
+    import h5py
+
+    from gpr3d.io.registry import detect_format
+
+    rng = np.random.default_rng(5)
+    ez = rng.standard_normal((120, 7))
+    hx = rng.standard_normal((120, 7))
+    p = tmp_path / "merged.out"
+    with h5py.File(p, "w") as f:
+        f.attrs["Iterations"] = 120
+        f.attrs["dt"] = 4.7e-12
+        f.attrs["nrx"] = 1
+        f["rxs/rx1/Ez"] = ez
+        f["rxs/rx1/Hx"] = hx
+    assert detect_format(p) == "gprmax"
+    s = gpr3d.read(p)
+    np.testing.assert_array_equal(s.data, ez.T.astype(np.float32))
+    assert s.dt_s == 4.7e-12 and s.n_traces == 7
+    assert s.positions_xyz is None and s.metadata["positions_source"].startswith("none")
+    assert s.metadata["gprmax_version"].startswith("unknown")
+    np.testing.assert_array_equal(read_gprmax(p, component="Hx")[0].data, hx.T.astype(np.float32))
+    # an HDF5 file with the attributes but no receivers' components is not taken for gprMax
+    q = tmp_path / "other.h5"
+    with h5py.File(q, "w") as f:
+        f.attrs["Iterations"] = 120
+        f.attrs["dt"] = 4.7e-12
+        f["rxs/rx1/notes"] = np.zeros(3)
+    with pytest.raises(FormatError, match="gprMax"):
+        read_gprmax(q)

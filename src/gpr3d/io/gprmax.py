@@ -5,7 +5,9 @@ Both versions write HDF5 with root attributes ``gprMax`` (version), ``Iterations
 ``rxs/rxN`` holding field components (``Ex`` ... ``Hz``) of shape ``(iterations,)``
 or, once merged, ``(iterations, n_traces)``. gprMax 4's merge tool also writes
 ``trace_metadata/{srcs,rxs}/.../Position`` with the real position of every trace;
-without it positions follow from the step attributes.
+without it positions follow from the step attributes. gprMax 3's merge tool keeps only ``Iterations``, ``dt``,
+``nrx`` and ``rxs/rxN/<component>`` (no ``gprMax`` attribute, no geometry): such files are recognised by that
+structure and read with no positions (a Survey without ``positions_xyz``; give them, e.g. as poses).
 
 Frames: gprMax models put the vertical on their y axis (as in its B-scan
 examples), so a gprMax point ``(x, y, z)`` is the world point ``(x, -z, y)``
@@ -45,12 +47,20 @@ def _is_hdf5(path) -> bool:
         return False
 
 
+def _has_gprmax_layout(f) -> bool:
+    """gprMax's structure: root attributes ``Iterations`` and ``dt``, and a group ``rxs`` of receiver groups holding
+    field components. gprMax 3's merge tool writes just that (with ``nrx``), without the ``gprMax`` attribute."""
+    if "Iterations" not in f.attrs or "dt" not in f.attrs or not isinstance(f.get("rxs"), h5py.Group):
+        return False
+    return any(isinstance(g, h5py.Group) and any(c in g for c in COMPONENTS) for g in f["rxs"].values())
+
+
 def is_gprmax(path) -> bool:
     if not _is_hdf5(path):
         return False
     try:
         with h5py.File(path, "r") as f:
-            return "gprMax" in f.attrs and "rxs" in f
+            return ("gprMax" in f.attrs and "rxs" in f) or _has_gprmax_layout(f)
     except Exception:  # noqa: BLE001 - detection never raises
         return False
 
@@ -94,10 +104,14 @@ def read_gprmax(path, *, component: str = "Ez") -> list[Survey]:
 
 def _read_gprmax(p, component):
     with h5py.File(p, "r") as f:
-        if "gprMax" not in f.attrs:
-            raise FormatError(p, "HDF5 file has no 'gprMax' attribute: not a gprMax output")
-        version = f.attrs["gprMax"]
-        version = version.decode() if isinstance(version, bytes) else str(version)
+        if "gprMax" in f.attrs:
+            version = f.attrs["gprMax"]
+            version = version.decode() if isinstance(version, bytes) else str(version)
+        elif _has_gprmax_layout(f):  # gprMax 3's merge tool keeps only Iterations, dt, nrx and rxs/rxN/<component>
+            version = "unknown (merged file without a gprMax attribute)"
+        else:
+            raise FormatError(p, "HDF5 file has neither a 'gprMax' attribute nor gprMax's layout (Iterations, dt and "
+                                 "rxs/rxN/<component>): not a gprMax output")
         try:
             dt = float(f.attrs["dt"])
             iterations = int(f.attrs["Iterations"])
@@ -147,25 +161,29 @@ def _read_gprmax(p, component):
             if tm is not None and f"rxs/{name}/Position" in tm:
                 rx = np.asarray(tm[f"rxs/{name}/Position"][()], dtype=float)
                 pos_source = "gprMax trace_metadata"
-            else:
+            elif "Position" in g.attrs or np.any(rxsteps != 0):
                 rx0 = np.asarray(g.attrs.get("Position", (0, 0, 0)), dtype=float)
                 rx = rx0[None, :] + idx * rxsteps[None, :]
                 pos_source = "gprMax receiver position + rxsteps"
+            else:  # a merged file that kept no geometry: positions are unknown, not all at the origin
+                rx = None
+                pos_source = "none in the file (give the trace positions)"
             if tm is not None and src_group is not None and f"srcs/{src_group}/Position" in tm:
                 tx = np.asarray(tm[f"srcs/{src_group}/Position"][()], dtype=float)
             elif src_pos is not None:
                 tx = src_pos[None, :] + idx * srcsteps[None, :]
             else:
-                tx = rx.copy()
-            if rx.shape != (n_tr, 3) or tx.shape != (n_tr, 3):
-                raise FormatError(p, "trace_metadata positions do not match the number of traces")
-            tx_w, rx_w = gprmax_to_world(tx), gprmax_to_world(rx)
-            mid = (tx_w + rx_w) / 2
-            sep = rx_w - tx_w
-            offset = float(np.median(np.linalg.norm(sep, axis=1)))
-            orient = None
-            if offset > 0:
-                orient = quat_from_yaw(np.arctan2(sep[:, 1], sep[:, 0]))
+                tx = None if rx is None else rx.copy()
+            mid, orient, offset = None, None, 0.0
+            if rx is not None:
+                if tx is None or rx.shape != (n_tr, 3) or tx.shape != (n_tr, 3):
+                    raise FormatError(p, "trace_metadata positions do not match the number of traces")
+                tx_w, rx_w = gprmax_to_world(tx), gprmax_to_world(rx)
+                mid = (tx_w + rx_w) / 2
+                sep = rx_w - tx_w
+                offset = float(np.median(np.linalg.norm(sep, axis=1)))
+                if offset > 0:
+                    orient = quat_from_yaw(np.arctan2(sep[:, 1], sep[:, 0]))
             freq = waveform.get("WaveformFrequency")
             surveys.append(
                 Survey(
@@ -187,7 +205,7 @@ def _read_gprmax(p, component):
                         "dx_dy_dz": dl.tolist(),
                         "merged": bool(arr.shape[1] > 1 or "ntraces" in f.attrs),
                         "positions_source": pos_source,
-                        "tx_positions_gprmax": tx.tolist() if n_tr <= 4096 else None,
+                        "tx_positions_gprmax": tx.tolist() if tx is not None and n_tr <= 4096 else None,
                         "waveform": waveform or None,
                         "antenna": f"gprMax {waveform.get('SourceType', 'source')}" if waveform else "gprMax",
                     },

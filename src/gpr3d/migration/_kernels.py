@@ -133,6 +133,7 @@ def kernels():
 
     _CACHE["adjoint"], _CACHE["forward"] = adjoint, forward
     _CACHE["helpers"] = legs, start_depth, depth_axis
+    _CACHE["sample_position"] = sample_position
     return adjoint, forward
 
 
@@ -190,3 +191,123 @@ def simd_adjoint():
         adjoint_simd = None
     _CACHE["simd"] = adjoint_simd
     return adjoint_simd
+
+
+def tiled_adjoint(simd: bool):
+    """The adjoint with an aperture, at a cost that follows the aperture (``simd``: the explicit-SIMD depth loop).
+
+    The image is cut into tiles of ``TILE x TILE`` columns, the traces are binned by their tx-rx midpoint (a
+    trace index list sorted by bin, ``order``, with each bin's start in ``bin_start``); a tile visits only the
+    bins within the aperture's reach (``reach``: the horizontal distance at which the deepest voxel leaves the
+    cone) of it, and of their traces only those whose midpoint lies within reach of the tile. Each visited
+    trace's row is then read for all the tile's columns while it is in cache, into the tile's accumulators.
+    The sum is the same as the plain adjoint's (only voxels outside every aperture are skipped, where that
+    adds exact zeros); ``depth``, ``slow`` padded to whole SIMD blocks when ``simd``.
+    """
+    key = ("tiled", simd)
+    if key in _CACHE:
+        return _CACHE[key]
+    numba = require("numba")
+    kernels()
+    legs, start_depth, depth_axis = _CACHE["helpers"]
+    sample_position = _CACHE["sample_position"]
+    f32 = np.float32
+    if simd:
+        from gpr3d.migration import _simd
+
+        s0, s1, s2, s3 = (_simd.stack(m) for m in range(4))
+
+        @numba.njit(fastmath=True, cache=False, inline="always")
+        def inner(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode):
+            nblk = depth.shape[0] // _simd.W
+            if mode == 0:
+                s0(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+            elif mode == 1:
+                s1(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+            elif mode == 2:
+                s2(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+            else:
+                s3(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+    else:
+        @numba.njit(fastmath=True, cache=False, inline="always")
+        def inner(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode):
+            one = np.uint32(1)
+            for k in range(k0, nd):
+                u, za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
+                w = f32(1.0)
+                if mode & 1:
+                    w *= f32(0.5) * (za / ra + zb / rb)
+                if mode & 2:
+                    w *= f32(0.5) * (ra + rb)
+                i0 = np.uint32(u)
+                f = u - f32(i0)
+                acc[k] += w * (row[i0] + f * (row[i0 + one] - row[i0]))
+
+    tile = TILE
+
+    @numba.njit(parallel=True, fastmath=True, cache=True)
+    def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image,
+                      order, bin_start, bx0, by0, bsize, nbx, nby, mid, reach):
+        nx, ny, nd = image.shape
+        d0, dd = depth_axis(depth, nd)
+        ntx = (nx + tile - 1) // tile
+        nty = (ny + tile - 1) // tile
+        for t in numba.prange(ntx * nty):
+            tx0 = (t // nty) * tile
+            ty0 = (t - (t // nty) * nty) * tile
+            tx1 = min(tx0 + tile, nx)
+            ty1 = min(ty0 + tile, ny)
+            xa, xb, ya, yb = x[tx0], x[tx1 - 1], y[ty0], y[ty1 - 1]
+            acc = np.zeros((tile * tile, depth.shape[0]), np.float32)
+            i_lo = max(int(math.floor((xa - reach - bx0) / bsize)), 0)
+            i_hi = min(int(math.floor((xb + reach - bx0) / bsize)), nbx - 1)
+            j_lo = max(int(math.floor((ya - reach - by0) / bsize)), 0)
+            j_hi = min(int(math.floor((yb + reach - by0) / bsize)), nby - 1)
+            r2 = reach * reach
+            for bi in range(i_lo, i_hi + 1):
+                for bj in range(j_lo, j_hi + 1):
+                    b = bi * nby + bj
+                    for q in range(bin_start[b], bin_start[b + 1]):
+                        j = order[q]
+                        # the midpoint's distance to the tile's rectangle: beyond reach, no column sees the trace
+                        ex = max(xa - mid[j, 0], f32(0.0), mid[j, 0] - xb)
+                        ey = max(ya - mid[j, 1], f32(0.0), mid[j, 1] - yb)
+                        if ex * ex + ey * ey > r2:
+                            continue
+                        row = data[j]
+                        ha = tx[j, 2]
+                        hb = rx[j, 2]
+                        for ix in range(tx0, tx1):
+                            for iy in range(ty0, ty1):
+                                ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
+                                k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
+                                if k0 < nd:
+                                    inner(row, depth, slow, acc[(ix - tx0) * tile + (iy - ty0)], h2a, h2b, ha, hb,
+                                          t0, inv_dt, umax, k0, nd, mode)
+            for ix in range(tx0, tx1):
+                for iy in range(ty0, ty1):
+                    a = acc[(ix - tx0) * tile + (iy - ty0)]
+                    col = image[ix, iy]
+                    for k in range(nd):
+                        col[k] += a[k]
+
+    _CACHE[key] = adjoint_tiled
+    return adjoint_tiled
+
+
+#: columns per tile side in :func:`tiled_adjoint`
+TILE = 8
+
+
+def bin_traces(mid: np.ndarray, bsize: float):
+    """Traces binned by their midpoints ``mid`` (n, 2) on a square grid of side ``bsize``: the trace order sorted by
+    bin, each bin's start in that order (``nbx * nby + 1``), the grid's origin and size."""
+    bx0, by0 = float(mid[:, 0].min()), float(mid[:, 1].min())
+    nbx = int((mid[:, 0].max() - bx0) // bsize) + 1
+    nby = int((mid[:, 1].max() - by0) // bsize) + 1
+    bi = np.minimum(((mid[:, 0] - bx0) // bsize).astype(np.int64), nbx - 1)
+    bj = np.minimum(((mid[:, 1] - by0) // bsize).astype(np.int64), nby - 1)
+    b = bi * nby + bj
+    order = np.argsort(b, kind="stable").astype(np.int64)
+    start = np.searchsorted(b[order], np.arange(nbx * nby + 1)).astype(np.int64)
+    return order, start, bx0, by0, nbx, nby

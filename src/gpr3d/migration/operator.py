@@ -102,6 +102,8 @@ class BackProjection:
         self.engine = engine
         # the numba engine's adjoint uses the explicit-SIMD kernel where it compiles; GPR3D_SIMD=0 turns it off
         self.simd = os.environ.get("GPR3D_SIMD", "1") != "0"
+        # with an aperture, the tiled adjoint (cost that follows the aperture); GPR3D_TILED=0 turns it off
+        self.tiled = os.environ.get("GPR3D_TILED", "1") != "0"
         self.x = grid.x.astype(np.float64)
         self.y = grid.y.astype(np.float64)
         self.depth = grid.depth.astype(np.float64)
@@ -178,6 +180,16 @@ class BackProjection:
             step = self.depth[1] - self.depth[0] if nd > 1 else 1.0
             args[4] = np.r_[self.depth, self.depth[-1] + step * np.arange(1, extra + 1)].astype(np.float32)
             args[5] = np.r_[self.slow, np.full(extra, self.slow[-1])].astype(np.float32)
+        if self.tan_ap > 0 and self.tiled:
+            # the cost follows the aperture: tiles of columns visit only the traces whose cone reaches them
+            mid = (0.5 * (self.tx[:, :2] + self.rx[:, :2])).astype(np.float32)
+            reach = self.tan_ap * float(self.depth[-1]) + 1e-6
+            bsize = max(reach / 2, _kernels.TILE * max(self.grid.dx, self.grid.dy))  # bins of >= one tile
+            order, start, bx0, by0, nbx, nby = _kernels.bin_traces(mid, bsize)
+            _kernels.tiled_adjoint(simd is not None)(padded, *args, img, order, start, np.float32(bx0),
+                                                    np.float32(by0), np.float32(bsize), nbx, nby, mid,
+                                                    np.float32(reach))
+        elif simd is not None:
             simd(padded, *args, img)
         else:
             _kernels.kernels()[0](padded, *args, img)
