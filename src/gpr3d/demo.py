@@ -55,6 +55,7 @@ from pathlib import Path
 
 
 from gpr3d import __version__
+from gpr3d.core.units import velocity_from_eps_r
 from gpr3d.io.atomic import atomic_write_text
 
 __all__ = ["DemoConfig", "run_demo"]
@@ -357,7 +358,7 @@ def _depth_rows(survey, found, real, real_found, log, true_xy) -> dict:
     est = DepthEstimator.load()
     pipes = demo_scene().pipes
     truth_eps = demo_scene().eps_r
-    kw = dict(t0_s=survey.metadata["truth_t0_s"], v_m_s=299792458.0 / truth_eps**0.5, offset_m=survey.offset_m,
+    kw = dict(t0_s=survey.metadata["truth_t0_s"], v_m_s=velocity_from_eps_r(truth_eps), offset_m=survey.offset_m,
               tolerance_s=1.0 / survey.frequency_hz)
     truth = [_true_top_depth(true_xy[int(t["apex_trace"])], t["apex_time_s"], pipes, **kw)
              for t in found["targets"]]

@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from gpr3d.core.errors import InvalidDataError
+
 __all__ = ["C0", "velocity_from_eps_r", "eps_r_from_velocity", "twt_to_depth", "depth_to_twt"]
 
 #: speed of light in vacuum (m/s)
@@ -14,15 +16,19 @@ C0 = 299_792_458.0
 
 def velocity_from_eps_r(eps_r: float) -> float:
     """Wave speed (m/s) in a low-loss medium of relative permittivity ``eps_r``."""
-    if not (eps_r >= 1.0) or not math.isfinite(eps_r):
-        raise ValueError(f"eps_r must be a finite number >= 1, got {eps_r!r}")
-    return C0 / math.sqrt(eps_r)
+    try:
+        e = float(eps_r)
+    except (TypeError, ValueError):
+        raise InvalidDataError(f"eps_r must be a number >= 1, got {eps_r!r}") from None
+    if not (e >= 1.0) or not math.isfinite(e):
+        raise InvalidDataError(f"eps_r must be a finite number >= 1, got {eps_r!r}")
+    return C0 / math.sqrt(e)
 
 
 def eps_r_from_velocity(velocity_m_s: float) -> float:
     """Relative permittivity from a wave speed (m/s)."""
     if not (0 < velocity_m_s <= C0):
-        raise ValueError(f"velocity must be in (0, c], got {velocity_m_s!r} m/s")
+        raise InvalidDataError(f"velocity must be in (0, c], got {velocity_m_s!r} m/s")
     return (C0 / velocity_m_s) ** 2
 
 

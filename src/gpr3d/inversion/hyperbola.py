@@ -44,7 +44,7 @@ from scipy.optimize import least_squares
 from scipy.signal import hilbert
 
 from gpr3d.core.errors import InvalidDataError
-from gpr3d.core.units import C0
+from gpr3d.core.units import C0, velocity_from_eps_r
 from gpr3d.io.coco import BOX_PAD_PERIODS
 
 __all__ = ["HyperbolaFit", "direct_wave_time", "time_zero", "pick_arrivals", "fit_hyperbola", "fit_boxes",
@@ -257,11 +257,11 @@ def _t0(p, t0, dw, h):
 
 
 def _solve(x, t, t0, dw, h, with_radius, scale, x_guess, t_apex):
-    v_lo, v_hi = C0 / math.sqrt(EPS_RANGE[1]), C0 / math.sqrt(EPS_RANGE[0])
+    v_lo, v_hi = velocity_from_eps_r(EPS_RANGE[1]), velocity_from_eps_r(EPS_RANGE[0])
     span = max(float(x.max() - x.min()), 1e-3)
     best = None
     for eps_guess in (4.0, 9.0, 20.0):  # a few starts: the misfit is not convex in v
-        v = C0 / math.sqrt(eps_guess)
+        v = velocity_from_eps_r(eps_guess)
         z = max(0.5 * v * max(t_apex - _t0([0, 0, v], t0, dw, h), 1e-12), 1e-3)
         p0 = [x_guess, z, v] + ([0.3 * z] if with_radius else [])
         lo = [x.min() - span, 1e-4, v_lo] + ([0.0] if with_radius else [])
@@ -416,7 +416,7 @@ def fit_record(survey, boxes, *, apexes=None, trace_spacing_m: float | None = No
     per = 3 if model == "cylinder" else 2
     xs = [x[picks[k][0]] for k in used]
     ts = [picks[k][1] for k in used]
-    v_lo, v_hi = C0 / math.sqrt(EPS_RANGE[1]), C0 / math.sqrt(EPS_RANGE[0])
+    v_lo, v_hi = velocity_from_eps_r(EPS_RANGE[1]), velocity_from_eps_r(EPS_RANGE[0])
 
     def unpack(p):
         return p[0], [p[1 + per * i : 1 + per * (i + 1)] for i in range(len(used))]
@@ -443,7 +443,7 @@ def fit_record(survey, boxes, *, apexes=None, trace_spacing_m: float | None = No
     singles = [fit_hyperbola(xi, ti, t0_s=t0_s, direct_wave_s=dw, offset_m=h, frequency_hz=survey.frequency_hz,
                              model="point") for xi, ti in zip(xs, ts)]
     v_single = [f.v_m_s for f in singles if f.ok]
-    starts = ([float(np.median(v_single))] if v_single else []) + [C0 / math.sqrt(e) for e in (4.0, 9.0, 20.0)]
+    starts = ([float(np.median(v_single))] if v_single else []) + [velocity_from_eps_r(e) for e in (4.0, 9.0, 20.0)]
     best = None
     for v in starts:
         t0g = t0_s if dw is None else time_zero(dw, h, v)

@@ -19,6 +19,7 @@ import numpy as np
 
 from gpr3d import __version__
 from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.units import velocity_from_eps_r
 from gpr3d.io.atomic import atomic_path, atomic_write_text
 from gpr3d.migration.grid import Grid3D
 from gpr3d.migration.masking import box_mask, check_boxes, image_envelope
@@ -75,7 +76,7 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None) -> 
     t = time.perf_counter()
     s = _prepare(survey, cfg)
     t_prep = time.perf_counter() - t
-    v = 299792458.0 / np.sqrt(eps)
+    v = velocity_from_eps_r(eps)
     depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s) * 0.95
     grid = Grid3D.covering(s.positions_xyz, depth_m=depth, spacing_m=cfg.spacing_m,
                            depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gpr3d.core.units import C0
+from gpr3d.core.units import velocity_from_eps_r
 from gpr3d.migration.grid import Grid3D
 from gpr3d.migration.operator import BackProjection, antenna_positions
 
@@ -26,7 +26,7 @@ def stolt_migrate(data: np.ndarray, dx_m: float, dt_s: float, eps_r: float, *, p
     mapping ``omega = (v/2) sign(kz) sqrt(kx^2 + kz^2)`` with its Jacobian, by linear
     interpolation along frequency; the depth spacing is ``(v/2) dt``.
     """
-    v2 = 0.5 * C0 / np.sqrt(eps_r)
+    v2 = 0.5 * velocity_from_eps_r(eps_r)
     nx, nt = data.shape
     NX, NT = pad * nx, pad * nt
     P = np.fft.fft2(np.asarray(data, dtype=np.float64), s=(NX, NT))  # (kx, omega)

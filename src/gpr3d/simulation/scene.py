@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from gpr3d.core.units import C0
+from gpr3d.core.units import C0, velocity_from_eps_r
 
 __all__ = ["Medium", "Target", "Stone", "Antenna", "Scene", "TARGET_KINDS", "MATERIALS"]
 
@@ -44,7 +44,7 @@ class Medium:
 
     @property
     def velocity_m_s(self) -> float:
-        return C0 / math.sqrt(self.eps_r)
+        return velocity_from_eps_r(self.eps_r)
 
 
 @dataclass
