@@ -339,6 +339,13 @@ def cmd_dataset(args):
     return 0
 
 
+def _reconstruct_defaults():
+    """The library's reconstruction defaults (the CLI's defaults come from them, so the two cannot drift apart)."""
+    from gpr3d.migration.reconstruct import ReconstructConfig
+
+    return ReconstructConfig()
+
+
 def cmd_reconstruct(args):
     from gpr3d.io.detections import read_boxes
     from gpr3d.io.registry import read
@@ -886,14 +893,16 @@ def build_parser() -> argparse.ArgumentParser:
                     help="relative permittivity, or 'file' for the header's (default: estimated from the data, "
                          "see --depth)")
     sp.add_argument("--boxes", default=None, help="JSON boxes (gpr3d detect output or a list): migrate only these")
-    sp.add_argument("--spacing", type=float, default=0.02, help="voxel size in metres (default 0.02)")
-    sp.add_argument("--max-depth", type=float, default=None, help="deepest voxel (m; default: the time window)")
-    sp.add_argument("--aperture", type=float, default=50.0, help="beam half-angle in degrees (0: none)")
-    sp.add_argument("--threshold", type=float, default=0.3,
-                    help="target threshold, fraction of the image's 99.5th-percentile column maximum")
-    sp.add_argument("--min-line", type=float, default=0.3, help="shortest line target (m)")
+    rc = _reconstruct_defaults()
+    sp.add_argument("--spacing", type=float, default=rc.spacing_m, help=f"voxel size in metres (default {rc.spacing_m:g})")
+    sp.add_argument("--max-depth", type=float, default=rc.max_depth_m, help="deepest voxel (m; default: the time window)")
+    sp.add_argument("--aperture", type=float, default=rc.aperture_deg,
+                    help=f"beam half-angle in degrees (0: none; default {rc.aperture_deg:g})")
+    sp.add_argument("--threshold", type=float, default=rc.threshold,
+                    help=f"target threshold, fraction of the image's 99.5th-percentile column maximum ({rc.threshold:g})")
+    sp.add_argument("--min-line", type=float, default=rc.min_line_m, help=f"shortest line target (m; {rc.min_line_m:g})")
     sp.add_argument("--no-time-zero", action="store_true", help="the data already start at time zero")
-    sp.add_argument("--engine", choices=("numba", "numpy"), default="numba", help="migration kernel")
+    sp.add_argument("--engine", choices=("numba", "numpy"), default=rc.engine, help="migration kernel")
     sp.add_argument("--mask", choices=("none", "detect"), default="none",
                     help="detect: run the detector on the trace sequence and migrate only its boxes")
     add_detector_args(sp)
