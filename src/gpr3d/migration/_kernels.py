@@ -218,7 +218,7 @@ def tiled_adjoint(simd: bool):
         s0, s1, s2, s3 = (_simd.stack(m) for m in range(4))
 
         @numba.njit(fastmath=True, cache=False, inline="always")
-        def inner(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode):
+        def inner(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode, uu, ww):
             nblk = depth.shape[0] // _simd.W
             if mode == 0:
                 s0(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
@@ -230,7 +230,9 @@ def tiled_adjoint(simd: bool):
                 s3(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
     else:
         @numba.njit(fastmath=True, cache=False, inline="always")
-        def inner(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode):
+        def inner(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode, uu, ww):
+            # two passes, as in the plain adjoint: the positions and weights (vectorised: square roots in SIMD
+            # lanes), then the reads of the trace (scalar loads: no hardware gather, which is slow on some CPUs)
             one = np.uint32(1)
             for k in range(k0, nd):
                 u, za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
@@ -239,9 +241,13 @@ def tiled_adjoint(simd: bool):
                     w *= f32(0.5) * (za / ra + zb / rb)
                 if mode & 2:
                     w *= f32(0.5) * (ra + rb)
+                uu[k] = u
+                ww[k] = w
+            for k in range(k0, nd):
+                u = uu[k]
                 i0 = np.uint32(u)
                 f = u - f32(i0)
-                acc[k] += w * (row[i0] + f * (row[i0 + one] - row[i0]))
+                acc[k] += ww[k] * (row[i0] + f * (row[i0 + one] - row[i0]))
 
     tile = TILE
 
@@ -259,6 +265,8 @@ def tiled_adjoint(simd: bool):
             ty1 = min(ty0 + tile, ny)
             xa, xb, ya, yb = x[tx0], x[tx1 - 1], y[ty0], y[ty1 - 1]
             acc = np.zeros((tile * tile, depth.shape[0]), np.float32)
+            uu = np.empty(depth.shape[0], np.float32)
+            ww = np.empty(depth.shape[0], np.float32)
             i_lo = max(int(math.floor((xa - reach - bx0) / bsize)), 0)
             i_hi = min(int(math.floor((xb + reach - bx0) / bsize)), nbx - 1)
             j_lo = max(int(math.floor((ya - reach - by0) / bsize)), 0)
@@ -283,7 +291,7 @@ def tiled_adjoint(simd: bool):
                                 k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
                                 if k0 < nd:
                                     inner(row, depth, slow, acc[(ix - tx0) * tile + (iy - ty0)], h2a, h2b, ha, hb,
-                                          t0, inv_dt, umax, k0, nd, mode)
+                                          t0, inv_dt, umax, k0, nd, mode, uu, ww)
             for ix in range(tx0, tx1):
                 for iy in range(ty0, ty1):
                     a = acc[(ix - tx0) * tile + (iy - ty0)]
