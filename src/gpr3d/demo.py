@@ -36,7 +36,7 @@ Stages so far (each later stage of the system adds its own):
    stage 5 runs with that estimate, not the truth; the real
    recording's estimate is shown beside its header's eps_r.
 7. **Visual-inertial pose** — the synthetic cart rig (60 s of random motion with
-   turns and stops, a 200 Hz IMU, 15 Hz visual odometry with noise, gross
+   turns and stops, a 200 Hz IMU, 15 Hz visual odometry against keyframes with noise, gross
    errors and a 2 s tracking loss) fused by the error-state EKF; the fused
    path, odometry alone and the truth (TUM files and a plan view), with their
    APE through evo (needs the ``pose`` extra; skipped with a hint without it).
@@ -132,7 +132,7 @@ def _survey_poses(cfg: DemoConfig, log):
 
     # the antenna 0.3 m behind the IMU at its height (the ground); the cart steers over the 2 m x 2 m patch
     rig = RigConfig(duration_s=cfg.walk_seconds, area=((0.0, 2.0), (0.0, 2.0)), turn_rate_rad_s=cfg.walk_turn_rate,
-                    stops=max(3, int(cfg.walk_seconds // 60)),
+                    stops=max(3, int(cfg.walk_seconds // 60)), vo_keyframe_m=0.1,
                     imu_T_antenna=np.array([[1.0, 0, 0, -0.3], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]))
     run = simulate_rig(rig, seed=cfg.walk_seed)
     truth = run.truth_trajectory()
@@ -407,7 +407,7 @@ def _pose_stage(out: Path, log) -> dict:
     from gpr3d.pose.rig import RigConfig, simulate_rig
     from gpr3d.viz.maps import save_paths_png
 
-    rig = RigConfig(duration_s=60.0, vo_gap=(30.0, 2.0))
+    rig = RigConfig(duration_s=60.0, vo_gap=(30.0, 2.0), vo_keyframe_m=0.1)  # odometry against keyframes, as pose.vo
     run = simulate_rig(rig, seed=2)
     t = time.perf_counter()
     res = fuse(run.imu, run.vo, run.filter_config())

@@ -132,3 +132,30 @@ def test_tiled_adjoint_sums_what_every_trace_sees(simd):
     far = (np.maximum(0, np.maximum(grid.x[0] - mid[:, 0], mid[:, 0] - grid.x[-1])) ** 2
            + np.maximum(0, np.maximum(grid.y[0] - mid[:, 1], mid[:, 1] - grid.y[-1])) ** 2) > reach**2
     assert far.sum() > n // 3
+
+
+@pytest.mark.parametrize("simd", [True, False])
+@pytest.mark.parametrize("weights", [{}, {"obliquity": True, "spreading": True}])
+def test_fold_in_the_same_pass_equals_migrating_a_trace_of_ones(simd, weights):
+    """The fold summed in the migration's own pass equals the numpy reference's migration of a trace of ones,
+    with a record short enough (60 samples) that the deeper voxels fall on its last sample and past its end, where
+    the fold must drop to 1 - frac and then 0."""
+    rng = np.random.default_rng(2)
+    n = 120
+    pos = np.c_[rng.uniform(-0.5, 1.5, n), rng.uniform(-0.5, 1.5, n), rng.uniform(0, 0.05, n)]
+    tx, rx = antenna_positions(pos, headings_rad=rng.uniform(-3, 3, n), offset_m=0.1)
+    grid = Grid3D(0.0, 0.0, 0.04, 0.05, 0.05, 0.02, 21, 19, 30)
+    kw = dict(dt_s=0.1e-9, n_samples=60, eps_r=6.0, aperture_deg=35, **weights)
+    d = rng.standard_normal((n, 60)).astype(np.float32)
+    ref = BackProjection(grid, tx, rx, engine="numpy", **kw)
+    want_img, want_fold = ref.adjoint(d), ref.adjoint(np.ones((n, 60), np.float32))
+    op = BackProjection(grid, tx, rx, **kw)
+    op.simd = simd
+    img, fold = op.adjoint(d, with_fold=True)
+    np.testing.assert_allclose(img, want_img, atol=1e-4 * np.abs(want_img).max())
+    np.testing.assert_allclose(fold, want_fold, atol=1e-4 * want_fold.max())
+    assert want_fold[..., -1].max() == 0 < want_fold[..., 5].max()  # the record ends inside the grid
+    # without an aperture (a second migration) the same
+    op2 = BackProjection(grid, tx, rx, **{**kw, "aperture_deg": None})
+    i2, f2 = op2.adjoint(d, with_fold=True)
+    np.testing.assert_allclose(f2, op2.adjoint(np.ones((n, 60), np.float32)), rtol=1e-6)

@@ -193,7 +193,7 @@ def simd_adjoint():
     return adjoint_simd
 
 
-def tiled_adjoint(simd: bool):
+def tiled_adjoint(simd: bool, fold: bool = False):
     """The adjoint with an aperture, at a cost that follows the aperture (``simd``: the explicit-SIMD depth loop).
 
     The image is cut into tiles of ``TILE x TILE`` columns, the traces are binned by their tx-rx midpoint (a
@@ -202,9 +202,10 @@ def tiled_adjoint(simd: bool):
     cone) of it, and of their traces only those whose midpoint lies within reach of the tile. Each visited
     trace's row is then read for all the tile's columns while it is in cache, into the tile's accumulators.
     The sum is the same as the plain adjoint's (only voxels outside every aperture are skipped, where that
-    adds exact zeros); ``depth``, ``slow`` padded to whole SIMD blocks when ``simd``.
+    adds exact zeros); ``depth``, ``slow`` padded to whole SIMD blocks when ``simd``. ``fold``: the adjoint of a
+    trace of ones (how many traces see each voxel, weighted) is summed into ``fold_img`` in the same pass.
     """
-    key = ("tiled", simd)
+    key = ("tiled", simd, fold)
     if key in _CACHE:
         return _CACHE[key]
     numba = require("numba")
@@ -215,22 +216,36 @@ def tiled_adjoint(simd: bool):
     if simd:
         from gpr3d.migration import _simd
 
-        s0, s1, s2, s3 = (_simd.stack(m) for m in range(4))
+        s0, s1, s2, s3 = (_simd.stack(m, fold) for m in range(4))
+        W = _simd.W
 
-        @numba.njit(fastmath=True, cache=False, inline="always")
-        def inner(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode, uu, ww):
-            nblk = depth.shape[0] // _simd.W
-            if mode == 0:
-                s0(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-            elif mode == 1:
-                s1(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-            elif mode == 2:
-                s2(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-            else:
-                s3(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+        if fold:
+            @numba.njit(fastmath=True, cache=False, inline="always")
+            def inner(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode, uu, ww):
+                nblk = depth.shape[0] // W
+                if mode == 0:
+                    s0(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+                elif mode == 1:
+                    s1(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+                elif mode == 2:
+                    s2(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+                else:
+                    s3(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+        else:
+            @numba.njit(fastmath=True, cache=False, inline="always")
+            def inner(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode, uu, ww):
+                nblk = depth.shape[0] // W
+                if mode == 0:
+                    s0(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+                elif mode == 1:
+                    s1(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+                elif mode == 2:
+                    s2(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+                else:
+                    s3(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
     else:
         @numba.njit(fastmath=True, cache=False, inline="always")
-        def inner(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode, uu, ww):
+        def inner(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode, uu, ww):
             # two passes, as in the plain adjoint: the positions and weights (vectorised: square roots in SIMD
             # lanes), then the reads of the trace (scalar loads: no hardware gather, which is slow on some CPUs)
             one = np.uint32(1)
@@ -243,17 +258,19 @@ def tiled_adjoint(simd: bool):
                     w *= f32(0.5) * (ra + rb)
                 uu[k] = u
                 ww[k] = w
+                if fold:  # a trace of ones read at u: 1 inside the record, 1 - frac on the last sample, 0 past it
+                    facc[k] += w * min(max(umax - u, f32(0.0)), f32(1.0))
             for k in range(k0, nd):
                 u = uu[k]
                 i0 = np.uint32(u)
-                f = u - f32(i0)
-                acc[k] += ww[k] * (row[i0] + f * (row[i0 + one] - row[i0]))
+                fr = u - f32(i0)
+                acc[k] += ww[k] * (row[i0] + fr * (row[i0 + one] - row[i0]))
 
     tile = TILE
 
-    @numba.njit(parallel=True, fastmath=True, cache=True)
+    @numba.njit(parallel=True, fastmath=True, cache=False)
     def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image,
-                      order, bin_start, bx0, by0, bsize, nbx, nby, mid, reach):
+                      order, bin_start, bx0, by0, bsize, nbx, nby, mid, reach, fold_img):
         nx, ny, nd = image.shape
         d0, dd = depth_axis(depth, nd)
         ntx = (nx + tile - 1) // tile
@@ -265,6 +282,7 @@ def tiled_adjoint(simd: bool):
             ty1 = min(ty0 + tile, ny)
             xa, xb, ya, yb = x[tx0], x[tx1 - 1], y[ty0], y[ty1 - 1]
             acc = np.zeros((tile * tile, depth.shape[0]), np.float32)
+            facc = np.zeros((tile * tile, depth.shape[0] if fold else 1), np.float32)
             uu = np.empty(depth.shape[0], np.float32)
             ww = np.empty(depth.shape[0], np.float32)
             i_lo = max(int(math.floor((xa - reach - bx0) / bsize)), 0)
@@ -290,14 +308,19 @@ def tiled_adjoint(simd: bool):
                                 ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
                                 k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
                                 if k0 < nd:
-                                    inner(row, depth, slow, acc[(ix - tx0) * tile + (iy - ty0)], h2a, h2b, ha, hb,
-                                          t0, inv_dt, umax, k0, nd, mode, uu, ww)
+                                    c = (ix - tx0) * tile + (iy - ty0)
+                                    inner(row, depth, slow, acc[c], facc[c], h2a, h2b, ha, hb, t0, inv_dt, umax,
+                                          k0, nd, mode, uu, ww)
             for ix in range(tx0, tx1):
                 for iy in range(ty0, ty1):
-                    a = acc[(ix - tx0) * tile + (iy - ty0)]
+                    c = (ix - tx0) * tile + (iy - ty0)
                     col = image[ix, iy]
                     for k in range(nd):
-                        col[k] += a[k]
+                        col[k] += acc[c, k]
+                    if fold:
+                        fcol = fold_img[ix, iy]
+                        for k in range(nd):
+                            fcol[k] += facc[c, k]
 
     _CACHE[key] = adjoint_tiled
     return adjoint_tiled

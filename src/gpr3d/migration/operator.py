@@ -158,8 +158,14 @@ class BackProjection:
         return out[:, : self.n_samples].astype(np.float32)
 
     # ---------------------------------------------------------------- public
-    def adjoint(self, data) -> np.ndarray:
-        """Migration: data ``(n_traces, n_samples)`` -> image ``(nx, ny, nd)`` float32."""
+    def adjoint(self, data, *, with_fold: bool = False):
+        """Migration: data ``(n_traces, n_samples)`` -> image ``(nx, ny, nd)`` float32.
+
+        ``with_fold``: also the fold, the adjoint of a trace of ones (how many traces see each voxel inside their
+        aperture and record, weighted), returned as ``(image, fold)``; with an aperture the numba engine sums it in
+        the same pass, otherwise it is a second migration."""
+        if with_fold and not (self.engine == "numba" and self.tan_ap > 0 and self.tiled):
+            return self.adjoint(data), self.adjoint(np.ones((self.n_traces, self.n_samples), dtype=np.float32))
         data = np.ascontiguousarray(data, dtype=np.float32)
         if data.shape != (self.n_traces, self.n_samples):
             raise InvalidDataError(f"data must be {(self.n_traces, self.n_samples)}, got {data.shape}")
@@ -186,9 +192,12 @@ class BackProjection:
             reach = self.tan_ap * float(self.depth[-1]) + 1e-6
             bsize = max(reach / 2, _kernels.TILE * max(self.grid.dx, self.grid.dy))  # bins of >= one tile
             order, start, bx0, by0, nbx, nby = _kernels.bin_traces(mid, bsize)
-            _kernels.tiled_adjoint(simd is not None)(padded, *args, img, order, start, np.float32(bx0),
-                                                    np.float32(by0), np.float32(bsize), nbx, nby, mid,
-                                                    np.float32(reach))
+            fold = np.zeros(self.grid.shape if with_fold else (1, 1, 1), dtype=np.float32)
+            _kernels.tiled_adjoint(simd is not None, with_fold)(padded, *args, img, order, start, np.float32(bx0),
+                                                               np.float32(by0), np.float32(bsize), nbx, nby, mid,
+                                                               np.float32(reach), fold)
+            if with_fold:
+                return img, fold
         elif simd is not None:
             simd(padded, *args, img)
         else:

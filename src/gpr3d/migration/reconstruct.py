@@ -86,20 +86,21 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None) -> 
                         engine=cfg.engine)
     t = time.perf_counter()
     noise_map = None
+    # the fold (how many traces see each voxel inside their aperture and record) comes with the image: in the same
+    # pass where the kernel can
+    want_fold = cfg.normalize != "none"
     if boxes:
         # boxes refer to the recording's samples; time zero cut some: shift them
         cut = survey.n_samples - s.n_samples
         shifted = [[b[0], b[1] - cut * s.dt_s, b[2], b[3] - cut * s.dt_s] for b in boxes]
         mask = box_mask(s.n_traces, s.n_samples, s.dt_s, shifted, taper_traces=cfg.taper_traces)
-        image = op.adjoint(s.data * mask)
+        out = op.adjoint(s.data * mask, with_fold=want_fold)
         noise_map = image_envelope(op.adjoint(s.data * (1 - mask)))
     else:
-        image = op.adjoint(s.data)
+        out = op.adjoint(s.data, with_fold=want_fold)
+    image, fold = out if want_fold else (out, None)
     t_mig = time.perf_counter() - t
-    fold = None
-    if cfg.normalize != "none":
-        # fold: how many traces see each voxel inside their aperture and record
-        fold = op.adjoint(np.ones((s.n_traces, s.n_samples), dtype=np.float32) * (1.0 if not cfg.obliquity else 1.0))
+    if want_fold:
         floor = 0.05 * float(fold.max())
         norm = np.maximum(fold, floor)
         norm = np.sqrt(norm) if cfg.normalize == "sqrt_fold" else norm
