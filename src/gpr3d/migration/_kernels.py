@@ -51,6 +51,16 @@ def kernels():
         return min(max(u, f32(0.0)), umax), za, zb, ra, rb
 
     @njit(fastmath=True, cache=True, inline="always")
+    def weight(za, zb, ra, rb, mode):
+        # bit 0: obliquity (mean cosine of the two legs), bit 1: spreading (mean leg length)
+        w = f32(1.0)
+        if mode & 1:
+            w *= f32(0.5) * (za / ra + zb / rb)
+        if mode & 2:
+            w *= f32(0.5) * (ra + rb)
+        return w
+
+    @njit(fastmath=True, cache=True, inline="always")
     def depth_axis(depth, nd):
         # first depth and depth step (the aperture's start_depth needs them)
         return depth[0], (depth[1] - depth[0] if nd > 1 else f32(1.0))
@@ -81,12 +91,7 @@ def kernels():
                 else:
                     for k in range(k0, nd):
                         uu[k], za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
-                        w = f32(1.0)
-                        if mode & 1:
-                            w *= f32(0.5) * (za / ra + zb / rb)
-                        if mode & 2:
-                            w *= f32(0.5) * (ra + rb)
-                        ww[k] = w
+                        ww[k] = weight(za, zb, ra, rb, mode)
                 row = data[j]
                 # unsigned indices (u >= 0 by the clamp): no negative-index wraparound, so the gathers vectorise
                 if mode == 0:
@@ -122,18 +127,14 @@ def kernels():
                         u, za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
                         i0 = np.uint32(u)
                         f = u - f32(i0)
-                        w = f32(1.0)
-                        if mode & 1:
-                            w *= f32(0.5) * (za / ra + zb / rb)
-                        if mode & 2:
-                            w *= f32(0.5) * (ra + rb)
-                        m = w * col[k]
+                        m = weight(za, zb, ra, rb, mode) * col[k]
                         row[i0] += (f32(1.0) - f) * m
                         row[i0 + np.uint32(1)] += f * m
 
     _CACHE["adjoint"], _CACHE["forward"] = adjoint, forward
     _CACHE["helpers"] = legs, start_depth, depth_axis
     _CACHE["sample_position"] = sample_position
+    _CACHE["weight"] = weight
     return adjoint, forward
 
 
@@ -211,7 +212,7 @@ def tiled_adjoint(simd: bool, fold: bool = False):
     numba = require("numba")
     kernels()
     legs, start_depth, depth_axis = _CACHE["helpers"]
-    sample_position = _CACHE["sample_position"]
+    sample_position, weight = _CACHE["sample_position"], _CACHE["weight"]
     f32 = np.float32
     if simd:
         from gpr3d.migration import _simd
@@ -251,11 +252,7 @@ def tiled_adjoint(simd: bool, fold: bool = False):
             one = np.uint32(1)
             for k in range(k0, nd):
                 u, za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
-                w = f32(1.0)
-                if mode & 1:
-                    w *= f32(0.5) * (za / ra + zb / rb)
-                if mode & 2:
-                    w *= f32(0.5) * (ra + rb)
+                w = weight(za, zb, ra, rb, mode)
                 uu[k] = u
                 ww[k] = w
                 if fold:  # a trace of ones read at u: 1 inside the record, 1 - frac on the last sample, 0 past it
