@@ -2,140 +2,203 @@
 
 Arithmetic in float32 (16 lanes on AVX-512); traces arrive padded with two zero
 samples, so the inner loop needs no bounds branch: times past the end read zeros.
+
+Every kernel is a module-level function with ``cache=True``, so that numba compiles it once per machine and
+later processes load it from the cache (closures were recompiled in every process: seconds per command).
 """
 
 from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
+from numba import njit, prange
 
-from gpr3d.core.deps import require
+from gpr3d.migration import _simd
 
+f32 = np.float32
+W = _simd.W
 _CACHE = {}
+#: columns per tile side in the tiled adjoint
+TILE = 8
+
+@njit(fastmath=True, cache=True, inline="always")
+def legs(px, py, tx, rx, j):
+    # horizontal offsets of a column (px, py) from trace j's transmitter and receiver, and their squares
+    ax = px - tx[j, 0]
+    ay = py - tx[j, 1]
+    bx = px - rx[j, 0]
+    by = py - rx[j, 1]
+    return ax, ay, bx, by, ax * ax + ay * ay, bx * bx + by * by
+
+@njit(fastmath=True, cache=True, inline="always")
+def start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd):
+    if tan_ap <= 0.0:
+        return 0
+    hm = math.sqrt(0.25 * ((ax + bx) * (ax + bx) + (ay + by) * (ay + by)))
+    k0 = int(math.ceil((hm / tan_ap - d0) / dd - 1e-6))
+    return min(max(k0, 0), nd)
+
+@njit(fastmath=True, cache=True, inline="always")
+def sample_position(dk, ha, hb, h2a, h2b, sk, t0, inv_dt, umax):
+    # fractional sample index of the two-way time tx -> voxel at depth dk -> rx, clamped to the padded trace;
+    # with the vertical legs and path lengths the weights need
+    za = dk + ha
+    zb = dk + hb
+    ra = math.sqrt(h2a + za * za)
+    rb = math.sqrt(h2b + zb * zb)
+    u = (t0 + (ra + rb) * sk) * inv_dt
+    return min(max(u, f32(0.0)), umax), za, zb, ra, rb
+
+@njit(fastmath=True, cache=True, inline="always")
+def weight(za, zb, ra, rb, mode):
+    # bit 0: obliquity (mean cosine of the two legs), bit 1: spreading (mean leg length)
+    w = f32(1.0)
+    if mode & 1:
+        w *= f32(0.5) * (za / ra + zb / rb)
+    if mode & 2:
+        w *= f32(0.5) * (ra + rb)
+    return w
+
+@njit(fastmath=True, cache=True, inline="always")
+def depth_axis(depth, nd):
+    # first depth and depth step (the aperture's start_depth needs them)
+    return depth[0], (depth[1] - depth[0] if nd > 1 else f32(1.0))
+
+@njit(parallel=True, fastmath=True, cache=True)
+def adjoint(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image):
+    # per (column, trace): pass 1 computes the sample positions and weights for all depths
+    # (vectorised: two square roots per voxel), pass 2 gathers and accumulates
+    nx, ny, nd = image.shape
+    n_tr = data.shape[0]
+    d0, dd = depth_axis(depth, nd)
+    for c in prange(nx * ny):
+        ix = c // ny
+        iy = c - ix * ny
+        col = image[ix, iy]
+        uu = np.empty(nd, np.float32)
+        ww = np.ones(nd, np.float32)
+        acc = np.zeros(nd, np.float32)
+        one = np.uint32(1)
+        for j in range(n_tr):
+            ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
+            ha = tx[j, 2]
+            hb = rx[j, 2]
+            k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
+            if mode == 0:
+                for k in range(k0, nd):
+                    uu[k] = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)[0]
+            else:
+                for k in range(k0, nd):
+                    uu[k], za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
+                    ww[k] = weight(za, zb, ra, rb, mode)
+            row = data[j]
+            # unsigned indices (u >= 0 by the clamp): no negative-index wraparound, so the gathers vectorise
+            if mode == 0:
+                for k in range(k0, nd):
+                    u = uu[k]
+                    i0 = np.uint32(u)
+                    f = u - f32(i0)
+                    acc[k] += row[i0] + f * (row[i0 + one] - row[i0])
+            else:
+                for k in range(k0, nd):
+                    u = uu[k]
+                    i0 = np.uint32(u)
+                    f = u - f32(i0)
+                    acc[k] += ww[k] * (row[i0] + f * (row[i0 + one] - row[i0]))
+        for k in range(nd):
+            col[k] += acc[k]
+
+@njit(parallel=True, fastmath=True, cache=True)
+def forward(image, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, data):
+    nx, ny, nd = image.shape
+    n_tr = data.shape[0]
+    d0, dd = depth_axis(depth, nd)
+    for j in prange(n_tr):
+        row = data[j]
+        ha = tx[j, 2]
+        hb = rx[j, 2]
+        for ix in range(nx):
+            for iy in range(ny):
+                ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
+                k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
+                col = image[ix, iy]
+                for k in range(k0, nd):
+                    u, za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
+                    i0 = np.uint32(u)
+                    f = u - f32(i0)
+                    m = weight(za, zb, ra, rb, mode) * col[k]
+                    row[i0] += (f32(1.0) - f) * m
+                    row[i0 + np.uint32(1)] += f * m
 
 
 def kernels():
-    if "adjoint" in _CACHE:
-        return _CACHE["adjoint"], _CACHE["forward"]
-    numba = require("numba")
-    njit, prange = numba.njit, numba.prange
-    f32 = np.float32
-
-    @njit(fastmath=True, cache=True, inline="always")
-    def legs(px, py, tx, rx, j):
-        # horizontal offsets of a column (px, py) from trace j's transmitter and receiver, and their squares
-        ax = px - tx[j, 0]
-        ay = py - tx[j, 1]
-        bx = px - rx[j, 0]
-        by = py - rx[j, 1]
-        return ax, ay, bx, by, ax * ax + ay * ay, bx * bx + by * by
-
-    @njit(fastmath=True, cache=True, inline="always")
-    def start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd):
-        if tan_ap <= 0.0:
-            return 0
-        hm = math.sqrt(0.25 * ((ax + bx) * (ax + bx) + (ay + by) * (ay + by)))
-        k0 = int(math.ceil((hm / tan_ap - d0) / dd - 1e-6))
-        return min(max(k0, 0), nd)
-
-    @njit(fastmath=True, cache=True, inline="always")
-    def sample_position(dk, ha, hb, h2a, h2b, sk, t0, inv_dt, umax):
-        # fractional sample index of the two-way time tx -> voxel at depth dk -> rx, clamped to the padded trace;
-        # with the vertical legs and path lengths the weights need
-        za = dk + ha
-        zb = dk + hb
-        ra = math.sqrt(h2a + za * za)
-        rb = math.sqrt(h2b + zb * zb)
-        u = (t0 + (ra + rb) * sk) * inv_dt
-        return min(max(u, f32(0.0)), umax), za, zb, ra, rb
-
-    @njit(fastmath=True, cache=True, inline="always")
-    def weight(za, zb, ra, rb, mode):
-        # bit 0: obliquity (mean cosine of the two legs), bit 1: spreading (mean leg length)
-        w = f32(1.0)
-        if mode & 1:
-            w *= f32(0.5) * (za / ra + zb / rb)
-        if mode & 2:
-            w *= f32(0.5) * (ra + rb)
-        return w
-
-    @njit(fastmath=True, cache=True, inline="always")
-    def depth_axis(depth, nd):
-        # first depth and depth step (the aperture's start_depth needs them)
-        return depth[0], (depth[1] - depth[0] if nd > 1 else f32(1.0))
-
-    @njit(parallel=True, fastmath=True, cache=True)
-    def adjoint(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image):
-        # per (column, trace): pass 1 computes the sample positions and weights for all depths
-        # (vectorised: two square roots per voxel), pass 2 gathers and accumulates
-        nx, ny, nd = image.shape
-        n_tr = data.shape[0]
-        d0, dd = depth_axis(depth, nd)
-        for c in prange(nx * ny):
-            ix = c // ny
-            iy = c - ix * ny
-            col = image[ix, iy]
-            uu = np.empty(nd, np.float32)
-            ww = np.ones(nd, np.float32)
-            acc = np.zeros(nd, np.float32)
-            one = np.uint32(1)
-            for j in range(n_tr):
-                ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
-                ha = tx[j, 2]
-                hb = rx[j, 2]
-                k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
-                if mode == 0:
-                    for k in range(k0, nd):
-                        uu[k] = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)[0]
-                else:
-                    for k in range(k0, nd):
-                        uu[k], za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
-                        ww[k] = weight(za, zb, ra, rb, mode)
-                row = data[j]
-                # unsigned indices (u >= 0 by the clamp): no negative-index wraparound, so the gathers vectorise
-                if mode == 0:
-                    for k in range(k0, nd):
-                        u = uu[k]
-                        i0 = np.uint32(u)
-                        f = u - f32(i0)
-                        acc[k] += row[i0] + f * (row[i0 + one] - row[i0])
-                else:
-                    for k in range(k0, nd):
-                        u = uu[k]
-                        i0 = np.uint32(u)
-                        f = u - f32(i0)
-                        acc[k] += ww[k] * (row[i0] + f * (row[i0 + one] - row[i0]))
-            for k in range(nd):
-                col[k] += acc[k]
-
-    @njit(parallel=True, fastmath=True, cache=True)
-    def forward(image, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, data):
-        nx, ny, nd = image.shape
-        n_tr = data.shape[0]
-        d0, dd = depth_axis(depth, nd)
-        for j in prange(n_tr):
-            row = data[j]
-            ha = tx[j, 2]
-            hb = rx[j, 2]
-            for ix in range(nx):
-                for iy in range(ny):
-                    ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
-                    k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
-                    col = image[ix, iy]
-                    for k in range(k0, nd):
-                        u, za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
-                        i0 = np.uint32(u)
-                        f = u - f32(i0)
-                        m = weight(za, zb, ra, rb, mode) * col[k]
-                        row[i0] += (f32(1.0) - f) * m
-                        row[i0 + np.uint32(1)] += f * m
-
-    _CACHE["adjoint"], _CACHE["forward"] = adjoint, forward
-    _CACHE["helpers"] = legs, start_depth, depth_axis
-    _CACHE["sample_position"] = sample_position
-    _CACHE["weight"] = weight
+    """The plain (scalar) adjoint and the forward operator."""
     return adjoint, forward
+
+
+_S = tuple(_simd.stack(m) for m in range(4))
+_SF = tuple(_simd.stack(m, True) for m in range(4))
+s0, s1, s2, s3 = _S
+sf0, sf1, sf2, sf3 = _SF
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def _stack(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, mode, fold):
+    # the explicit-SIMD depth loop for the weights ``mode``, with the fold beside the image where ``fold``
+    if fold:
+        if mode == 0:
+            sf0(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+        elif mode == 1:
+            sf1(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+        elif mode == 2:
+            sf2(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+        else:
+            sf3(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+    elif mode == 0:
+        s0(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+    elif mode == 1:
+        s1(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+    elif mode == 2:
+        s2(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+    else:
+        s3(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+
+
+@njit(parallel=True, fastmath=True, cache=True)
+def adjoint_simd(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image):
+    nx, ny, nd = image.shape
+    n_tr = data.shape[0]
+    nblk = depth.shape[0] // W
+    d0, dd = depth_axis(depth, nd)
+    none = np.zeros(1, np.float32)
+    for c in prange(nx * ny):
+        ix = c // ny
+        iy = c - ix * ny
+        col = image[ix, iy]
+        acc = np.zeros(depth.shape[0], np.float32)
+        for j in range(n_tr):
+            ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
+            k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
+            if k0 >= nd:
+                continue
+            _stack(data[j], depth, slow, acc, none, h2a, h2b, tx[j, 2], rx[j, 2], t0, inv_dt, umax, k0, nblk, mode,
+                   False)
+        for k in range(nd):
+            col[k] += acc[k]
+
+
+def _probe(fn, *extra):
+    """``fn`` built and run on a tiny problem (all weight modes), or None where it does not compile here."""
+    one = np.zeros((1, 3), f32)
+    try:
+        for mode in range(4):
+            fn(np.zeros((1, 4), f32), one, one, np.zeros(1, f32), np.zeros(1, f32), np.arange(W, dtype=f32),
+               np.ones(W, f32), f32(0), f32(1), f32(2), f32(0.5), mode, np.zeros((1, 1, 2), f32), *extra)
+    except Exception:  # noqa: BLE001 - any failure to build means: use the scalar kernel
+        return None
+    return fn
 
 
 def simd_adjoint():
@@ -144,58 +207,34 @@ def simd_adjoint():
     Same arguments as the scalar adjoint, except ``depth`` and ``slow`` padded to a
     multiple of ``_simd.W`` (the real depth count is ``image.shape[2]``).
     """
-    if "simd" in _CACHE:
-        return _CACHE["simd"]
-    numba = require("numba")
-    from gpr3d.migration import _simd
-
-    kernels()
-    legs, start_depth, depth_axis = _CACHE["helpers"]
-    s0, s1, s2, s3 = (_simd.stack(m) for m in range(4))
-    W = _simd.W
-
-    @numba.njit(parallel=True, fastmath=True, cache=True)
-    def adjoint_simd(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image):
-        nx, ny, nd = image.shape
-        n_tr = data.shape[0]
-        nblk = depth.shape[0] // W
-        d0, dd = depth_axis(depth, nd)
-        for c in numba.prange(nx * ny):
-            ix = c // ny
-            iy = c - ix * ny
-            col = image[ix, iy]
-            acc = np.zeros(depth.shape[0], np.float32)
-            for j in range(n_tr):
-                ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
-                k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
-                if k0 >= nd:
-                    continue
-                args = (data[j], depth, slow, acc, h2a, h2b, tx[j, 2], rx[j, 2], t0, inv_dt, umax, k0, nblk)
-                if mode == 0:
-                    s0(*args)
-                elif mode == 1:
-                    s1(*args)
-                elif mode == 2:
-                    s2(*args)
-                else:
-                    s3(*args)
-            for k in range(nd):
-                col[k] += acc[k]
-
-    try:  # compile now, on a tiny problem, so that a CPU/LLVM without support falls back cleanly
-        f = np.float32
-        one = np.zeros((1, 3), f)
-        for mode in range(4):
-            adjoint_simd(np.zeros((1, 4), f), one, one, np.zeros(1, f), np.zeros(1, f), np.arange(W, dtype=f),
-                         np.ones(W, f), f(0), f(1), f(2), f(0), mode, np.zeros((1, 1, 2), f))
-    except Exception:  # noqa: BLE001 - any failure to build means: use the scalar kernel
-        adjoint_simd = None
-    _CACHE["simd"] = adjoint_simd
-    return adjoint_simd
+    if "simd" not in _CACHE:
+        _CACHE["simd"] = _probe(adjoint_simd)
+    return _CACHE["simd"]
 
 
-def tiled_adjoint(simd: bool, fold: bool = False):
-    """The adjoint with an aperture, at a cost that follows the aperture (``simd``: the explicit-SIMD depth loop).
+@njit(fastmath=True, cache=True, inline="always")
+def _scalar_depths(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode, fold, uu, ww):
+    # two passes, as in the plain adjoint: the positions and weights (vectorised: square roots in SIMD lanes),
+    # then the reads of the trace (scalar loads: no hardware gather, which is slow on some CPUs)
+    one = np.uint32(1)
+    for k in range(k0, nd):
+        u, za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
+        w = weight(za, zb, ra, rb, mode)
+        uu[k] = u
+        ww[k] = w
+        if fold:  # a trace of ones read at u: 1 inside the record, 1 - frac on the last sample, 0 past it
+            facc[k] += w * min(max(umax - u, f32(0.0)), f32(1.0))
+    for k in range(k0, nd):
+        u = uu[k]
+        i0 = np.uint32(u)
+        fr = u - f32(i0)
+        acc[k] += ww[k] * (row[i0] + fr * (row[i0 + one] - row[i0]))
+
+
+@njit(parallel=True, fastmath=True, cache=True)
+def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image,
+                  order, bin_start, bx0, by0, bsize, nbx, nby, mid, reach, fold_img, use_simd, fold):
+    """The adjoint with an aperture, at a cost that follows the aperture.
 
     The image is cut into tiles of ``TILE x TILE`` columns, the traces are binned by their tx-rx midpoint (a
     trace index list sorted by bin, ``order``, with each bin's start in ``bin_start``); a tile visits only the
@@ -203,128 +242,78 @@ def tiled_adjoint(simd: bool, fold: bool = False):
     cone) of it, and of their traces only those whose midpoint lies within reach of the tile. Each visited
     trace's row is then read for all the tile's columns while it is in cache, into the tile's accumulators.
     The sum is the same as the plain adjoint's (only voxels outside every aperture are skipped, where that
-    adds exact zeros); ``depth``, ``slow`` padded to whole SIMD blocks when ``simd``. ``fold``: the adjoint of a
-    trace of ones (how many traces see each voxel, weighted) is summed into ``fold_img`` in the same pass.
+    adds exact zeros). ``use_simd``: the explicit-SIMD depth loop (``depth``, ``slow`` padded to whole blocks).
+    ``fold``: the adjoint of a trace of ones is summed into ``fold_img`` in the same pass.
     """
-    key = ("tiled", simd, fold)
-    if key in _CACHE:
-        return _CACHE[key]
-    numba = require("numba")
-    kernels()
-    legs, start_depth, depth_axis = _CACHE["helpers"]
-    sample_position, weight = _CACHE["sample_position"], _CACHE["weight"]
-    f32 = np.float32
-    if simd:
-        from gpr3d.migration import _simd
-
-        s0, s1, s2, s3 = (_simd.stack(m, fold) for m in range(4))
-        W = _simd.W
-
-        if fold:
-            @numba.njit(fastmath=True, cache=False, inline="always")
-            def inner(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode, uu, ww):
-                nblk = depth.shape[0] // W
-                if mode == 0:
-                    s0(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-                elif mode == 1:
-                    s1(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-                elif mode == 2:
-                    s2(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-                else:
-                    s3(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-        else:
-            @numba.njit(fastmath=True, cache=False, inline="always")
-            def inner(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode, uu, ww):
-                nblk = depth.shape[0] // W
-                if mode == 0:
-                    s0(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-                elif mode == 1:
-                    s1(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-                elif mode == 2:
-                    s2(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-                else:
-                    s3(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-    else:
-        @numba.njit(fastmath=True, cache=False, inline="always")
-        def inner(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode, uu, ww):
-            # two passes, as in the plain adjoint: the positions and weights (vectorised: square roots in SIMD
-            # lanes), then the reads of the trace (scalar loads: no hardware gather, which is slow on some CPUs)
-            one = np.uint32(1)
-            for k in range(k0, nd):
-                u, za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
-                w = weight(za, zb, ra, rb, mode)
-                uu[k] = u
-                ww[k] = w
-                if fold:  # a trace of ones read at u: 1 inside the record, 1 - frac on the last sample, 0 past it
-                    facc[k] += w * min(max(umax - u, f32(0.0)), f32(1.0))
-            for k in range(k0, nd):
-                u = uu[k]
-                i0 = np.uint32(u)
-                fr = u - f32(i0)
-                acc[k] += ww[k] * (row[i0] + fr * (row[i0 + one] - row[i0]))
-
-    tile = TILE
-
-    @numba.njit(parallel=True, fastmath=True, cache=False)
-    def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image,
-                      order, bin_start, bx0, by0, bsize, nbx, nby, mid, reach, fold_img):
-        nx, ny, nd = image.shape
-        d0, dd = depth_axis(depth, nd)
-        ntx = (nx + tile - 1) // tile
-        nty = (ny + tile - 1) // tile
-        for t in numba.prange(ntx * nty):
-            tx0 = (t // nty) * tile
-            ty0 = (t - (t // nty) * nty) * tile
-            tx1 = min(tx0 + tile, nx)
-            ty1 = min(ty0 + tile, ny)
-            xa, xb, ya, yb = x[tx0], x[tx1 - 1], y[ty0], y[ty1 - 1]
-            acc = np.zeros((tile * tile, depth.shape[0]), np.float32)
-            facc = np.zeros((tile * tile, depth.shape[0] if fold else 1), np.float32)
-            uu = np.empty(depth.shape[0], np.float32)
-            ww = np.empty(depth.shape[0], np.float32)
-            i_lo = max(int(math.floor((xa - reach - bx0) / bsize)), 0)
-            i_hi = min(int(math.floor((xb + reach - bx0) / bsize)), nbx - 1)
-            j_lo = max(int(math.floor((ya - reach - by0) / bsize)), 0)
-            j_hi = min(int(math.floor((yb + reach - by0) / bsize)), nby - 1)
-            r2 = reach * reach
-            for bi in range(i_lo, i_hi + 1):
-                for bj in range(j_lo, j_hi + 1):
-                    b = bi * nby + bj
-                    for q in range(bin_start[b], bin_start[b + 1]):
-                        j = order[q]
-                        # the midpoint's distance to the tile's rectangle: beyond reach, no column sees the trace
-                        ex = max(xa - mid[j, 0], f32(0.0), mid[j, 0] - xb)
-                        ey = max(ya - mid[j, 1], f32(0.0), mid[j, 1] - yb)
-                        if ex * ex + ey * ey > r2:
-                            continue
-                        row = data[j]
-                        ha = tx[j, 2]
-                        hb = rx[j, 2]
-                        for ix in range(tx0, tx1):
-                            for iy in range(ty0, ty1):
-                                ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
-                                k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
-                                if k0 < nd:
-                                    c = (ix - tx0) * tile + (iy - ty0)
-                                    inner(row, depth, slow, acc[c], facc[c], h2a, h2b, ha, hb, t0, inv_dt, umax,
-                                          k0, nd, mode, uu, ww)
-            for ix in range(tx0, tx1):
-                for iy in range(ty0, ty1):
-                    c = (ix - tx0) * tile + (iy - ty0)
-                    col = image[ix, iy]
+    nx, ny, nd = image.shape
+    d0, dd = depth_axis(depth, nd)
+    nblk = depth.shape[0] // W
+    ntx = (nx + TILE - 1) // TILE
+    nty = (ny + TILE - 1) // TILE
+    for t in prange(ntx * nty):
+        tx0 = (t // nty) * TILE
+        ty0 = (t - (t // nty) * nty) * TILE
+        tx1 = min(tx0 + TILE, nx)
+        ty1 = min(ty0 + TILE, ny)
+        xa, xb, ya, yb = x[tx0], x[tx1 - 1], y[ty0], y[ty1 - 1]
+        acc = np.zeros((TILE * TILE, depth.shape[0]), np.float32)
+        facc = np.zeros((TILE * TILE, depth.shape[0] if fold else 1), np.float32)
+        uu = np.empty(depth.shape[0], np.float32)
+        ww = np.empty(depth.shape[0], np.float32)
+        i_lo = max(int(math.floor((xa - reach - bx0) / bsize)), 0)
+        i_hi = min(int(math.floor((xb + reach - bx0) / bsize)), nbx - 1)
+        j_lo = max(int(math.floor((ya - reach - by0) / bsize)), 0)
+        j_hi = min(int(math.floor((yb + reach - by0) / bsize)), nby - 1)
+        r2 = reach * reach
+        for bi in range(i_lo, i_hi + 1):
+            for bj in range(j_lo, j_hi + 1):
+                b = bi * nby + bj
+                for q in range(bin_start[b], bin_start[b + 1]):
+                    j = order[q]
+                    # the midpoint's distance to the tile's rectangle: beyond reach, no column sees the trace
+                    ex = max(xa - mid[j, 0], f32(0.0), mid[j, 0] - xb)
+                    ey = max(ya - mid[j, 1], f32(0.0), mid[j, 1] - yb)
+                    if ex * ex + ey * ey > r2:
+                        continue
+                    row = data[j]
+                    ha = tx[j, 2]
+                    hb = rx[j, 2]
+                    for ix in range(tx0, tx1):
+                        for iy in range(ty0, ty1):
+                            ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
+                            k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
+                            if k0 < nd:
+                                c = (ix - tx0) * TILE + (iy - ty0)
+                                if use_simd:
+                                    _stack(row, depth, slow, acc[c], facc[c], h2a, h2b, ha, hb, t0, inv_dt, umax, k0,
+                                           nblk, mode, fold)
+                                else:
+                                    _scalar_depths(row, depth, slow, acc[c], facc[c], h2a, h2b, ha, hb, t0, inv_dt,
+                                                   umax, k0, nd, mode, fold, uu, ww)
+        for ix in range(tx0, tx1):
+            for iy in range(ty0, ty1):
+                c = (ix - tx0) * TILE + (iy - ty0)
+                col = image[ix, iy]
+                for k in range(nd):
+                    col[k] += acc[c, k]
+                if fold:
+                    fcol = fold_img[ix, iy]
                     for k in range(nd):
-                        col[k] += acc[c, k]
-                    if fold:
-                        fcol = fold_img[ix, iy]
-                        for k in range(nd):
-                            fcol[k] += facc[c, k]
-
-    _CACHE[key] = adjoint_tiled
-    return adjoint_tiled
+                        fcol[k] += facc[c, k]
 
 
-#: columns per tile side in :func:`tiled_adjoint`
-TILE = 8
+def tiled_adjoint(simd: bool, fold: bool = False):
+    """:func:`adjoint_tiled` with its flags bound (``simd`` where the SIMD kernels build here), or None where it
+    does not build."""
+    key = ("tiled", simd, fold)
+    if key not in _CACHE:
+        def run(*args, _simd_flag=simd, _fold=fold):
+            return adjoint_tiled(*args, _simd_flag, _fold)
+
+        extra = (np.zeros(0, np.int64), np.zeros(2, np.int64), f32(0), f32(0), f32(1), 1, 1, np.zeros((1, 2), f32),
+                 f32(1), np.zeros((1, 1, 2), f32))
+        _CACHE[key] = run if _probe(run, *extra) is not None else None
+    return _CACHE[key]
 
 
 def bin_traces(mid: np.ndarray, bsize: float):

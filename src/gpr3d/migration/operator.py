@@ -166,6 +166,11 @@ class BackProjection:
         the same pass, otherwise it is a second migration."""
         if with_fold and not (self.engine == "numba" and self.tan_ap > 0 and self.tiled):
             return self.adjoint(data), self.adjoint(np.ones((self.n_traces, self.n_samples), dtype=np.float32))
+        if with_fold and self.engine == "numba":
+            from gpr3d.migration import _kernels
+
+            if _kernels.tiled_adjoint(self.simd and _kernels.simd_adjoint() is not None, True) is None:
+                return self.adjoint(data), self.adjoint(np.ones((self.n_traces, self.n_samples), dtype=np.float32))
         data = np.ascontiguousarray(data, dtype=np.float32)
         if data.shape != (self.n_traces, self.n_samples):
             raise InvalidDataError(f"data must be {(self.n_traces, self.n_samples)}, got {data.shape}")
@@ -186,16 +191,16 @@ class BackProjection:
             step = self.depth[1] - self.depth[0] if nd > 1 else 1.0
             args[4] = np.r_[self.depth, self.depth[-1] + step * np.arange(1, extra + 1)].astype(np.float32)
             args[5] = np.r_[self.slow, np.full(extra, self.slow[-1])].astype(np.float32)
-        if self.tan_ap > 0 and self.tiled:
+        tiled = _kernels.tiled_adjoint(simd is not None, with_fold) if self.tan_ap > 0 and self.tiled else None
+        if tiled is not None:
             # the cost follows the aperture: tiles of columns visit only the traces whose cone reaches them
             mid = (0.5 * (self.tx[:, :2] + self.rx[:, :2])).astype(np.float32)
             reach = self.tan_ap * float(self.depth[-1]) + 1e-6
             bsize = max(reach / 2, _kernels.TILE * max(self.grid.dx, self.grid.dy))  # bins of >= one tile
             order, start, bx0, by0, nbx, nby = _kernels.bin_traces(mid, bsize)
             fold = np.zeros(self.grid.shape if with_fold else (1, 1, 1), dtype=np.float32)
-            _kernels.tiled_adjoint(simd is not None, with_fold)(padded, *args, img, order, start, np.float32(bx0),
-                                                               np.float32(by0), np.float32(bsize), nbx, nby, mid,
-                                                               np.float32(reach), fold)
+            tiled(padded, *args, img, order, start, np.float32(bx0), np.float32(by0), np.float32(bsize), nbx, nby, mid,
+                  np.float32(reach), fold)
             if with_fold:
                 return img, fold
         elif simd is not None:
