@@ -222,8 +222,9 @@ def _scalar_depths(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, um
         w = weight(za, zb, ra, rb, mode)
         uu[k] = u
         ww[k] = w
-        if fold:  # a trace of ones read at u: 1 inside the record, 1 - frac on the last sample, 0 past it
-            facc[k] += w * min(max(umax - u, f32(0.0)), f32(1.0))
+    if fold:  # a trace of ones read at u: 1 inside the record, 1 - frac on the last sample, 0 past it
+        for k in range(k0, nd):  # (a loop of its own: a branch in the one above would keep it from vectorising)
+            facc[k] += ww[k] * min(max(umax - uu[k], f32(0.0)), f32(1.0))
     for k in range(k0, nd):
         u = uu[k]
         i0 = np.uint32(u)
