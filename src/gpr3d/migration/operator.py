@@ -164,18 +164,12 @@ class BackProjection:
         ``with_fold``: also the fold, the adjoint of a trace of ones (how many traces see each voxel inside their
         aperture and record, weighted), returned as ``(image, fold)``; with an aperture the numba engine sums it in
         the same pass, otherwise it is a second migration."""
-        if with_fold and not (self.engine == "numba" and self.tan_ap > 0 and self.tiled):
-            return self.adjoint(data), self.adjoint(np.ones((self.n_traces, self.n_samples), dtype=np.float32))
-        if with_fold and self.engine == "numba":
-            from gpr3d.migration import _kernels
-
-            if _kernels.tiled_adjoint(self.simd and _kernels.simd_adjoint() is not None, True) is None:
-                return self.adjoint(data), self.adjoint(np.ones((self.n_traces, self.n_samples), dtype=np.float32))
         data = np.ascontiguousarray(data, dtype=np.float32)
         if data.shape != (self.n_traces, self.n_samples):
             raise InvalidDataError(f"data must be {(self.n_traces, self.n_samples)}, got {data.shape}")
         if self.engine == "numpy":
-            return self._adjoint_numpy(data)
+            img = self._adjoint_numpy(data)
+            return (img, self._adjoint_numpy(np.ones_like(data))) if with_fold else img
         from gpr3d.migration import _kernels
 
         img = np.zeros(self.grid.shape, dtype=np.float32)
@@ -207,6 +201,8 @@ class BackProjection:
             simd(padded, *args, img)
         else:
             _kernels.kernels()[0](padded, *args, img)
+        if with_fold:  # no tiled kernel here (no aperture, or it does not build): the fold is a second migration
+            return img, self.adjoint(np.ones_like(data))
         return img
 
     def forward(self, image) -> np.ndarray:

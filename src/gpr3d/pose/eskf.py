@@ -435,9 +435,9 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
                     vo_speed = np.inf
             else:
                 vo_speed = np.inf
-            # the filter's clone stays at the live keyframe: it moves on when the next frame refers to this one
-            # (frame to frame: always)
-            reclone = k + 1 >= vo.ref.size or vo.ref[k + 1] == k or vo.ref[k + 1] != clone_frame
+            # the filter's clone stays at the live keyframe: it moves on unless the next frame refers to that keyframe
+            # too (frame to frame: always)
+            reclone = k + 1 >= vo.ref.size or vo.ref[k + 1] != clone_frame
             if wheel is not None and fi > 0:
                 d0, d1 = np.interp([clone_t, ft[k]], wt, wd)
                 flt.update_forward(d1 - d0, cfg.wheel_sigma_frac * (d1 - d0) + cfg.wheel_sigma_m)
