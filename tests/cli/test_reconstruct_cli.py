@@ -85,6 +85,9 @@ def test_boxes_make_a_noise_map(pipe_survey, tmp_path):
     (["--spacing", "0"], "spacing_m must be positive"),
     (["--boxes", "{box}"], "no 'targets' list"),
     (["--boxes", "{ns_box}"], "box 0 [10, 5, 40, 9] lies outside the data"),
+    (["--tile", "0"], "tile size must be a positive number of metres, got 0.0"),
+    (["--workers", "-2"], "workers must be a whole number >= 0, got -2"),
+    (["--scheduler", "localhost:8786"], "scheduler must be an address such as tcp://host:8786"),
 ])
 def test_bad_reconstruct_arguments_are_one_line_errors(pipe_survey, tmp_path, extra, words):
     d, _ = pipe_survey
@@ -94,6 +97,28 @@ def test_bad_reconstruct_arguments_are_one_line_errors(pipe_survey, tmp_path, ex
     r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--out", tmp_path / "o", *extra)
     assert r.returncode == 1 and words in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+
+
+def test_tiles_resume_and_give_the_volume_of_one_pass(pipe_survey, tmp_path):
+    """--tile cuts the grid into tiles migrated from the traces that reach them; --resume keeps them in OUT/tiles
+    and a second run reuses them. The volume equals the one-pass volume exactly."""
+    import h5py
+
+    d, _ = pipe_survey
+    common = ["--poses", d / "walk.tum", "--max-depth", "0.7", "--eps-r", "6"]
+    r = run_cli("reconstruct", d / "line.h5", *common, "--out", tmp_path / "one")
+    assert r.returncode == 0, r.stderr
+    r = run_cli("reconstruct", d / "line.h5", *common, "--out", tmp_path / "tiled", "--tile", "0.5", "--resume")
+    assert r.returncode == 0, r.stderr
+    tiles = sorted((tmp_path / "tiled" / "tiles" / "image").glob("*.npz"))
+    assert len(tiles) == 9  # 1.4 m x 1.4 m of columns in tiles of 24 columns (0.48 m)
+    tiles[0].unlink()
+    r = run_cli("reconstruct", d / "line.h5", *common, "--out", tmp_path / "tiled", "--tile", "0.5", "--resume")
+    assert r.returncode == 0 and "resumed 8 of 9 tiles" in r.stdout, r.stdout + r.stderr
+    with h5py.File(tmp_path / "one" / "volume.h5") as a, h5py.File(tmp_path / "tiled" / "volume.h5") as b:
+        np.testing.assert_array_equal(a["image"][()], b["image"][()])
+    one = json.loads((tmp_path / "one" / "targets.json").read_text())
+    assert json.loads((tmp_path / "tiled" / "targets.json").read_text()) == one
 
 
 def test_mask_detect_migrates_the_detected_boxes(pipe_survey, tmp_path):

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.units import C0
 from gpr3d.migration.grid import Grid3D
 from gpr3d.migration.masking import box_mask, image_envelope, masked_migration
@@ -105,11 +106,16 @@ def test_envelope_in_slabs_equals_one_transform():
     np.testing.assert_allclose(image_envelope(a, chunk_voxels=500), np.abs(hilbert(a, axis=2)), atol=1e-5)
 
 
-@pytest.mark.parametrize("simd", [True, False])
-def test_tiled_adjoint_sums_what_every_trace_sees(simd):
+READS = {"gather": (True, True), "loads": (True, False), "scalar": (False, None)}
+
+
+@pytest.mark.parametrize("read", list(READS))
+def test_tiled_adjoint_sums_what_every_trace_sees(read):
     """With an aperture the adjoint visits, per tile of columns, only the traces whose cone reaches it. Traces
     scattered over 3 m x 3 m around a 1.3 m x 1.1 m grid (most far out of reach, some beyond the grid's edges, some
-    lifted): the tiled image equals the untiled one and the numpy reference, with and without SIMD."""
+    lifted): the tiled image equals the untiled one and the numpy reference, with the SIMD loop reading the trace
+    by hardware gathers or by scalar loads, and with the scalar loop."""
+    simd, gather = READS[read]
     rng = np.random.default_rng(11)
     n = 300
     pos = np.c_[rng.uniform(-1, 2, n), rng.uniform(-1, 2, n), rng.uniform(0, 0.05, n)]
@@ -121,7 +127,7 @@ def test_tiled_adjoint_sums_what_every_trace_sees(simd):
     images = {}
     for tiled in (True, False):
         op = BackProjection(grid, tx, rx, **kw)
-        op.tiled, op.simd = tiled, simd
+        op.tiled, op.simd, op.gather = tiled, simd, gather
         images[tiled] = op.adjoint(d)
     peak = np.abs(ref).max()
     np.testing.assert_allclose(images[True], ref, atol=1e-4 * peak)
@@ -134,9 +140,9 @@ def test_tiled_adjoint_sums_what_every_trace_sees(simd):
     assert far.sum() > n // 3
 
 
-@pytest.mark.parametrize("simd", [True, False])
+@pytest.mark.parametrize("read", list(READS))
 @pytest.mark.parametrize("weights", [{}, {"obliquity": True, "spreading": True}])
-def test_fold_in_the_same_pass_equals_migrating_a_trace_of_ones(simd, weights):
+def test_fold_in_the_same_pass_equals_migrating_a_trace_of_ones(read, weights):
     """The fold summed in the migration's own pass equals the numpy reference's migration of a trace of ones,
     with a record short enough (60 samples) that the deeper voxels fall on its last sample and past its end, where
     the fold must drop to 1 - frac and then 0."""
@@ -150,7 +156,7 @@ def test_fold_in_the_same_pass_equals_migrating_a_trace_of_ones(simd, weights):
     ref = BackProjection(grid, tx, rx, engine="numpy", **kw)
     want_img, want_fold = ref.adjoint(d), ref.adjoint(np.ones((n, 60), np.float32))
     op = BackProjection(grid, tx, rx, **kw)
-    op.simd = simd
+    op.simd, op.gather = READS[read]
     img, fold = op.adjoint(d, with_fold=True)
     np.testing.assert_allclose(img, want_img, atol=1e-4 * np.abs(want_img).max())
     np.testing.assert_allclose(fold, want_fold, atol=1e-4 * want_fold.max())
@@ -159,3 +165,42 @@ def test_fold_in_the_same_pass_equals_migrating_a_trace_of_ones(simd, weights):
     op2 = BackProjection(grid, tx, rx, **{**kw, "aperture_deg": None})
     i2, f2 = op2.adjoint(d, with_fold=True)
     np.testing.assert_allclose(f2, op2.adjoint(np.ones((n, 60), np.float32)), rtol=1e-6)
+
+
+def test_read_path_follows_the_cpu_and_the_override(monkeypatch):
+    import llvmlite.binding as llb
+
+    from gpr3d.migration import _kernels
+
+    monkeypatch.setenv("GPR3D_GATHER", "0")
+    assert _kernels.read_path() == _kernels.LOADS
+    monkeypatch.setenv("GPR3D_GATHER", "1")
+    assert _kernels.read_path() == _kernels.GATHER
+    monkeypatch.delenv("GPR3D_GATHER")
+    for cpu, want in (("znver3", _kernels.LOADS), ("znver4", _kernels.LOADS), ("znver5", _kernels.GATHER),
+                      ("sapphirerapids", _kernels.GATHER)):
+        monkeypatch.setattr(llb, "get_host_cpu_name", lambda cpu=cpu: cpu)
+        assert _kernels.read_path() == want, cpu
+
+
+@pytest.mark.parametrize("engine", ["numba", "numpy"])
+@pytest.mark.parametrize("aperture", [30, None])
+def test_a_window_of_columns_is_that_part_of_the_whole_image(engine, aperture):
+    """``window`` migrates only some columns: exactly (bit for bit) those columns of the whole image, fold too."""
+    rng = np.random.default_rng(4)
+    n = 150
+    pos = np.c_[rng.uniform(-0.3, 1.3, n), rng.uniform(-0.3, 1.3, n), rng.uniform(0, 0.03, n)]
+    tx, rx = antenna_positions(pos, headings_rad=rng.uniform(-3, 3, n), offset_m=0.1)
+    grid = Grid3D(0.0, 0.0, 0.04, 0.05, 0.05, 0.02, 21, 19, 20)
+    op = BackProjection(grid, tx, rx, dt_s=0.1e-9, n_samples=120, eps_r=6.0, aperture_deg=aperture,
+                        obliquity=True, engine=engine)
+    d = rng.standard_normal((n, 120)).astype(np.float32)
+    img, fold = op.adjoint(d, with_fold=True)
+    wimg, wfold = op.adjoint(d, with_fold=True, window=(3, 11, 8, 19))
+    assert wimg.shape == (8, 11, 20)
+    np.testing.assert_array_equal(wimg, img[3:11, 8:19])
+    np.testing.assert_array_equal(wfold, fold[3:11, 8:19])
+    assert np.abs(wimg).max() > 0
+    for bad in ((0, 22, 0, 5), (5, 5, 0, 5), (-1, 3, 0, 5)):
+        with pytest.raises(InvalidDataError, match="window"):
+            op.adjoint(d, window=bad)

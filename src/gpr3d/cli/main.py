@@ -354,6 +354,13 @@ def cmd_reconstruct(args):
 
     if args.mask == "detect" and args.boxes:
         raise GPR3DError("give --boxes or --mask detect, not both")
+    site = dict(tile_m=args.tile, workers=args.workers, scheduler=args.scheduler,
+                checkpoint=str(Path(args.out) / "tiles") if args.resume else None)
+    if args.resume and args.tile is None and not args.workers and not args.scheduler:
+        site["tile_m"] = 5.0  # --resume alone: tiles of the default size, kept as they finish
+    from gpr3d.migration.reconstruct import check_site_settings
+
+    check_site_settings(ReconstructConfig(**site))  # one line, before any work
     eps_given = _eps_argument(args.eps_r)
     estimate = eps_given is None
     # weights checked before the work starts
@@ -370,7 +377,7 @@ def cmd_reconstruct(args):
                             spacing_m=args.spacing, max_depth_m=args.max_depth,
                             aperture_deg=None if args.aperture <= 0 else args.aperture, threshold=args.threshold,
                             min_line_m=args.min_line, engine=args.engine,
-                            time_zero="none" if args.no_time_zero else "peak")
+                            time_zero="none" if args.no_time_zero else "peak", **site)
     boxes = read_boxes(args.boxes) if args.boxes else None
     found = None
     if args.boxes:
@@ -404,7 +411,7 @@ def cmd_reconstruct(args):
         print(f"detector: {len(boxes)} boxes in {survey.n_traces} traces ({found['wall_s']:.1f} s)")
         if not boxes:
             raise GPR3DError("the detector found no hyperbolas: nothing to migrate (try a lower --score)")
-    result = reconstruct(survey, cfg, boxes=boxes)
+    result = reconstruct(survey, cfg, boxes=boxes, log=print)
     result["eps_r_source"] = f"estimated ({args.depth})" if estimate else ("file header" if eps_given == "file" else "given")
     files = write_reconstruction(result, args.out, source=str(args.input))
     g = result["grid"]
@@ -905,6 +912,15 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--engine", choices=("numba", "numpy"), default=rc.engine, help="migration kernel")
     sp.add_argument("--mask", choices=("none", "detect"), default="none",
                     help="detect: run the detector on the trace sequence and migrate only its boxes")
+    sp.add_argument("--tile", type=float, default=rc.tile_m,
+                    help="site scale: migrate in tiles of this side (m), each with only the traces that reach it "
+                         "(default: the whole grid at once; 5 with --workers/--scheduler)")
+    sp.add_argument("--workers", type=int, default=rc.workers,
+                    help="site scale: local Dask worker processes for the tiles (default 0: this process)")
+    sp.add_argument("--scheduler", default=rc.scheduler,
+                    help="site scale: address of a running Dask scheduler (tcp://host:8786) for the tiles")
+    sp.add_argument("--resume", action="store_true",
+                    help="keep finished tiles in OUT/tiles/ and reuse them when the same command runs again")
     add_detector_args(sp)
     add_depth_args(sp, "--depth")
 

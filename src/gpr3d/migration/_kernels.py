@@ -10,6 +10,7 @@ later processes load it from the cache (closures were recompiled in every proces
 from __future__ import annotations
 
 import math
+import os
 
 import numba
 import numpy as np
@@ -140,13 +141,33 @@ def kernels():
 
 _S = tuple(_simd.stack(m) for m in range(4))
 _SF = tuple(_simd.stack(m, True) for m in range(4))
+_L = tuple(_simd.stack(m, False, False) for m in range(4))
+_LF = tuple(_simd.stack(m, True, False) for m in range(4))
 s0, s1, s2, s3 = _S
 sf0, sf1, sf2, sf3 = _SF
+l0, l1, l2, l3 = _L
+lf0, lf1, lf2, lf3 = _LF
+
+#: the SIMD depth loop's ways of reading the trace: one hardware gather, or scalar loads (see :func:`read_path`)
+GATHER, LOADS = 1, 2
+
+
+def read_path() -> int:
+    """How the SIMD loop reads the trace here: ``GATHER`` where hardware gathers are fast, ``LOADS`` (scalar
+    loads into a vector) on the AMD cores whose gathers are slow (Zen 1-4, ``znver1``..``znver4`` to LLVM).
+
+    ``GPR3D_GATHER=1`` / ``0`` overrides; ``benchmarks/bench_reconstruct.py`` measures both."""
+    env = os.environ.get("GPR3D_GATHER", "auto")
+    if env in ("0", "1"):
+        return GATHER if env == "1" else LOADS
+    import llvmlite.binding as llb
+
+    cpu = llb.get_host_cpu_name()
+    return LOADS if cpu in ("znver1", "znver2", "znver3", "znver4") else GATHER
 
 
 @njit(fastmath=True, cache=True, inline="always")
-def _stack(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, mode, fold):
-    # the explicit-SIMD depth loop for the weights ``mode``, with the fold beside the image where ``fold``
+def _stack_gather(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, mode, fold):
     if fold:
         if mode == 0:
             sf0(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
@@ -166,8 +187,39 @@ def _stack(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, 
         s3(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
 
 
+@njit(fastmath=True, cache=True, inline="always")
+def _stack_loads(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, mode, fold):
+    if fold:
+        if mode == 0:
+            lf0(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+        elif mode == 1:
+            lf1(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+        elif mode == 2:
+            lf2(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+        else:
+            lf3(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+    elif mode == 0:
+        l0(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+    elif mode == 1:
+        l1(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+    elif mode == 2:
+        l2(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+    else:
+        l3(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def _stack(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, mode, fold, path):
+    # the explicit-SIMD depth loop for the weights ``mode``, with the fold beside the image where ``fold``, reading
+    # the trace by ``path`` (GATHER or LOADS)
+    if path == GATHER:
+        _stack_gather(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, mode, fold)
+    else:
+        _stack_loads(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, mode, fold)
+
+
 @njit(parallel=True, fastmath=True, cache=True)
-def adjoint_simd(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image):
+def adjoint_simd(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image, path):
     nx, ny, nd = image.shape
     n_tr = data.shape[0]
     nblk = depth.shape[0] // W
@@ -184,7 +236,7 @@ def adjoint_simd(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode
             if k0 >= nd:
                 continue
             _stack(data[j], depth, slow, acc, none, h2a, h2b, tx[j, 2], rx[j, 2], t0, inv_dt, umax, k0, nblk, mode,
-                   False)
+                   False, path)
         for k in range(nd):
             col[k] += acc[k]
 
@@ -201,15 +253,20 @@ def _probe(fn, *extra):
     return fn
 
 
-def simd_adjoint():
-    """The adjoint with the explicit-SIMD depth loop of :mod:`._simd`, or None where it does not compile.
+def simd_adjoint(path: int = GATHER):
+    """The adjoint with the explicit-SIMD depth loop of :mod:`._simd` reading the trace by ``path`` (``GATHER`` or
+    ``LOADS``), or None where it does not compile.
 
     Same arguments as the scalar adjoint, except ``depth`` and ``slow`` padded to a
     multiple of ``_simd.W`` (the real depth count is ``image.shape[2]``).
     """
-    if "simd" not in _CACHE:
-        _CACHE["simd"] = _probe(adjoint_simd)
-    return _CACHE["simd"]
+    key = ("simd", path)
+    if key not in _CACHE:
+        def run(*args, _path=path):
+            return adjoint_simd(*args, _path)
+
+        _CACHE[key] = run if _probe(run) is not None else None
+    return _CACHE[key]
 
 
 @njit(fastmath=True, cache=True, inline="always")
@@ -234,7 +291,7 @@ def _scalar_depths(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, um
 
 @njit(parallel=True, fastmath=True, cache=True)
 def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image,
-                  order, bin_start, bx0, by0, bsize, nbx, nby, mid, reach, fold_img, use_simd, fold):
+                  order, bin_start, bx0, by0, bsize, nbx, nby, mid, reach, fold_img, path, fold):
     """The adjoint with an aperture, at a cost that follows the aperture.
 
     The image is cut into tiles of ``TILE x TILE`` columns, the traces are binned by their tx-rx midpoint (a
@@ -243,7 +300,8 @@ def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mod
     cone) of it, and of their traces only those whose midpoint lies within reach of the tile. Each visited
     trace's row is then read for all the tile's columns while it is in cache, into the tile's accumulators.
     The sum is the same as the plain adjoint's (only voxels outside every aperture are skipped, where that
-    adds exact zeros). ``use_simd``: the explicit-SIMD depth loop (``depth``, ``slow`` padded to whole blocks).
+    adds exact zeros). ``path``: 0 the scalar depth loop, ``GATHER`` or ``LOADS`` the explicit-SIMD one reading the
+    trace that way (``depth``, ``slow`` padded to whole blocks).
     ``fold``: the adjoint of a trace of ones is summed into ``fold_img`` in the same pass.
     """
     nx, ny, nd = image.shape
@@ -261,10 +319,11 @@ def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mod
         facc = np.zeros((TILE * TILE, depth.shape[0] if fold else 1), np.float32)
         uu = np.empty(depth.shape[0], np.float32)
         ww = np.empty(depth.shape[0], np.float32)
-        i_lo = max(int(math.floor((xa - reach - bx0) / bsize)), 0)
-        i_hi = min(int(math.floor((xb + reach - bx0) / bsize)), nbx - 1)
-        j_lo = max(int(math.floor((ya - reach - by0) / bsize)), 0)
-        j_hi = min(int(math.floor((yb + reach - by0) / bsize)), nby - 1)
+        # the bins within reach, one more on each side (float32 rounding at a bin's edge must not drop a trace)
+        i_lo = max(int(math.floor((xa - reach - bx0) / bsize)) - 1, 0)
+        i_hi = min(int(math.floor((xb + reach - bx0) / bsize)) + 1, nbx - 1)
+        j_lo = max(int(math.floor((ya - reach - by0) / bsize)) - 1, 0)
+        j_hi = min(int(math.floor((yb + reach - by0) / bsize)) + 1, nby - 1)
         r2 = reach * reach
         for bi in range(i_lo, i_hi + 1):
             for bj in range(j_lo, j_hi + 1):
@@ -285,9 +344,9 @@ def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mod
                             k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
                             if k0 < nd:
                                 c = (ix - tx0) * TILE + (iy - ty0)
-                                if use_simd:
+                                if path:
                                     _stack(row, depth, slow, acc[c], facc[c], h2a, h2b, ha, hb, t0, inv_dt, umax, k0,
-                                           nblk, mode, fold)
+                                           nblk, mode, fold, path)
                                 else:
                                     _scalar_depths(row, depth, slow, acc[c], facc[c], h2a, h2b, ha, hb, t0, inv_dt,
                                                    umax, k0, nd, mode, fold, uu, ww)
@@ -303,13 +362,13 @@ def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mod
                         fcol[k] += facc[c, k]
 
 
-def tiled_adjoint(simd: bool, fold: bool = False):
-    """:func:`adjoint_tiled` with its flags bound (``simd`` where the SIMD kernels build here), or None where it
-    does not build."""
-    key = ("tiled", simd, fold)
+def tiled_adjoint(path: int, fold: bool = False):
+    """:func:`adjoint_tiled` with its flags bound (``path``: 0 for the scalar depth loop, ``GATHER`` or ``LOADS``
+    for the SIMD one), or None where it does not build."""
+    key = ("tiled", path, fold)
     if key not in _CACHE:
-        def run(*args, _simd_flag=simd, _fold=fold):
-            return adjoint_tiled(*args, _simd_flag, _fold)
+        def run(*args, _path=path, _fold=fold):
+            return adjoint_tiled(*args, _path, _fold)
 
         extra = (np.zeros(0, np.int64), np.zeros(2, np.int64), f32(0), f32(0), f32(1), 1, 1, np.zeros((1, 2), f32),
                  f32(1), np.zeros((1, 1, 2), f32))
@@ -319,12 +378,16 @@ def tiled_adjoint(simd: bool, fold: bool = False):
 
 def bin_traces(mid: np.ndarray, bsize: float):
     """Traces binned by their midpoints ``mid`` (n, 2) on a square grid of side ``bsize``: the trace order sorted by
-    bin, each bin's start in that order (``nbx * nby + 1``), the grid's origin and size."""
-    bx0, by0 = float(mid[:, 0].min()), float(mid[:, 1].min())
+    bin, each bin's start in that order (``nbx * nby + 1``), the grid's origin and size.
+
+    The bins' origin is a whole multiple of ``bsize``, so that any subset of the traces (a site tile's) falls into
+    the same bins, visited in the same order: the sums, and so the image, come out bit for bit the same."""
+    bx0 = math.floor(float(mid[:, 0].min()) / bsize) * bsize
+    by0 = math.floor(float(mid[:, 1].min()) / bsize) * bsize
     nbx = int((mid[:, 0].max() - bx0) // bsize) + 1
     nby = int((mid[:, 1].max() - by0) // bsize) + 1
-    bi = np.minimum(((mid[:, 0] - bx0) // bsize).astype(np.int64), nbx - 1)
-    bj = np.minimum(((mid[:, 1] - by0) // bsize).astype(np.int64), nby - 1)
+    bi = np.clip(((mid[:, 0] - bx0) // bsize).astype(np.int64), 0, nbx - 1)
+    bj = np.clip(((mid[:, 1] - by0) // bsize).astype(np.int64), 0, nby - 1)
     b = bi * nby + bj
     order = np.argsort(b, kind="stable").astype(np.int64)
     start = np.searchsorted(b[order], np.arange(nbx * nby + 1)).astype(np.int64)

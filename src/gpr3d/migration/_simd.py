@@ -13,7 +13,8 @@ step:
 * linear interpolation, optional weights, accumulation.
 
 ``llvm.masked.gather`` is generic LLVM: it becomes ``vpgatherdq`` on AVX-512/AVX2 and
-scalar loads elsewhere, so the code is correct on any CPU numba supports. Depths before
+scalar loads elsewhere, so the code is correct on any CPU numba supports. A variant reads the
+pairs with ``W`` scalar loads instead (for CPUs whose hardware gathers are slow). Depths before
 the aperture's first depth ``k0`` are masked off (they gather zeros).
 
 The arrays passed in must be padded to a multiple of ``W`` (``depth``, ``slow``,
@@ -36,7 +37,7 @@ def _gather_names():
     return "llvm.masked.gather.v16i64.v16p0i64"
 
 
-def stack(weights: int, fold: bool = False):
+def stack(weights: int, fold: bool = False, gather: bool = True):
     """The intrinsic ``stack(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)``.
 
     Adds, for depth blocks ``k0 // W .. nblk - 1``, ``w * row(u)`` into ``acc`` where
@@ -44,9 +45,12 @@ def stack(weights: int, fold: bool = False):
     likewise). ``weights``: bit 0 obliquity ``(za/ra + zb/rb) / 2``, bit 1 spreading ``(ra + rb) / 2``.
     ``fold``: the intrinsic takes one more array after ``acc``, ``facc``, and adds into it what a trace of ones
     would give, ``w * clamp(umax - u, 0, 1)`` (the fold, in the same pass).
+    ``gather``: read the sample pairs with one hardware gather; otherwise with ``W`` scalar 64-bit loads put into a
+    vector (for CPUs whose gathers are slow: several AMD generations).
     """
-    if (weights, fold) in _STACKS:
-        return _STACKS[(weights, fold)]
+    key = (weights, fold, gather)
+    if key in _STACKS:
+        return _STACKS[key]
     from llvmlite import ir
     from numba import types
     from numba.core import cgutils
@@ -66,7 +70,7 @@ def stack(weights: int, fold: bool = False):
         vpq = ir.VectorType(i64.as_pointer(), W)
         v2f = ir.VectorType(f32, 2 * W)
         mod = builder.module
-        gather = cgutils.get_or_insert_function(mod, ir.FunctionType(vq, [vpq, i32, vmask, vq]), gather_name)
+        gather_fn = cgutils.get_or_insert_function(mod, ir.FunctionType(vq, [vpq, i32, vmask, vq]), gather_name)
         sqrt = cgutils.get_or_insert_function(mod, ir.FunctionType(vf, [vf]), "llvm.sqrt.v16f32")
         vmax = cgutils.get_or_insert_function(mod, ir.FunctionType(vf, [vf, vf]), "llvm.maxnum.v16f32")
         vmin = cgutils.get_or_insert_function(mod, ir.FunctionType(vf, [vf, vf]), "llvm.minnum.v16f32")
@@ -110,7 +114,15 @@ def stack(weights: int, fold: bool = False):
             live = builder.icmp_unsigned(">=", depth_index, k0_v)
             ptrs = builder.gep(row_p, [i0], source_etype=f32)
             ptrs.type = ir.VectorType(f32.as_pointer(), W)  # llvmlite types a vector GEP as a scalar pointer
-            pairs = builder.call(gather, [builder.bitcast(ptrs, vpq), align, live, zero_q])
+            if gather:
+                pairs = builder.call(gather_fn, [builder.bitcast(ptrs, vpq), align, live, zero_q])
+            else:  # W scalar loads: every index is inside the padded row (u is clamped), so none needs the mask
+                pairs = zero_q
+                for lane in range(W):
+                    at = builder.extract_element(i0, ir.Constant(i32, lane))
+                    p = builder.bitcast(builder.gep(row_p, [at]), i64.as_pointer())
+                    pairs = builder.insert_element(pairs, builder.load(p, align=4), ir.Constant(i32, lane))
+                pairs = builder.select(live, pairs, zero_q)
             pairs = builder.bitcast(pairs, v2f)
             g0 = builder.shuffle_vector(pairs, ir.Constant(v2f, ir.Undefined), evens)
             g1 = builder.shuffle_vector(pairs, ir.Constant(v2f, ir.Undefined), odds)
@@ -144,5 +156,5 @@ def stack(weights: int, fold: bool = False):
         def _stack(typingctx, row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk):
             return types.void(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk), _codegen
 
-    _STACKS[(weights, fold)] = _stack
+    _STACKS[key] = _stack
     return _stack

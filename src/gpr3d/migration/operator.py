@@ -102,6 +102,9 @@ class BackProjection:
         self.engine = engine
         # the numba engine's adjoint uses the explicit-SIMD kernel where it compiles; GPR3D_SIMD=0 turns it off
         self.simd = os.environ.get("GPR3D_SIMD", "1") != "0"
+        # how the SIMD loop reads traces: None = by the CPU (:func:`._kernels.read_path`), True = hardware gathers,
+        # False = scalar loads
+        self.gather = None
         # with an aperture, the tiled adjoint (cost that follows the aperture); GPR3D_TILED=0 turns it off
         self.tiled = os.environ.get("GPR3D_TILED", "1") != "0"
         self.x = grid.x.astype(np.float64)
@@ -117,8 +120,20 @@ class BackProjection:
         return (self.n_traces * self.n_samples, self.grid.size)
 
     # ---------------------------------------------------------------- numpy reference
-    def _times_weights(self, j):
-        X, Y, D = np.meshgrid(self.x, self.y, self.depth, indexing="ij")
+    def _window(self, window):
+        """The column coordinates of ``window = (ix0, ix1, iy0, iy1)`` (None: the whole grid), checked."""
+        if window is None:
+            return self.x, self.y
+        ix0, ix1, iy0, iy1 = (int(v) for v in window)
+        if not (0 <= ix0 < ix1 <= self.grid.nx and 0 <= iy0 < iy1 <= self.grid.ny):
+            raise InvalidDataError(f"window {tuple(window)} does not lie inside the {self.grid.nx} x {self.grid.ny} "
+                                   "columns of the grid")
+        return self.x[ix0:ix1], self.y[iy0:iy1]
+
+    def _times_weights(self, j, xs=None, ys=None):
+        xs = self.x if xs is None else xs
+        ys = self.y if ys is None else ys
+        X, Y, D = np.meshgrid(xs, ys, self.depth, indexing="ij")
         za, zb = D + self.tx[j, 2], D + self.rx[j, 2]
         ra = np.sqrt((X - self.tx[j, 0]) ** 2 + (Y - self.tx[j, 1]) ** 2 + za**2)
         rb = np.sqrt((X - self.rx[j, 0]) ** 2 + (Y - self.rx[j, 1]) ** 2 + zb**2)
@@ -132,15 +147,17 @@ class BackProjection:
             hm = np.hypot(X - 0.5 * (self.tx[j, 0] + self.rx[j, 0]), Y - 0.5 * (self.tx[j, 1] + self.rx[j, 1]))
             # the kernels start at the first depth sample at or below hm / tan
             kmin = np.ceil((hm / self.tan_ap - self.depth[0]) / (self.depth[1] - self.depth[0]) - 1e-12)
-            w = np.where(np.arange(self.grid.nd)[None, None, :] >= kmin, w, 0.0)
+            w = np.where(np.arange(len(self.depth))[None, None, :] >= kmin, w, 0.0)
         u = np.clip(u, 0.0, self.n_samples)  # past the end: the zero padding
         i0 = np.floor(u).astype(np.int64)
         return u, i0, w
 
-    def _adjoint_numpy(self, data):
-        img = np.zeros(self.grid.shape, dtype=np.float64)
+    def _adjoint_numpy(self, data, xs=None, ys=None):
+        xs = self.x if xs is None else xs
+        ys = self.y if ys is None else ys
+        img = np.zeros((len(xs), len(ys), self.grid.nd), dtype=np.float64)
         for j in range(self.n_traces):
-            u, i0, w = self._times_weights(j)
+            u, i0, w = self._times_weights(j, xs, ys)
             f = u - i0
             row = np.concatenate([data[j].astype(np.float64), [0.0, 0.0]])
             img += w * (row[i0] + f * (row[i0 + 1] - row[i0]))
@@ -158,25 +175,30 @@ class BackProjection:
         return out[:, : self.n_samples].astype(np.float32)
 
     # ---------------------------------------------------------------- public
-    def adjoint(self, data, *, with_fold: bool = False):
+    def adjoint(self, data, *, with_fold: bool = False, window=None):
         """Migration: data ``(n_traces, n_samples)`` -> image ``(nx, ny, nd)`` float32.
 
         ``with_fold``: also the fold, the adjoint of a trace of ones (how many traces see each voxel inside their
         aperture and record, weighted), returned as ``(image, fold)``; with an aperture the numba engine sums it in
-        the same pass, otherwise it is a second migration."""
+        the same pass, otherwise it is a second migration. ``window = (ix0, ix1, iy0, iy1)``: only those columns
+        of the grid (an image of ``(ix1 - ix0, iy1 - iy0, nd)``, equal to that part of the whole image; what
+        :mod:`.sitetiles` gives each tile)."""
         data = np.ascontiguousarray(data, dtype=np.float32)
         if data.shape != (self.n_traces, self.n_samples):
             raise InvalidDataError(f"data must be {(self.n_traces, self.n_samples)}, got {data.shape}")
+        xs, ys = self._window(window)
         if self.engine == "numpy":
-            img = self._adjoint_numpy(data)
-            return (img, self._adjoint_numpy(np.ones_like(data))) if with_fold else img
+            img = self._adjoint_numpy(data, xs, ys)
+            return (img, self._adjoint_numpy(np.ones_like(data), xs, ys)) if with_fold else img
         from gpr3d.migration import _kernels
 
-        img = np.zeros(self.grid.shape, dtype=np.float32)
+        shape = (len(xs), len(ys), self.grid.nd)
+        img = np.zeros(shape, dtype=np.float32)
         padded = np.zeros((self.n_traces, self.n_samples + 2), dtype=np.float32)
         padded[:, : self.n_samples] = data
-        args = list(self._kernel_args())
-        simd = _kernels.simd_adjoint() if self.simd else None
+        args = list(self._kernel_args(xs, ys))
+        path = _kernels.read_path() if self.gather is None else (_kernels.GATHER if self.gather else _kernels.LOADS)
+        simd = _kernels.simd_adjoint(path) if self.simd else None
         if simd is not None:
             from gpr3d.migration._simd import W
 
@@ -185,14 +207,15 @@ class BackProjection:
             step = self.depth[1] - self.depth[0] if nd > 1 else 1.0
             args[4] = np.r_[self.depth, self.depth[-1] + step * np.arange(1, extra + 1)].astype(np.float32)
             args[5] = np.r_[self.slow, np.full(extra, self.slow[-1])].astype(np.float32)
-        tiled = _kernels.tiled_adjoint(simd is not None, with_fold) if self.tan_ap > 0 and self.tiled else None
+        tiled = (_kernels.tiled_adjoint(path if simd is not None else 0, with_fold) if self.tan_ap > 0 and self.tiled
+                 else None)
         if tiled is not None:
             # the cost follows the aperture: tiles of columns visit only the traces whose cone reaches them
             mid = (0.5 * (self.tx[:, :2] + self.rx[:, :2])).astype(np.float32)
-            reach = self.tan_ap * float(self.depth[-1]) + 1e-6
+            reach = self.reach_m
             bsize = max(reach / 2, _kernels.TILE * max(self.grid.dx, self.grid.dy))  # bins of >= one tile
             order, start, bx0, by0, nbx, nby = _kernels.bin_traces(mid, bsize)
-            fold = np.zeros(self.grid.shape if with_fold else (1, 1, 1), dtype=np.float32)
+            fold = np.zeros(shape if with_fold else (1, 1, 1), dtype=np.float32)
             tiled(padded, *args, img, order, start, np.float32(bx0), np.float32(by0), np.float32(bsize), nbx, nby, mid,
                   np.float32(reach), fold)
             if with_fold:
@@ -202,7 +225,7 @@ class BackProjection:
         else:
             _kernels.kernels()[0](padded, *args, img)
         if with_fold:  # no tiled kernel here (no aperture, or it does not build): the fold is a second migration
-            return img, self.adjoint(np.ones_like(data))
+            return img, self.adjoint(np.ones_like(data), window=window)
         return img
 
     def forward(self, image) -> np.ndarray:
@@ -219,10 +242,18 @@ class BackProjection:
         forward(image, *self._kernel_args(), out)
         return np.ascontiguousarray(out[:, : self.n_samples])
 
-    def _kernel_args(self):
+    @property
+    def reach_m(self) -> float:
+        """How far (horizontally, m) from a trace's tx-rx midpoint its aperture reaches at the deepest voxel (inf:
+        no aperture)."""
+        return self.tan_ap * float(self.depth[-1]) + 1e-6 if self.tan_ap > 0 else math.inf
+
+    def _kernel_args(self, xs=None, ys=None):
         f = np.float32
+        xs = self.x if xs is None else xs
+        ys = self.y if ys is None else ys
         mode = (1 if self.obliquity else 0) | (2 if self.spreading else 0)
-        return (self.tx.astype(f), self.rx.astype(f), self.x.astype(f), self.y.astype(f), self.depth.astype(f),
+        return (self.tx.astype(f), self.rx.astype(f), xs.astype(f), ys.astype(f), self.depth.astype(f),
                 self.slow.astype(f), f(self.t0), f(1.0 / self.dt), f(self.n_samples), f(self.tan_ap), mode)
 
 

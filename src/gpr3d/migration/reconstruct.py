@@ -26,7 +26,7 @@ from gpr3d.migration.masking import box_mask, check_boxes, image_envelope
 from gpr3d.migration.operator import BackProjection, antenna_positions
 from gpr3d.migration.targets import extract_targets, targets_to_json
 
-__all__ = ["ReconstructConfig", "reconstruct", "write_reconstruction"]
+__all__ = ["ReconstructConfig", "check_site_settings", "reconstruct", "write_reconstruction"]
 
 
 @dataclass
@@ -46,6 +46,24 @@ class ReconstructConfig:
     min_line_m: float = 0.3
     taper_traces: float = 3.0
     engine: str = "numba"
+    #: site scale (see :mod:`.sitetiles`): None and no workers: the whole grid in one pass; otherwise tiles of
+    #: this side (m; 5 m where only workers are given), on ``workers`` local Dask processes (0: in this process)
+    #: or on the Dask scheduler at ``scheduler``; ``checkpoint``: a folder keeping finished tiles (a rerun resumes)
+    tile_m: float | None = None
+    workers: int = 0
+    scheduler: str | None = None
+    checkpoint: str | None = None
+
+
+def check_site_settings(cfg: ReconstructConfig) -> None:
+    """One line naming a wrong tile size, worker count or scheduler address (before any work)."""
+    if cfg.tile_m is not None and not (isinstance(cfg.tile_m, (int, float)) and np.isfinite(cfg.tile_m)
+                                       and cfg.tile_m > 0):
+        raise InvalidDataError(f"tile size must be a positive number of metres, got {cfg.tile_m}")
+    if isinstance(cfg.workers, bool) or not isinstance(cfg.workers, (int, np.integer)) or cfg.workers < 0:
+        raise InvalidDataError(f"workers must be a whole number >= 0, got {cfg.workers!r}")
+    if cfg.scheduler is not None and not str(cfg.scheduler).startswith(("tcp://", "tls://", "inproc://", "ucx://")):
+        raise InvalidDataError(f"scheduler must be an address such as tcp://host:8786, got {cfg.scheduler!r}")
 
 
 def _prepare(survey, cfg):
@@ -59,9 +77,11 @@ def _prepare(survey, cfg):
     return s
 
 
-def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None) -> dict:
+def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log=None) -> dict:
     """Migrate ``survey`` in 3D and extract targets; returns a dict of arrays, grid, targets and timings."""
     cfg = cfg or ReconstructConfig()
+    log = log or (lambda msg: None)
+    check_site_settings(cfg)
     eps = cfg.eps_r or survey.eps_r
     if eps is None:
         raise InvalidDataError("no eps_r: the survey has none; give --eps-r")
@@ -89,15 +109,27 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None) -> 
     # the fold (how many traces see each voxel inside their aperture and record) comes with the image: in the same
     # pass where the kernel can
     want_fold = cfg.normalize != "none"
+    site = cfg.tile_m is not None or cfg.workers or cfg.scheduler
+
+    def migrate(data, with_fold, part=""):
+        if not site:
+            return op.adjoint(data, with_fold=with_fold)
+        from gpr3d.migration.sitetiles import migrate_site
+
+        ck = None if cfg.checkpoint is None else str(Path(cfg.checkpoint) / (part or "image"))
+        res = migrate_site(op, data, tile_m=cfg.tile_m or 5.0, with_fold=with_fold, workers=cfg.workers,
+                           scheduler=cfg.scheduler, checkpoint=ck, log=log)
+        return (res.image, res.fold) if with_fold else res.image
+
     if boxes:
         # boxes refer to the recording's samples; time zero cut some: shift them
         cut = survey.n_samples - s.n_samples
         shifted = [[b[0], b[1] - cut * s.dt_s, b[2], b[3] - cut * s.dt_s] for b in boxes]
         mask = box_mask(s.n_traces, s.n_samples, s.dt_s, shifted, taper_traces=cfg.taper_traces)
-        out = op.adjoint(s.data * mask, with_fold=want_fold)
-        noise_map = image_envelope(op.adjoint(s.data * (1 - mask)))
+        out = migrate(s.data * mask, want_fold)
+        noise_map = image_envelope(migrate(s.data * (1 - mask), False, "noise"))
     else:
-        out = op.adjoint(s.data, with_fold=want_fold)
+        out = migrate(s.data, want_fold)
     image, fold = out if want_fold else (out, None)
     t_mig = time.perf_counter() - t
     if want_fold:
