@@ -109,6 +109,12 @@ def test_envelope_in_slabs_equals_one_transform():
 READS = {"gather": (True, True), "loads": (True, False), "scalar": (False, None)}
 
 
+def scattered_antennas(rng, n, lo, hi, lift, offset=0.1):
+    """tx, rx of ``n`` antennas at random over [lo, hi]^2, lifted 0..``lift`` m, headed at random."""
+    pos = np.c_[rng.uniform(lo, hi, n), rng.uniform(lo, hi, n), rng.uniform(0, lift, n)]
+    return antenna_positions(pos, headings_rad=rng.uniform(-3, 3, n), offset_m=offset)
+
+
 @pytest.mark.parametrize("read", list(READS))
 def test_tiled_adjoint_sums_what_every_trace_sees(read):
     """With an aperture the adjoint visits, per tile of columns, only the traces whose cone reaches it. Traces
@@ -118,8 +124,7 @@ def test_tiled_adjoint_sums_what_every_trace_sees(read):
     simd, gather = READS[read]
     rng = np.random.default_rng(11)
     n = 300
-    pos = np.c_[rng.uniform(-1, 2, n), rng.uniform(-1, 2, n), rng.uniform(0, 0.05, n)]
-    tx, rx = antenna_positions(pos, headings_rad=rng.uniform(-3, 3, n), offset_m=0.1)
+    tx, rx = scattered_antennas(rng, n, -1, 2, 0.05)
     grid = Grid3D(0.0, 0.0, 0.04, 0.05, 0.05, 0.02, 27, 23, 30)
     d = rng.standard_normal((n, 200)).astype(np.float32)
     kw = dict(dt_s=0.1e-9, n_samples=200, eps_r=6.0, aperture_deg=25, obliquity=True, spreading=True)
@@ -148,8 +153,7 @@ def test_fold_in_the_same_pass_equals_migrating_a_trace_of_ones(read, weights):
     the fold must drop to 1 - frac and then 0."""
     rng = np.random.default_rng(2)
     n = 120
-    pos = np.c_[rng.uniform(-0.5, 1.5, n), rng.uniform(-0.5, 1.5, n), rng.uniform(0, 0.05, n)]
-    tx, rx = antenna_positions(pos, headings_rad=rng.uniform(-3, 3, n), offset_m=0.1)
+    tx, rx = scattered_antennas(rng, n, -0.5, 1.5, 0.05)
     grid = Grid3D(0.0, 0.0, 0.04, 0.05, 0.05, 0.02, 21, 19, 30)
     kw = dict(dt_s=0.1e-9, n_samples=60, eps_r=6.0, aperture_deg=35, **weights)
     d = rng.standard_normal((n, 60)).astype(np.float32)
@@ -189,8 +193,7 @@ def test_a_window_of_columns_is_that_part_of_the_whole_image(engine, aperture):
     """``window`` migrates only some columns: exactly (bit for bit) those columns of the whole image, fold too."""
     rng = np.random.default_rng(4)
     n = 150
-    pos = np.c_[rng.uniform(-0.3, 1.3, n), rng.uniform(-0.3, 1.3, n), rng.uniform(0, 0.03, n)]
-    tx, rx = antenna_positions(pos, headings_rad=rng.uniform(-3, 3, n), offset_m=0.1)
+    tx, rx = scattered_antennas(rng, n, -0.3, 1.3, 0.03)
     grid = Grid3D(0.0, 0.0, 0.04, 0.05, 0.05, 0.02, 21, 19, 20)
     op = BackProjection(grid, tx, rx, dt_s=0.1e-9, n_samples=120, eps_r=6.0, aperture_deg=aperture,
                         obliquity=True, engine=engine)

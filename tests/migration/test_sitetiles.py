@@ -3,14 +3,14 @@ import pytest
 
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.migration.grid import Grid3D
-from gpr3d.migration.operator import BackProjection, antenna_positions, effective_slowness
+from gpr3d.migration.operator import BackProjection, effective_slowness
 from gpr3d.migration.sitetiles import migrate_site, plan_tiles, tile_traces
+from tests.migration.test_operator import scattered_antennas
 
 RNG = np.random.default_rng(21)
 N = 400
-# traces over 2.4 m x 2 m, some beyond the grid's edges, a few lifted; a grid of 2.2 m x 1.8 m at 5 cm
-POS = np.c_[RNG.uniform(-0.2, 2.2, N), RNG.uniform(-0.2, 1.8, N), RNG.uniform(0, 0.04, N)]
-TX, RX = antenna_positions(POS, headings_rad=RNG.uniform(-3, 3, N), offset_m=0.12)
+# traces over 2.4 m x 2.4 m, some beyond the grid's edges, a few lifted; a grid of 2.2 m x 1.8 m at 5 cm
+TX, RX = scattered_antennas(RNG, N, -0.2, 2.2, 0.04, offset=0.12)
 GRID = Grid3D(0.0, 0.0, 0.04, 0.05, 0.05, 0.03, 45, 37, 24)
 DATA = RNG.standard_normal((N, 160)).astype(np.float32)
 
@@ -47,21 +47,20 @@ def test_tiles_in_one_process_give_the_whole_image_bit_for_bit(engine):
     assert max(got.traces_per_tile) < 0.6 * N and min(got.traces_per_tile) > 0
 
 
-def test_a_tile_takes_every_trace_that_reaches_it():
-    """Each trace that tile_traces leaves out of a tile adds exactly nothing to that tile's columns."""
+def test_a_tile_takes_every_trace_that_reaches_it_and_no_more():
+    """Each trace that tile_traces leaves out of a tile adds exactly nothing to that tile's columns; and each trace
+    it keeps, bar those in its 1 cm margin, does reach some voxel of the tile (its fold there is positive)."""
     o = op("numpy")
     tile = plan_tiles(GRID, 0.4)[7]
     keep = tile_traces(o, tile)
     out = np.setdiff1d(np.arange(N), keep)
-    assert 0 < keep.size < N
-    lone = BackProjection(GRID, TX[out], RX[out], dt_s=0.1e-9, n_samples=160, t0_s=0.5e-9, eps_r=5.0,
-                          aperture_deg=30, obliquity=True, spreading=True, engine="numpy")
-    np.testing.assert_array_equal(lone.adjoint(DATA[out], window=tile.window), 0.0)
-    # and the traces it keeps do reach it (the halo is the cone's radius at the deepest voxel, no more)
-    near = BackProjection(GRID, TX[keep], RX[keep], dt_s=0.1e-9, n_samples=160, t0_s=0.5e-9, eps_r=5.0,
-                          aperture_deg=30, engine="numpy")
-    seen = near.adjoint(np.ones((keep.size, 160), np.float32), window=tile.window)
-    assert seen.max() > 0
+    assert 0 < keep.size < N // 2
+    np.testing.assert_array_equal(o.with_traces(out).adjoint(DATA[out], window=tile.window), 0.0)
+    ones = np.ones((1, 160), np.float32)
+    reached = np.array([o.with_traces([j]).adjoint(ones, window=tile.window).max() > 0 for j in keep])
+    inner = tile_traces(o, tile, margin_m=-0.01)  # the traces at least 1 cm inside the reach
+    assert set(inner) <= set(keep[reached])
+    assert reached.sum() >= 0.9 * keep.size
 
 
 def test_layered_velocity_travels_to_the_tiles():

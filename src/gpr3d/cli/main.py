@@ -356,8 +356,6 @@ def cmd_reconstruct(args):
         raise GPR3DError("give --boxes or --mask detect, not both")
     site = dict(tile_m=args.tile, workers=args.workers, scheduler=args.scheduler,
                 checkpoint=str(Path(args.out) / "tiles") if args.resume else None)
-    if args.resume and args.tile is None and not args.workers and not args.scheduler:
-        site["tile_m"] = 5.0  # --resume alone: tiles of the default size, kept as they finish
     from gpr3d.migration.reconstruct import check_site_settings
 
     check_site_settings(ReconstructConfig(**site))  # one line, before any work
@@ -914,7 +912,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="detect: run the detector on the trace sequence and migrate only its boxes")
     sp.add_argument("--tile", type=float, default=rc.tile_m,
                     help="site scale: migrate in tiles of this side (m), each with only the traces that reach it "
-                         "(default: the whole grid at once; 5 with --workers/--scheduler)")
+                         "(default: the whole grid at once; 5 with --workers, --scheduler or --resume)")
     sp.add_argument("--workers", type=int, default=rc.workers,
                     help="site scale: local Dask worker processes for the tiles (default 0: this process)")
     sp.add_argument("--scheduler", default=rc.scheduler,

@@ -141,12 +141,8 @@ def kernels():
 
 _S = tuple(_simd.stack(m) for m in range(4))
 _SF = tuple(_simd.stack(m, True) for m in range(4))
-_L = tuple(_simd.stack(m, False, False) for m in range(4))
-_LF = tuple(_simd.stack(m, True, False) for m in range(4))
 s0, s1, s2, s3 = _S
 sf0, sf1, sf2, sf3 = _SF
-l0, l1, l2, l3 = _L
-lf0, lf1, lf2, lf3 = _LF
 
 #: the SIMD depth loop's ways of reading the trace: one hardware gather, or scalar loads (see :func:`read_path`)
 GATHER, LOADS = 1, 2
@@ -167,55 +163,27 @@ def read_path() -> int:
 
 
 @njit(fastmath=True, cache=True, inline="always")
-def _stack_gather(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, mode, fold):
-    if fold:
-        if mode == 0:
-            sf0(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-        elif mode == 1:
-            sf1(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-        elif mode == 2:
-            sf2(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-        else:
-            sf3(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-    elif mode == 0:
-        s0(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-    elif mode == 1:
-        s1(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-    elif mode == 2:
-        s2(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-    else:
-        s3(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-
-
-@njit(fastmath=True, cache=True, inline="always")
-def _stack_loads(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, mode, fold):
-    if fold:
-        if mode == 0:
-            lf0(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-        elif mode == 1:
-            lf1(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-        elif mode == 2:
-            lf2(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-        else:
-            lf3(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-    elif mode == 0:
-        l0(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-    elif mode == 1:
-        l1(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-    elif mode == 2:
-        l2(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-    else:
-        l3(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)
-
-
-@njit(fastmath=True, cache=True, inline="always")
 def _stack(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, mode, fold, path):
     # the explicit-SIMD depth loop for the weights ``mode``, with the fold beside the image where ``fold``, reading
     # the trace by ``path`` (GATHER or LOADS)
-    if path == GATHER:
-        _stack_gather(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, mode, fold)
+    g = path == GATHER
+    if fold:
+        if mode == 0:
+            sf0(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, g)
+        elif mode == 1:
+            sf1(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, g)
+        elif mode == 2:
+            sf2(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, g)
+        else:
+            sf3(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, g)
+    elif mode == 0:
+        s0(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, g)
+    elif mode == 1:
+        s1(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, g)
+    elif mode == 2:
+        s2(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, g)
     else:
-        _stack_loads(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, mode, fold)
+        s3(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, g)
 
 
 @njit(parallel=True, fastmath=True, cache=True)

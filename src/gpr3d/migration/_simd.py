@@ -37,18 +37,19 @@ def _gather_names():
     return "llvm.masked.gather.v16i64.v16p0i64"
 
 
-def stack(weights: int, fold: bool = False, gather: bool = True):
-    """The intrinsic ``stack(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk)``.
+def stack(weights: int, fold: bool = False):
+    """The intrinsic ``stack(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, gather)``.
 
     Adds, for depth blocks ``k0 // W .. nblk - 1``, ``w * row(u)`` into ``acc`` where
     ``u = (t0 + (ra + rb) * slow) * inv_dt`` and ``ra = sqrt(h2a + (depth + ha)^2)`` (``rb``
     likewise). ``weights``: bit 0 obliquity ``(za/ra + zb/rb) / 2``, bit 1 spreading ``(ra + rb) / 2``.
     ``fold``: the intrinsic takes one more array after ``acc``, ``facc``, and adds into it what a trace of ones
     would give, ``w * clamp(umax - u, 0, 1)`` (the fold, in the same pass).
-    ``gather``: read the sample pairs with one hardware gather; otherwise with ``W`` scalar 64-bit loads put into a
-    vector (for CPUs whose gathers are slow: several AMD generations).
+    ``gather`` (an integer, at run time): non-zero reads the sample pairs with one hardware gather, zero with ``W``
+    scalar 64-bit loads put into a vector (for CPUs whose gathers are slow: several AMD generations); the loop is
+    emitted once for each, behind one branch.
     """
-    key = (weights, fold, gather)
+    key = (weights, fold)
     if key in _STACKS:
         return _STACKS[key]
     from llvmlite import ir
@@ -63,7 +64,7 @@ def stack(weights: int, fold: bool = False, gather: bool = True):
         arrays = [context.make_array(signature.args[i])(context, builder, args[i]) for i in range(na)]
         row_p, depth_p, slow_p, acc_p = (a.data for a in arrays[:4])
         facc_p = arrays[4].data if fold else None
-        h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk = args[na:]
+        h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, gather = args[na:]
         f32, i1, i32, i64 = ir.FloatType(), ir.IntType(1), ir.IntType(32), ir.IntType(64)
         vf, vi, vq = ir.VectorType(f32, W), ir.VectorType(i32, W), ir.VectorType(i64, W)
         vmask = ir.VectorType(i1, W)
@@ -100,61 +101,70 @@ def stack(weights: int, fold: bool = False, gather: bool = True):
         evens = ir.Constant(vi, list(range(0, 2 * W, 2)))
         odds = ir.Constant(vi, list(range(1, 2 * W, 2)))
         first = builder.udiv(k0, ir.Constant(k0.type, W))
-        with cgutils.for_range_slice(builder, first, nblk, ir.Constant(k0.type, 1)) as (blk, _):
-            off = builder.mul(blk, ir.Constant(blk.type, W))
-            d = vload(depth_p, off)
-            za, zb = add(d, ha_v), add(d, hb_v)
-            ra = builder.call(sqrt, [add(mul(za, za), h2a_v)])
-            rb = builder.call(sqrt, [add(mul(zb, zb), h2b_v)])
-            u = mul(add(t0_v, mul(add(ra, rb), vload(slow_p, off))), idt_v)
-            u = builder.call(vmin, [builder.call(vmax, [u, zero_f]), umax_v])
-            i0 = builder.fptoui(u, vi)
-            frac = builder.fsub(u, builder.uitofp(i0, vf), flags=fast)
-            depth_index = builder.add(splat(builder.trunc(off, i32), vi), lanes)
-            live = builder.icmp_unsigned(">=", depth_index, k0_v)
-            ptrs = builder.gep(row_p, [i0], source_etype=f32)
-            ptrs.type = ir.VectorType(f32.as_pointer(), W)  # llvmlite types a vector GEP as a scalar pointer
-            if gather:
-                pairs = builder.call(gather_fn, [builder.bitcast(ptrs, vpq), align, live, zero_q])
-            else:  # W scalar loads: every index is inside the padded row (u is clamped), so none needs the mask
-                pairs = zero_q
-                for lane in range(W):
-                    at = builder.extract_element(i0, ir.Constant(i32, lane))
-                    p = builder.bitcast(builder.gep(row_p, [at]), i64.as_pointer())
-                    pairs = builder.insert_element(pairs, builder.load(p, align=4), ir.Constant(i32, lane))
-                pairs = builder.select(live, pairs, zero_q)
-            pairs = builder.bitcast(pairs, v2f)
-            g0 = builder.shuffle_vector(pairs, ir.Constant(v2f, ir.Undefined), evens)
-            g1 = builder.shuffle_vector(pairs, ir.Constant(v2f, ir.Undefined), odds)
-            val = add(g0, mul(frac, builder.fsub(g1, g0, flags=fast)))
-            w = None
-            if weights & 1:
-                w = mul(half, add(builder.fdiv(za, ra, flags=fast), builder.fdiv(zb, rb, flags=fast)))
-            if weights & 2:
-                ws = mul(half, add(ra, rb))
-                w = ws if w is None else mul(w, ws)
-            if w is not None:
-                val = mul(val, w)
-            acc_ptr = builder.bitcast(builder.gep(acc_p, [off]), vf.as_pointer())
-            builder.store(add(builder.load(acc_ptr, align=4), val), acc_ptr, align=4)
-            if fold:  # a trace of ones read at u: 1 inside the record, 1 - frac on the last sample, 0 past it
-                ones = builder.call(vmin, [builder.call(vmax, [builder.fsub(umax_v, u, flags=fast), zero_f]),
-                                           ir.Constant(vf, [1.0] * W)])
-                ones = builder.select(live, ones, zero_f)
+
+        def depth_loop(use_gather):
+            with cgutils.for_range_slice(builder, first, nblk, ir.Constant(k0.type, 1)) as (blk, _):
+                off = builder.mul(blk, ir.Constant(blk.type, W))
+                d = vload(depth_p, off)
+                za, zb = add(d, ha_v), add(d, hb_v)
+                ra = builder.call(sqrt, [add(mul(za, za), h2a_v)])
+                rb = builder.call(sqrt, [add(mul(zb, zb), h2b_v)])
+                u = mul(add(t0_v, mul(add(ra, rb), vload(slow_p, off))), idt_v)
+                u = builder.call(vmin, [builder.call(vmax, [u, zero_f]), umax_v])
+                i0 = builder.fptoui(u, vi)
+                frac = builder.fsub(u, builder.uitofp(i0, vf), flags=fast)
+                depth_index = builder.add(splat(builder.trunc(off, i32), vi), lanes)
+                live = builder.icmp_unsigned(">=", depth_index, k0_v)
+                if use_gather:
+                    ptrs = builder.gep(row_p, [i0], source_etype=f32)
+                    ptrs.type = ir.VectorType(f32.as_pointer(), W)  # llvmlite types a vector GEP as a scalar pointer
+                    pairs = builder.call(gather_fn, [builder.bitcast(ptrs, vpq), align, live, zero_q])
+                else:  # W scalar loads: every index is inside the padded row (u is clamped), so none needs the mask
+                    pairs = zero_q
+                    for lane in range(W):
+                        at = builder.extract_element(i0, ir.Constant(i32, lane))
+                        p = builder.bitcast(builder.gep(row_p, [at]), i64.as_pointer())
+                        pairs = builder.insert_element(pairs, builder.load(p, align=4), ir.Constant(i32, lane))
+                    pairs = builder.select(live, pairs, zero_q)
+                pairs = builder.bitcast(pairs, v2f)
+                g0 = builder.shuffle_vector(pairs, ir.Constant(v2f, ir.Undefined), evens)
+                g1 = builder.shuffle_vector(pairs, ir.Constant(v2f, ir.Undefined), odds)
+                val = add(g0, mul(frac, builder.fsub(g1, g0, flags=fast)))
+                w = None
+                if weights & 1:
+                    w = mul(half, add(builder.fdiv(za, ra, flags=fast), builder.fdiv(zb, rb, flags=fast)))
+                if weights & 2:
+                    ws = mul(half, add(ra, rb))
+                    w = ws if w is None else mul(w, ws)
                 if w is not None:
-                    ones = mul(ones, w)
-                f_ptr = builder.bitcast(builder.gep(facc_p, [off]), vf.as_pointer())
-                builder.store(add(builder.load(f_ptr, align=4), ones), f_ptr, align=4)
+                    val = mul(val, w)
+                acc_ptr = builder.bitcast(builder.gep(acc_p, [off]), vf.as_pointer())
+                builder.store(add(builder.load(acc_ptr, align=4), val), acc_ptr, align=4)
+                if fold:  # a trace of ones read at u: 1 inside the record, 1 - frac on the last sample, 0 past it
+                    ones = builder.call(vmin, [builder.call(vmax, [builder.fsub(umax_v, u, flags=fast), zero_f]),
+                                               ir.Constant(vf, [1.0] * W)])
+                    ones = builder.select(live, ones, zero_f)
+                    if w is not None:
+                        ones = mul(ones, w)
+                    f_ptr = builder.bitcast(builder.gep(facc_p, [off]), vf.as_pointer())
+                    builder.store(add(builder.load(f_ptr, align=4), ones), f_ptr, align=4)
+
+        with builder.if_else(builder.icmp_signed("!=", gather, ir.Constant(gather.type, 0))) as (hw, loads):
+            with hw:
+                depth_loop(True)
+            with loads:
+                depth_loop(False)
         return context.get_dummy_value()
 
     if fold:
         @intrinsic
-        def _stack(typingctx, row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk):
-            return types.void(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk), _codegen
+        def _stack(typingctx, row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, gather):
+            return (types.void(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, gather),
+                    _codegen)
     else:
         @intrinsic
-        def _stack(typingctx, row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk):
-            return types.void(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk), _codegen
+        def _stack(typingctx, row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, gather):
+            return types.void(row, depth, slow, acc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, gather), _codegen
 
     _STACKS[key] = _stack
     return _stack

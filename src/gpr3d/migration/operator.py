@@ -21,6 +21,7 @@ vectorised over voxels, one trace at a time).
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 
@@ -241,6 +242,13 @@ class BackProjection:
         out = np.zeros((self.n_traces, self.n_samples + 2), dtype=np.float32)
         forward(image, *self._kernel_args(), out)
         return np.ascontiguousarray(out[:, : self.n_samples])
+
+    def with_traces(self, idx) -> "BackProjection":
+        """The same operator (grid, velocity, aperture, weights, kernel choices) for the traces ``idx`` only."""
+        sub = copy.copy(self)
+        sub.tx = np.ascontiguousarray(self.tx[idx])
+        sub.rx = np.ascontiguousarray(self.rx[idx])
+        return sub
 
     @property
     def reach_m(self) -> float:

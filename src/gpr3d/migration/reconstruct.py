@@ -46,9 +46,9 @@ class ReconstructConfig:
     min_line_m: float = 0.3
     taper_traces: float = 3.0
     engine: str = "numba"
-    #: site scale (see :mod:`.sitetiles`): None and no workers: the whole grid in one pass; otherwise tiles of
-    #: this side (m; 5 m where only workers are given), on ``workers`` local Dask processes (0: in this process)
-    #: or on the Dask scheduler at ``scheduler``; ``checkpoint``: a folder keeping finished tiles (a rerun resumes)
+    #: site scale (see :mod:`.sitetiles`): all unset, the whole grid in one pass; otherwise tiles of ``tile_m``
+    #: (m; ``sitetiles.DEFAULT_TILE_M`` where unset), on ``workers`` local Dask processes (0: in this process) or
+    #: on the Dask scheduler at ``scheduler``; ``checkpoint``: a folder keeping finished tiles (a rerun resumes)
     tile_m: float | None = None
     workers: int = 0
     scheduler: str | None = None
@@ -57,13 +57,9 @@ class ReconstructConfig:
 
 def check_site_settings(cfg: ReconstructConfig) -> None:
     """One line naming a wrong tile size, worker count or scheduler address (before any work)."""
-    if cfg.tile_m is not None and not (isinstance(cfg.tile_m, (int, float)) and np.isfinite(cfg.tile_m)
-                                       and cfg.tile_m > 0):
-        raise InvalidDataError(f"tile size must be a positive number of metres, got {cfg.tile_m}")
-    if isinstance(cfg.workers, bool) or not isinstance(cfg.workers, (int, np.integer)) or cfg.workers < 0:
-        raise InvalidDataError(f"workers must be a whole number >= 0, got {cfg.workers!r}")
-    if cfg.scheduler is not None and not str(cfg.scheduler).startswith(("tcp://", "tls://", "inproc://", "ucx://")):
-        raise InvalidDataError(f"scheduler must be an address such as tcp://host:8786, got {cfg.scheduler!r}")
+    from gpr3d.migration.sitetiles import check_settings
+
+    check_settings(tile_m=cfg.tile_m, workers=cfg.workers, scheduler=cfg.scheduler)
 
 
 def _prepare(survey, cfg):
@@ -109,15 +105,15 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     # the fold (how many traces see each voxel inside their aperture and record) comes with the image: in the same
     # pass where the kernel can
     want_fold = cfg.normalize != "none"
-    site = cfg.tile_m is not None or cfg.workers or cfg.scheduler
+    site = cfg.tile_m is not None or cfg.workers or cfg.scheduler or cfg.checkpoint
 
     def migrate(data, with_fold, part=""):
         if not site:
             return op.adjoint(data, with_fold=with_fold)
-        from gpr3d.migration.sitetiles import migrate_site
+        from gpr3d.migration.sitetiles import DEFAULT_TILE_M, migrate_site
 
         ck = None if cfg.checkpoint is None else str(Path(cfg.checkpoint) / (part or "image"))
-        res = migrate_site(op, data, tile_m=cfg.tile_m or 5.0, with_fold=with_fold, workers=cfg.workers,
+        res = migrate_site(op, data, tile_m=cfg.tile_m or DEFAULT_TILE_M, with_fold=with_fold, workers=cfg.workers,
                            scheduler=cfg.scheduler, checkpoint=ck, log=log)
         return (res.image, res.fold) if with_fold else res.image
 

@@ -28,10 +28,12 @@ from gpr3d.core.errors import InvalidDataError
 from gpr3d.io.atomic import atomic_write_text
 from gpr3d.migration.operator import BackProjection
 
-__all__ = ["Tile", "plan_tiles", "tile_traces", "migrate_site", "SiteResult"]
+__all__ = ["DEFAULT_TILE_M", "SiteResult", "Tile", "check_settings", "migrate_site", "plan_tiles", "tile_traces"]
 
 #: tile sides are whole multiples of the kernel's column tiles (8 columns)
 _ALIGN = 8
+#: the tile side (m) where none is given
+DEFAULT_TILE_M = 5.0
 
 
 @dataclass(frozen=True)
@@ -67,8 +69,7 @@ class SiteResult:
 
 def plan_tiles(grid, tile_m: float) -> list[Tile]:
     """The grid's columns cut into square tiles of about ``tile_m`` metres (whole multiples of 8 columns)."""
-    if not (np.isfinite(tile_m) and tile_m > 0):
-        raise InvalidDataError(f"tile size must be a positive number of metres, got {tile_m}")
+    check_settings(tile_m=tile_m)
     n = max(_ALIGN, int(round(tile_m / max(grid.dx, grid.dy) / _ALIGN)) * _ALIGN)
     return [Tile(ix, min(ix + n, grid.nx), iy, min(iy + n, grid.ny))
             for ix in range(0, grid.nx, n) for iy in range(0, grid.ny, n)]
@@ -88,38 +89,37 @@ def tile_traces(op: BackProjection, tile: Tile, margin_m: float = 0.01) -> np.nd
     return np.flatnonzero(ex * ex + ey * ey <= r * r)
 
 
-def _operator_spec(op: BackProjection) -> dict:
-    # what a worker needs to rebuild the operator (the traces travel apart, tile by tile)
-    return {"grid": op.grid, "dt_s": op.dt, "n_samples": op.n_samples, "t0_s": op.t0, "slow": op.slow,
-            "tan_ap": op.tan_ap, "obliquity": op.obliquity, "spreading": op.spreading, "engine": op.engine,
-            "simd": op.simd, "tiled": op.tiled, "gather": op.gather}
-
-
-def _rebuild(spec: dict, tx, rx) -> BackProjection:
-    op = BackProjection(spec["grid"], tx, rx, dt_s=spec["dt_s"], n_samples=spec["n_samples"], t0_s=spec["t0_s"],
-                        eps_r=1.0, obliquity=spec["obliquity"], spreading=spec["spreading"], engine=spec["engine"])
-    op.slow = spec["slow"]  # the parent's slowness as it is (layers included)
-    op.tan_ap = spec["tan_ap"]
-    op.simd, op.tiled, op.gather = spec["simd"], spec["tiled"], spec["gather"]
-    return op
-
-
-def migrate_tile(spec: dict, tile: Tile, data, tx, rx, with_fold: bool, threads: int | None = None):
-    """One tile's image (and fold): what a worker runs. ``data``, ``tx``, ``rx``: the tile's traces only."""
+def migrate_tile(op: BackProjection, tile: Tile, data, with_fold: bool, threads: int | None = None):
+    """One tile's image (and fold): what a worker runs. ``op`` and ``data`` hold the tile's traces only."""
     if threads:
         import numba
 
         numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
-    op = _rebuild(spec, tx, rx)
     t = time.perf_counter()
     if len(data) == 0:
-        shape = (tile.ix1 - tile.ix0, tile.iy1 - tile.iy0, op.grid.nd)
-        empty = np.zeros(shape, np.float32)
-        out = (empty, empty.copy()) if with_fold else empty
+        empty = np.zeros((tile.ix1 - tile.ix0, tile.iy1 - tile.iy0, op.grid.nd), np.float32)
+        img, fold = empty, (empty.copy() if with_fold else None)
     else:
         out = op.adjoint(data, with_fold=with_fold, window=tile.window)
-    img, fold = out if with_fold else (out, None)
+        img, fold = out if with_fold else (out, None)
     return {"tile": tile, "image": img, "fold": fold, "wall_s": time.perf_counter() - t, "pid": os.getpid()}
+
+
+def check_settings(*, tile_m=DEFAULT_TILE_M, workers=0, scheduler=None, threads=None) -> None:
+    """One line naming a wrong tile size, worker or thread count, or scheduler address."""
+    try:
+        ok = tile_m is None or (math.isfinite(float(tile_m)) and float(tile_m) > 0)
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise InvalidDataError(f"tile size must be a positive number of metres, got {tile_m}")
+    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 0:
+        raise InvalidDataError(f"workers must be a whole number >= 0, got {workers!r}")
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer))
+                                or threads < 1):
+        raise InvalidDataError(f"threads must be a whole number >= 1, got {threads!r}")
+    if scheduler is not None and not str(scheduler).startswith(("tcp://", "tls://", "inproc://", "ucx://")):
+        raise InvalidDataError(f"scheduler must be an address such as tcp://host:8786, got {scheduler!r}")
 
 
 def _fingerprint(op: BackProjection, data, with_fold: bool, tiles: list[Tile]) -> str:
@@ -178,8 +178,8 @@ def _client(workers: int, scheduler: str | None, threads_per_worker: int):
     return distributed.Client(cluster), cluster
 
 
-def migrate_site(op: BackProjection, data, *, tile_m: float = 5.0, with_fold: bool = True, workers: int = 0,
-                 scheduler: str | None = None, threads: int | None = None, checkpoint=None, client=None,
+def migrate_site(op: BackProjection, data, *, tile_m: float = DEFAULT_TILE_M, with_fold: bool = True,
+                 workers: int = 0, scheduler: str | None = None, threads: int | None = None, checkpoint=None, client=None,
                  log=None) -> SiteResult:
     """The adjoint of ``op`` (and its fold) over its whole grid, tile by tile.
 
@@ -195,12 +195,7 @@ def migrate_site(op: BackProjection, data, *, tile_m: float = 5.0, with_fold: bo
         raise InvalidDataError(f"data must be {(op.n_traces, op.n_samples)}, got {data.shape}")
     if not np.all(np.isfinite(data)):
         raise InvalidDataError("the data hold NaN or infinite samples: nothing can be migrated from them")
-    if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 0:
-        raise InvalidDataError(f"workers must be a whole number >= 0, got {workers!r}")
-    if threads is not None and (not isinstance(threads, (int, np.integer)) or threads < 1):
-        raise InvalidDataError(f"threads must be a whole number >= 1, got {threads!r}")
-    if scheduler is not None and not str(scheduler).startswith(("tcp://", "tls://", "inproc://", "ucx://")):
-        raise InvalidDataError(f"scheduler must be an address such as tcp://host:8786, got {scheduler!r}")
+    check_settings(tile_m=tile_m, workers=workers, scheduler=scheduler, threads=threads)
     log = log or (lambda msg: None)
     t_start = time.perf_counter()
     g = op.grid
@@ -218,7 +213,6 @@ def migrate_site(op: BackProjection, data, *, tile_m: float = 5.0, with_fold: bo
             todo.append(tile)
     if resumed:
         log(f"resumed {resumed} of {len(tiles)} tiles from {checkpoint}")
-    spec = _operator_spec(op)
     counts = []
 
     def finish(res):
@@ -229,19 +223,23 @@ def migrate_site(op: BackProjection, data, *, tile_m: float = 5.0, with_fold: bo
     def parts(tile):
         idx = tile_traces(op, tile)
         counts.append(int(idx.size))
-        return data[idx], op.tx[idx], op.rx[idx]
+        return op.with_traces(idx), data[idx]
 
     if workers == 0 and scheduler is None and client is None:
         mode = "this process"
         for tile in todo:
-            finish(migrate_tile(spec, tile, *parts(tile), with_fold, threads))
+            sub, d = parts(tile)
+            finish(migrate_tile(sub, tile, d, with_fold, threads))
     else:
-        per = threads or max(1, (os.cpu_count() or 1) // max(workers, 1))
+        # numba threads per worker: this machine's cores shared out on a local cluster; elsewhere as given (None:
+        # numba's default on each worker)
+        per = threads or (max(1, (os.cpu_count() or 1) // workers) if workers and not scheduler and client is None
+                          else None)
         own = client is None
         client, cluster = _client(workers, scheduler, 1) if own else (client, None)
         if not own:
             n = len(client.scheduler_info().get("workers", {}))
-            mode = f"the given client ({n} worker(s) x {per} thread(s))"
+            mode = f"the given client ({n} worker(s))"
         else:
             mode = scheduler or f"{workers} local worker(s) x {per} thread(s)"
         try:
@@ -254,8 +252,8 @@ def migrate_site(op: BackProjection, data, *, tile_m: float = 5.0, with_fold: bo
             queue = list(todo)
 
             def submit(tile):
-                d, a, b = parts(tile)
-                return client.submit(migrate_tile, spec, tile, client.scatter(d), a, b, with_fold, per, pure=False)
+                sub, d = parts(tile)
+                return client.submit(migrate_tile, sub, tile, client.scatter(d), with_fold, per, pure=False)
 
             running = distributed.as_completed([submit(queue.pop(0)) for _ in range(min(2 * n_workers, len(queue)))])
             for fut in running:
