@@ -64,8 +64,10 @@ def weight(za, zb, ra, rb, mode):
 
 @njit(fastmath=True, cache=True, inline="always")
 def depth_axis(depth, nd):
-    # first depth and depth step (the aperture's start_depth needs them)
-    return depth[0], (depth[1] - depth[0] if nd > 1 else f32(1.0))
+    # first real depth and depth step (the aperture's start_depth needs them); the SIMD kernels get ``depth`` padded
+    # at the top to whole blocks, so the real depths are its last ``nd``
+    off = depth.shape[0] - nd
+    return depth[off], (depth[off + 1] - depth[off] if nd > 1 else f32(1.0))
 
 @njit(parallel=True, fastmath=True, cache=True)
 def adjoint(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image):
@@ -191,6 +193,7 @@ def adjoint_simd(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode
     nx, ny, nd = image.shape
     n_tr = data.shape[0]
     nblk = depth.shape[0] // W
+    off = depth.shape[0] - nd
     d0, dd = depth_axis(depth, nd)
     none = np.zeros(1, np.float32)
     for c in prange(nx * ny):
@@ -203,10 +206,10 @@ def adjoint_simd(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode
             k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
             if k0 >= nd:
                 continue
-            _stack(data[j], depth, slow, acc, none, h2a, h2b, tx[j, 2], rx[j, 2], t0, inv_dt, umax, k0, nblk, mode,
-                   False, path)
+            _stack(data[j], depth, slow, acc, none, h2a, h2b, tx[j, 2], rx[j, 2], t0, inv_dt, umax, k0 + off, nblk,
+                   mode, False, path)
         for k in range(nd):
-            col[k] += acc[k]
+            col[k] += acc[k + off]
 
 
 def _probe(fn, *extra):
@@ -225,8 +228,8 @@ def simd_adjoint(path: int = GATHER):
     """The adjoint with the explicit-SIMD depth loop of :mod:`._simd` reading the trace by ``path`` (``GATHER`` or
     ``LOADS``), or None where it does not compile.
 
-    Same arguments as the scalar adjoint, except ``depth`` and ``slow`` padded to a
-    multiple of ``_simd.W`` (the real depth count is ``image.shape[2]``).
+    Same arguments as the scalar adjoint, except ``depth`` and ``slow`` padded at the top to a
+    multiple of ``_simd.W`` (the real depths are the last ``image.shape[2]``).
     """
     key = ("simd", path)
     if key not in _CACHE:
@@ -269,12 +272,13 @@ def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mod
     trace's row is then read for all the tile's columns while it is in cache, into the tile's accumulators.
     The sum is the same as the plain adjoint's (only voxels outside every aperture are skipped, where that
     adds exact zeros). ``path``: 0 the scalar depth loop, ``GATHER`` or ``LOADS`` the explicit-SIMD one reading the
-    trace that way (``depth``, ``slow`` padded to whole blocks).
+    trace that way (``depth``, ``slow`` padded at the top to whole blocks).
     ``fold``: the adjoint of a trace of ones is summed into ``fold_img`` in the same pass.
     """
     nx, ny, nd = image.shape
     d0, dd = depth_axis(depth, nd)
     nblk = depth.shape[0] // W
+    off = depth.shape[0] - nd  # top padding of the SIMD blocks (0 for the scalar loop)
     ntx = (nx + TILE - 1) // TILE
     nty = (ny + TILE - 1) // TILE
     for t in prange(ntx * nty):
@@ -313,21 +317,22 @@ def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mod
                             if k0 < nd:
                                 c = (ix - tx0) * TILE + (iy - ty0)
                                 if path:
-                                    _stack(row, depth, slow, acc[c], facc[c], h2a, h2b, ha, hb, t0, inv_dt, umax, k0,
-                                           nblk, mode, fold, path)
+                                    _stack(row, depth, slow, acc[c], facc[c], h2a, h2b, ha, hb, t0, inv_dt, umax,
+                                           k0 + off, nblk, mode, fold, path)
                                 else:
-                                    _scalar_depths(row, depth, slow, acc[c], facc[c], h2a, h2b, ha, hb, t0, inv_dt,
+                                    _scalar_depths(row, depth[off:], slow[off:], acc[c, off:],
+                                                   facc[c, off:] if fold else facc[c], h2a, h2b, ha, hb, t0, inv_dt,
                                                    umax, k0, nd, mode, fold, uu, ww)
         for ix in range(tx0, tx1):
             for iy in range(ty0, ty1):
                 c = (ix - tx0) * TILE + (iy - ty0)
                 col = image[ix, iy]
                 for k in range(nd):
-                    col[k] += acc[c, k]
+                    col[k] += acc[c, k + off]
                 if fold:
                     fcol = fold_img[ix, iy]
                     for k in range(nd):
-                        fcol[k] += facc[c, k]
+                        fcol[k] += facc[c, k + off]
 
 
 def tiled_adjoint(path: int, fold: bool = False):

@@ -204,10 +204,13 @@ class BackProjection:
             from gpr3d.migration._simd import W
 
             nd = self.grid.nd
-            extra = -nd % W  # pad depth and slowness to whole SIMD blocks (the pad voxels are discarded)
-            step = self.depth[1] - self.depth[0] if nd > 1 else 1.0
-            args[4] = np.r_[self.depth, self.depth[-1] + step * np.arange(1, extra + 1)].astype(np.float32)
-            args[5] = np.r_[self.slow, np.full(extra, self.slow[-1])].astype(np.float32)
+            # depth and slowness padded to whole SIMD blocks at the top: every column's depth loop ends at the
+            # deepest voxel, so the blocks end there too and only the first (at the aperture's start depth) is
+            # partly idle (padded at the bottom, a grid of 65 depths paid a whole block for its last voxel); the pad
+            # voxels are never live and are discarded
+            extra = -nd % W
+            args[4] = np.r_[np.full(extra, self.depth[0]), self.depth].astype(np.float32)
+            args[5] = np.r_[np.full(extra, self.slow[0]), self.slow].astype(np.float32)
         tiled = (_kernels.tiled_adjoint(path if simd is not None else 0, with_fold) if self.tan_ap > 0 and self.tiled
                  else None)
         if tiled is not None:
