@@ -33,7 +33,7 @@ import warnings
 import numpy as np
 
 from gpr3d.core.units import C0
-from gpr3d.migration.grid import Grid3D
+from gpr3d.core.grid import Grid3D
 from gpr3d.migration.operator import BackProjection
 
 NS_SRC, NS_REC, NT, DT, EPS = 20, 25, 512, 0.1e-9, 6.0
@@ -76,7 +76,7 @@ def big(n_traces=16):
     t = time.perf_counter()
     r = reconstruct(s, ReconstructConfig(spacing_m=0.02, pad_m=0.0, max_depth_m=8.0, time_zero="none"))
     wall = time.perf_counter() - t
-    g = r["grid"]
+    g = r.grid
     peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
     print(f"reconstruct on {g.nx} x {g.ny} x {g.nd} = {g.size:.3g} voxels, {n_traces} traces: {wall:.1f} s, "
           f"peak resident memory {peak_gb:.2f} GB (limit 8 GB)")

@@ -128,7 +128,7 @@ def main(argv=None):
     s = survey(args.traces)
     t_sim = time.perf_counter() - t
     cfg = ReconstructConfig(eps_r=EPS, max_depth_m=1.3)
-    g = reconstruct(s, cfg)["grid"]  # the grid reconstruct picks (and numba's compilation, out of the timings)
+    g = reconstruct(s, cfg).grid  # the grid reconstruct picks (and numba's compilation, out of the timings)
     tx, rx = antenna_positions(s.positions_xyz, s.orientations_quat_wxyz, s.offset_m)
     updates = s.n_traces * g.size
     tan_ap = math.tan(math.radians(50.0))
@@ -160,7 +160,7 @@ def main(argv=None):
         os.environ["GPR3D_TILED"] = "1" if tiled else "0"
         w, res = timed(lambda: reconstruct(s, cfg), 1)
         rows.append((f"gpr3d reconstruct end to end, {'tiled' if tiled else 'untiled'} "
-                     f"({res['grid'].nx} x {res['grid'].ny} x {res['grid'].nd}, {len(res['targets'])} targets)", w,
+                     f"({res.grid.nx} x {res.grid.ny} x {res.grid.nd}, {len(res.targets)} targets)", w,
                      math.nan))
         print(rows[-1], flush=True)
     os.environ.pop("GPR3D_TILED", None)

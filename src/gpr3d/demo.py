@@ -229,13 +229,13 @@ def _reconstruction_stage(out: Path, log) -> dict:
         wall = time.perf_counter() - t
         if folder:
             write_reconstruction(result, out / folder, source="random_walk_survey.h5")
-        ev = evaluate_targets(result["targets"], truth_lines_from_pipes(pipes))
-        rows[key] = {"wall_s": wall, "n_targets": len(result["targets"]), "false_targets": ev["false_targets"],
+        ev = evaluate_targets(result.targets, truth_lines_from_pipes(pipes))
+        rows[key] = {"wall_s": wall, "n_targets": len(result.targets), "false_targets": ev["false_targets"],
                      "truth": [{"target": n, **r} for n, r in zip(names, ev["truth"])],
-                     "updates_per_s": result["updates_per_s"], "grid": result["grid"].to_dict()}
+                     "updates_per_s": result.updates_per_s, "grid": result.grid.to_dict()}
         if key == "estimated":
-            g, mig = result["grid"], result["timings_s"]["migrate"]
-            one_pass = result["image"]
+            g, mig = result.grid, result.timings_s["migrate"]
+            one_pass = result.image
     log(f"[4/7] 3D reconstruction: {survey.n_traces} traces -> {g.nx} x {g.ny} x {g.nd} voxels in "
         f"{rows['estimated']['wall_s']:.1f} s (migration {mig:.1f} s, "
         f"{rows['estimated']['updates_per_s'] / 1e9:.2f} G updates/s); targets from the fused poses "
@@ -257,8 +257,8 @@ def _reconstruction_stage(out: Path, log) -> dict:
     t = time.perf_counter()
     tiled = reconstruct(survey, ReconstructConfig(spacing_m=0.02, max_depth_m=0.8, tile_m=0.64))
     wall_tiles = time.perf_counter() - t
-    same = bool(np.array_equal(tiled["image"], one_pass))
-    n_tiles = len(plan_tiles(tiled["grid"], 0.64))
+    same = bool(np.array_equal(tiled.image, one_pass))
+    n_tiles = len(plan_tiles(tiled.grid, 0.64))
     log(f"      site scale: in {n_tiles} tiles of 0.64 m with the cone's halo ({wall_tiles:.1f} s), the volume "
         f"{'equals the one-pass volume bit for bit' if same else 'DIFFERS from the one-pass volume'}")
     est = rows["estimated"]
@@ -330,7 +330,7 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
     wall = time.perf_counter() - t
     write_reconstruction(result, out / "reconstruction_masked", source="random_walk_survey.h5")
     names = ["L leg along x", "L leg along y", "diagonal pipe", "rebar at x=0.2", "rebar at x=1.85"]
-    ev = evaluate_targets(result["targets"], truth_lines_from_pipes(demo_scene().pipes))
+    ev = evaluate_targets(result.targets, truth_lines_from_pipes(demo_scene().pipes))
     for name, r in zip(names, ev["truth"]):
         if "position_error_m" in r:
             log(f"      {name:<16} position {r['position_error_m'] * 100:4.1f} cm, complete "
@@ -338,8 +338,8 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
         else:
             log(f"      {name:<16} not found")
     log(f"      migrated inside the detected boxes only, with the estimated eps_r {eps_est:.2f}, in {wall:.1f} s: "
-        f"{len(result['targets'])} targets, {ev['false_targets']} false (noise map in reconstruction_masked/)")
-    row.update({"masked_eps_r": eps_est, "masked_eps_r_source": "estimated (migration focus)", "masked_wall_s": wall, "masked_targets": len(result["targets"]),
+        f"{len(result.targets)} targets, {ev['false_targets']} false (noise map in reconstruction_masked/)")
+    row.update({"masked_eps_r": eps_est, "masked_eps_r_source": "estimated (migration focus)", "masked_wall_s": wall, "masked_targets": len(result.targets),
                 "masked_false_targets": ev["false_targets"], "masked_truth": ev["truth"],
                 "folder": "reconstruction_masked"})
     return row

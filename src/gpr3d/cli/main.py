@@ -410,12 +410,12 @@ def cmd_reconstruct(args):
         if not boxes:
             raise GPR3DError("the detector found no hyperbolas: nothing to migrate (try a lower --score)")
     result = reconstruct(survey, cfg, boxes=boxes, log=print)
-    result["eps_r_source"] = f"estimated ({args.depth})" if estimate else ("file header" if eps_given == "file" else "given")
+    result.eps_r_source = f"estimated ({args.depth})" if estimate else ("file header" if eps_given == "file" else "given")
     files = write_reconstruction(result, args.out, source=str(args.input))
-    g = result["grid"]
-    print(f"migrated {result['n_traces']} traces onto {g.nx} x {g.ny} x {g.nd} voxels in "
-          f"{result['timings_s']['migrate']:.1f} s ({result['updates_per_s'] / 1e9:.2f} G voxel-trace updates/s)")
-    for t in result["targets"]:
+    g = result.grid
+    print(f"migrated {result.n_traces} traces onto {g.nx} x {g.ny} x {g.nd} voxels in "
+          f"{result.timings_s['migrate']:.1f} s ({result.updates_per_s / 1e9:.2f} G voxel-trace updates/s)")
+    for t in result.targets:
         pts = "  ".join("(" + ", ".join(f"{v:.2f}" for v in p) + ")" for p in t.points_xyz)
         print(f"  {t.kind:5s} depth {t.depth_m:.2f} m  score {t.score:.2f}  {pts}")
     print(f"wrote {', '.join(files)} to {args.out}/")

@@ -30,7 +30,7 @@ import numpy as np
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.poses import quat_from_yaw, rotate_vectors
 from gpr3d.core.units import C0
-from gpr3d.migration.grid import Grid3D
+from gpr3d.core.grid import Grid3D
 
 __all__ = ["BackProjection", "antenna_positions", "effective_slowness", "dot_test"]
 
@@ -91,8 +91,8 @@ class BackProjection:
         self.rx = np.ascontiguousarray(rx, dtype=np.float64)
         if self.tx.shape != self.rx.shape or self.tx.ndim != 2 or self.tx.shape[1] != 3:
             raise InvalidDataError("tx and rx must both be (n_traces, 3)")
-        if engine not in ("numba", "numpy"):
-            raise InvalidDataError(f"engine must be 'numba' or 'numpy', got {engine!r}")
+        if engine not in self._ENGINES:
+            raise InvalidDataError(f"engine must be one of {', '.join(map(repr, self._ENGINES))}, got {engine!r}")
         self.dt = float(dt_s)
         self.n_samples = int(n_samples)
         self.t0 = float(t0_s)
@@ -188,9 +188,16 @@ class BackProjection:
         if data.shape != (self.n_traces, self.n_samples):
             raise InvalidDataError(f"data must be {(self.n_traces, self.n_samples)}, got {data.shape}")
         xs, ys = self._window(window)
-        if self.engine == "numpy":
-            img = self._adjoint_numpy(data, xs, ys)
-            return (img, self._adjoint_numpy(np.ones_like(data), xs, ys)) if with_fold else img
+        img, fold = self._ENGINES[self.engine][0](self, data, xs, ys, with_fold)
+        if with_fold and fold is None:  # the engine does not sum it in the same pass: a second migration
+            fold = self._ENGINES[self.engine][0](self, np.ones_like(data), xs, ys, False)[0]
+        return (img, fold) if with_fold else img
+
+    def _adjoint_numpy_engine(self, data, xs, ys, with_fold):
+        return self._adjoint_numpy(data, xs, ys), None
+
+    def _adjoint_numba(self, data, xs, ys, with_fold):
+        # (image, fold): the fold where the tiled kernel sums it in the same pass, else None
         from gpr3d.migration import _kernels
 
         shape = (len(xs), len(ys), self.grid.nd)
@@ -222,29 +229,30 @@ class BackProjection:
             fold = np.zeros(shape if with_fold else (1, 1, 1), dtype=np.float32)
             tiled(padded, *args, img, order, start, np.float32(bx0), np.float32(by0), np.float32(bsize), nbx, nby, mid,
                   np.float32(reach), fold)
-            if with_fold:
-                return img, fold
-        elif simd is not None:
+            return img, (fold if with_fold else None)
+        if simd is not None:
             simd(padded, *args, img)
         else:
             _kernels.kernels()[0](padded, *args, img)
-        if with_fold:  # no tiled kernel here (no aperture, or it does not build): the fold is a second migration
-            return img, self.adjoint(np.ones_like(data), window=window)
-        return img
+        return img, None
 
     def forward(self, image) -> np.ndarray:
         """Demigration: image ``(nx, ny, nd)`` -> data ``(n_traces, n_samples)`` float32."""
         image = np.ascontiguousarray(image, dtype=np.float32)
         if image.shape != self.grid.shape:
             raise InvalidDataError(f"image must be {self.grid.shape}, got {image.shape}")
-        if self.engine == "numpy":
-            return self._forward_numpy(image)
+        return self._ENGINES[self.engine][1](self, image)
+
+    def _forward_numba(self, image):
         from gpr3d.migration._kernels import kernels
 
         _, forward = kernels()
         out = np.zeros((self.n_traces, self.n_samples + 2), dtype=np.float32)
         forward(image, *self._kernel_args(), out)
         return np.ascontiguousarray(out[:, : self.n_samples])
+
+    #: engine name -> (adjoint, forward): the numba kernels, or the numpy reference
+    _ENGINES = {"numba": (_adjoint_numba, _forward_numba), "numpy": (_adjoint_numpy_engine, _forward_numpy)}
 
     def with_traces(self, idx) -> "BackProjection":
         """The same operator (grid, velocity, aperture, weights, kernel choices) for the traces ``idx`` only."""

@@ -14,19 +14,18 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import h5py
 import numpy as np
 
 from gpr3d import __version__
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.units import velocity_from_eps_r
-from gpr3d.io.atomic import atomic_path, atomic_write_text
-from gpr3d.migration.grid import Grid3D
+from gpr3d.io.atomic import atomic_write_text
+from gpr3d.core.grid import Grid3D
 from gpr3d.migration.masking import box_mask, check_boxes, image_envelope
 from gpr3d.migration.operator import BackProjection, antenna_positions
 from gpr3d.migration.targets import extract_targets, targets_to_json
 
-__all__ = ["ReconstructConfig", "check_site_settings", "reconstruct", "write_reconstruction"]
+__all__ = ["Reconstruction", "ReconstructConfig", "check_site_settings", "reconstruct", "write_reconstruction"]
 
 
 @dataclass
@@ -55,6 +54,25 @@ class ReconstructConfig:
     checkpoint: str | None = None
 
 
+@dataclass
+class Reconstruction:
+    """What :func:`reconstruct` returns: float32 volumes of ``grid.shape`` (x, y, depth), the targets, and how
+    they were made."""
+
+    image: np.ndarray  #: the migrated image, normalised by the fold as the config says
+    envelope: np.ndarray  #: its envelope along depth (what the targets are extracted from)
+    noise_map: np.ndarray | None  #: with boxes: the envelope of the data outside them, migrated; else None
+    fold: np.ndarray | None  #: how many traces see each voxel (weighted); None with ``normalize="none"``
+    grid: Grid3D
+    targets: list  #: :class:`gpr3d.migration.targets.Target`
+    eps_r: float
+    config: dict  #: the :class:`ReconstructConfig` as a dict
+    n_traces: int
+    timings_s: dict
+    updates_per_s: float | None  #: traces x voxels / migration seconds
+    eps_r_source: str = "given"  #: where eps_r came from (``config.json`` records it)
+
+
 def check_site_settings(cfg: ReconstructConfig) -> None:
     """One line naming a wrong tile size, worker count or scheduler address (before any work)."""
     from gpr3d.migration.sitetiles import check_settings
@@ -73,8 +91,8 @@ def _prepare(survey, cfg):
     return s
 
 
-def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log=None) -> dict:
-    """Migrate ``survey`` in 3D and extract targets; returns a dict of arrays, grid, targets and timings."""
+def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log=None) -> "Reconstruction":
+    """Migrate ``survey`` in 3D and extract targets (see :class:`Reconstruction`)."""
     cfg = cfg or ReconstructConfig()
     log = log or (lambda msg: None)
     check_site_settings(cfg)
@@ -137,90 +155,29 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
             noise_map = noise_map / norm
     env = image_envelope(image)
     targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m)
-    return {"image": image, "envelope": env, "noise_map": noise_map, "fold": fold, "grid": grid, "targets": targets,
-            "eps_r": eps, "config": asdict(cfg), "n_traces": s.n_traces,
-            "timings_s": {"prepare": t_prep, "migrate": t_mig},
-            "updates_per_s": s.n_traces * grid.size / t_mig if t_mig > 0 else None}
+    return Reconstruction(image=image, envelope=env, noise_map=noise_map, fold=fold, grid=grid, targets=targets,
+                          eps_r=float(eps), config=asdict(cfg), n_traces=s.n_traces,
+                          timings_s={"prepare": t_prep, "migrate": t_mig},
+                          updates_per_s=s.n_traces * grid.size / t_mig if t_mig > 0 else None)
 
 
-def _figures(result, out: Path):
-    from gpr3d.viz._figures import pyplot, save_figure
-
-    plt = pyplot()
-    g, env = result["grid"], result["envelope"]
-    ext_xy = (g.x[0], g.x[-1], g.y[0], g.y[-1])
-    figs = {}
-    fig, axes = plt.subplots(1, 2 if result["noise_map"] is not None else 1, figsize=(12 if result["noise_map"]
-                                                                                      is not None else 6.5, 6))
-    axes = np.atleast_1d(axes)
-    axes[0].imshow(env.max(axis=2).T, origin="lower", extent=ext_xy, cmap="hot", aspect="equal")
-    for t in result["targets"]:
-        p = np.array(t.points_xyz)
-        axes[0].plot(p[:, 0], p[:, 1], "c-" if t.kind == "line" else "co", lw=2, ms=5)
-    axes[0].set_title("top view: max envelope over depth; cyan: extracted targets", fontsize=9)
-    axes[0].set_xlabel("x (m)")
-    axes[0].set_ylabel("y (m)")
-    if result["noise_map"] is not None:
-        axes[1].imshow(result["noise_map"].max(axis=2).T, origin="lower", extent=ext_xy, cmap="hot", aspect="equal")
-        axes[1].set_title("noise map: the removed data, migrated", fontsize=9)
-        axes[1].set_xlabel("x (m)")
-    figs["top.png"] = fig
-    fig, ax = plt.subplots(figsize=(8, 4))
-    ax.imshow(env.max(axis=1).T, extent=(g.x[0], g.x[-1], g.depth[-1], g.depth[0]), cmap="hot", aspect="auto")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("depth (m)")
-    ax.set_title("front view: max envelope over y", fontsize=9)
-    figs["front.png"] = fig
-    fig = plt.figure(figsize=(7, 6))
-    ax = fig.add_subplot(projection="3d")
-    thr = result["config"]["threshold"] * float(np.percentile(env.max(axis=2), 99.5))
-    idx = np.argwhere(env >= thr)
-    if len(idx) > 20000:
-        idx = idx[np.random.default_rng(0).choice(len(idx), 20000, replace=False)]
-    pts = g.points(idx)
-    ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], c=env[tuple(idx.T)], cmap="hot", s=2, alpha=0.5)
-    for t in result["targets"]:
-        p = np.array(t.points_xyz)
-        ax.plot(p[:, 0], p[:, 1], -p[:, 2], "b-" if t.kind == "line" else "bo", lw=3)
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_zlabel("z (m)")
-    ax.set_title("3D: voxels above the threshold, extracted targets (blue)", fontsize=9)
-    figs["view3d.png"] = fig
-    for name, f in figs.items():
-        save_figure(f, out / name, dpi=110)
-
-
-def write_reconstruction(result: dict, out_dir, *, source: str = "") -> list[str]:
-    """Write the outputs of :func:`reconstruct` into ``out_dir`` (atomically, file by file)."""
-    from gpr3d.core.deps import require
+def write_reconstruction(result: "Reconstruction", out_dir, *, source: str = "") -> list[str]:
+    """Write a :class:`Reconstruction` into ``out_dir`` (atomically, file by file): ``volume.h5``
+    (:func:`gpr3d.io.volume.write_volume`), ``volume.vti``, ``targets.json``, ``config.json`` and the figures of
+    :func:`gpr3d.viz.volume.reconstruction_figures`."""
+    from gpr3d.io.volume import write_volume, write_vti
+    from gpr3d.viz.volume import reconstruction_figures
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    g = result["grid"]
-    with atomic_path(out / "volume.h5", suffix=".h5.part") as tmp:
-        with h5py.File(tmp, "w") as f:
-            f.attrs.update({"schema": "gpr3d.volume", "schema_version": 1, "gpr3d_version": __version__,
-                            "grid_json": json.dumps(g.to_dict()), "eps_r": result["eps_r"], "source": source,
-                            "axes": "x, y, depth (positive down), metres"})
-            for k in ("image", "envelope", "noise_map"):
-                if result[k] is not None:
-                    f.create_dataset(k, data=result[k], compression="gzip", compression_opts=4, shuffle=True)
-    evtk = require("pyevtk").hl
-    point_data = {"envelope": np.ascontiguousarray(result["envelope"][:, :, ::-1])}
-    if result["noise_map"] is not None:
-        point_data["noise_map"] = np.ascontiguousarray(result["noise_map"][:, :, ::-1])
-    # ParaView: z up, so depth runs downwards from the top of the block
-    z_bottom = -(g.d0 + (g.nd - 1) * g.dd)
-    with atomic_path(out / "volume.vti", suffix=".part.vti") as tmp:
-        written = evtk.imageToVTK(str(tmp)[:-4], origin=(g.x0, g.y0, z_bottom), spacing=(g.dx, g.dy, g.dd),
-                                  pointData=point_data)
-        Path(written).replace(tmp)
-    atomic_write_text(out / "targets.json", json.dumps(targets_to_json(result["targets"]), indent=1))
+    g = result.grid
+    write_volume(out / "volume.h5", g, {"image": result.image, "envelope": result.envelope,
+                                        "noise_map": result.noise_map}, eps_r=result.eps_r, source=source)
+    write_vti(out / "volume.vti", g, {"envelope": result.envelope, "noise_map": result.noise_map})
+    atomic_write_text(out / "targets.json", json.dumps(targets_to_json(result.targets), indent=1))
     atomic_write_text(out / "config.json", json.dumps({"gpr3d": __version__, "source": source,
-                                                       "eps_r": result["eps_r"],
-                                                       "eps_r_source": result.get("eps_r_source", "given"),
-                                                       "config": result["config"], "grid": g.to_dict(), "timings_s": result["timings_s"]},
-                                                      indent=1))
-    _figures(result, out)
+                                                       "eps_r": result.eps_r, "eps_r_source": result.eps_r_source,
+                                                       "config": result.config, "grid": g.to_dict(),
+                                                       "timings_s": result.timings_s}, indent=1))
+    reconstruction_figures(result, out)
     return sorted(p.name for p in out.iterdir())

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
-from gpr3d.migration.grid import Grid3D
+from gpr3d.core.grid import Grid3D
 
 __all__ = ["Target3D", "ridge_map", "extract_targets", "targets_to_json"]
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from gpr3d.core.units import velocity_from_eps_r
-from gpr3d.migration.grid import Grid3D
+from gpr3d.core.grid import Grid3D
 from gpr3d.migration.operator import BackProjection, antenna_positions
 
 __all__ = ["stolt_migrate", "split_lines", "kirchhoff_line", "pseudo3d"]

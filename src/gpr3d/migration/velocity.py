@@ -46,7 +46,7 @@ def focus_eps(survey, *, boxes=None, eps_grid=None, spacing_m: float = 0.04, max
     for eps in grid:
         r = reconstruct(survey, ReconstructConfig(eps_r=float(eps), spacing_m=spacing_m, max_depth_m=max_depth_m,
                                                   aperture_deg=aperture_deg), boxes=boxes)
-        ent.append(image_entropy(r["envelope"]))
+        ent.append(image_entropy(r.envelope))
     ent = np.array(ent)
     if not np.any(np.isfinite(ent)):
         raise InvalidDataError("the migrated image is empty for every eps_r: no data to focus")

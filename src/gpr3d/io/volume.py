@@ -1,0 +1,113 @@
+"""Migrated volumes on disk: the ``gpr3d.volume`` HDF5 schema (read and written) and VTK image data for ParaView.
+
+``volume.h5``: attributes ``schema = "gpr3d.volume"``, ``schema_version = 1``, ``gpr3d_version``, ``grid_json``
+(:meth:`Grid3D.to_dict` as JSON), ``axes``, and any others the writer passes (``eps_r``, ``source``); one float32
+dataset of the grid's shape ``(nx, ny, nd)`` per volume (``image``, ``envelope``, ``noise_map``, ``fold``), x, y,
+then depth positive down, in metres.
+
+``volume.vti``: the same volumes as VTK point data, z up (depth runs downwards from the top of the block).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gpr3d import __version__
+from gpr3d.core.errors import FormatError
+from gpr3d.core.grid import Grid3D
+from gpr3d.io._common import check_file, hdf5_errors
+from gpr3d.io.atomic import atomic_path
+
+__all__ = ["SCHEMA", "SCHEMA_VERSION", "Volume", "read_volume", "write_volume", "write_vti"]
+
+SCHEMA = "gpr3d.volume"
+SCHEMA_VERSION = 1
+AXES = "x, y, depth (positive down), metres"
+
+
+@dataclass
+class Volume:
+    """A ``volume.h5`` read back: its grid, its volumes by name and its other attributes."""
+
+    grid: Grid3D
+    arrays: dict = field(default_factory=dict)
+    attrs: dict = field(default_factory=dict)
+
+
+def write_volume(path, grid: Grid3D, arrays: dict, **attrs) -> Path:
+    """Write ``arrays`` (name -> ``grid.shape`` array; None values are left out) and ``attrs`` to ``path``
+    (atomically; gzip-compressed float32)."""
+    import h5py
+
+    for name, a in arrays.items():
+        if a is not None and np.shape(a) != grid.shape:
+            raise ValueError(f"volume {name!r} is {np.shape(a)}, the grid is {grid.shape}")
+    path = Path(path)
+    with atomic_path(path, suffix=".h5.part") as tmp:
+        with h5py.File(tmp, "w") as f:
+            f.attrs.update({"schema": SCHEMA, "schema_version": SCHEMA_VERSION, "gpr3d_version": __version__,
+                            "grid_json": json.dumps(grid.to_dict()), "axes": AXES,
+                            **{k: v for k, v in attrs.items() if v is not None}})
+            for name, a in arrays.items():
+                if a is not None:
+                    f.create_dataset(name, data=np.asarray(a, np.float32), compression="gzip", compression_opts=4,
+                                     shuffle=True)
+    return path
+
+
+def read_volume(path, names=None) -> Volume:
+    """Read a ``volume.h5`` (all its volumes, or those in ``names``); a file that is not one, or is damaged, gives
+    one :class:`FormatError` naming the problem."""
+    import h5py
+
+    from gpr3d.core.errors import InvalidDataError
+
+    path = check_file(path)
+    with hdf5_errors(path), h5py.File(path, "r") as f:
+        schema = f.attrs.get("schema")
+        schema = schema.decode() if isinstance(schema, bytes) else schema
+        if schema != SCHEMA:
+            raise FormatError(path, f"not a gpr3d volume (schema attribute {schema!r}, expected {SCHEMA!r})")
+        version = int(f.attrs.get("schema_version", -1))
+        if version > SCHEMA_VERSION:
+            raise FormatError(path, f"gpr3d.volume schema version {version} is newer than this gpr3d reads "
+                                    f"({SCHEMA_VERSION}): upgrade gpr3d")
+        try:
+            grid = Grid3D.from_dict(json.loads(f.attrs["grid_json"]))
+        except (json.JSONDecodeError, InvalidDataError) as exc:
+            raise FormatError(path, f"its grid_json attribute is not a grid ({str(exc)[:120]})") from None
+        wanted = list(f.keys()) if names is None else list(names)
+        arrays = {}
+        for name in wanted:
+            if name not in f:
+                raise FormatError(path, f"holds no volume {name!r} (it has {', '.join(sorted(f.keys())) or 'none'})")
+            if f[name].shape != grid.shape:
+                raise FormatError(path, f"volume {name!r} is {f[name].shape}, its grid is {grid.shape}")
+            a = f[name][()].astype(np.float32)
+            if not np.all(np.isfinite(a)):
+                raise FormatError(path, f"volume {name!r} holds NaN or infinite values")
+            arrays[name] = a
+        attrs = {k: (v.decode() if isinstance(v, bytes) else v.item() if hasattr(v, "item") else v)
+                 for k, v in f.attrs.items() if k != "grid_json"}
+    return Volume(grid=grid, arrays=arrays, attrs=attrs)
+
+
+def write_vti(path, grid: Grid3D, arrays: dict) -> Path:
+    """Write ``arrays`` (name -> ``grid.shape``; None left out) as VTK image data (``.vti``, ParaView): z up, so
+    depth runs downwards from the top of the block."""
+    from gpr3d.core.deps import require
+
+    evtk = require("pyevtk").hl
+    point_data = {k: np.ascontiguousarray(np.asarray(a, np.float32)[:, :, ::-1]) for k, a in arrays.items()
+                  if a is not None}
+    z_bottom = -(grid.d0 + (grid.nd - 1) * grid.dd)
+    path = Path(path)
+    with atomic_path(path, suffix=".part.vti") as tmp:
+        written = evtk.imageToVTK(str(tmp)[:-4], origin=(grid.x0, grid.y0, z_bottom),
+                                  spacing=(grid.dx, grid.dy, grid.dd), pointData=point_data)
+        Path(written).replace(tmp)
+    return path
