@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _report import cpu_name, write_table  # noqa: E402
 
 from gpr3d.core.survey import Survey  # noqa: E402
-from gpr3d.migration.grid import Grid3D  # noqa: E402
+from gpr3d.core.grid import Grid3D  # noqa: E402
 from gpr3d.migration.operator import BackProjection, antenna_positions  # noqa: E402
 from gpr3d.migration.sitetiles import migrate_site  # noqa: E402
 from gpr3d.simulation.forward import ForwardScene, Pipe, forward_model  # noqa: E402

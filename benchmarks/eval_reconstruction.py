@@ -28,7 +28,7 @@ import time
 import numpy as np
 
 from gpr3d.core.survey import Survey
-from gpr3d.migration.grid import Grid3D
+from gpr3d.core.grid import Grid3D
 from gpr3d.migration.masking import box_mask, image_envelope, signal_to_clutter
 from gpr3d.migration.metrics import evaluate_targets, truth_lines_from_pipes
 from gpr3d.migration.operator import BackProjection, antenna_positions

@@ -3,7 +3,7 @@ import pytest
 
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.units import C0
-from gpr3d.migration.grid import Grid3D
+from gpr3d.core.grid import Grid3D
 from gpr3d.migration.masking import box_mask, image_envelope, masked_migration
 from gpr3d.migration.operator import BackProjection, antenna_positions, dot_test, effective_slowness
 from gpr3d.simulation.forward import ForwardScene, Sphere, forward_model

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from gpr3d.core.errors import InvalidDataError
-from gpr3d.migration.grid import Grid3D
+from gpr3d.core.grid import Grid3D
 from gpr3d.migration.operator import BackProjection, effective_slowness
 from gpr3d.migration.sitetiles import migrate_site, plan_tiles, tile_traces
 from tests.migration.test_operator import scattered_antennas

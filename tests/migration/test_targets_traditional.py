@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from gpr3d.migration.grid import Grid3D
+from gpr3d.core.grid import Grid3D
 from gpr3d.migration.metrics import evaluate_targets, truth_lines_from_pipes
 from gpr3d.migration.targets import Target3D, extract_targets, targets_to_json
 from gpr3d.migration.traditional import split_lines, stolt_migrate
