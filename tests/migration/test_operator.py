@@ -207,3 +207,19 @@ def test_a_window_of_columns_is_that_part_of_the_whole_image(engine, aperture):
     for bad in ((0, 22, 0, 5), (5, 5, 0, 5), (-1, 3, 0, 5)):
         with pytest.raises(InvalidDataError, match="window"):
             op.adjoint(d, window=bad)
+
+
+@pytest.mark.parametrize("read", list(READS) + ["numpy"])
+def test_a_voxel_at_an_antenna_stays_finite(read):
+    """A grid from depth 0 with an antenna exactly over a column: that voxel's legs have length 0; the obliquity
+    weight must count it as 0 (not 0/0 = NaN, which would spread through the image)."""
+    grid = Grid3D(0.0, 0.0, 0.0, 0.05, 1.0, 0.05, 9, 1, 6)
+    pos = np.array([[0.2, 0.0, 0.0], [0.3, 0.0, 0.0]])
+    tx, rx = antenna_positions(pos, headings_rad=np.zeros(2), offset_m=0.0)
+    op = BackProjection(grid, tx, rx, dt_s=0.1e-9, n_samples=40, eps_r=4.0, aperture_deg=45, obliquity=True,
+                        engine="numpy" if read == "numpy" else "numba")
+    if read != "numpy":
+        op.simd, op.gather = READS[read]
+    img = op.adjoint(np.ones((2, 40), np.float32))
+    assert np.all(np.isfinite(img)) and img.max() > 0
+    assert img[4, 0, 0] == 0.0  # the voxel at the antenna at x = 0.2

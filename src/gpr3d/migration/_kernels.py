@@ -57,7 +57,8 @@ def weight(za, zb, ra, rb, mode):
     # bit 0: obliquity (mean cosine of the two legs), bit 1: spreading (mean leg length)
     w = f32(1.0)
     if mode & 1:
-        w *= f32(0.5) * (za / ra + zb / rb)
+        # (a voxel exactly at an antenna, depth 0 under it, has r = 0: its cosine counts as 0, not 0/0)
+        w *= f32(0.5) * (za / max(ra, f32(1e-12)) + zb / max(rb, f32(1e-12)))
     if mode & 2:
         w *= f32(0.5) * (ra + rb)
     return w

@@ -100,6 +100,7 @@ def stack(weights: int, fold: bool = False):
         align = ir.Constant(i32, 4)
         evens = ir.Constant(vi, list(range(0, 2 * W, 2)))
         odds = ir.Constant(vi, list(range(1, 2 * W, 2)))
+        tiny = ir.Constant(vf, [1e-12] * W)
         first = builder.udiv(k0, ir.Constant(k0.type, W))
 
         def depth_loop(use_gather):
@@ -132,7 +133,9 @@ def stack(weights: int, fold: bool = False):
                 val = add(g0, mul(frac, builder.fsub(g1, g0, flags=fast)))
                 w = None
                 if weights & 1:
-                    w = mul(half, add(builder.fdiv(za, ra, flags=fast), builder.fdiv(zb, rb, flags=fast)))
+                    # r kept off 0 (a voxel exactly at an antenna): its cosine counts as 0, not 0/0
+                    ra_, rb_ = (builder.call(vmax, [r, tiny]) for r in (ra, rb))
+                    w = mul(half, add(builder.fdiv(za, ra_, flags=fast), builder.fdiv(zb, rb_, flags=fast)))
                 if weights & 2:
                     ws = mul(half, add(ra, rb))
                     w = ws if w is None else mul(w, ws)

@@ -141,7 +141,7 @@ class BackProjection:
         u = (self.t0 + (ra + rb) * self.slow[None, None, :]) / self.dt
         w = np.ones_like(u)
         if self.obliquity:
-            w *= 0.5 * (za / ra + zb / rb)
+            w *= 0.5 * (za / np.maximum(ra, 1e-12) + zb / np.maximum(rb, 1e-12))  # r = 0 at an antenna: cos 0
         if self.spreading:
             w *= 0.5 * (ra + rb)
         if self.tan_ap > 0:
