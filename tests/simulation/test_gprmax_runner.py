@@ -129,3 +129,49 @@ def test_gprmax_survey_scenes_are_affordable_buildable_and_varied():
     assert kinds == {"rebar", "steel_pipe", "pvc_pipe", "void", "tank"} and hosts == {"concrete", "soil"}
     # the training draws are not touched by the held-out profile
     assert sample_survey_scene(4242, 0).to_dict() != sample_gprmax_survey_scene(4242, 0).to_dict()
+
+
+def test_layers_build_from_their_tops_down(tmp_path):
+    """Two layers below the host's top: each a box of its own material from its top to the floor (the deeper one
+    written last), and the model builds; tops outside the scene or out of order are refused."""
+    from gpr3d.simulation.scene import Layer
+
+    s = Scene(medium=Medium("concrete", 5.0, 0.002), layers=[Layer(0.08, 9.0, 0.004), Layer(0.15, 15.0, 0.01)],
+              antenna=Antenna(1.5e9, 0.03), width_m=0.4, depth_m=0.25, n_traces=2, trace_step_m=0.05, x_start_m=0.15,
+              targets=[Target("rebar", x_m=0.2, depth_m=0.1, radius_m=0.01)])
+    gs = build_gprmax_scene(s)
+    boxes = [o.kwargs if hasattr(o, "kwargs") else o.params_str() for o in gs.geometry_objects
+             if type(o).__name__ == "Box"]
+    text = [str(b) for b in boxes]
+    assert len(text) == 3 and "'host'" in text[0] and "'layer0'" in text[1] and "'layer1'" in text[2]
+    import re
+
+    tops = [float(re.search(r"'p2': \(0\.4, ([0-9.e-]+), inf\)", t).group(1)) for t in text]
+    assert tops == pytest.approx([0.25, 0.25 - 0.08, 0.25 - 0.15])  # each box from the floor up to its top
+    build_only(s, tmp_path)
+    for tops in ((0.0,), (0.3,), (0.15, 0.08)):
+        bad = Scene(**{**s.__dict__, "layers": [Layer(t, 9.0) for t in tops]})
+        with pytest.raises(ValueError, match="layer tops"):
+            build_gprmax_scene(bad)
+
+
+def test_layered_time_rules_and_json():
+    """The window and the antenna-following model follow the layers: vertical time summed layer by layer, and the
+    model's reach set by the fastest layer."""
+    import math
+
+    from gpr3d.core.units import C0
+    from gpr3d.simulation.gprmax_runner import following_domain
+    from gpr3d.simulation.scene import Layer
+
+    s = Scene(medium=Medium("soil", 9.0, 0.002), layers=[Layer(0.3, 4.0), Layer(0.5, 16.0)], depth_m=0.8,
+              antenna=Antenna(500e6, 0.1))
+    want = (0.3 * 3.0 + 0.2 * 2.0 + 0.3 * 4.0) / C0
+    assert s.vertical_time_s(0.8) == pytest.approx(want, rel=1e-12)
+    assert s.vertical_time_s(0.4) == pytest.approx((0.3 * 3.0 + 0.1 * 2.0) / C0, rel=1e-12)
+    assert s.time_window == pytest.approx(2 * want + 2 * math.sqrt(2) / 500e6, rel=1e-12)
+    assert Scene.from_json(s.to_json()).layers == s.layers
+    one = Scene(**{**s.__dict__, "layers": []})
+    # the eps 4 layer is faster than the host: the model reaches farther (by the speed ratio, for the same window)
+    d_l, d_1 = following_domain(s), following_domain(Scene(**{**one.__dict__, "time_window_s": s.time_window}))
+    assert d_l["half_width_m"] > 1.3 * d_1["half_width_m"]

@@ -76,6 +76,12 @@ def build_gprmax_scene(scene: Scene, *, x0: float = 0.0, width: float | None = N
                            id="host_box", seed=scene.seed))
     else:
         s.add(g.Box(p1=(0, 0, 0), p2=(width, ys, INF), material_id="host"))
+    tops = [lay.top_m for lay in scene.layers]
+    if tops and (min(tops) <= 0 or max(tops) >= ys or any(b <= a for a, b in zip(tops, tops[1:]))):
+        raise ValueError(f"layer tops must increase inside (0, {ys}) m below the surface, got {tops}")
+    for k, lay in enumerate(scene.layers):  # each from its top down to the floor; deeper ones overwrite
+        s.add(g.Material(er=lay.eps_r, se=lay.conductivity_s_m, mr=1, sm=0, id=f"layer{k}"))
+        s.add(g.Box(p1=(0, 0, 0), p2=(width, ys - lay.top_m, INF), material_id=f"layer{k}"))
 
     def inside(cx, depth, r):  # does a circle (world x, depth of its top) reach into the model more than a sliver?
         if ys - depth <= 2 * dx:  # its top (height ys - depth above the floor) within two cells of the floor
@@ -152,7 +158,8 @@ def following_domain(scene: Scene) -> dict:
     """
     dx = scene.dx
     window = scene.time_window
-    reach = scene.medium.velocity_m_s * window / 2
+    # the fastest host layer sets how far an echo can come from within the window
+    reach = C0 / math.sqrt(min(eps for _, eps in scene.eps_profile())) * window / 2
     half = reach + scene.antenna.offset_m / 2 + (PML_CELLS + 2) * dx
     half = math.ceil(half / dx) * dx
     lam = C0 / (scene.antenna.frequency_hz * math.sqrt(scene.medium.eps_r))

@@ -18,7 +18,7 @@ import numpy as np
 
 from gpr3d.core.units import C0, velocity_from_eps_r
 
-__all__ = ["Medium", "Target", "Stone", "Antenna", "Scene", "TARGET_KINDS", "MATERIALS"]
+__all__ = ["Medium", "Target", "Stone", "Antenna", "Layer", "Scene", "TARGET_KINDS", "MATERIALS"]
 
 TARGET_KINDS = ("rebar", "steel_pipe", "pvc_pipe", "void", "tank")
 
@@ -91,6 +91,16 @@ class Antenna:
 
 
 @dataclass
+class Layer:
+    """A horizontal layer of the host: from ``top_m`` below the surface down to the next layer's top (or the
+    bottom of the scene)."""
+
+    top_m: float
+    eps_r: float
+    conductivity_s_m: float = 0.005
+
+
+@dataclass
 class Scene:
     """A 2D/3D GPR scene and the straight survey line over it."""
 
@@ -107,12 +117,13 @@ class Scene:
     dx_m: float | None = None  #: None: from the rule in :meth:`default_dx`
     stones: list = field(default_factory=list)
     rough_surface_m: float = 0.0  #: RMS height of a rough surface (0 = flat)
+    layers: list = field(default_factory=list)  #: :class:`Layer` below the host's top one, tops increasing
     seed: int = 0
     name: str = "scene"
 
     # ---- derived grid and time rules -------------------------------------------------
     def max_eps_r(self) -> float:
-        eps = [self.medium.eps_r] + [s.eps_r for s in self.stones]
+        eps = [self.medium.eps_r] + [s.eps_r for s in self.stones] + [lay.eps_r for lay in self.layers]
         for t in self.targets:
             for m in (t.material, t.fill):
                 if m and MATERIALS.get(m):
@@ -130,14 +141,28 @@ class Scene:
         ordinary targets set it: the step is capped at the host rule but not driven
         by water).
         """
-        eps = min(self.max_eps_r(), max(self.medium.eps_r * 1.5, 20.0))
+        host = max([self.medium.eps_r] + [lay.eps_r for lay in self.layers])
+        eps = min(self.max_eps_r(), max(host * 1.5, 20.0))
         lam_min = C0 / (2.0 * self.antenna.frequency_hz * math.sqrt(eps))
         step = lam_min / 10.0
         return float(np.floor(step * 1e4) / 1e4)  # whole 0.1 mm
 
     def default_time_window(self) -> float:
-        """Time window: the two-way time to the bottom of the scene plus two pulse lengths."""
-        return 2.0 * self.depth_m / self.medium.velocity_m_s + 2.0 * math.sqrt(2) / self.antenna.frequency_hz
+        """Time window: the two-way time to the bottom of the scene (through its layers) plus two pulse lengths."""
+        return 2.0 * self.vertical_time_s(self.depth_m) + 2.0 * math.sqrt(2) / self.antenna.frequency_hz
+
+    def eps_profile(self) -> list:
+        """``[(top_m, eps_r), ...]`` of the host from the surface down: the medium, then the layers."""
+        return [(0.0, self.medium.eps_r)] + [(lay.top_m, lay.eps_r) for lay in self.layers]
+
+    def vertical_time_s(self, depth_m: float) -> float:
+        """One-way vertical travel time from the surface down to ``depth_m`` through the host's layers."""
+        prof = self.eps_profile()
+        t = 0.0
+        for k, (top, eps) in enumerate(prof):
+            bottom = prof[k + 1][0] if k + 1 < len(prof) else math.inf
+            t += max(0.0, min(bottom, depth_m) - top) * math.sqrt(eps) / C0
+        return t
 
     @property
     def dx(self) -> float:
@@ -167,6 +192,7 @@ class Scene:
         d["antenna"] = Antenna(**d["antenna"])
         d["targets"] = [Target(**{**t, "axis_xyz": tuple(t["axis_xyz"])}) for t in d["targets"]]
         d["stones"] = [Stone(**s) for s in d.get("stones", [])]
+        d["layers"] = [Layer(**lay) for lay in d.get("layers", [])]
         return cls(**d)
 
     @classmethod
