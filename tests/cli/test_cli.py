@@ -128,6 +128,10 @@ def test_demo_end_to_end(tmp_path):
     for row in summary["stages"]["synthetic"]["apexes"]:
         assert abs(row["apex_time_error_s"]) < 0.1e-9  # two samples
         assert abs(row["apex_trace_found"] - row["apex_trace_true"]) <= 1
+    rtm = summary["stages"]["synthetic"]["rtm"]  # the wave-equation step focuses each point target
+    assert len(rtm["focus_error_m"]) == 2 and max(rtm["focus_error_m"]) <= 2 * rtm["cell_m"]
+    rec_tiles = summary["stages"]["reconstruction"]["tiles"]  # site tiles give the one-pass volume exactly
+    assert rec_tiles["equal_to_one_pass"] and rec_tiles["n"] > 1
     walk = summary["stages"]["random_motion"]
     # a trace every 1 cm of the antenna's path: the count follows the path length
     assert walk["n_traces"] == pytest.approx(100 * walk["path_m"], abs=2) and walk["path_m"] > 50
@@ -144,7 +148,7 @@ def test_demo_end_to_end(tmp_path):
             assert row["completeness"] >= 0.9 and row["depth_error_m"] < 0.05, (key, row)
     names = {p.name for p in (tmp_path / "d").iterdir()}
     assert {"summary.json", "config.json", "real_raw.png", "real_processed.png", "real_processed.h5",
-            "synthetic_processed.png", "random_walk_survey.h5", "random_walk.tum", "random_walk_truth.tum",
+            "synthetic_processed.png", "synthetic_rtm.png", "random_walk_survey.h5", "random_walk.tum", "random_walk_truth.tum",
             "random_walk_map.png",
             "reconstruction"} <= names
     assert (tmp_path / "d" / "reconstruction" / "targets.json").exists()
