@@ -58,6 +58,52 @@ def test_metrics_on_known_offsets():
     assert row["completeness"] == pytest.approx((1.0 + np.sqrt(0.1**2 - 0.03**2 - 0.02**2)) / 2, abs=0.01)
 
 
+def test_endpoint_error_overshoot_and_excess_on_known_lines():
+    """A 2 m truth line found as a line from -0.3 m to 1.0 m (overshooting its start by 0.3 m) plus a line 0.5 m
+    away from every truth line: endpoint error (0.3 + 1.0) / 2, overshoot 0.3 m, excess 0.2 + 0.8 m (the part of
+    the first beyond 0.1 m of the truth's end, and all of the second) over 2 m of truth."""
+    truth = truth_lines_from_pipes([Pipe((0, 0, -0.52), (2, 0, -0.52), 0.02)])
+    est = [Target3D("line", [[-0.3, 0.0, 0.5], [1.0, 0.0, 0.5]], 0.5, 1.0),
+           Target3D("line", [[0.0, 0.5, 0.5], [0.8, 0.5, 0.5]], 0.5, 1.0)]
+    ev = evaluate_targets(est, truth)
+    row = ev["truth"][0]
+    assert row["endpoint_error_m"] == pytest.approx(0.65, abs=1e-9)
+    assert row["overshoot_m"] == pytest.approx(0.3, abs=1e-9)
+    assert ev["excess_m"] == pytest.approx(0.2 + 0.8, abs=0.02)
+    assert ev["excess_fraction"] == pytest.approx(1.0 / 2.0, abs=0.01)
+    assert ev["false_lines"] == 1 and ev["false_points"] == 0
+
+
+def test_a_rebar_found_as_points_counts_as_found():
+    """Points along a truth bar cover it around them (5 cm each side) and are not false; a point far off is."""
+    truth = truth_lines_from_pipes([Pipe((0, 0, -0.06), (1, 0, -0.06), 0.01)])
+    pts = [Target3D("point", [[x, 0.01, 0.05]], 0.05, 1.0) for x in np.arange(0.05, 1.0, 0.1)]
+    ev = evaluate_targets(pts + [Target3D("point", [[0.5, 0.6, 0.05]], 0.05, 1.0)], truth)
+    assert ev["truth"][0]["completeness"] > 0.95
+    assert ev["false_points"] == 1 and ev["false_lines"] == 0
+
+
+def test_collinear_pieces_across_a_gap_are_joined():
+    """A pipe imaged in two pieces with a 30 cm gap (and a crossing bar between them) comes out as one line; a
+    parallel pipe 15 cm to the side and a piece at another depth are not joined to it."""
+    g = Grid3D(0, 0, 0.1, 0.02, 0.02, 0.02, 101, 61, 30)
+    segs = [((0.2, 0.6, 0.4), (0.8, 0.6, 0.4)), ((1.1, 0.6, 0.4), (1.8, 0.6, 0.4)),  # the pipe, cut
+            ((0.2, 0.75, 0.4), (0.7, 0.75, 0.4)),  # a parallel pipe beside it
+            ((1.0, 0.2, 0.2), (1.0, 1.1, 0.2))]  # crossing above the gap
+    img = blob_image(g, segs, [])
+    lines = [t for t in extract_targets(img, g, band_m=0.06) if t.kind == "line"]
+    along = [t for t in lines if abs(t.direction[1]) < 0.1 and abs(np.mean([p[1] for p in t.points_xyz]) - 0.6) < 0.03]
+    assert len(along) == 1, [t.points_xyz for t in lines]
+    xs = sorted(p[0] for p in along[0].points_xyz)
+    assert xs[0] < 0.25 and xs[1] > 1.75 and along[0].extra.get("joined") == 2
+    beside = [t for t in lines if abs(np.mean([p[1] for p in t.points_xyz]) - 0.75) < 0.03]
+    assert len(beside) == 1 and beside[0].length_m < 0.6
+    # without joining the two pieces stay apart
+    apart = [t for t in extract_targets(img, g, band_m=0.06, join_gap_m=0.0) if t.kind == "line"
+             and abs(t.direction[1]) < 0.1 and abs(np.mean([p[1] for p in t.points_xyz]) - 0.6) < 0.03]
+    assert len(apart) == 2
+
+
 def test_stolt_focuses_a_diffraction_hyperbola():
     from scipy.signal import hilbert
 

@@ -3,7 +3,13 @@
 Truth lines are the **tops** of the true pipes (``depth = -z_centre - radius``),
 sampled every centimetre. An extracted line covers a truth sample when it passes
 within ``tol_m`` (3D) of it and runs within ``max_angle_deg`` of the truth
-direction; each extracted line is matched to the truth line it covers most.
+direction; each extracted line is matched to the truth line it covers most. Point targets within
+``tol_m`` of a truth line cover its samples within ``point_cover_m`` of them (a rebar found as a row of
+points is found, and those points are not false).
+
+Overshoot is scored twice: the endpoint error (how far the matched lines' extreme ends lie beyond or short of
+the true ends, mean of the two ends) and the excess length (extracted line length lying farther than
+``excess_m`` from every truth line, summed over the scene, also as a fraction of the true length).
 """
 
 from __future__ import annotations
@@ -35,10 +41,12 @@ def _samples(a, b, step=0.01):
     return a + np.outer(np.linspace(0, 1, n), b - a)
 
 
-def evaluate_targets(targets, truth: list[dict], *, tol_m: float = 0.1, max_angle_deg: float = 15.0) -> dict:
-    """Per truth line: matched segments, position error (horizontal, m), depth error (m),
-    orientation error (deg), completeness; plus the count of false targets."""
+def evaluate_targets(targets, truth: list[dict], *, tol_m: float = 0.1, max_angle_deg: float = 15.0,
+                     point_cover_m: float = 0.05, excess_m: float = 0.1) -> dict:
+    """Per truth line: matched segments, position error (horizontal, m), depth error (m), orientation error (deg),
+    endpoint error (m), completeness; per scene: false lines and points, excess length (m and fraction)."""
     lines = [t for t in targets if t.kind == "line"]
+    points = [np.array(t.points_xyz[0], float) for t in targets if t.kind == "point"]
     per_truth = []
     matched = set()
     cover_by = {}
@@ -58,6 +66,10 @@ def evaluate_targets(targets, truth: list[dict], *, tol_m: float = 0.1, max_angl
             if hit.any():
                 cover_by.setdefault(li, []).append((hit.sum(), ti))
                 covered |= hit
+        for q in points:  # points on the line cover it around them
+            d_line, _ = _seg_dist(q[None], a, b)
+            if d_line[0] < tol_m:
+                covered |= np.linalg.norm(samp - q, axis=1) < max(point_cover_m, tol_m)
         per_truth.append({"samples": samp, "covered": covered})
     for li, lst in cover_by.items():
         matched.add(li)
@@ -94,17 +106,30 @@ def evaluate_targets(targets, truth: list[dict], *, tol_m: float = 0.1, max_angl
                 wts.append(int(inside.sum()))
             if wts:
                 w = np.asarray(wts, float)
+                ends = np.array([(np.array(lines[li].points_xyz[k]) - a) @ u for li in lis for k in (0, 1)])
+                length = float(np.linalg.norm(b - a))
                 row.update({"position_error_m": float(np.average(pos_err, weights=w)),
                             "depth_error_m": float(np.average(dep_err, weights=w)),
-                            "orientation_error_deg": float(np.average(ang_err, weights=w))})
+                            "orientation_error_deg": float(np.average(ang_err, weights=w)),
+                            "endpoint_error_m": float(0.5 * (abs(ends.min()) + abs(ends.max() - length))),
+                            "overshoot_m": float(max(0.0, -ends.min()) + max(0.0, ends.max() - length))})
         rows.append(row)
     false_lines = [i for i in range(len(lines)) if i not in matched]
     # points are false when no truth line passes within tol
     false_points = 0
-    for t in targets:
-        if t.kind != "point":
-            continue
-        p = np.array(t.points_xyz[0])
+    for p in points:
         dmin = min((_seg_dist(p[None], np.array(tr["p0"]), np.array(tr["p1"]))[0][0] for tr in truth), default=np.inf)
         false_points += int(dmin > tol_m)
-    return {"truth": rows, "false_targets": len(false_lines) + false_points, "n_extracted": len(targets)}
+    # excess: extracted line length far from every truth line
+    excess = 0.0
+    for ln in lines:
+        pts = _samples(np.array(ln.points_xyz[0]), np.array(ln.points_xyz[1]))
+        step = np.linalg.norm(np.subtract(ln.points_xyz[1], ln.points_xyz[0])) / max(len(pts) - 1, 1)
+        dmin = np.full(len(pts), np.inf)
+        for tr in truth:
+            dmin = np.minimum(dmin, _seg_dist(pts, np.array(tr["p0"]), np.array(tr["p1"]))[0])
+        excess += float(np.count_nonzero(dmin > excess_m)) * step
+    true_len = float(sum(np.linalg.norm(np.subtract(tr["p1"], tr["p0"])) for tr in truth))
+    return {"truth": rows, "false_targets": len(false_lines) + false_points, "false_lines": len(false_lines),
+            "false_points": false_points, "n_extracted": len(targets), "excess_m": excess,
+            "true_length_m": true_len, "excess_fraction": excess / true_len if true_len > 0 else 0.0}

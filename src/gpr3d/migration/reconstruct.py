@@ -154,7 +154,10 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
         if noise_map is not None:
             noise_map = noise_map / norm
     env = image_envelope(image)
-    targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m)
+    # the band cleared around each line found: half a wavelength (the width of a pipe's image), at least two cells
+    tol = 2.0 * max(grid.dx, grid.dy)
+    band = max(2 * tol, 0.5 * v / survey.frequency_hz) if survey.frequency_hz else None
+    targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band)
     return Reconstruction(image=image, envelope=env, noise_map=noise_map, fold=fold, grid=grid, targets=targets,
                           eps_r=float(eps), config=asdict(cfg), n_traces=s.n_traces,
                           timings_s={"prepare": t_prep, "migrate": t_mig},

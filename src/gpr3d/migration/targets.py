@@ -8,11 +8,16 @@ works on that ridge map (value and depth of the maximum per column):
    connected parts (8-neighbours);
 2. in each part, find straight segments one after the other by weighted RANSAC,
    refined by a weighted principal axis; endpoints at the 1st/99th percentile of
-   the inliers along the axis; the depth along the segment by a robust linear fit;
-   the band around an accepted segment is removed before the next search (an
-   L-shaped pipe becomes two segments, a thick image of one pipe stays one), and a
-   segment lying wholly within the band of a longer one is dropped as its fragment;
-3. what remains, if large enough, is a point target (weighted centroid).
+   the inliers along the axis (the image's smear beyond a pipe's end still counts:
+   ends overshoot, see ``benchmarks/eval_scenes.py``); the depth along the segment
+   by a robust linear fit; the band around an accepted segment is removed before
+   the next search (an L-shaped pipe becomes two segments,
+   a thick image of one pipe stays one, a bar of a mat crossing it keeps the rest of
+   its length), and a segment lying wholly within the band of a longer one is dropped
+   as its fragment;
+3. collinear segments (within 3 deg, their axes within the inlier distance, at one
+   depth) across a gap shorter than ``join_gap_m`` are joined into one;
+4. what remains, if large enough, is a point target (weighted centroid).
 """
 
 from __future__ import annotations
@@ -109,19 +114,59 @@ def _shadowed(a, b, found, band):
     return False
 
 
+def join_collinear(lines: list, *, tol_m: float, join_gap_m: float, max_angle_deg: float = 3.0) -> list:
+    """Join line targets that continue one another: directions within ``max_angle_deg``, each one's ends within
+    ``tol_m`` (horizontally) of the other's axis and depth, the gap between them under ``join_gap_m``."""
+    out = [t for t in lines]
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(out)):
+            for j in range(i + 1, len(out)):
+                a, b = out[i], out[j]
+                pa, pb = np.array(a.points_xyz, float), np.array(b.points_xyz, float)
+                da = (pa[1, :2] - pa[0, :2]) / max(np.linalg.norm(pa[1, :2] - pa[0, :2]), 1e-12)
+                db = (pb[1, :2] - pb[0, :2]) / max(np.linalg.norm(pb[1, :2] - pb[0, :2]), 1e-12)
+                if abs(float(da @ db)) < np.cos(np.radians(max_angle_deg)):
+                    continue
+                # b's ends against a's axis (horizontal offset) and a's depth line, extended
+                sa = (pb[:, :2] - pa[0, :2]) @ da
+                off = np.abs((pb[:, 0] - pa[0, 0]) * da[1] - (pb[:, 1] - pa[0, 1]) * da[0])
+                la = float(np.linalg.norm(pa[1, :2] - pa[0, :2]))
+                dep_a = pa[0, 2] + (pa[1, 2] - pa[0, 2]) * sa / max(la, 1e-12)
+                if off.max() > tol_m or np.abs(pb[:, 2] - dep_a).max() > tol_m:
+                    continue
+                gap = max(sa.min() - la, -sa.max(), 0.0)
+                if gap > join_gap_m:
+                    continue
+                ends = np.vstack([pa, pb])
+                s_all = (ends[:, :2] - pa[0, :2]) @ da
+                k0, k1 = int(np.argmin(s_all)), int(np.argmax(s_all))
+                na, nb_ = a.n_voxels, b.n_voxels
+                joined = Target3D("line", [ends[k0].tolist(), ends[k1].tolist()], float(min(ends[k0][2], ends[k1][2])),
+                                  float((a.score * na + b.score * nb_) / max(na + nb_, 1)), na + nb_,
+                                  {"joined": a.extra.get("joined", 1) + b.extra.get("joined", 1)})
+                out = [t for k, t in enumerate(out) if k not in (i, j)] + [joined]
+                merged = True
+                break
+            if merged:
+                break
+    return out
+
+
 def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.3, reference_percentile: float = 99.5,
                     min_line_m: float = 0.3,
                     tol_m: float | None = None, band_m: float | None = None, min_columns: int = 6,
-                    min_density: float = 1.0,
-                    max_segments: int = 10, iters: int = 300, seed: int = 0) -> list[Target3D]:
+                    min_density: float = 1.0, join_gap_m: float = 0.5,
+                    max_segments: int = 40, iters: int = 300, seed: int = 0) -> list[Target3D]:
     """Line and point targets from an image envelope ``(nx, ny, nd)`` on ``grid``.
 
     ``threshold`` is relative to the ``reference_percentile`` of the ridge map (a
     robust stand-in for its maximum: pipe ends and crossings make hot spots far
     brighter than the pipes themselves). ``tol_m`` (default 2 cells) is the inlier distance of the line fits; ``band_m`` (default
-    ``max(4 tol, 0.1 m)``) the band removed around an accepted line; segments
-    shorter than ``min_line_m`` become points; a line needs ``min_density`` inlier
-    columns per cell of its length.
+    ``max(4 tol, 0.1 m)``; ``reconstruct`` gives ``max(2 tol, half a wavelength)``) the band removed around an
+    accepted line; segments shorter than ``min_line_m`` become points; a line needs ``min_density`` inlier
+    columns per cell of its length; collinear lines across gaps up to ``join_gap_m`` are joined.
     """
     val, dep = ridge_map(np.asarray(envelope, dtype=np.float32), grid)
     peak = float(np.percentile(val, reference_percentile))
@@ -183,6 +228,8 @@ def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.
                 k = sel[np.argmax(w)]
                 out.append(Target3D("point", [[float(cen[0]), float(cen[1]), float(d_all[k])]], float(d_all[k]),
                                     float(w.mean() / peak), int(len(sel))))
+    lines = join_collinear([t for t in out if t.kind == "line"], tol_m=tol, join_gap_m=join_gap_m)
+    out = lines + [t for t in out if t.kind != "line"]
     out.sort(key=lambda t: -t.score * t.n_voxels)
     return out
 
