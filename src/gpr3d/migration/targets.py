@@ -7,9 +7,10 @@ works on that ridge map (value and depth of the maximum per column):
 1. keep the columns above ``threshold`` x the map's maximum; split them into
    connected parts (8-neighbours);
 2. in each part, find straight segments one after the other by weighted RANSAC,
-   refined by a weighted principal axis; endpoints at the 1st/99th percentile of
-   the inliers along the axis (the image's smear beyond a pipe's end still counts:
-   ends overshoot, see ``benchmarks/eval_scenes.py``); the depth along the segment
+   refined by a weighted principal axis; endpoints at the 2 % and 98 % quantiles,
+   weighted by the ridge value, of the inliers at least half the line's median
+   strength (the weak fringe past a pipe's end counts little; ends still overshoot
+   by 10-20 cm, see ``benchmarks/eval_scenes.py``); the depth along the segment
    by a robust linear fit; the band around an accepted segment is removed before
    the next search (an L-shaped pipe becomes two segments,
    a thick image of one pipe stays one, a bar of a mat crossing it keeps the rest of
@@ -114,6 +115,19 @@ def _shadowed(a, b, found, band):
     return False
 
 
+def _extent(s, w, q):
+    """The extent along a line of its inlier columns (positions ``s``): the ``q`` and ``1 - q`` quantiles of ``s``
+    weighted by the columns' ridge values ``w`` (weak columns at the ends, the smear past a pipe's end, count for
+    little); ``q = 0`` gives the unweighted 1st and 99th percentiles."""
+    if q <= 0:
+        lo, hi = np.percentile(s, [1, 99])
+        return float(lo), float(hi)
+    order = np.argsort(s)
+    cw = np.cumsum(w[order])
+    cw /= cw[-1]
+    return float(s[order][np.searchsorted(cw, q)]), float(s[order][min(np.searchsorted(cw, 1 - q), len(s) - 1)])
+
+
 def join_collinear(lines: list, *, tol_m: float, join_gap_m: float, max_angle_deg: float = 3.0) -> list:
     """Join line targets that continue one another: directions within ``max_angle_deg``, each one's ends within
     ``tol_m`` (horizontally) of the other's axis and depth, the gap between them under ``join_gap_m``."""
@@ -157,7 +171,8 @@ def join_collinear(lines: list, *, tol_m: float, join_gap_m: float, max_angle_de
 def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.3, reference_percentile: float = 99.5,
                     min_line_m: float = 0.3,
                     tol_m: float | None = None, band_m: float | None = None, min_columns: int = 6,
-                    min_density: float = 1.0, join_gap_m: float = 0.5,
+                    min_density: float = 1.0, join_gap_m: float = 0.5, end_weight: float = 0.02,
+                    end_rel: float = 0.5,
                     max_segments: int = 40, iters: int = 300, seed: int = 0) -> list[Target3D]:
     """Line and point targets from an image envelope ``(nx, ny, nd)`` on ``grid``.
 
@@ -166,7 +181,9 @@ def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.
     brighter than the pipes themselves). ``tol_m`` (default 2 cells) is the inlier distance of the line fits; ``band_m`` (default
     ``max(4 tol, 0.1 m)``; ``reconstruct`` gives ``max(2 tol, half a wavelength)``) the band removed around an
     accepted line; segments shorter than ``min_line_m`` become points; a line needs ``min_density`` inlier
-    columns per cell of its length; collinear lines across gaps up to ``join_gap_m`` are joined.
+    columns per cell of its length; collinear lines across gaps up to ``join_gap_m`` are joined. A line's ends: the
+    ``end_weight`` and ``1 - end_weight`` quantiles, weighted by ridge value, of its inlier columns at least
+    ``end_rel`` times their median value (``end_weight = 0``: the unweighted 1st and 99th percentiles).
     """
     val, dep = ridge_map(np.asarray(envelope, dtype=np.float32), grid)
     peak = float(np.percentile(val, reference_percentile))
@@ -197,7 +214,8 @@ def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.
             inl = _line_dist(p, c, d) < tol
             c, d = _pca(p[inl], w[inl])
             s = (p[inl] - c) @ d
-            lo, hi = np.percentile(s, [1, 99])
+            strong = w[inl] >= end_rel * np.median(w[inl])  # the line's own weak fringe does not set its ends
+            lo, hi = _extent(s[strong], w[inl][strong], end_weight)
             if hi - lo < min_line_m:
                 break  # no more lines in this part: the rest are points
             # depth along the line: robust straight-line fit (median of depths in slices)
