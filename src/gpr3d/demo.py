@@ -268,6 +268,8 @@ def _reconstruction_stage(out: Path, log) -> dict:
             write_reconstruction(result, out / folder, source="random_walk_survey.h5")
         ev = evaluate_targets(result.targets, truth_lines_from_pipes(pipes))
         rows[key] = {"wall_s": wall, "n_targets": len(result.targets), "false_targets": ev["false_targets"],
+                     "false_lines": ev["false_lines"], "false_points": ev["false_points"],
+                     "excess_fraction": ev["excess_fraction"],
                      "truth": [{"target": n, **r} for n, r in zip(names, ev["truth"])],
                      "updates_per_s": result.updates_per_s, "grid": result.grid.to_dict()}
         if key == "estimated":
@@ -282,11 +284,16 @@ def _reconstruction_stage(out: Path, log) -> dict:
         for key in ("estimated", "true"):
             r = rows[key]["truth"][i]
             cells.append(f"position {r['position_error_m'] * 100:4.1f} cm, depth {r['depth_error_m'] * 100:4.1f} cm, "
-                         f"orientation {r['orientation_error_deg']:4.1f} deg, complete {r['completeness'] * 100:3.0f} %"
-                         if "position_error_m" in r else "not found")
+                         f"orientation {r['orientation_error_deg']:4.1f} deg, ends {r['endpoint_error_m'] * 100:4.1f} cm "
+                         f"off, complete {r['completeness'] * 100:3.0f} %" if "position_error_m" in r
+                         else f"found as points only, complete {r['completeness'] * 100:3.0f} %" if r["completeness"] > 0
+                         else "not found")
         log(f"      {name:<16} {cells[0]}  ({cells[1]})")
-    log(f"      {rows['estimated']['n_targets']} targets, {rows['estimated']['false_targets']} false "
-        f"({rows['true']['n_targets']}, {rows['true']['false_targets']} false from the true poses)")
+    est_, tru_ = rows["estimated"], rows["true"]
+    log(f"      {est_['n_targets']} targets: {est_['false_lines']} false lines, {est_['false_points']} false points, "
+        f"overshoot {est_['excess_fraction'] * 100:.0f} % of the true length ({tru_['n_targets']} targets, "
+        f"{tru_['false_lines']} false lines, {tru_['false_points']} false points, {tru_['excess_fraction'] * 100:.0f} % "
+        "from the true poses)")
     # site scale: the same survey in tiles, each from only the traces whose cone reaches it (gpr3d reconstruct
     # --tile / --workers); the volume must be the one-pass volume bit for bit
     from gpr3d.migration.sitetiles import plan_tiles
@@ -301,6 +308,8 @@ def _reconstruction_stage(out: Path, log) -> dict:
     est = rows["estimated"]
     return {"wall_s": est["wall_s"], "grid": est["grid"], "updates_per_s": est["updates_per_s"],
             "n_targets": est["n_targets"], "false_targets": est["false_targets"], "truth": est["truth"],
+            "false_lines": est["false_lines"], "false_points": est["false_points"],
+            "excess_fraction": est["excess_fraction"],
             "poses": "estimated (visual-inertial fusion)", "with_true_poses": rows["true"], "folder": "reconstruction",
             "tiles": {"n": n_tiles, "tile_m": 0.64, "wall_s": wall_tiles, "equal_to_one_pass": same}}
 
