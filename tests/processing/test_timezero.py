@@ -52,3 +52,21 @@ def test_time_zero_takes_off_the_direct_waves_offset():
     assert p.t0_s == pytest.approx(2e-9, abs=0.01e-9)
     q = s.time_zero(method="peak", search_s=4e-9, shift=False, offset_correction=False)
     assert q.t0_s - p.t0_s == pytest.approx(0.3 / 299792458.0, rel=1e-9)
+
+
+def test_peak_time_zero_is_not_taken_by_a_shallow_echo_stronger_than_the_direct_wave():
+    """A rebar mat under a few cm of cover outshines the direct wave in most traces (here 70 %, echo 1.6x, at a
+    time that moves from trace to trace). Time zero stays on the direct wave: the mean trace's peak (the median of
+    per-trace peaks, as before, lands on the echoes)."""
+    rng = np.random.default_rng(3)
+    t = np.arange(400) * DT
+    t_direct = 2.0e-9
+    x = np.stack([ricker(t - t_direct, 1e9) for _ in range(50)])
+    for i in rng.permutation(50)[:35]:
+        x[i] += 1.6 * ricker(t - (3.3e-9 + rng.uniform(-0.2e-9, 0.2e-9)), 1e9)
+    assert np.median(direct_wave_peak(x)) * DT > 3.0e-9  # most traces' largest peak is the echo
+    assert estimate_time_zero(x, DT, method="peak") == pytest.approx(t_direct, abs=0.01e-9)
+    # per trace, rel=0.5 finds the first peak at least half the largest: the direct wave
+    np.testing.assert_allclose(direct_wave_peak(x, rel=0.5) * DT, t_direct, atol=0.01e-9)
+    with pytest.raises(ValueError, match="rel"):
+        direct_wave_peak(x, rel=0.0)

@@ -1,24 +1,29 @@
-"""Targets from a 3D image: a ridge map, connected parts, sequential robust line fits.
+"""Targets from a 3D image: a ridge map, groups, a weighted Hough transform, robust line fits.
 
 Migrated energy focuses on the surface that reflected it, so each image column's
 envelope maximum marks the top of whatever lies below that point. Extraction
 works on that ridge map (value and depth of the maximum per column):
 
-1. keep the columns above ``threshold`` x the map's maximum; split them into
-   connected parts (8-neighbours);
-2. in each part, find straight segments one after the other by weighted RANSAC,
-   refined by a weighted principal axis; endpoints at the 2 % and 98 % quantiles,
-   weighted by the ridge value, of the inliers at least half the line's median
-   strength (the weak fringe past a pipe's end counts little; ends still overshoot
-   by 10-20 cm, see ``benchmarks/eval_scenes.py``); the depth along the segment
-   by a robust linear fit; the band around an accepted segment is removed before
-   the next search (an L-shaped pipe becomes two segments,
-   a thick image of one pipe stays one, a bar of a mat crossing it keeps the rest of
-   its length), and a segment lying wholly within the band of a longer one is dropped
-   as its fragment;
-3. collinear segments (within 3 deg, their axes within the inlier distance, at one
-   depth) across a gap shorter than ``join_gap_m`` are joined into one;
-4. what remains, if large enough, is a point target (weighted centroid).
+1. keep the columns above ``threshold`` x a robust reference level of the map; gather them in
+   groups: connected parts after closing gaps narrower than ``group_gap_m`` (a rebar imaged as a row of
+   bright crossings and faint stretches between them is one group);
+2. in each group, find straight lines one after the other: the peak of a Hough transform weighted by
+   ridge value (the line through the most energy, whatever its pieces), refined by a weighted principal
+   axis; its inlier columns split into runs at gaps wider than ``run_gap_m``; each run long, dense and
+   strong enough is a line: ends at the 2 % and 98 % quantiles, weighted by ridge value, of the inliers at
+   least half the line's median strength; depth along it by a Theil-Sen fit (columns where a crossing
+   target lies shallower do not tilt it). The band around an accepted line is removed before the next
+   search (an L-shaped pipe becomes two lines, a thick image of one pipe stays one, a bar of a mat crossing
+   it keeps the rest of its length); a line lying mostly within two bands of a parallel one already found
+   is that line's fringe and is dropped; a Hough peak that gives no line is suppressed, its columns stay
+   for the others;
+3. an end piece of a line beyond a gap, lying in the band of another line that crosses it, is that line's
+   image and is cut off;
+4. collinear lines (within 3 deg, their axes within the inlier distance, at one depth) across a gap
+   shorter than ``join_gap_m`` are joined into one;
+5. what remains of a connected part, if compact, is a point target (weighted centroid).
+
+``benchmarks/eval_scenes.py`` scores this on random forward-model scenes (pipes, rebar mats).
 """
 
 from __future__ import annotations
@@ -26,7 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import ndimage
+from scipy import ndimage, stats
 
 from gpr3d.core.grid import Grid3D
 
@@ -80,39 +85,10 @@ def _pca(p, w):
     return c, vt[0]
 
 
-def _ransac(p, w, tol, rng, iters):
-    best, best_score = None, -1.0
-    n = len(p)
-    for _ in range(iters):
-        i, j = rng.integers(0, n, 2)
-        d = p[j] - p[i]
-        nd = np.hypot(*d)
-        if nd < 3 * tol:
-            continue
-        inl = _line_dist(p, p[i], d / nd) < tol
-        score = float(w[inl].sum())
-        if score > best_score:
-            best, best_score = inl, score
-    return best
-
-
 def _seg_point_dist(p, a, b):
     ab = b - a
     t = np.clip((p - a) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
     return float(np.hypot(*(p - (a + t * ab))))
-
-
-def _shadowed(a, b, found, band):
-    """True when both ends of segment a-b lie within ``band`` of one longer line already found
-    (a fragment of that line's image, e.g. from a bright end or corner)."""
-    for t in found:
-        if t.kind != "line":
-            continue
-        pa, pb = np.array(t.points_xyz[0][:2]), np.array(t.points_xyz[1][:2])
-        if np.hypot(*(pb - pa)) >= np.hypot(*(b - a)) and max(_seg_point_dist(a, pa, pb),
-                                                               _seg_point_dist(b, pa, pb)) < band:
-            return True
-    return False
 
 
 def _extent(s, w, q):
@@ -168,86 +144,261 @@ def join_collinear(lines: list, *, tol_m: float, join_gap_m: float, max_angle_de
     return out
 
 
-def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.3, reference_percentile: float = 99.5,
-                    min_line_m: float = 0.3,
-                    tol_m: float | None = None, band_m: float | None = None, min_columns: int = 6,
-                    min_density: float = 1.0, join_gap_m: float = 0.5, end_weight: float = 0.02,
-                    end_rel: float = 0.5,
-                    max_segments: int = 40, iters: int = 300, seed: int = 0) -> list[Target3D]:
-    """Line and point targets from an image envelope ``(nx, ny, nd)`` on ``grid``.
+def _fringe(a, b, found, band, max_angle_deg: float = 10.0) -> bool:
+    """True when most of segment a-b (horizontal) lies within ``band`` of a near-parallel line already found:
+    the fringe of that line's (wide) image, not a target of its own."""
+    u = (b - a) / max(np.hypot(*(b - a)), 1e-12)
+    pts = a + np.linspace(0.0, 1.0, 11)[:, None] * (b - a)
+    for t in found:
+        pa, pb = np.array(t.points_xyz[0][:2]), np.array(t.points_xyz[1][:2])
+        v = (pb - pa) / max(np.hypot(*(pb - pa)), 1e-12)
+        if abs(float(u @ v)) >= np.cos(np.radians(max_angle_deg)) and np.mean(_seg_dists(pts, pa, pb) < band) >= 0.7:
+            return True
+    return False
 
-    ``threshold`` is relative to the ``reference_percentile`` of the ridge map (a
-    robust stand-in for its maximum: pipe ends and crossings make hot spots far
-    brighter than the pipes themselves). ``tol_m`` (default 2 cells) is the inlier distance of the line fits; ``band_m`` (default
-    ``max(4 tol, 0.1 m)``; ``reconstruct`` gives ``max(2 tol, half a wavelength)``) the band removed around an
-    accepted line; segments shorter than ``min_line_m`` become points; a line needs ``min_density`` inlier
-    columns per cell of its length; collinear lines across gaps up to ``join_gap_m`` are joined. A line's ends: the
-    ``end_weight`` and ``1 - end_weight`` quantiles, weighted by ridge value, of its inlier columns at least
-    ``end_rel`` times their median value (``end_weight = 0``: the unweighted 1st and 99th percentiles).
+
+def _seg_dists(q, a, b):
+    ab = b - a
+    t = np.clip((q - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0)
+    return np.hypot(*(q - (a + t[:, None] * ab)).T)
+
+
+def _depth_fit(s, depth, w, dd):
+    """Depth along a line, ``depth = k s + m``: Theil-Sen (robust to the columns where a crossing target lies
+    shallower), then a weighted least-squares fit to the columns within ``max(2 dd, median residual)``."""
+    if len(s) < 3 or np.ptp(s) <= 0:
+        return np.array([0.0, float(np.average(depth, weights=w))])
+    with np.errstate(invalid="ignore", divide="ignore"):  # its confidence interval, unused, can be 0/0
+        k, m, *_ = stats.theilslopes(depth, s)
+    A = np.stack([s, np.ones_like(s)], axis=1)
+    res = np.abs(A @ np.array([k, m]) - depth)
+    keep = res <= max(2 * dd, float(np.median(res)))
+    coef, *_ = np.linalg.lstsq(A[keep] * w[keep, None], depth[keep] * w[keep], rcond=None)
+    return coef
+
+
+def _is_line(s, n, min_line, min_density, cell):
+    # a real line's image is at least a cell wide all along: sparse "lines" join scattered blobs
+    return s[-1] - s[0] >= min_line and n * cell / max(s[-1] - s[0], 1e-9) >= min_density
+
+
+def _chain_runs(s, w, depth, *, run_gap, join_gap, min_columns, min_line, min_density, cell, level, depth_tol):
+    """The runs of a Hough line's inliers (positions ``s`` along it, sorted) that make lines: split at gaps over
+    ``run_gap``; a run long and dense enough is a line, and takes in the short pieces beyond its ends (each
+    within ``join_gap`` of the last, at least ``level`` strong on average, at its depth within ``depth_tol``):
+    a rebar imaged as bright stretches between the bars crossing it stays one line."""
+    runs = [r for r in np.split(np.arange(len(s)), np.nonzero(np.diff(s) > run_gap)[0] + 1) if len(r) >= min_columns]
+    ok = [_is_line(s[r], len(r), min_line, min_density, cell) for r in runs]
+    used = [False] * len(runs)
+    out = []
+    for k, r in enumerate(runs):
+        if not ok[k] or used[k]:
+            continue
+        used[k] = True
+        chain = [r]
+        zd = float(np.median(depth[r]))
+        for step in (-1, 1):
+            j, edge = k + step, (r[0] if step < 0 else r[-1])
+            while 0 <= j < len(runs) and not ok[j] and not used[j]:
+                q = runs[j]
+                gap = s[edge] - s[q[-1]] if step < 0 else s[q[0]] - s[edge]
+                if gap > join_gap or w[q].mean() < level or abs(float(np.median(depth[q])) - zd) > depth_tol:
+                    break
+                used[j] = True
+                chain.append(q)
+                edge = q[0] if step < 0 else q[-1]
+                j += step
+        out.append(np.sort(np.concatenate(chain)))
+    return out
+
+
+class _Hough:
+    """Weighted Hough accumulator over points ``p (n, 2)`` (m) with weights ``w``: angle steps of ``step_deg``,
+    distance bins of ``tol``. Points can be removed (their votes subtracted) and peaks suppressed."""
+
+    def __init__(self, p, w, tol, step_deg):
+        self.p, self.w, self.tol = p, w, tol
+        th = np.radians(np.arange(0.0, 180.0, step_deg))
+        self.normals = np.stack([np.cos(th), np.sin(th)], axis=1)
+        self.centre = p.mean(axis=0)
+        self.rmax = float(np.hypot(*(p - self.centre).T).max()) + tol
+        self.nr = int(np.ceil(2 * self.rmax / tol)) + 1
+        self.acc = self._votes(np.arange(len(p)))
+        self.suppressed = np.zeros(self.acc.shape, bool)
+
+    def _votes(self, idx):
+        nth = len(self.normals)
+        r = (self.p[idx] - self.centre) @ self.normals.T
+        rb = np.clip(np.floor((r + self.rmax) / self.tol).astype(np.int64), 0, self.nr - 1)
+        flat = (rb + self.nr * np.arange(nth)[None, :]).ravel()
+        return np.bincount(flat, np.repeat(self.w[idx], nth), minlength=self.nr * nth).reshape(nth, self.nr)
+
+    def remove(self, idx):
+        if len(idx):
+            self.acc -= self._votes(idx)
+
+    def peak(self):
+        """``(votes, centre, direction, (angle bin, distance bin))`` of the strongest line not suppressed (a
+        line straddling two distance bins counts both)."""
+        sm = self.acc.copy()
+        sm[:, :-1] += self.acc[:, 1:]
+        sm[self.suppressed] = -np.inf
+        ti, ri = np.unravel_index(int(np.argmax(sm)), sm.shape)
+        n = self.normals[ti]
+        c = self.centre + ((ri + 1) * self.tol - self.rmax) * n
+        return float(sm[ti, ri]), c, np.array([-n[1], n[0]]), (ti, ri)
+
+    def suppress(self, key):
+        ti, ri = key
+        self.suppressed[np.arange(ti - 2, ti + 3) % len(self.normals), max(ri - 1, 0):ri + 2] = True
+
+
+def _trim_crossings(lines, info, P, W, band, end_weight, end_rel, min_angle_deg: float = 20.0):
+    """Cut off a line's end piece (beyond a gap wider than ``band``) whose columns lie mostly within ``band`` of
+    another line crossing it (at more than ``min_angle_deg``): that line's image, not this one's."""
+    geo = [(np.array(t.points_xyz[0][:2]), np.array(t.points_xyz[1][:2])) for t in lines]
+    for i, t in enumerate(lines):
+        cols, c, d, coef = info[i]
+        s = (P[cols] - c) @ d
+        order = np.argsort(s)
+        cols, s = cols[order], s[order]
+        claimed = np.zeros(len(cols), bool)
+        for j, (pa, pb) in enumerate(geo):
+            v = (pb - pa) / max(np.hypot(*(pb - pa)), 1e-12)
+            if j != i and abs(float(v @ d)) <= np.cos(np.radians(min_angle_deg)):
+                claimed |= _seg_dists(P[cols], pa, pb) < band
+        pieces = np.split(np.arange(len(cols)), np.nonzero(np.diff(s) > band)[0] + 1)
+        k0, k1 = 0, len(pieces)
+        if k1 - k0 > 1 and claimed[pieces[k0]].mean() >= 0.5:
+            k0 += 1
+        if k1 - k0 > 1 and claimed[pieces[k1 - 1]].mean() >= 0.5:
+            k1 -= 1
+        if (k0, k1) == (0, len(pieces)):
+            continue
+        keep = np.concatenate(pieces[k0:k1])
+        ss, ww = s[keep], W[cols[keep]]
+        strong = ww >= end_rel * np.median(ww)
+        lo, hi = _extent(ss[strong], ww[strong], end_weight)
+        a = np.append(c + lo * d, coef[0] * lo + coef[1])
+        b = np.append(c + hi * d, coef[0] * hi + coef[1])
+        t.points_xyz = [a.tolist(), b.tolist()]
+        t.depth_m = float(min(a[2], b[2]))
+        t.extra["trimmed"] = True
+
+
+def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.3, reference_percentile: float = 99.5,
+                    min_line_m: float = 0.3, tol_m: float | None = None, band_m: float | None = None,
+                    min_columns: int = 6, min_density: float = 1.0, line_contrast: float = 4.0 / 3.0,
+                    group_gap_m: float | None = None, run_gap_m: float | None = None, join_gap_m: float = 0.5,
+                    end_weight: float = 0.02, end_rel: float = 0.5, max_segments: int = 40,
+                    angle_step_deg: float = 0.5, max_peaks: int = 400) -> list[Target3D]:
+    """Line and point targets from an image envelope ``(nx, ny, nd)`` on ``grid`` (deterministic).
+
+    ``threshold`` is relative to the ``reference_percentile`` of the ridge map (a robust stand-in for its
+    maximum: pipe ends and crossings make hot spots far brighter than the pipes themselves). ``tol_m`` (default
+    2 cells) is the inlier distance of the line fits and the Hough bin; ``band_m`` (default ``max(4 tol, 0.1 m)``;
+    ``reconstruct`` gives ``max(2 tol, half a wavelength)``) the band removed around an accepted line. Columns
+    whose gaps are narrower than ``group_gap_m`` (default 3 bands) are searched together; a line's inliers split
+    at gaps wider than ``run_gap_m`` (default 4 bands). A line needs ``min_line_m`` of length (shorter: points),
+    ``min_density`` inlier columns per cell of its length, and a mean ridge value of ``line_contrast`` x the
+    threshold (a smear just above the threshold is not a pipe). Its ends: the ``end_weight`` and
+    ``1 - end_weight`` quantiles, weighted by ridge value, of its inlier columns at least ``end_rel`` times their
+    median value. Collinear lines across gaps up to ``join_gap_m`` are joined. At most ``max_segments`` lines
+    and ``max_peaks`` Hough peaks per group are examined.
     """
-    val, dep = ridge_map(np.asarray(envelope, dtype=np.float32), grid)
+    envelope = np.asarray(envelope, dtype=np.float32)
+    val, dep = ridge_map(envelope, grid)
     peak = float(np.percentile(val, reference_percentile))
-    if peak <= 0:
+    if not peak > 0:
         return []
+    cell = min(grid.dx, grid.dy)
     tol = tol_m or 2.0 * max(grid.dx, grid.dy)
     band = band_m or max(4 * tol, 0.1)
-    rng = np.random.default_rng(seed)
-    labels, n = ndimage.label(val >= threshold * peak, structure=np.ones((3, 3)))
-    out: list[Target3D] = []
-    for lab in range(1, n + 1):
-        idx = np.argwhere(labels == lab)
-        if len(idx) < min_columns:
+    group_gap = 3 * band if group_gap_m is None else group_gap_m
+    run_gap = 4 * band if run_gap_m is None else run_gap_m
+    mask = val >= threshold * peak
+    parts, n_parts = ndimage.label(mask, structure=np.ones((3, 3)))
+    r = int(round(group_gap / 2 / cell))
+    if r > 0:
+        yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+        grown = ndimage.binary_dilation(mask, structure=(xx**2 + yy**2) <= r * r)
+    else:
+        grown = mask
+    groups, n_groups = ndimage.label(grown, structure=np.ones((3, 3)))
+    idx = np.argwhere(mask)
+    P = np.stack([grid.x0 + idx[:, 0] * grid.dx, grid.y0 + idx[:, 1] * grid.dy], axis=1)
+    W = val[tuple(idx.T)].astype(float)
+    D = dep[tuple(idx.T)].astype(float)
+    part_of, group_of = parts[tuple(idx.T)], groups[tuple(idx.T)]
+    left = np.ones(len(P), bool)  # not explained by a line (candidates for points)
+    lines: list[Target3D] = []
+    info = []  # per line: (its columns, centre, direction, depth fit), for trimming
+    for g in range(1, n_groups + 1):
+        members = np.nonzero(group_of == g)[0]
+        if len(members) < min_columns:
             continue
-        p_all = np.stack([grid.x0 + idx[:, 0] * grid.dx, grid.y0 + idx[:, 1] * grid.dy], axis=1)
-        w_all = val[tuple(idx.T)].astype(float)
-        d_all = dep[tuple(idx.T)].astype(float)
-        left = np.ones(len(idx), bool)
-        for _ in range(max_segments):
-            if left.sum() < min_columns:
+        p, w = P[members], W[members]
+        hough = _Hough(p, w, tol, angle_step_deg)
+        avail = np.ones(len(p), bool)
+        for _ in range(max_peaks):
+            if avail.sum() < min_columns or len(lines) >= max_segments:
                 break
-            sel = np.nonzero(left)[0]
-            p, w = p_all[sel], w_all[sel]
-            inl = _ransac(p, w, tol, rng, iters)
-            if inl is None or inl.sum() < min_columns:
-                break
-            c, d = _pca(p[inl], w[inl])
-            inl = _line_dist(p, c, d) < tol
-            c, d = _pca(p[inl], w[inl])
-            s = (p[inl] - c) @ d
-            strong = w[inl] >= end_rel * np.median(w[inl])  # the line's own weak fringe does not set its ends
-            lo, hi = _extent(s[strong], w[inl][strong], end_weight)
-            if hi - lo < min_line_m:
-                break  # no more lines in this part: the rest are points
-            # depth along the line: robust straight-line fit (median of depths in slices)
-            dd = d_all[sel][inl]
-            A = np.stack([s, np.ones_like(s)], axis=1)
-            coef, *_ = np.linalg.lstsq(A * w[inl][:, None], dd * w[inl], rcond=None)
-            res = np.abs(A @ coef - dd)
-            keep = res <= np.percentile(res, 80)
-            coef, *_ = np.linalg.lstsq(A[keep], dd[keep], rcond=None)
-            a = np.append(c + lo * d, coef[0] * lo + coef[1])
-            b = np.append(c + hi * d, coef[0] * hi + coef[1])
-            # a real line's image is at least a cell wide all along: sparse "lines" join scattered blobs
-            dense = inl.sum() * min(grid.dx, grid.dy) / max(hi - lo, 1e-9) >= min_density
-            if dense and not _shadowed(a[:2], b[:2], out, band):
-                out.append(Target3D("line", [a.tolist(), b.tolist()], float(min(a[2], b[2])),
-                                    float(w[inl].mean() / peak), int(inl.sum())))
-            # remove the band around the accepted segment
-            along = (p - c) @ d
-            near = (_line_dist(p, c, d) < band) & (along >= lo - band) & (along <= hi + band)
-            left[sel[near]] = False
-        if left.sum() >= min_columns:
-            sel = np.nonzero(left)[0]
-            w = w_all[sel]
-            # only a compact, strong remainder is a point target
-            cen = np.average(p_all[sel], axis=0, weights=w)
-            spread = np.sqrt(np.average(np.sum((p_all[sel] - cen) ** 2, axis=1), weights=w))
-            if spread < max(min_line_m / 2, 3 * tol):
-                k = sel[np.argmax(w)]
-                out.append(Target3D("point", [[float(cen[0]), float(cen[1]), float(d_all[k])]], float(d_all[k]),
-                                    float(w.mean() / peak), int(len(sel))))
-    lines = join_collinear([t for t in out if t.kind == "line"], tol_m=tol, join_gap_m=join_gap_m)
-    out = lines + [t for t in out if t.kind != "line"]
+            votes, c0, d0, key = hough.peak()
+            if votes < min_columns * threshold * peak:
+                break  # no line of min_columns columns left
+            sel = np.nonzero(avail)[0]
+            inl = _line_dist(p[sel], c0, d0) < tol
+            if inl.sum() < min_columns:
+                hough.suppress(key)
+                continue
+            c, d = _pca(p[sel][inl], w[sel][inl])
+            inl = _line_dist(p[sel], c, d) < tol
+            if inl.sum() >= 2:
+                c, d = _pca(p[sel][inl], w[sel][inl])
+                inl = _line_dist(p[sel], c, d) < tol
+            ii = sel[inl]
+            s = (p[ii] - c) @ d
+            order = np.argsort(s)
+            ii, s = ii[order], s[order]
+            cleared = np.zeros(len(p), bool)
+            runs = _chain_runs(s, w[ii], D[members[ii]], run_gap=run_gap, join_gap=join_gap_m, min_columns=min_columns,
+                               min_line=min_line_m, min_density=min_density, cell=cell,
+                               level=line_contrast * threshold * peak, depth_tol=max(2 * grid.dd, tol))
+            for run in runs:
+                jj, ss, ww = ii[run], s[run], w[ii[run]]
+                strong = ww >= end_rel * np.median(ww)
+                lo, hi = _extent(ss[strong], ww[strong], end_weight)
+                coef = _depth_fit(ss, D[members[jj]], ww, grid.dd)
+                a = np.append(c + lo * d, coef[0] * lo + coef[1])
+                b = np.append(c + hi * d, coef[0] * hi + coef[1])
+                if ww.mean() >= line_contrast * threshold * peak and not _fringe(a[:2], b[:2], lines, 2 * band):
+                    lines.append(Target3D("line", [a.tolist(), b.tolist()], float(min(a[2], b[2])),
+                                          float(ww.mean() / peak), int(len(run))))
+                    info.append((members[jj], c, d, coef))
+                along = (p - c) @ d
+                cleared |= (_line_dist(p, c, d) < band) & (along >= lo - band) & (along <= hi + band)
+            if not cleared.any():
+                hough.suppress(key)  # this peak gives no line; its columns stay for other lines
+                continue
+            gone = np.nonzero(cleared & avail)[0]
+            avail[gone] = False
+            left[members[cleared]] = False
+            hough.remove(gone)
+    _trim_crossings(lines, info, P, W, band, end_weight, end_rel)
+    points: list[Target3D] = []
+    for lab in range(1, n_parts + 1):
+        sel = np.nonzero(left & (part_of == lab))[0]
+        if len(sel) < min_columns:
+            continue
+        w = W[sel]
+        # only a compact, strong remainder is a point target
+        cen = np.average(P[sel], axis=0, weights=w)
+        spread = np.sqrt(np.average(np.sum((P[sel] - cen) ** 2, axis=1), weights=w))
+        if spread < max(min_line_m / 2, 3 * tol):
+            k = sel[np.argmax(w)]
+            points.append(Target3D("point", [[float(cen[0]), float(cen[1]), float(D[k])]], float(D[k]),
+                                   float(w.mean() / peak), int(len(sel))))
+    out = join_collinear(lines, tol_m=tol, join_gap_m=join_gap_m) + points
     out.sort(key=lambda t: -t.score * t.n_voxels)
     return out
 
