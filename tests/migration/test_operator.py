@@ -181,8 +181,8 @@ def test_read_path_follows_the_cpu_and_the_override(monkeypatch):
     monkeypatch.setenv("GPR3D_GATHER", "1")
     assert _kernels.read_path() == _kernels.GATHER
     monkeypatch.delenv("GPR3D_GATHER")
-    for cpu, want in (("znver3", _kernels.LOADS), ("znver4", _kernels.LOADS), ("znver5", _kernels.GATHER),
-                      ("sapphirerapids", _kernels.GATHER)):
+    for cpu, want in (("znver3", _kernels.LOADS), ("znver4", _kernels.LOADS), ("znver5", _kernels.LOADS),
+                      ("sapphirerapids", _kernels.GATHER), ("skylake-avx512", _kernels.GATHER)):
         monkeypatch.setattr(llb, "get_host_cpu_name", lambda cpu=cpu: cpu)
         assert _kernels.read_path() == want, cpu
 
@@ -223,3 +223,24 @@ def test_a_voxel_at_an_antenna_stays_finite(read):
     img = op.adjoint(np.ones((2, 40), np.float32))
     assert np.all(np.isfinite(img)) and img.max() > 0
     assert img[4, 0, 0] == 0.0  # the voxel at the antenna at x = 0.2
+
+
+def test_the_depth_loop_stops_where_the_record_ends():
+    """A trace's loop over a column's depths stops past the deepest voxel whose two-way path fits in the record
+    (beyond it every read is the zero padding). At zero offset the bound is exact: the cut lies 1-2 indices past
+    that voxel; a column wholly in reach runs to the bottom, one out of reach does not run."""
+    from gpr3d.migration._kernels import end_depth, record_path
+
+    d0, dd, nd = 0.02, 0.01, 200
+    slow = np.full(nd, 1 / 1e8, np.float32)  # 0.1 m/ns
+    t0, inv_dt, umax = np.float32(1e-9), np.float32(1e10), np.float32(300.0)  # record: 30 ns, 29 ns after t0
+    lmax2 = record_path(slow, 0, t0, inv_dt, umax)
+    assert lmax2 == pytest.approx((29e-9 * 1e8) ** 2, rel=1e-3)
+    for h in (0.0, 0.5, 1.0, 1.4):
+        z_last = np.sqrt(lmax2 / 4 - h * h)  # 2 sqrt(h^2 + z^2) = path
+        k_true = int(np.floor((z_last - d0) / dd))
+        k1 = end_depth(h, 0.0, h, 0.0, 0.0, 0.0, lmax2, d0, dd, nd)
+        assert k_true + 1 <= k1 <= k_true + 2, (h, k_true, k1)
+    assert end_depth(0.3, 0.0, 0.3, 0.0, 0.0, 0.0, lmax2, d0, dd, 50) == 50  # the column ends at 0.51 m: all in reach
+    assert end_depth(1.5, 0.0, 1.5, 0.0, 0.0, 0.0, lmax2, d0, dd, nd) == 0  # 3 m of path before any depth
+    assert record_path(slow, 0, np.float32(31e-9), inv_dt, umax) < 0  # a record that ends before time zero

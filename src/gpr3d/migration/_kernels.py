@@ -42,6 +42,37 @@ def start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd):
     return min(max(k0, 0), nd)
 
 @njit(fastmath=True, cache=True, inline="always")
+def record_path(slow, off, t0, inv_dt, umax):
+    # the square of the longest path (tx -> voxel -> rx, m) whose two-way time still lands inside the record, at the
+    # fastest depth's speed (a little longer, for float32 rounding); inf when the slowness is not positive, -1 when
+    # the record ends before time zero
+    smin = slow[off]
+    for k in range(off + 1, slow.shape[0]):
+        smin = min(smin, slow[k])
+    if not smin > 0.0:
+        return math.inf
+    lmax = (float(umax) / float(inv_dt) - float(t0)) / float(smin) * 1.0001
+    return lmax * lmax if lmax > 0.0 else -1.0
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def end_depth(ax, ay, bx, by, ha, hb, lmax2, d0, dd, nd):
+    # one past the deepest depth index that a trace's record can reach from a column: the two legs are together at
+    # least sqrt(|a + b|^2 + (za + zb)^2) long (the triangle inequality, a and b the horizontal legs), and a path
+    # longer than sqrt(lmax2) (see record_path) reads the zero padding past the record, which adds exact zeros to
+    # the image and to the fold. Cheap when the whole column is in reach (the common case); two indices of margin.
+    m2 = (ax + bx) * (ax + bx) + (ay + by) * (ay + by)
+    zf = 2.0 * (d0 + (nd - 1) * dd) + ha + hb
+    if zf <= 0.0 or m2 + zf * zf < lmax2:
+        return nd
+    if m2 >= lmax2:
+        return 0
+    z = 0.5 * (math.sqrt(lmax2 - m2) - ha - hb)
+    k1 = int(math.floor((z - d0) / dd)) + 2
+    return min(max(k1, 0), nd)
+
+
+@njit(fastmath=True, cache=True, inline="always")
 def sample_position(dk, ha, hb, h2a, h2b, sk, t0, inv_dt, umax):
     # fractional sample index of the two-way time tx -> voxel at depth dk -> rx, clamped to the padded trace;
     # with the vertical legs and path lengths the weights need
@@ -77,6 +108,7 @@ def adjoint(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, ima
     nx, ny, nd = image.shape
     n_tr = data.shape[0]
     d0, dd = depth_axis(depth, nd)
+    lmax2 = record_path(slow, 0, t0, inv_dt, umax)
     for c in prange(nx * ny):
         ix = c // ny
         iy = c - ix * ny
@@ -90,23 +122,24 @@ def adjoint(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, ima
             ha = tx[j, 2]
             hb = rx[j, 2]
             k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
+            k1 = end_depth(ax, ay, bx, by, ha, hb, lmax2, d0, dd, nd)
             if mode == 0:
-                for k in range(k0, nd):
+                for k in range(k0, k1):
                     uu[k] = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)[0]
             else:
-                for k in range(k0, nd):
+                for k in range(k0, k1):
                     uu[k], za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
                     ww[k] = weight(za, zb, ra, rb, mode)
             row = data[j]
             # unsigned indices (u >= 0 by the clamp): no negative-index wraparound, so the gathers vectorise
             if mode == 0:
-                for k in range(k0, nd):
+                for k in range(k0, k1):
                     u = uu[k]
                     i0 = np.uint32(u)
                     f = u - f32(i0)
                     acc[k] += row[i0] + f * (row[i0 + one] - row[i0])
             else:
-                for k in range(k0, nd):
+                for k in range(k0, k1):
                     u = uu[k]
                     i0 = np.uint32(u)
                     f = u - f32(i0)
@@ -153,7 +186,8 @@ GATHER, LOADS = 1, 2
 
 def read_path() -> int:
     """How the SIMD loop reads the trace here: ``GATHER`` where hardware gathers are fast, ``LOADS`` (scalar
-    loads into a vector) on the AMD cores whose gathers are slow (Zen 1-4, ``znver1``..``znver4`` to LLVM).
+    loads into a vector) on AMD cores (``znver1``..``znver5`` to LLVM): gathers are slow on Zen 1-4, and on Zen 5
+    the loads measured 2.88-2.90 s against 2.99-3.07 s for the gathers (the 8000-trace adjoint with its fold).
 
     ``GPR3D_GATHER=1`` / ``0`` overrides; ``benchmarks/bench_reconstruct.py`` measures both."""
     env = os.environ.get("GPR3D_GATHER", "auto")
@@ -162,7 +196,7 @@ def read_path() -> int:
     import llvmlite.binding as llb
 
     cpu = llb.get_host_cpu_name()
-    return LOADS if cpu in ("znver1", "znver2", "znver3", "znver4") else GATHER
+    return LOADS if cpu.startswith("znver") else GATHER
 
 
 @njit(fastmath=True, cache=True, inline="always")
@@ -196,6 +230,7 @@ def adjoint_simd(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode
     nblk = depth.shape[0] // W
     off = depth.shape[0] - nd
     d0, dd = depth_axis(depth, nd)
+    lmax2 = record_path(slow, off, t0, inv_dt, umax)
     none = np.zeros(1, np.float32)
     for c in prange(nx * ny):
         ix = c // ny
@@ -205,10 +240,11 @@ def adjoint_simd(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode
         for j in range(n_tr):
             ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
             k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
-            if k0 >= nd:
+            k1 = end_depth(ax, ay, bx, by, tx[j, 2], rx[j, 2], lmax2, d0, dd, nd)
+            if k0 >= k1:
                 continue
-            _stack(data[j], depth, slow, acc, none, h2a, h2b, tx[j, 2], rx[j, 2], t0, inv_dt, umax, k0 + off, nblk,
-                   mode, False, path)
+            _stack(data[j], depth, slow, acc, none, h2a, h2b, tx[j, 2], rx[j, 2], t0, inv_dt, umax, k0 + off,
+                   min(nblk, (k1 + off + W - 1) // W), mode, False, path)
         for k in range(nd):
             col[k] += acc[k + off]
 
@@ -280,6 +316,7 @@ def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mod
     d0, dd = depth_axis(depth, nd)
     nblk = depth.shape[0] // W
     off = depth.shape[0] - nd  # top padding of the SIMD blocks (0 for the scalar loop)
+    lmax2 = record_path(slow, off, t0, inv_dt, umax)
     ntx = (nx + TILE - 1) // TILE
     nty = (ny + TILE - 1) // TILE
     for t in prange(ntx * nty):
@@ -315,15 +352,16 @@ def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mod
                         for iy in range(ty0, ty1):
                             ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
                             k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
-                            if k0 < nd:
+                            k1 = end_depth(ax, ay, bx, by, ha, hb, lmax2, d0, dd, nd)
+                            if k0 < k1:
                                 c = (ix - tx0) * TILE + (iy - ty0)
                                 if path:
                                     _stack(row, depth, slow, acc[c], facc[c], h2a, h2b, ha, hb, t0, inv_dt, umax,
-                                           k0 + off, nblk, mode, fold, path)
+                                           k0 + off, min(nblk, (k1 + off + W - 1) // W), mode, fold, path)
                                 else:
                                     _scalar_depths(row, depth[off:], slow[off:], acc[c, off:],
                                                    facc[c, off:] if fold else facc[c], h2a, h2b, ha, hb, t0, inv_dt,
-                                                   umax, k0, nd, mode, fold, uu, ww)
+                                                   umax, k0, k1, mode, fold, uu, ww)
         for ix in range(tx0, tx1):
             for iy in range(ty0, ty1):
                 c = (ix - tx0) * TILE + (iy - ty0)
