@@ -59,7 +59,7 @@ def test_reconstruct_errors_are_one_line(pipe_survey, tmp_path):
     short = Trajectory([0, 1], [[0, 0, 0], [1, 0, 0]], [[1, 0, 0, 0]] * 2)
     write_tum(short, tmp_path / "short.tum")
     r = run_cli("reconstruct", d / "line.h5", "--poses", tmp_path / "short.tum", "--out", tmp_path / "o")
-    assert r.returncode == 1 and "2 poses but the survey has 2500 traces" in r.stderr
+    assert r.returncode == 1 and "short.tum holds 2 poses but" in r.stderr and "line.h5 has 2500 traces" in r.stderr
     (tmp_path / "boxes.json").write_text("[[1, 2, 3]]")
     r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--boxes", tmp_path / "boxes.json",
                 "--out", tmp_path / "o")
@@ -82,7 +82,7 @@ def test_boxes_make_a_noise_map(pipe_survey, tmp_path):
 @pytest.mark.parametrize("extra, words", [
     (["--eps-r", "-3"], "--eps-r must be a relative permittivity >= 1 or 'file', got '-3'"),
     (["--eps-r", "six"], "--eps-r must be a relative permittivity >= 1 or 'file', got 'six'"),
-    (["--spacing", "0"], "spacing_m must be positive"),
+    (["--spacing", "0"], "--spacing must be positive"),
     (["--boxes", "{box}"], "no 'targets' list"),
     (["--boxes", "{ns_box}"], "box 0 [10, 5, 40, 9] lies outside the data"),
     (["--tile", "0"], "tile size must be a positive number of metres, got 0.0"),

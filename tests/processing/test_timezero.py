@@ -41,7 +41,7 @@ def test_time_zero_step_on_synthetic_survey():
     assert p.t0_s == 0.0 and p.n_samples < s.n_samples
     q = s.time_zero(method="peak", search_s=4e-9, shift=False)
     assert q.t0_s == pytest.approx(2e-9, abs=0.01e-9) and q.n_samples == s.n_samples
-    with pytest.raises(gpr3d.InvalidDataError, match="unknown time-zero method"):
+    with pytest.raises(gpr3d.InvalidDataError, match="time_zero: method must be 'first_break' or 'peak', got 'guess'"):
         s.time_zero(method="guess")
 
 

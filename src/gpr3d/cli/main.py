@@ -112,8 +112,13 @@ def _apply_steps(survey, specs):
 
 
 def cmd_show(args):
-    from gpr3d.viz.bscan import save_bscan_png
+    from gpr3d.viz.bscan import check_plot_args, save_bscan_png
 
+    _check_suffix(args.out, (".png",), "--out")
+    try:
+        check_plot_args(cmap=args.cmap, clip_percentile=args.clip)
+    except GPR3DError as exc:
+        raise GPR3DError(f"--{'cmap' if 'colour' in str(exc) else 'clip'}: {exc}") from None
     s = _apply_steps(_read_channel(args), args.steps)
     if args.axis == "depth" and args.eps_r is None and s.eps_r is None:
         raise GPR3DError("--axis depth needs --eps-r (the file gives no eps_r)")
@@ -325,6 +330,7 @@ def cmd_dataset(args):
     from gpr3d.simulation.packed import PackedDataset, load_sample, pack_dataset, save_label_preview
 
     if args.action == "preview":
+        _check_suffix(args.dst, (".png",), "dataset preview's output (dst)")
         survey, labels = load_sample(args.src, args.index)
         save_label_preview(survey, labels, args.dst)
         print(f"wrote {args.dst}")
@@ -346,6 +352,11 @@ def _reconstruct_defaults():
     return ReconstructConfig()
 
 
+#: ReconstructConfig's names for the settings that reconstruct's options set
+_RECONSTRUCT_FLAGS = {"spacing_m": "--spacing", "max_depth_m": "--max-depth", "aperture_deg": "--aperture",
+                      "threshold": "--threshold", "min_line_m": "--min-line", "engine": "--engine"}
+
+
 def cmd_reconstruct(args):
     from gpr3d.io.detections import read_boxes
     from gpr3d.io.registry import read
@@ -354,11 +365,25 @@ def cmd_reconstruct(args):
 
     if args.mask == "detect" and args.boxes:
         raise GPR3DError("give --boxes or --mask detect, not both")
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise GPR3DError(f"--out {args.out} is a file; reconstruct writes a folder (give a new or existing folder)")
     site = dict(tile_m=args.tile, workers=args.workers, scheduler=args.scheduler,
                 checkpoint=str(Path(args.out) / "tiles") if args.resume else None)
-    from gpr3d.migration.reconstruct import check_site_settings
+    from gpr3d.migration.reconstruct import check_config
 
-    check_site_settings(ReconstructConfig(**site))  # one line, before any work
+    if args.aperture < 0:
+        raise GPR3DError(f"--aperture must be 0 (none) or a cone half-angle in (0, 90) degrees, got {args.aperture:g}")
+    settings = dict(spacing_m=args.spacing, max_depth_m=args.max_depth,
+                    aperture_deg=None if args.aperture == 0 else args.aperture, threshold=args.threshold,
+                    min_line_m=args.min_line, engine=args.engine, time_zero="none" if args.no_time_zero else "peak")
+    try:
+        check_config(ReconstructConfig(**settings, **site))  # one line naming the setting, before any work
+    except GPR3DError as exc:
+        msg = str(exc)
+        for name, flag in _RECONSTRUCT_FLAGS.items():
+            if msg.startswith(name + " "):
+                msg = flag + msg[len(name):]
+        raise GPR3DError(msg) from None
     eps_given = _eps_argument(args.eps_r)
     estimate = eps_given is None
     # weights checked before the work starts
@@ -366,17 +391,20 @@ def cmd_reconstruct(args):
     depthnet = _depthnet(args) if estimate and args.depth in ("hybrid", "net") else None
     survey = read(args.input, format=args.format, channel=args.channel)
     if args.poses:
-        survey = attach_poses(survey, read_trajectory(args.poses), by="index")
+        traj = read_trajectory(args.poses)
+        if len(traj) != survey.n_traces:
+            raise GPR3DError(f"--poses {args.poses} holds {len(traj)} poses but {args.input} has {survey.n_traces} "
+                             "traces (one pose per trace)")
+        survey = attach_poses(survey, traj, by="index")
     if survey.positions_xyz is None:
         raise GPR3DError("the survey has no antenna positions: give --poses (a TUM file, one pose per trace)")
     if eps_given == "file" and survey.eps_r is None:
         raise GPR3DError(f"--eps-r file: {args.input} gives no eps_r; give a number or leave --eps-r out to estimate it")
-    cfg = ReconstructConfig(eps_r=survey.eps_r if eps_given == "file" else eps_given,
-                            spacing_m=args.spacing, max_depth_m=args.max_depth,
-                            aperture_deg=None if args.aperture <= 0 else args.aperture, threshold=args.threshold,
-                            min_line_m=args.min_line, engine=args.engine,
-                            time_zero="none" if args.no_time_zero else "peak", **site)
+    cfg = ReconstructConfig(eps_r=survey.eps_r if eps_given == "file" else eps_given, **settings, **site)
     boxes = read_boxes(args.boxes) if args.boxes else None
+    if args.boxes and not boxes:
+        raise GPR3DError(f"{args.boxes} lists no boxes: nothing to migrate inside them (leave --boxes out to "
+                         "migrate the whole record)")
     found = None
     if args.boxes:
         from gpr3d.io.detections import read_detections

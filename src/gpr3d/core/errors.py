@@ -50,3 +50,7 @@ class MissingDependencyError(GPR3DError, ImportError):
 
 class TruncatedRecordingWarning(UserWarning):
     """A recording ends mid-trace; the partial trace(s) were dropped."""
+
+
+class GeometryWarning(UserWarning):
+    """The survey's geometry cannot support what was asked of it (e.g. 3D from one straight profile)."""

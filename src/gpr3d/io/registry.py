@@ -53,6 +53,17 @@ def detect_format(path) -> str:
     sidecars = {".dzg": ".DZT", ".dzx": ".DZT", ".cor": ".rd3", ".gps": ".DT1"}
     if ext in sidecars:
         raise UnknownFormatError(p, f"is a sidecar (GPS/metadata) file: read the {sidecars[ext]} data file beside it")
+    # data files whose header lives in a file of its own beside them: name the missing one
+    pairs = {".dt1": ((".hd",), "pulseEKKO"), ".hd": ((".dt1",), "pulseEKKO"), ".rd3": ((".rad",), "MALA"),
+             ".rd7": ((".rad",), "MALA"), ".rad": ((".rd3", ".rd7"), "MALA")}
+    if ext in pairs:
+        from gpr3d.io._common import sidecar
+
+        need, vendor = pairs[ext]
+        if all(sidecar(p, s) is None for s in need):
+            wanted = " or ".join(p.with_suffix(s.upper()).name for s in need)
+            raise UnknownFormatError(p, f"its partner file {wanted} is missing ({vendor} keeps data and header in "
+                                        "two files with one name): copy it beside this one")
     claimed = [f.name for f in FORMATS.values() if ext in f.extensions]
     if claimed:
         raise UnknownFormatError(p, f"has a {ext} extension but is not a valid {'/'.join(claimed)} file "

@@ -43,6 +43,15 @@ def _rows(path, text: str, ncols: int, what: str) -> np.ndarray:
     return arr
 
 
+def _check_times(p, t) -> None:
+    """Timestamps that run backwards are a broken or shuffled file, not a trajectory (equal ones pass: a cart at
+    rest logged twice)."""
+    back = np.nonzero(np.diff(t) < 0)[0]
+    if back.size:
+        i = int(back[0]) + 1
+        raise FormatError(p, f"timestamps run backwards at pose {i} ({float(t[i])!r} s after {float(t[i - 1])!r} s)")
+
+
 def read_tum(path) -> Trajectory:
     """Read a TUM trajectory (``t tx ty tz qx qy qz qw`` per line)."""
     p = check_file(path)
@@ -50,6 +59,7 @@ def read_tum(path) -> Trajectory:
     q = arr[:, [7, 4, 5, 6]]
     if np.any(np.linalg.norm(q, axis=1) < 1e-9):
         raise FormatError(p, "holds a zero quaternion")
+    _check_times(p, arr[:, 0])
     return Trajectory(arr[:, 0], arr[:, 1:4], q)
 
 
@@ -107,6 +117,7 @@ def read_csv_trajectory(path) -> Trajectory:
     if not np.all(np.isfinite(arr)):
         raise FormatError(p, "holds NaN/inf values")
     arr[:, 0] *= t_scale
+    _check_times(p, arr[:, 0])
     return Trajectory(arr[:, 0], arr[:, 1:4], arr[:, 4:8])
 
 

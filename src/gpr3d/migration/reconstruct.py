@@ -10,14 +10,16 @@ extraction. Outputs: ``volume.h5`` (image, envelope, noise map, grid), ``volume.
 from __future__ import annotations
 
 import json
+import os
 import time
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from gpr3d import __version__
-from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.errors import GeometryWarning, InvalidDataError
 from gpr3d.core.units import velocity_from_eps_r
 from gpr3d.io.atomic import atomic_write_text
 from gpr3d.core.grid import Grid3D
@@ -73,6 +75,75 @@ class Reconstruction:
     eps_r_source: str = "given"  #: where eps_r came from (``config.json`` records it)
 
 
+def check_config(cfg: ReconstructConfig) -> None:
+    """One line naming the first setting of ``cfg`` out of its range (before any work)."""
+
+    def bad(name, must):
+        raise InvalidDataError(f"{name} must be {must}, got {getattr(cfg, name)!r}")
+
+    def number(name, *, positive=False, none_ok=False, lo=None, hi=None, lo_open=False, hi_open=False):
+        v = getattr(cfg, name)
+        if v is None and none_ok:
+            return
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+            bad(name, "a finite number")
+        if positive and not v > 0:
+            bad(name, "positive")
+        if lo is not None and (v < lo or (lo_open and v == lo)):
+            bad(name, f"{'>' if lo_open else '>='} {lo}")
+        if hi is not None and (v > hi or (hi_open and v == hi)):
+            bad(name, f"{'<' if hi_open else '<='} {hi}")
+
+    number("eps_r", none_ok=True, lo=1.0)
+    for name in ("spacing_m", "depth_spacing_m", "max_depth_m"):
+        number(name, positive=True, none_ok=name != "spacing_m")
+    number("pad_m", lo=0.0)
+    number("aperture_deg", none_ok=True, lo=0.0, hi=90.0, lo_open=True, hi_open=True)
+    number("threshold", lo=0.0, hi=1.0, lo_open=True)  # relative to the image's reference level
+    number("min_line_m", lo=0.0)
+    number("taper_traces", lo=0.0)
+    for name in ("obliquity", "spreading", "remove_background"):
+        if not isinstance(getattr(cfg, name), bool):
+            bad(name, "true or false")
+    if cfg.time_zero not in ("peak", "first_break", "none"):
+        bad("time_zero", "'peak', 'first_break' or 'none'")
+    if cfg.normalize not in ("sqrt_fold", "fold", "none"):
+        bad("normalize", "'sqrt_fold', 'fold' or 'none'")
+    check_site_settings(cfg)
+
+
+def cross_line_extent(positions_xyz) -> float:
+    """The spread of the antenna positions across their main horizontal direction (m): the extent along the
+    second principal axis (one straight profile: about 0)."""
+    xy = np.asarray(positions_xyz, dtype=float)[:, :2]
+    if len(xy) < 3:
+        return 0.0
+    xy = xy - xy.mean(axis=0)
+    _, _, vt = np.linalg.svd(xy, full_matrices=False)
+    across = xy @ vt[-1]
+    return float(across.max() - across.min())
+
+
+#: bytes per voxel that a reconstruction holds at once (image, fold, envelope, the normalised image, and the
+#: accumulators and temporaries of the migration and the envelope)
+BYTES_PER_VOXEL = 4 * 8
+
+
+def check_grid_fits(grid: Grid3D, *, available_bytes: int | None = None) -> None:
+    """Refuse a grid whose reconstruction would not fit in this machine's memory, saying how big it would be."""
+    need = grid.size * BYTES_PER_VOXEL
+    if available_bytes is None:
+        try:
+            available_bytes = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        except (ValueError, OSError, AttributeError):  # not a POSIX system: no estimate
+            return
+    if need > 0.8 * available_bytes:
+        raise InvalidDataError(
+            f"the grid of {grid.nx} x {grid.ny} x {grid.nd} voxels ({grid.size / 1e6:,.0f} M) would need about "
+            f"{need / 2**30:,.1f} GiB, more than this machine's {available_bytes / 2**30:,.1f} GiB can hold: "
+            "use a larger --spacing or a smaller --max-depth")
+
+
 def check_site_settings(cfg: ReconstructConfig) -> None:
     """One line naming a wrong tile size, worker count or scheduler address (before any work)."""
     from gpr3d.migration.sitetiles import check_settings
@@ -95,25 +166,30 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     """Migrate ``survey`` in 3D and extract targets (see :class:`Reconstruction`)."""
     cfg = cfg or ReconstructConfig()
     log = log or (lambda msg: None)
-    check_site_settings(cfg)
+    check_config(cfg)
     eps = cfg.eps_r or survey.eps_r
     if eps is None:
         raise InvalidDataError("no eps_r: the survey has none; give --eps-r")
     if not (np.isfinite(eps) and eps >= 1.0):
         raise InvalidDataError(f"eps_r must be a relative permittivity >= 1, got {eps}")
-    for name in ("spacing_m", "depth_spacing_m", "max_depth_m"):
-        val = getattr(cfg, name)
-        if val is not None and not (np.isfinite(val) and val > 0):
-            raise InvalidDataError(f"{name} must be positive, got {val}")
-    if boxes:
+    if boxes is not None:
+        if len(boxes) == 0:
+            raise InvalidDataError("no boxes: nothing to migrate inside them (give boxes=None for the whole record)")
         boxes = check_boxes(boxes, survey.n_traces, survey.n_samples * survey.dt_s)
     t = time.perf_counter()
     s = _prepare(survey, cfg)
     t_prep = time.perf_counter() - t
+    width = cross_line_extent(s.positions_xyz)
+    if width < max(2 * cfg.spacing_m, 0.05):
+        warnings.warn(f"the antenna positions span only {width * 100:.1f} cm across their main direction (one "
+                      "straight profile): a 3D image cannot tell one side of the line from the other, and targets "
+                      "off the line come out mirrored on both sides; migrate the profile in 2D instead",
+                      GeometryWarning, stacklevel=2)
     v = velocity_from_eps_r(eps)
     depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s) * 0.95
     grid = Grid3D.covering(s.positions_xyz, depth_m=depth, spacing_m=cfg.spacing_m,
                            depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m)
+    check_grid_fits(grid)  # (site tiles too: the whole volume is put together in memory)
     tx, rx = antenna_positions(s.positions_xyz, s.orientations_quat_wxyz, s.offset_m)
     op = BackProjection(grid, tx, rx, dt_s=s.dt_s, n_samples=s.n_samples, t0_s=s.t0_s, eps_r=eps,
                         aperture_deg=cfg.aperture_deg, obliquity=cfg.obliquity, spreading=cfg.spreading,

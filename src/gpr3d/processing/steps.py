@@ -24,7 +24,7 @@ from gpr3d.processing.envelope import envelope as _envelope
 from gpr3d.processing.filters import bandpass as _bandpass
 from gpr3d.processing.resample import resample_traces as _resample_traces
 
-__all__ = ["STEPS", "run_step", "parse_step", "describe_steps"]
+__all__ = ["STEPS", "run_step", "parse_step", "describe_steps", "check_step_args"]
 
 
 def _need_frequency(s, what: str) -> float:
@@ -131,17 +131,114 @@ STEPS: dict[str, Callable] = {
 }
 
 
-def run_step(survey, step: str, **kwargs):
-    """Apply ``step`` to ``survey``; return a new Survey with the step in its history."""
-    try:
-        func = STEPS[step]
-    except KeyError:
-        raise InvalidDataError(f"unknown processing step {step!r}; known: {', '.join(STEPS)}") from None
+def _record_s(s) -> float:
+    return s.n_samples * s.dt_s
+
+
+def _positive(v) -> bool:
+    return v > 0
+
+
+#: value checks per step argument, beyond its type: (test(value, survey), what it must be); each names the
+#: argument in the error before any work starts
+_RULES: dict[tuple[str, str], tuple[Callable, str]] = {
+    ("time_zero", "threshold"): (lambda v, s: 0 < v <= 1, "in (0, 1]"),
+    ("time_zero", "search_s"): (lambda v, s: 0 < v <= _record_s(s), "positive and at most the record's length"),
+    ("time_zero", "method"): (lambda v, s: v in ("first_break", "peak"), "'first_break' or 'peak'"),
+    ("dewow", "window_s"): (lambda v, s: 2 * s.dt_s <= v <= _record_s(s),
+                            "between two samples and the record's length"),
+    ("remove_background", "method"): (lambda v, s: v in ("mean", "median"), "'mean' or 'median'"),
+    ("remove_background", "window_traces"): (lambda v, s: 1 <= v, "a whole number >= 1"),
+    ("gain_tpow", "t_ref_s"): (lambda v, s: v > 0, "positive"),
+    ("gain_sec", "t_ref_s"): (lambda v, s: v > 0, "positive"),
+    ("gain_sec", "alpha_per_s"): (lambda v, s: v >= 0, ">= 0"),
+    ("gain_sec", "max_gain"): (lambda v, s: v >= 1, ">= 1"),
+    ("gain_agc", "window_s"): (lambda v, s: 2 * s.dt_s <= v <= _record_s(s),
+                               "between two samples and the record's length"),
+    ("gain_agc", "eps"): (lambda v, s: v > 0, "positive"),
+    ("bandpass", "order"): (lambda v, s: 1 <= v <= 10, "a whole number from 1 to 10"),
+    ("bandpass", "fmin_hz"): (lambda v, s: 0 < v < 0.5 / s.dt_s, "between 0 and the Nyquist frequency"),
+    ("bandpass", "fmax_hz"): (lambda v, s: 0 < v < 0.5 / s.dt_s, "between 0 and the Nyquist frequency"),
+    ("resample_spacing", "spacing_m"): (lambda v, s: v > 0, "positive"),
+}
+
+_BOOL_WORDS = {"true": True, "yes": True, "on": True, "1": True, "false": False, "no": False, "off": False, "0": False}
+
+
+def _typed(step: str, name: str, value, annotation: str, survey):
+    """``value`` as the type its parameter's annotation names (``bool``, ``int``, ``float``, ``str``, optional
+    ``None``), checked by :data:`_RULES`; otherwise an :class:`InvalidDataError` naming the step and argument."""
+    kinds = [k.strip() for k in str(annotation).split("|")]
+    where = f"{step}: {name}"
+    if value is None:
+        if "None" in kinds:
+            return None
+        raise InvalidDataError(f"{where} must be given (not none)")
+    if "bool" in kinds:
+        if isinstance(value, bool):
+            return value
+        word = str(value).strip().lower()
+        if word in _BOOL_WORDS:
+            return _BOOL_WORDS[word]
+        raise InvalidDataError(f"{where} must be true or false, got {value!r}")
+    if "int" in kinds or "float" in kinds:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+            raise InvalidDataError(f"{where} must be a finite number, got {value!r}")
+        if "int" in kinds:
+            if float(value) != int(value):
+                raise InvalidDataError(f"{where} must be a whole number, got {value!r}")
+            value = int(value)
+        else:
+            value = float(value)
+    elif "str" in kinds and not isinstance(value, str):
+        raise InvalidDataError(f"{where} must be a word, got {value!r}")
+    rule = _RULES.get((step, name))
+    if rule is not None and not rule[0](value, survey):
+        raise InvalidDataError(f"{where} must be {rule[1]}, got {value!r}")
+    return value
+
+
+def _check_sample_range(value, survey):
+    """``remove_dc``'s ``sample_range``: ``[start, stop]``, whole sample indices with 0 <= start < stop <= n."""
+    if value is None:
+        return None
+    if not isinstance(value, (list, tuple)) or len(value) != 2 or any(
+            isinstance(v, bool) or not isinstance(v, (int, float)) or float(v) != int(v) for v in value):
+        raise InvalidDataError(f"remove_dc: sample_range must be two whole sample indices [start, stop], got {value!r}")
+    a, b = int(value[0]), int(value[1])
+    if not 0 <= a < b <= survey.n_samples:
+        raise InvalidDataError(f"remove_dc: sample_range must satisfy 0 <= start < stop <= {survey.n_samples} "
+                               f"(the samples per trace), got {value!r}")
+    return [a, b]
+
+
+def check_step_args(survey, step: str, kwargs: dict) -> dict:
+    """``kwargs`` of ``step`` checked against its signature and rules (types, ranges, the survey's record), as the
+    values the step will use; one :class:`InvalidDataError` naming the step and argument otherwise."""
+    func = STEPS[step]
     sig = inspect.signature(func)
     try:
         sig.bind(survey, **kwargs)
     except TypeError as exc:
         raise InvalidDataError(f"{step}: {exc}") from None
+    out = {}
+    for name, value in kwargs.items():
+        if (step, name) == ("remove_dc", "sample_range"):
+            out[name] = _check_sample_range(value, survey)
+        else:
+            out[name] = _typed(step, name, value, sig.parameters[name].annotation, survey)
+    if step == "bandpass" and out.get("fmin_hz") is not None and out.get("fmax_hz") is not None \
+            and not out["fmin_hz"] < out["fmax_hz"]:
+        raise InvalidDataError(f"bandpass: fmin_hz must be below fmax_hz, got {out['fmin_hz']} and {out['fmax_hz']}")
+    return out
+
+
+def run_step(survey, step: str, **kwargs):
+    """Apply ``step`` to ``survey``; return a new Survey with the step in its history."""
+    if step not in STEPS:
+        raise InvalidDataError(f"unknown processing step {step!r}; known: {', '.join(STEPS)}")
+    func = STEPS[step]
+    kwargs = check_step_args(survey, step, kwargs)
     try:
         changes, result = func(survey, **kwargs)
     except ValueError as exc:  # bad parameter values from the array functions
@@ -162,6 +259,8 @@ def _parse_value(text: str):
         return None
     if low in ("true", "false"):
         return low == "true"
+    if text.startswith("[") and text.endswith("]"):  # [start, stop]
+        return [_parse_value(t.strip()) for t in text[1:-1].split(",") if t.strip()]
     if "," in text:
         return [_parse_value(t) for t in text.split(",")]
     try:

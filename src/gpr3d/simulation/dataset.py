@@ -24,6 +24,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 import time
 import uuid
@@ -208,6 +209,14 @@ def build_dataset(cfg: SimulateConfig, *, progress: bool = True, log=print) -> d
         raise GPR3DError(f"--max-seconds must be > 0, got {cfg.max_seconds}")
     if cfg.preset not in PRESETS:
         raise GPR3DError(f"unknown preset {cfg.preset!r} (use {', '.join(PRESETS)})")
+    if cfg.engine not in ("gprmax", "forward"):
+        raise GPR3DError(f"--engine must be gprmax or forward, got {cfg.engine!r}")
+    if isinstance(cfg.workers, bool) or not isinstance(cfg.workers, int) or cfg.workers < 1:
+        raise GPR3DError(f"--workers must be a whole number >= 1, got {cfg.workers!r}")
+    if cfg.scheduler is not None and not re.fullmatch(r"(tcp|tls|ucx)://[^\s:/]+:\d{1,5}", str(cfg.scheduler)):
+        raise GPR3DError(f"--scheduler must be an address such as tcp://host:8786, got {cfg.scheduler!r}")
+    if not isinstance(cfg.image_height, int) or not 16 <= cfg.image_height <= 4096:
+        raise GPR3DError(f"--image-height must be a whole number of pixels from 16 to 4096, got {cfg.image_height!r}")
     if cfg.engine == "gprmax":
         require("gprMax")
     out = Path(cfg.out)

@@ -6,7 +6,25 @@ import numpy as np
 
 from gpr3d.viz._figures import plot_to_png, pyplot
 
-__all__ = ["plot_bscan", "save_bscan_png"]
+__all__ = ["plot_bscan", "save_bscan_png", "check_plot_args"]
+
+
+def check_plot_args(*, cmap=None, clip_percentile=None, axis=None) -> None:
+    """One line naming a colour map matplotlib does not have, a clip percentile outside (0, 100], or an unknown
+    axis (before any drawing)."""
+    from gpr3d.core.errors import InvalidDataError
+
+    if cmap is not None:
+        import matplotlib
+
+        if not isinstance(cmap, str) or cmap not in matplotlib.colormaps:
+            raise InvalidDataError(f"colour map {cmap!r} is not one matplotlib knows (e.g. gray, hot, seismic, viridis)")
+    if clip_percentile is not None:
+        if isinstance(clip_percentile, bool) or not isinstance(clip_percentile, (int, float)) \
+                or not 0 < clip_percentile <= 100:
+            raise InvalidDataError(f"clip percentile must be in (0, 100], got {clip_percentile!r}")
+    if axis is not None and axis not in ("time", "depth"):
+        raise InvalidDataError(f"axis must be 'time' or 'depth', got {axis!r}")
 
 
 def plot_bscan(
@@ -34,6 +52,7 @@ def plot_bscan(
     boxes : iterable of ``(trace_start, t_start_s, trace_end, t_end_s)`` to outline.
     apexes : iterable of ``(trace, t_s)`` (times from the first sample) to mark with a cross.
     """
+    check_plot_args(cmap=cmap, clip_percentile=clip_percentile, axis=axis)
     plt = pyplot()
     if ax is None:
         _, ax = plt.subplots(figsize=(8, 4.5))
