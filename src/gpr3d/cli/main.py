@@ -158,6 +158,63 @@ def cmd_convert(args):
     return 0
 
 
+def _number_list(text, what, kind=float):
+    if not text:
+        return None
+    try:
+        return [kind(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise GPR3DError(f"{what} must be a comma-separated list of {'whole numbers' if kind is int else 'numbers'}, "
+                         f"got {text!r}") from None
+
+
+def cmd_grid(args):
+    from gpr3d.core.gridsurvey import assemble_grid, read_layout
+    from gpr3d.io.registry import read
+
+    _check_suffix(args.out, (".h5", ".hdf5"), "--out")
+    if (args.spacing is None) == (args.layout is None):
+        raise GPR3DError("give --spacing (parallel lines) or --layout (a file of line ends), one of them")
+    if args.spacing is not None and not (args.spacing > 0 and args.spacing < 1e4):
+        raise GPR3DError(f"--spacing must be a positive distance in metres, got {args.spacing:g}")
+    layout = read_layout(args.layout) if args.layout else None
+    reversed_lines = _number_list(args.reversed, "--reversed", int)
+    offsets = _number_list(args.start_offsets, "--start-offsets")
+    surveys = [_apply_steps(read(f), args.steps) for f in args.lines]
+    g = assemble_grid(surveys, names=[Path(f).name for f in args.lines], line_spacing_m=args.spacing,
+                      direction=args.direction, start_offsets_m=offsets, serpentine=args.serpentine,
+                      reversed_lines=reversed_lines, layout=layout)
+    g.save(args.out)
+    lo, hi = g.positions_xyz[:, :2].min(axis=0), g.positions_xyz[:, :2].max(axis=0)
+    print(f"wrote {args.out}: {len(surveys)} lines, {g.n_traces} traces over x {lo[0]:.2f}..{hi[0]:.2f} m, "
+          f"y {lo[1]:.2f}..{hi[1]:.2f} m")
+    return 0
+
+
+def cmd_cscan(args):
+    from gpr3d.io.volume import write_cscan
+    from gpr3d.processing.cscan import cscan
+    from gpr3d.viz.maps import save_cscan_sheet
+
+    if not (args.cell > 0 and args.cell < 1e3):
+        raise GPR3DError(f"--cell must be a positive size in metres, got {args.cell:g}")
+    if not args.window_ns > 0:
+        raise GPR3DError(f"--window-ns must be positive, got {args.window_ns:g}")
+    eps = _eps_argument(args.eps_r)
+    s = _apply_steps(_read_channel(args), args.steps)
+    eps_r = s.eps_r if eps == "file" else eps
+    cs = cscan(s, cell_m=args.cell, window_s=args.window_ns * 1e-9, eps_r=eps_r, fill_m=args.fill)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise GPR3DError(f"--out {out} is a file; cscan writes a folder")
+    out.mkdir(parents=True, exist_ok=True)
+    write_cscan(out / "cscan.h5", cs)
+    save_cscan_sheet(out / "cscan.png", cs, title=f"{Path(args.input).name}: C-scans ({args.window_ns:g} ns slices)")
+    print(f"wrote {out}/cscan.h5 and cscan.png: {cs.values.shape[0]} slices of {cs.values.shape[1]} x "
+          f"{cs.values.shape[2]} cells of {args.cell:g} m")
+    return 0
+
+
 def cmd_simulate(args):
     from gpr3d.simulation.dataset import SimulateConfig, build_dataset
 
@@ -833,6 +890,31 @@ def build_parser() -> argparse.ArgumentParser:
              "example:\n  gpr3d convert XLINE00.DT1 xline00.sgy")
     add_input(sp)
     sp.add_argument("out", help="output: .h5 (gpr3d), .sgy/.segy (SEG-Y) or .png")
+
+    sp = add("grid", cmd_grid, "put parallel line files together into one survey with positions",
+             "examples:\n  gpr3d grid XLINE*.DT1 --spacing 0.2 --out grid.h5\n"
+             "  gpr3d grid L*.DZT --spacing 0.5 --serpentine --direction y --out grid.h5\n"
+             "  gpr3d grid L*.DZT --layout lines.txt --out grid.h5     (lines.txt: NAME x0 y0 x1 y1 per line)")
+    sp.add_argument("lines", nargs="+", help="line files, in the order they were recorded")
+    sp.add_argument("--out", required=True, help="output survey (.h5)")
+    sp.add_argument("--spacing", type=float, default=None, help="distance between neighbouring lines (m)")
+    sp.add_argument("--direction", default="x", choices=("x", "y"), help="the lines run along x (default) or y")
+    sp.add_argument("--serpentine", action="store_true", help="every second line was walked back (zig-zag)")
+    sp.add_argument("--reversed", default="", help="lines walked back, as indices: 1,3,7")
+    sp.add_argument("--start-offsets", default="", help="each line's start along its direction (m): 0,0.1,...")
+    sp.add_argument("--layout", default=None, help="file of NAME x0 y0 x1 y1 lines (instead of --spacing)")
+    sp.add_argument("--steps", nargs="*", default=[], metavar="STEP", help="processing steps for every line first")
+
+    sp = add("cscan", cmd_cscan, "C-scans: time or depth slices of the envelope, gridded on the ground",
+             "example:\n  gpr3d cscan grid.h5 --steps time_zero dewow remove_background --window-ns 10 --cell 0.05 "
+             "--eps-r 9 --out cscan")
+    add_input(sp)
+    sp.add_argument("--out", required=True, help="output folder (cscan.h5, cscan.png)")
+    sp.add_argument("--cell", type=float, default=0.05, help="cell size (m; default 0.05)")
+    sp.add_argument("--window-ns", type=float, default=10.0, help="slice thickness in two-way time (ns; default 10)")
+    sp.add_argument("--eps-r", default=None, help="relative permittivity: label the slices with depths")
+    sp.add_argument("--fill", type=float, default=None, help="fill empty cells within this distance (m; 2 cells)")
+    sp.add_argument("--steps", nargs="*", default=[], metavar="STEP", help="processing steps first")
 
     sp = add("simulate", cmd_simulate, "build a labelled dataset of simulated B-scans (resumable)",
              "examples:\n  gpr3d simulate --engine gprmax --n 1 --seed 0 --out sim1\n"

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Grid3D"]
+__all__ = ["Grid3D", "CScan"]
 
 
 @dataclass(frozen=True)
@@ -84,3 +84,26 @@ class Grid3D:
                 or min(vals[k] for k in ("nx", "ny", "nd")) < 1:
             raise InvalidDataError(f"grid steps and counts must be positive and finite, got {d!r}")
         return cls(**vals)
+
+
+@dataclass
+class CScan:
+    """Horizontal slices of a survey's envelope on a square grid in the site frame (see
+    :mod:`gpr3d.processing.cscan`)."""
+
+    values: np.ndarray  #: (n_slices, nx, ny) float32, NaN where no trace is near
+    x0: float  #: centre of cell [0, 0] in the site frame (m)
+    y0: float
+    cell_m: float
+    t_start_s: np.ndarray  #: each slice's window start (two-way time after time zero)
+    window_s: float
+    depth_m: np.ndarray | None = None  #: each slice's mid depth, with ``eps_r``
+    eps_r: float | None = None
+
+    @property
+    def x(self) -> np.ndarray:
+        return self.x0 + self.cell_m * np.arange(self.values.shape[1])
+
+    @property
+    def y(self) -> np.ndarray:
+        return self.y0 + self.cell_m * np.arange(self.values.shape[2])

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Callable
 
 from gpr3d.core.errors import FormatError, UnknownFormatError
-from gpr3d.io import dt1, dzt, gprmax, hdf5, rd3
+from gpr3d.io import dt1, dzt, gprmax, hdf5, rd3, segy
 from gpr3d.io._common import check_file
 
 __all__ = ["FORMATS", "register", "detect_format", "read", "read_all"]
@@ -41,6 +41,8 @@ register(Format("gprmax", "gprMax output (v3 .out, v4 .h5)", (".h5", ".out"), gp
 register(Format("dzt", "GSSI DZT", (".dzt",), dzt.is_dzt, dzt.read_dzt))
 register(Format("dt1", "Sensors & Software DT1/HD", (".dt1", ".hd"), dt1.is_dt1, dt1.read_dt1))
 register(Format("rd3", "MALA RD3/RD7 + RAD", (".rd3", ".rd7", ".rad"), rd3.is_rd3, rd3.read_rd3))
+register(Format("segy", "SEG-Y rev 1/2 (as GPR software writes it)", (".sgy", ".segy"), segy.is_segy,
+                segy.read_segy))
 
 
 def detect_format(path) -> str:

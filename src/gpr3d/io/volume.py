@@ -111,3 +111,43 @@ def write_vti(path, grid: Grid3D, arrays: dict) -> Path:
                                   spacing=(grid.dx, grid.dy, grid.dd), pointData=point_data)
         Path(written).replace(tmp)
     return path
+
+
+def write_cscan(path, cs) -> Path:
+    """Write a :class:`~gpr3d.processing.cscan.CScan` to HDF5 (atomically): ``values`` (slices, x, y) and the
+    georeference as attributes (``x0``, ``y0``: centre of cell [0, 0], ``cell_m``, site frame), ``t_start_s``,
+    ``window_s`` and, with an eps_r, ``depth_m``."""
+    import h5py
+
+    path = Path(path)
+    with atomic_path(path, suffix=".h5.part") as tmp:
+        with h5py.File(tmp, "w") as f:
+            f.attrs.update({"schema": "gpr3d.cscan", "schema_version": 1, "gpr3d_version": __version__,
+                            "x0": cs.x0, "y0": cs.y0, "cell_m": cs.cell_m, "window_s": cs.window_s,
+                            "axes": "slice, x (east), y (north); cell centres x0 + i * cell_m",
+                            **({"eps_r": cs.eps_r} if cs.eps_r is not None else {})})
+            f.create_dataset("values", data=np.asarray(cs.values, np.float32), compression="gzip",
+                             compression_opts=4, shuffle=True)
+            f.create_dataset("t_start_s", data=np.asarray(cs.t_start_s, float))
+            if cs.depth_m is not None:
+                f.create_dataset("depth_m", data=np.asarray(cs.depth_m, float))
+    return path
+
+
+def read_cscan(path):
+    """Read what :func:`write_cscan` wrote, as a :class:`~gpr3d.processing.cscan.CScan`."""
+    import h5py
+
+    from gpr3d.core.grid import CScan
+
+    p = check_file(path)
+    try:
+        with h5py.File(p, "r") as f:
+            if f.attrs.get("schema") != "gpr3d.cscan":
+                raise FormatError(p, "is not a gpr3d C-scan file")
+            a = dict(f.attrs)
+            return CScan(f["values"][()], float(a["x0"]), float(a["y0"]), float(a["cell_m"]), f["t_start_s"][()],
+                         float(a["window_s"]), f["depth_m"][()] if "depth_m" in f else None,
+                         float(a["eps_r"]) if "eps_r" in a else None)
+    except (OSError, KeyError) as exc:
+        raise FormatError(p, f"unreadable C-scan ({exc})") from None

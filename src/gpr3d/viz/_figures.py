@@ -20,7 +20,8 @@ def pyplot():
 def save_figure(fig, path, *, dpi: int = 120, close: bool = True) -> None:
     """Lay out ``fig`` and write it to ``path`` as PNG in one atomic step."""
     try:
-        fig.tight_layout()
+        if fig.get_layout_engine() is None:
+            fig.tight_layout()
         with atomic_path(path, suffix=".png.part") as tmp:
             fig.savefig(tmp, dpi=dpi, format="png")
     finally:

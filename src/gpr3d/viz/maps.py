@@ -6,7 +6,7 @@ import numpy as np
 
 from gpr3d.viz._figures import plot_to_png, pyplot
 
-__all__ = ["plot_survey_map", "save_survey_map_png", "plot_paths", "save_paths_png"]
+__all__ = ["plot_survey_map", "save_survey_map_png", "plot_paths", "save_paths_png", "save_cscan_sheet"]
 
 
 def plot_survey_map(positions_xyz, ax=None, *, pipes=(), spheres=(), title=None, color_by=None):
@@ -62,3 +62,41 @@ def plot_paths(paths: dict, ax=None, *, title=None):
 
 def save_paths_png(path, paths: dict, *, dpi=120, **kwargs) -> None:
     plot_to_png(path, plot_paths, paths, figsize=(6.5, 6), dpi=dpi, **kwargs)
+
+
+def save_cscan_sheet(path, cs, *, max_panels: int = 12, ncols: int = 4, dpi: int = 110, title=None) -> None:
+    """A sheet of C-scan panels (at most ``max_panels``, spread over the slices), each with its time or depth
+    window, each scaled to its own 99th percentile (deep slices are weaker: no gain is assumed), with one colour
+    bar; written atomically."""
+    from gpr3d.viz._figures import save_figure
+
+    n = cs.values.shape[0]
+    pick = np.unique(np.linspace(0, n - 1, min(n, max_panels)).round().astype(int))
+    ncols = min(ncols, len(pick))
+    rows = int(np.ceil(len(pick) / ncols))
+    plt = pyplot()
+    ext = (cs.x[0] - cs.cell_m / 2, cs.x[-1] + cs.cell_m / 2, cs.y[0] - cs.cell_m / 2, cs.y[-1] + cs.cell_m / 2)
+    aspect = (ext[3] - ext[2]) / max(ext[1] - ext[0], 1e-9)
+    fig, axes = plt.subplots(rows, ncols, figsize=(3.8 * ncols + 1.0, max(3.8 * aspect, 1.2) * rows + 0.9),
+                             squeeze=False, layout="constrained")
+    im = None
+    for ax, k in zip(axes.flat, pick):
+        v = cs.values[k]
+        finite = v[np.isfinite(v)]
+        scale = float(np.percentile(finite, 99)) if finite.size else 1.0
+        im = ax.imshow((v / (scale or 1.0)).T, origin="lower", extent=ext, cmap="viridis", vmin=0, vmax=1)
+        t0, t1 = cs.t_start_s[k] * 1e9, (cs.t_start_s[k] + cs.window_s) * 1e9
+        label = f"{t0:.0f}-{t1:.0f} ns"
+        if cs.depth_m is not None:
+            label += f"  (~{cs.depth_m[k]:.2f} m)"
+        ax.set_title(label, fontsize=9)
+        ax.set_xlabel("x (m)", fontsize=8)
+        ax.set_ylabel("y (m)", fontsize=8)
+        ax.tick_params(labelsize=7)
+    for ax in list(axes.flat)[len(pick):]:
+        ax.axis("off")
+    if im is not None:
+        fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label="mean envelope / the slice's 99th percentile")
+    if title:
+        fig.suptitle(title)
+    save_figure(fig, path, dpi=dpi)

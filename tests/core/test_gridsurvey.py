@@ -1,0 +1,59 @@
+import numpy as np
+import pytest
+
+from gpr3d import Survey
+from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.gridsurvey import assemble_grid, read_layout
+
+
+def line(n, step=0.05, samples=16, seed=0, name="L.h5"):
+    rng = np.random.default_rng(seed)
+    pos = np.c_[np.arange(n) * step, np.zeros(n), np.zeros(n)]
+    return Survey(data=rng.standard_normal((n, samples)).astype(np.float32), dt_s=1e-10, positions_xyz=pos,
+                  offset_m=0.1, metadata={"path": name})
+
+
+def test_parallel_lines_land_on_their_rows_with_headings_along_them():
+    lines = [line(11, seed=k, name=f"L{k}.h5") for k in range(3)]
+    g = assemble_grid(lines, line_spacing_m=0.2)
+    assert g.n_traces == 33
+    np.testing.assert_allclose(g.positions_xyz[11:22, 1], 0.2)
+    np.testing.assert_allclose(g.positions_xyz[22:, 0], np.arange(11) * 0.05, atol=1e-12)
+    np.testing.assert_array_equal(g.data[11:22], lines[1].data)
+    assert g.metadata["grid"]["first_trace"] == [0, 11, 22]
+    np.testing.assert_allclose(g.orientations_quat_wxyz[:, 0], 1.0)  # heading +x: the identity rotation
+
+
+def test_serpentine_reversed_offsets_and_lines_along_y():
+    lines = [line(11, seed=k) for k in range(3)]
+    g = assemble_grid(lines, line_spacing_m=0.5, serpentine=True, start_offsets_m=[0.0, 0.1, 0.0])
+    # line 1 was walked back: its first trace at the far end (0.1 + 0.5 m), its last at its start
+    assert g.positions_xyz[11, 0] == pytest.approx(0.6) and g.positions_xyz[21, 0] == pytest.approx(0.1)
+    np.testing.assert_allclose(g.positions_xyz[22:, 0], np.arange(11) * 0.05, atol=1e-12)
+    g2 = assemble_grid(lines, line_spacing_m=0.5, direction="y", reversed_lines=[0])
+    assert g2.positions_xyz[0, 1] == pytest.approx(0.5) and g2.positions_xyz[10, 1] == pytest.approx(0.0)
+    np.testing.assert_allclose(g2.positions_xyz[11:22, 0], 0.5)
+
+
+def test_a_layout_file_places_each_line_by_its_ends(tmp_path):
+    (tmp_path / "lines.txt").write_text("# name x0 y0 x1 y1\nA.h5 1 1 1 2\nB.h5, 2, 2, 1, 2\n")
+    layout = read_layout(tmp_path / "lines.txt")
+    g = assemble_grid([line(11, name="A.h5"), line(11, name="B.h5")], layout=layout)
+    np.testing.assert_allclose(g.positions_xyz[:11, :2], np.c_[np.ones(11), 1 + np.arange(11) * 0.05], atol=1e-12)
+    np.testing.assert_allclose(g.positions_xyz[11:, :2], np.c_[2 - np.arange(11) * 0.05, 2 * np.ones(11)], atol=1e-12)
+    with pytest.raises(InvalidDataError, match="no entry for C.h5"):
+        assemble_grid([line(5, name="A.h5"), line(5, name="C.h5")], layout=layout)
+    (tmp_path / "bad.txt").write_text("A.h5 1 1 one 2\n")
+    with pytest.raises(InvalidDataError, match="bad.txt line 1: coordinates must be numbers"):
+        read_layout(tmp_path / "bad.txt")
+
+
+def test_lines_that_do_not_match_are_refused():
+    with pytest.raises(InvalidDataError, match="lines of one grid must match"):
+        assemble_grid([line(5), line(5, samples=20)], line_spacing_m=0.2)
+    with pytest.raises(InvalidDataError, match="spacing or a layout"):
+        assemble_grid([line(5), line(5)])
+    with pytest.raises(InvalidDataError, match="line spacing must be a positive"):
+        assemble_grid([line(5), line(5)], line_spacing_m=-1.0)
+    with pytest.raises(InvalidDataError, match="reversed lines must be line indices"):
+        assemble_grid([line(5), line(5)], line_spacing_m=0.2, reversed_lines=[2])
