@@ -50,7 +50,12 @@ def test_a_layout_file_places_each_line_by_its_ends(tmp_path):
 
 def test_lines_that_do_not_match_are_refused():
     with pytest.raises(InvalidDataError, match="lines of one grid must match"):
-        assemble_grid([line(5), line(5, samples=20)], line_spacing_m=0.2)
+        assemble_grid([line(5), line(5).replace(dt_s=2e-10)], line_spacing_m=0.2)
+    with pytest.raises(InvalidDataError, match="correct time zero line by line"):
+        assemble_grid([line(5), line(5).replace(t0_s=1e-9)], line_spacing_m=0.2)
+    # records cut to different lengths by time zero: the common length is kept
+    g = assemble_grid([line(5), line(5, samples=20)], line_spacing_m=0.2)
+    assert g.n_samples == 16 and g.metadata["grid"]["samples_kept"] == 16
     with pytest.raises(InvalidDataError, match="spacing or a layout"):
         assemble_grid([line(5), line(5)])
     with pytest.raises(InvalidDataError, match="line spacing must be a positive"):

@@ -186,3 +186,27 @@ def test_split_grid_lines():
     lines = split_lines(tr.positions_xyz)
     assert len(lines) == 10
     assert sum(len(l) for l in lines) == len(tr)
+
+
+def test_a_dipping_layer_is_no_pipe_and_shallow_ringing_is_skipped():
+    """A planar reflector dipping across the area lights the whole ridge map: no line comes out of it (a pipe beside
+    it still does); ``min_depth_m`` leaves out a bright line in the ringing zone; a line plunging at 60 deg is no
+    pipe."""
+    g = Grid3D(0, 0, 0.05, 0.05, 0.05, 0.05, 61, 41, 50)
+    X, Y, D = np.meshgrid(g.x, g.y, g.depth, indexing="ij")
+    plane = np.exp(-0.5 * ((D - (0.8 + 0.3 * X / 3.0)) / 0.06) ** 2) * (Y < 1.2)  # layer over y < 1.2 m
+    pipe = blob_image(g, [((0.3, 1.7, 1.5), (2.7, 1.7, 1.5))], [], sigma=0.06)
+    img = np.maximum(0.8 * plane, pipe).astype(np.float32)
+    lines = [t for t in extract_targets(img, g, band_m=0.1) if t.kind == "line"]
+    assert len(lines) == 1 and abs(lines[0].points_xyz[0][1] - 1.7) < 0.05, [t.points_xyz for t in lines]
+    assert [t for t in extract_targets(img, g, band_m=0.1, lateral_contrast=0.0) if t.kind == "line"
+            and t.points_xyz[0][1] < 1.2]  # without the side test the layer gives lines
+    ring = blob_image(g, [((0.3, 0.6, 0.15), (2.7, 0.6, 0.15))], [], sigma=0.06)
+    both = np.maximum(ring, 0.7 * pipe)
+    assert {round(t.points_xyz[0][1], 1) for t in extract_targets(both, g, band_m=0.1) if t.kind == "line"} \
+        == {0.6, 1.7}
+    deep = [t for t in extract_targets(both, g, band_m=0.1, min_depth_m=0.4) if t.kind == "line"]
+    assert len(deep) == 1 and abs(deep[0].points_xyz[0][1] - 1.7) < 0.05
+    plunge = blob_image(g, [((0.5, 1.0, 0.2), (1.5, 1.0, 1.93))], [], sigma=0.06)  # 60 deg
+    assert not [t for t in extract_targets(plunge, g, band_m=0.1) if t.kind == "line"]
+    assert [t for t in extract_targets(plunge, g, band_m=0.1, max_dip_deg=80) if t.kind == "line"]

@@ -411,7 +411,8 @@ def _reconstruct_defaults():
 
 #: ReconstructConfig's names for the settings that reconstruct's options set
 _RECONSTRUCT_FLAGS = {"spacing_m": "--spacing", "max_depth_m": "--max-depth", "aperture_deg": "--aperture",
-                      "threshold": "--threshold", "min_line_m": "--min-line", "engine": "--engine"}
+                      "threshold": "--threshold", "min_line_m": "--min-line", "engine": "--engine",
+                      "min_target_depth_m": "--min-depth"}
 
 
 def cmd_reconstruct(args):
@@ -432,7 +433,8 @@ def cmd_reconstruct(args):
         raise GPR3DError(f"--aperture must be 0 (none) or a cone half-angle in (0, 90) degrees, got {args.aperture:g}")
     settings = dict(spacing_m=args.spacing, max_depth_m=args.max_depth,
                     aperture_deg=None if args.aperture == 0 else args.aperture, threshold=args.threshold,
-                    min_line_m=args.min_line, engine=args.engine, time_zero="none" if args.no_time_zero else "peak")
+                    min_line_m=args.min_line, engine=args.engine, time_zero="none" if args.no_time_zero else "peak",
+                    min_target_depth_m=args.min_depth)
     try:
         check_config(ReconstructConfig(**settings, **site))  # one line naming the setting, before any work
     except GPR3DError as exc:
@@ -1016,6 +1018,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--threshold", type=float, default=rc.threshold,
                     help=f"target threshold, fraction of the image's 99.5th-percentile column maximum ({rc.threshold:g})")
     sp.add_argument("--min-line", type=float, default=rc.min_line_m, help=f"shortest line target (m; {rc.min_line_m:g})")
+    sp.add_argument("--min-depth", type=float, default=rc.min_target_depth_m,
+                    help="no targets shallower than this (m; e.g. where the direct wave rings)")
     sp.add_argument("--no-time-zero", action="store_true", help="the data already start at time zero")
     sp.add_argument("--engine", choices=("numba", "numpy"), default=rc.engine, help="migration kernel")
     sp.add_argument("--mask", choices=("none", "detect"), default="none",

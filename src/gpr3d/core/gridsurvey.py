@@ -118,9 +118,13 @@ def assemble_grid(surveys, *, names=None, line_spacing_m: float | None = None, d
         else list(names)
     first = surveys[0]
     for name, s in zip(names, surveys):
-        if s.n_samples != first.n_samples or not np.isclose(s.dt_s, first.dt_s, rtol=1e-9):
-            raise InvalidDataError(f"{name}: {s.n_samples} samples of {s.dt_s * 1e9:g} ns, but {names[0]} has "
-                                   f"{first.n_samples} of {first.dt_s * 1e9:g} ns: lines of one grid must match")
+        if not np.isclose(s.dt_s, first.dt_s, rtol=1e-9, atol=0.0):
+            raise InvalidDataError(f"{name}: samples every {s.dt_s * 1e9:g} ns, but {names[0]} every "
+                                   f"{first.dt_s * 1e9:g} ns: lines of one grid must match")
+        if abs(s.t0_s - first.t0_s) > 0.5 * first.dt_s:
+            raise InvalidDataError(f"{name}: time zero {s.t0_s * 1e9:g} ns, but {names[0]}'s is "
+                                   f"{first.t0_s * 1e9:g} ns: correct time zero line by line first (time_zero)")
+    ns = min(s.n_samples for s in surveys)  # time zero cut each line a little differently: the common length
     dist = [along_line_distance(s) for s in surveys]
     if (layout is None) == (line_spacing_m is None):
         raise InvalidDataError("give the line spacing or a layout (one of them)")
@@ -142,8 +146,8 @@ def assemble_grid(surveys, *, names=None, line_spacing_m: float | None = None, d
         pos.append(np.hstack([xy, z]))
         yaw.append(np.full(len(d), np.arctan2(line.direction[1], line.direction[0])))
     t0 = [s.t0_s for s in surveys]
-    data = np.concatenate([s.data for s in surveys], axis=0)
-    meta = {"format": "grid", "grid": {"files": names, "first_trace": first_trace,
+    data = np.concatenate([s.data[:, :ns] for s in surveys], axis=0)
+    meta = {"format": "grid", "grid": {"files": names, "first_trace": first_trace, "samples_kept": ns,
                                        "lines": [[*ln.start.tolist(), *ln.end.tolist()] for ln in lines],
                                        "t0_s": t0}}
     meta.update({k: v for k, v in first.metadata.items() if k not in ("path", "format")})

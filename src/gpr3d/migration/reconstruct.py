@@ -45,6 +45,7 @@ class ReconstructConfig:
     normalize: str = "sqrt_fold"  #: divide the image by sqrt(fold) ("sqrt_fold"), by the fold ("fold") or not ("none")
     threshold: float = 0.3
     min_line_m: float = 0.3
+    min_target_depth_m: float | None = None  #: no targets shallower (e.g. where the direct wave rings)
     taper_traces: float = 3.0
     engine: str = "numba"
     #: site scale (see :mod:`.sitetiles`): all unset, the whole grid in one pass; otherwise tiles of ``tile_m``
@@ -101,6 +102,7 @@ def check_config(cfg: ReconstructConfig) -> None:
     number("aperture_deg", none_ok=True, lo=0.0, hi=90.0, lo_open=True, hi_open=True)
     number("threshold", lo=0.0, hi=1.0, lo_open=True)  # relative to the image's reference level
     number("min_line_m", lo=0.0)
+    number("min_target_depth_m", none_ok=True, lo=0.0)
     number("taper_traces", lo=0.0)
     for name in ("obliquity", "spreading", "remove_background"):
         if not isinstance(getattr(cfg, name), bool):
@@ -233,7 +235,8 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     # the band cleared around each line found: half a wavelength (the width of a pipe's image), at least two cells
     tol = 2.0 * max(grid.dx, grid.dy)
     band = max(2 * tol, 0.5 * v / survey.frequency_hz) if survey.frequency_hz else None
-    targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band)
+    targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band,
+                              min_depth_m=cfg.min_target_depth_m)
     return Reconstruction(image=image, envelope=env, noise_map=noise_map, fold=fold, grid=grid, targets=targets,
                           eps_r=float(eps), config=asdict(cfg), n_traces=s.n_traces,
                           timings_s={"prepare": t_prep, "migrate": t_mig},

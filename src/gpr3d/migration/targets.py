@@ -28,7 +28,7 @@ works on that ridge map (value and depth of the maximum per column):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import ndimage, stats
@@ -163,6 +163,29 @@ def _seg_dists(q, a, b):
     return np.hypot(*(q - (a + t[:, None] * ab)).T)
 
 
+def _side_level(val, grid, a, b, offset) -> float:
+    """How bright the map stays beside segment a-b: on each side, the dimmer of the mean ridge values along the
+    parallels ``offset`` and ``2 offset`` away (inside the map); the brighter side's. A pipe is dim on both sides
+    (a parallel pipe close by is bright at one distance only); a bright layer through or along the line is not."""
+    d = (b - a) / max(np.hypot(*(b - a)), 1e-12)
+    n = np.array([-d[1], d[0]])
+    t = np.linspace(0.0, 1.0, max(int(np.hypot(*(b - a)) / min(grid.dx, grid.dy)), 2))
+    pts = a + t[:, None] * (b - a)
+    sides = []
+    for side in (-1.0, 1.0):
+        levels = []
+        for k in (1.0, 2.0):
+            q = pts + side * k * offset * n
+            i = np.rint((q[:, 0] - grid.x0) / grid.dx).astype(int)
+            j = np.rint((q[:, 1] - grid.y0) / grid.dy).astype(int)
+            ok = (i >= 0) & (i < val.shape[0]) & (j >= 0) & (j < val.shape[1])
+            if ok.any():
+                levels.append(float(val[i[ok], j[ok]].mean()))
+        if levels:
+            sides.append(min(levels))
+    return float(max(sides)) if sides else 0.0
+
+
 def _depth_fit(s, depth, w, dd):
     """Depth along a line, ``depth = k s + m``: Theil-Sen (robust to the columns where a crossing target lies
     shallower), then a weighted least-squares fit to the columns within ``max(2 dd, median residual)``."""
@@ -291,7 +314,8 @@ def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.
                     min_columns: int = 6, min_density: float = 1.0, line_contrast: float = 4.0 / 3.0,
                     group_gap_m: float | None = None, run_gap_m: float | None = None, join_gap_m: float = 0.5,
                     end_weight: float = 0.02, end_rel: float = 0.5, max_segments: int = 40,
-                    angle_step_deg: float = 0.5, max_peaks: int = 400) -> list[Target3D]:
+                    angle_step_deg: float = 0.5, max_peaks: int = 400, min_depth_m: float | None = None,
+                    max_dip_deg: float = 45.0, lateral_contrast: float = 1.5) -> list[Target3D]:
     """Line and point targets from an image envelope ``(nx, ny, nd)`` on ``grid`` (deterministic).
 
     ``threshold`` is relative to the ``reference_percentile`` of the ridge map (a robust stand-in for its
@@ -303,10 +327,17 @@ def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.
     ``min_density`` inlier columns per cell of its length, and a mean ridge value of ``line_contrast`` x the
     threshold (a smear just above the threshold is not a pipe). Its ends: the ``end_weight`` and
     ``1 - end_weight`` quantiles, weighted by ridge value, of its inlier columns at least ``end_rel`` times their
-    median value. Collinear lines across gaps up to ``join_gap_m`` are joined. At most ``max_segments`` lines
+    median value. Collinear lines across gaps up to ``join_gap_m`` are joined. A line must stand out from its
+    sides (its mean ridge value ``lateral_contrast`` times the level 2.5 and 5 bands to the brighter side, see
+    :func:`_side_level`: a dipping layer's image is bright beside a line through it, a pipe's is not) and dip less than ``max_dip_deg``. ``min_depth_m``: nothing
+    shallower is looked at (e.g. where the direct wave rings). At most ``max_segments`` lines
     and ``max_peaks`` Hough peaks per group are examined.
     """
     envelope = np.asarray(envelope, dtype=np.float32)
+    if min_depth_m is not None and min_depth_m > grid.d0:
+        k0 = min(int(np.ceil((min_depth_m - grid.d0) / grid.dd - 1e-9)), grid.nd - 1)
+        envelope = envelope[:, :, k0:]
+        grid = replace(grid, d0=grid.d0 + k0 * grid.dd, nd=grid.nd - k0)
     val, dep = ridge_map(envelope, grid)
     peak = float(np.percentile(val, reference_percentile))
     if not peak > 0:
@@ -315,7 +346,7 @@ def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.
     tol = tol_m or 2.0 * max(grid.dx, grid.dy)
     band = band_m or max(4 * tol, 0.1)
     group_gap = 3 * band if group_gap_m is None else group_gap_m
-    run_gap = 4 * band if run_gap_m is None else run_gap_m
+    run_gap = min(4 * band, 0.5) if run_gap_m is None else run_gap_m
     mask = val >= threshold * peak
     parts, n_parts = ndimage.label(mask, structure=np.ones((3, 3)))
     r = int(round(group_gap / 2 / cell))
@@ -371,6 +402,9 @@ def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.
                 coef = _depth_fit(ss, D[members[jj]], ww, grid.dd)
                 a = np.append(c + lo * d, coef[0] * lo + coef[1])
                 b = np.append(c + hi * d, coef[0] * hi + coef[1])
+                if abs(coef[0]) > np.tan(np.radians(max_dip_deg)) \
+                        or _side_level(val, grid, a[:2], b[:2], 2.5 * band) * lateral_contrast > ww.mean():
+                    continue  # plunging, or as bright beside it as on it (a dipping layer): no pipe; its columns stay
                 if ww.mean() >= line_contrast * threshold * peak and not _fringe(a[:2], b[:2], lines, 2 * band):
                     lines.append(Target3D("line", [a.tolist(), b.tolist()], float(min(a[2], b[2])),
                                           float(ww.mean() / peak), int(len(run))))

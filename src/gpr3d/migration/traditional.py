@@ -48,14 +48,18 @@ def stolt_migrate(data: np.ndarray, dx_m: float, dt_s: float, eps_r: float, *, p
     return img.astype(np.float32), v2 * dt_s
 
 
-def split_lines(positions_xyz: np.ndarray, *, max_gap_m: float = 0.05, max_turn_rad: float = 0.3,
+def split_lines(positions_xyz: np.ndarray, *, max_gap_m: float | None = None, max_turn_rad: float = 0.3,
                 min_traces: int = 10):
     """Split a trajectory of straight grid lines into lines: lists of trace indices.
 
-    A new line starts after a jump longer than ``max_gap_m`` or a turn sharper than
-    ``max_turn_rad`` between consecutive steps; pieces shorter than ``min_traces`` are dropped.
+    A new line starts after a jump longer than ``max_gap_m`` (default: three times the median step) or a turn
+    sharper than ``max_turn_rad`` between consecutive steps; pieces shorter than ``min_traces`` are dropped.
     """
     p = np.asarray(positions_xyz)[:, :2]
+    if max_gap_m is None:
+        steps = np.hypot(*np.diff(p, axis=0).T)
+        moving = steps[steps > 0]
+        max_gap_m = 3.0 * float(np.median(moving)) if moving.size else 0.05
     lines, cur = [], [0]
     prev_dir = None
     for i in range(1, len(p)):
@@ -114,7 +118,12 @@ def pseudo3d(survey, grid: Grid3D, *, eps_r: float, method: str = "kirchhoff", a
     """
     from scipy.signal import hilbert
 
-    lines = split_lines(survey.positions_xyz)
+    starts = survey.metadata.get("grid", {}).get("first_trace")  # a grid put together from line files
+    if starts:
+        bounds = [*starts, survey.n_traces]
+        lines = [np.arange(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b - a >= 10]
+    else:
+        lines = split_lines(survey.positions_xyz)
     planes_x, planes_y = {}, {}
     for idx in lines:
         p = survey.positions_xyz[idx]
