@@ -91,6 +91,10 @@ def one_line_error(capsys, argv, *needles):
      ["short.tum", "noposes.h5", "50 poses", "400 traces"]),
     (["reconstruct", "{d}/walk.h5", "--eps-r", "6", "--out", "{d}/plain.txt"], ["--out", "is a file"]),
     (["dataset", "preview", "{d}", "{d}/x.txt"], ["x.txt", ".png"]),
+    (["migrate", DZT, "--out", "{d}/m"], ["--eps-r or --velocity"]),
+    (["migrate", DZT, "--out", "{d}/m", "--velocity", "5"], ["--velocity", "0.2998"]),
+    (["migrate", DZT, "--out", "{d}/m", "--eps-r", "6", "--max-depth", "-2"], ["--max-depth"]),
+    (["show", DZT, "--out", "{d}/a.png", "--ascan", "99999"], ["--ascan", "0..1039"]),
 ])
 def test_a_wrong_argument_is_one_line_naming_it_and_leaves_nothing(files, capsys, argv, needles):
     """Each case the issue lists (tracebacks, a hang, wrong results with no error, unhelpful messages)."""
@@ -208,3 +212,20 @@ def test_hostile_arguments_never_crash_or_hang(files, capsys, data, tmp_path_fac
         assert len(lines) == 1 and lines[0].startswith("gpr3d: error: "), (argv, err)
     if rc != 0:
         assert not out.exists(), argv
+
+
+def test_migrate_a_profile_and_draw_wiggles_and_an_ascan(tmp_path, capsys):
+    """gpr3d migrate writes the migrated profile (HDF5 + figure); show draws wiggles and one A-scan."""
+    import h5py
+
+    assert main(["migrate", DZT, "--eps-r", "6", "--max-depth", "2", "--steps", "time_zero", "dewow",
+                 "remove_background", "--out", str(tmp_path / "m")]) == 0
+    with h5py.File(tmp_path / "m" / "profile.h5") as f:
+        assert f.attrs["method"] == "kirchhoff" and f.attrs["eps_r"] == 6.0
+        assert f["image"].shape == (f["along_m"].shape[0], f["depth_m"].shape[0])
+        assert f["depth_m"][-1] <= 2.0 + 1e-9 and np.isfinite(f["image"][()]).all()
+    assert (tmp_path / "m" / "profile.png").stat().st_size > 10_000
+    for extra, name in ((["--style", "wiggle"], "w.png"), (["--ascan", "500"], "a.png")):
+        assert main(["show", DZT, "--out", str(tmp_path / name), *extra]) == 0
+        assert (tmp_path / name).stat().st_size > 5_000
+    capsys.readouterr()

@@ -120,6 +120,19 @@ def cmd_show(args):
     except GPR3DError as exc:
         raise GPR3DError(f"--{'cmap' if 'colour' in str(exc) else 'clip'}: {exc}") from None
     s = _apply_steps(_read_channel(args), args.steps)
+    if args.ascan is not None or args.style == "wiggle":
+        from gpr3d.viz._figures import plot_to_png
+        from gpr3d.viz.bscan import plot_ascan, plot_wiggles
+
+        if args.ascan is not None and not 0 <= args.ascan < s.n_traces:
+            raise GPR3DError(f"--ascan must be a trace in 0..{s.n_traces - 1}, got {args.ascan}")
+        name = Path(args.input).name
+        if args.ascan is not None:
+            plot_to_png(args.out, plot_ascan, s, args.ascan, figsize=(8, 3.5), title=f"{name}: trace {args.ascan}")
+        else:
+            plot_to_png(args.out, plot_wiggles, s, figsize=(8, 5), title=name)
+        print(f"wrote {args.out}")
+        return 0
     if args.axis == "depth" and args.eps_r is None and s.eps_r is None:
         raise GPR3DError("--axis depth needs --eps-r (the file gives no eps_r)")
     save_bscan_png(s, args.out, axis=args.axis, eps_r=args.eps_r, cmap=args.cmap, clip_percentile=args.clip,
@@ -212,6 +225,38 @@ def cmd_cscan(args):
     save_cscan_sheet(out / "cscan.png", cs, title=f"{Path(args.input).name}: C-scans ({args.window_ns:g} ns slices)")
     print(f"wrote {out}/cscan.h5 and cscan.png: {cs.values.shape[0]} slices of {cs.values.shape[1]} x "
           f"{cs.values.shape[2]} cells of {args.cell:g} m")
+    return 0
+
+
+def cmd_migrate(args):
+    from gpr3d.io.volume import write_profile
+    from gpr3d.migration.profile import migrate_profile
+    from gpr3d.viz.bscan import save_profile_png
+
+    if (args.eps_r is None) == (args.velocity is None):
+        raise GPR3DError("give --eps-r or --velocity (one of them)")
+    if args.velocity is not None and not 0.001 <= args.velocity <= 0.2998:
+        raise GPR3DError(f"--velocity must be a wave speed in m/ns, between 0.001 and c = 0.2998, got {args.velocity:g}")
+    for flag, value in (("--max-depth", args.max_depth), ("--spacing", args.spacing),
+                        ("--trace-spacing", args.trace_spacing)):
+        if value is not None and not value > 0:
+            raise GPR3DError(f"{flag} must be positive, got {value:g}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise GPR3DError(f"--out {out} is a file; migrate writes a folder")
+    eps = _eps_argument(args.eps_r) if args.eps_r is not None else (0.299792458 / args.velocity) ** 2
+    s = _apply_steps(_read_channel(args), args.steps)
+    if eps == "file":
+        if s.eps_r is None:
+            raise GPR3DError(f"--eps-r file: {args.input} gives no eps_r; give a number")
+        eps = s.eps_r
+    prof = migrate_profile(s, eps_r=float(eps), method=args.method, max_depth_m=args.max_depth,
+                           spacing_m=args.spacing, trace_spacing_m=args.trace_spacing)
+    out.mkdir(parents=True, exist_ok=True)
+    write_profile(out / "profile.h5", prof)
+    save_profile_png(out / "profile.png", prof, title=f"{Path(args.input).name}: {args.method}, eps_r {eps:.3g}")
+    print(f"wrote {out}/profile.h5 and profile.png: {prof.image.shape[0]} x {prof.image.shape[1]} cells "
+          f"({args.method}, eps_r {eps:.3g}, {prof.wall_s:.1f} s)")
     return 0
 
 
@@ -880,6 +925,24 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--cmap", default="gray", help="colour map: gray, hot (as the reference paper), seismic, ...")
     sp.add_argument("--clip", type=float, default=99.0, help="colour limit percentile of |amplitude| (default 99)")
     sp.add_argument("--steps", nargs="*", default=[], help="processing before drawing")
+    sp.add_argument("--style", choices=("image", "wiggle"), default="image",
+                    help="image (default) or wiggle traces (at most 60, evenly spread)")
+    sp.add_argument("--ascan", type=int, default=None, metavar="TRACE", help="draw this one trace (an A-scan) instead")
+
+    sp = add("migrate", cmd_migrate, "migrate one profile in 2D (Kirchhoff, back projection, Stolt or RTM)",
+             "examples:\n  gpr3d migrate XLINE00.DT1 --eps-r 9 --steps time_zero dewow remove_background --out mig\n"
+             "  gpr3d migrate line.DZT --velocity 0.1 --method stolt --trace-spacing 0.02 --out mig")
+    add_input(sp)
+    sp.add_argument("--out", required=True, help="output folder (profile.h5, profile.png)")
+    sp.add_argument("--method", default="kirchhoff", choices=("kirchhoff", "backprojection", "stolt", "rtm"),
+                    help="kirchhoff (default: obliquity weight, 50 deg aperture), backprojection (no weights), "
+                         "stolt (f-k, zero offset), rtm (2D Maxwell reverse time)")
+    sp.add_argument("--eps-r", default=None, help="relative permittivity of the host, or 'file' (the header's)")
+    sp.add_argument("--velocity", type=float, default=None, help="wave speed in m/ns (instead of --eps-r)")
+    sp.add_argument("--max-depth", type=float, default=None, help="deepest depth (m; default: the record's reach)")
+    sp.add_argument("--spacing", type=float, default=None, help="image cell along the line (m; default trace step)")
+    sp.add_argument("--trace-spacing", type=float, default=None, help="trace spacing (m; default: the positions)")
+    sp.add_argument("--steps", nargs="*", default=[], metavar="STEP", help="processing first")
 
     sp = add("process", cmd_process, "process a radar file and write the result",
              "example:\n  gpr3d process FILE____032.DZT --steps time_zero dewow remove_background "

@@ -151,3 +151,20 @@ def read_cscan(path):
                          float(a["eps_r"]) if "eps_r" in a else None)
     except (OSError, KeyError) as exc:
         raise FormatError(p, f"unreadable C-scan ({exc})") from None
+
+
+def write_profile(path, prof) -> Path:
+    """Write a migrated profile (:class:`~gpr3d.migration.profile.ProfileImage`: ``image (along, depth)``,
+    ``along_m``, ``depth_m``, ``method``, ``eps_r``) to HDF5, atomically."""
+    import h5py
+
+    path = Path(path)
+    with atomic_path(path, suffix=".h5.part") as tmp:
+        with h5py.File(tmp, "w") as f:
+            f.attrs.update({"schema": "gpr3d.profile", "schema_version": 1, "gpr3d_version": __version__,
+                            "method": prof.method, "eps_r": prof.eps_r, "axes": "along (m), depth (m, down)"})
+            f.create_dataset("image", data=np.asarray(prof.image, np.float32), compression="gzip",
+                             compression_opts=4, shuffle=True)
+            f.create_dataset("along_m", data=np.asarray(prof.along_m, float))
+            f.create_dataset("depth_m", data=np.asarray(prof.depth_m, float))
+    return path

@@ -158,7 +158,8 @@ def _prepare(survey, cfg):
         raise InvalidDataError("the survey has no antenna positions: give --poses (a TUM file, one pose per trace)")
     s = survey
     if cfg.time_zero != "none":
-        s = s.time_zero(method=cfg.time_zero, search_s=min(s.time_window_s / 4, 10e-9))
+        # time zero only noted (t0_s), not cut: the migration honours it, and a fractional shift would resample
+        s = s.time_zero(method=cfg.time_zero, search_s=min(s.time_window_s / 4, 10e-9), shift=False)
     if cfg.remove_background:
         s = s.remove_background()
     return s
@@ -185,10 +186,10 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     if width < max(2 * cfg.spacing_m, 0.05):
         warnings.warn(f"the antenna positions span only {width * 100:.1f} cm across their main direction (one "
                       "straight profile): a 3D image cannot tell one side of the line from the other, and targets "
-                      "off the line come out mirrored on both sides; migrate the profile in 2D instead",
+                      "off the line come out mirrored on both sides; migrate the profile in 2D instead (gpr3d migrate)",
                       GeometryWarning, stacklevel=2)
     v = velocity_from_eps_r(eps)
-    depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s) * 0.95
+    depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s - s.t0_s) * 0.95
     grid = Grid3D.covering(s.positions_xyz, depth_m=depth, spacing_m=cfg.spacing_m,
                            depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m)
     check_grid_fits(grid)  # (site tiles too: the whole volume is put together in memory)

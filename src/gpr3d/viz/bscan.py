@@ -6,7 +6,7 @@ import numpy as np
 
 from gpr3d.viz._figures import plot_to_png, pyplot
 
-__all__ = ["plot_bscan", "save_bscan_png", "check_plot_args"]
+__all__ = ["plot_bscan", "save_bscan_png", "check_plot_args", "save_profile_png", "plot_wiggles", "plot_ascan"]
 
 
 def check_plot_args(*, cmap=None, clip_percentile=None, axis=None) -> None:
@@ -105,3 +105,72 @@ def plot_bscan(
 def save_bscan_png(survey, path, *, dpi: int = 120, **kwargs) -> None:
     """Render :func:`plot_bscan` to a PNG file atomically."""
     plot_to_png(path, plot_bscan, survey, figsize=(8, 4.5), dpi=dpi, **kwargs)
+
+
+def save_profile_png(path, prof, *, title=None, dpi: int = 110) -> None:
+    """A migrated profile beside its envelope, depth down, each with a colour bar; written atomically."""
+    from scipy.signal import hilbert
+
+    from gpr3d.viz._figures import save_figure
+
+    plt = pyplot()
+    img = np.asarray(prof.image, dtype=np.float64)
+    env = np.abs(hilbert(img, axis=1))
+    ext = (prof.along_m[0], prof.along_m[-1], prof.depth_m[-1], prof.depth_m[0])
+    fig, axes = plt.subplots(2, 1, figsize=(9, 7), layout="constrained")
+    lim = float(np.percentile(np.abs(img), 99.5)) or 1.0
+    for ax, data, cmap, vmin, vmax, label in ((axes[0], img, "seismic", -lim, lim, "migrated amplitude"),
+                                              (axes[1], env, "viridis", 0.0,
+                                               float(np.percentile(env, 99.5)) or 1.0, "envelope")):
+        im = ax.imshow(data.T, aspect="auto", extent=ext, cmap=cmap, vmin=vmin, vmax=vmax)
+        ax.set(xlabel="along the profile (m)", ylabel="depth (m)")
+        fig.colorbar(im, ax=ax, label=label)
+    axes[0].set_title(title or f"{prof.method} migration, eps_r {prof.eps_r:g}")
+    save_figure(fig, path, dpi=dpi)
+
+
+def plot_wiggles(survey, ax=None, *, traces=None, scale: float = 1.0, fill: bool = True, title=None):
+    """Wiggle plot: each trace drawn as a curve about its own axis (time down), positive lobes filled; ``traces``
+    picks which (default: at most 60, evenly spread); ``scale`` in trace spacings per the largest amplitude."""
+    plt = pyplot()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 5))
+    n = survey.n_traces
+    idx = np.unique(np.linspace(0, n - 1, min(n, 60)).round().astype(int)) if traces is None \
+        else np.asarray(traces, dtype=int)
+    if idx.size == 0 or idx.min() < 0 or idx.max() >= n:
+        from gpr3d.core.errors import InvalidDataError
+
+        raise InvalidDataError(f"traces must lie in 0..{n - 1}")
+    t = (np.arange(survey.n_samples) * survey.dt_s - survey.t0_s) * 1e9
+    data = survey.data[idx].astype(np.float64)
+    peak = float(np.abs(data).max()) or 1.0
+    gap = float(np.median(np.diff(idx))) if idx.size > 1 else 1.0
+    for k, tr in zip(idx, data):
+        x = k + scale * gap * tr / peak
+        ax.plot(x, t, "k-", lw=0.5)
+        if fill:
+            ax.fill_betweenx(t, k, x, where=x > k, color="k", lw=0)
+    ax.set(xlabel="trace", ylabel="two-way time (ns)", ylim=(t[-1], t[0]), title=title)
+    return ax
+
+
+def plot_ascan(survey, trace: int, ax=None, *, envelope: bool = True, title=None):
+    """One A-scan: amplitude against two-way time, with its envelope."""
+    from scipy.signal import hilbert
+
+    from gpr3d.core.errors import InvalidDataError
+
+    if not 0 <= int(trace) < survey.n_traces:
+        raise InvalidDataError(f"trace must lie in 0..{survey.n_traces - 1}, got {trace}")
+    plt = pyplot()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 3.5))
+    t = (np.arange(survey.n_samples) * survey.dt_s - survey.t0_s) * 1e9
+    a = survey.data[int(trace)].astype(np.float64)
+    ax.plot(t, a, "k-", lw=0.8, label="amplitude")
+    if envelope:
+        ax.plot(t, np.abs(hilbert(a)), "r-", lw=0.8, label="envelope")
+        ax.legend(loc="upper right")
+    ax.set(xlabel="two-way time (ns)", ylabel="amplitude", title=title or f"trace {int(trace)}")
+    return ax
