@@ -180,7 +180,8 @@ _SHOW = {"--clip": _hostile, "--cmap": st.sampled_from(["gray", "hot", "notacmap
 _STEPS = st.sampled_from(["dewow:window_s", "gain_tpow:power", "gain_tpow:t_ref_s", "gain_agc:window_s",
                           "bandpass:order", "bandpass:fmin_hz", "remove_dc:sample_range", "time_zero:threshold",
                           "time_zero:shift", "time_zero:search_s", "remove_background:window_traces",
-                          "gain_sec:alpha_per_s", "resample_spacing:spacing_m"])
+                          "gain_sec:alpha_per_s", "resample_spacing:spacing_m", "topo_correct:eps_r",
+                          "topo_correct:velocity_m_s"])
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

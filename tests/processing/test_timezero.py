@@ -34,6 +34,20 @@ def test_shift_traces_matches_interpolation():
         np.testing.assert_allclose(y[i], ref, atol=1e-6)
 
 
+@pytest.mark.parametrize("shift", [0.0, 3.25, 7.9, 10.0])
+def test_one_shift_for_all_traces_matches_interpolation(shift):
+    """The uniform-shift path (two slices) gives np.interp's values, the same as the per-trace path."""
+    rng = np.random.default_rng(5)
+    x = rng.standard_normal((6, 40)).astype(np.float32)
+    y = shift_traces(x, shift)
+    assert y.shape == (6, int(np.floor(39 - shift + 1e-9)) + 1)
+    for i in range(6):
+        ref = np.interp(np.arange(y.shape[1]) + shift, np.arange(40), x[i])
+        np.testing.assert_allclose(y[i], ref, atol=1e-6)
+    per_trace = shift_traces(x, np.array([shift] * 5 + [shift + 1e-12]))  # (not all equal: the general path)
+    np.testing.assert_allclose(y, per_trace[:, : y.shape[1]], atol=1e-5)
+
+
 def test_time_zero_step_on_synthetic_survey():
     s = point_targets_bscan([[0.3, 0.2]], t0_s=2e-9, offset_m=0.0, dt_s=DT, n_samples=300)
     p = s.time_zero(method="peak", search_s=4e-9)

@@ -96,10 +96,18 @@ def cmd_info(args):
     return 1 if failed else 0
 
 
+def _with_track(survey, args):
+    if getattr(args, "track", None):
+        from gpr3d.io.trajectory import apply_track, read_track
+
+        survey = apply_track(survey, read_track(args.track))
+    return survey
+
+
 def _read_channel(args):
     from gpr3d.io.registry import read
 
-    return read(args.input, format=args.format, channel=args.channel)
+    return _with_track(read(args.input, format=args.format, channel=args.channel), args)
 
 
 def _apply_steps(survey, specs):
@@ -493,7 +501,7 @@ def cmd_reconstruct(args):
     # weights checked before the work starts
     detector = _detector(args) if args.mask == "detect" or (estimate and not args.boxes) else None
     depthnet = _depthnet(args) if estimate and args.depth in ("hybrid", "net") else None
-    survey = read(args.input, format=args.format, channel=args.channel)
+    survey = _with_track(read(args.input, format=args.format, channel=args.channel), args)
     if args.poses:
         traj = read_trajectory(args.poses)
         if len(traj) != survey.n_traces:
@@ -903,6 +911,11 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--trace-spacing", type=float, default=None,
                         help="trace spacing in metres (default: the file's positions)")
 
+    def add_track(sp):
+        sp.add_argument("--track", default=None,
+                        help="place the traces on a surveyed track: x y z text, CSV (x,y,z columns) or GSSI .DZG "
+                             "(GPS fixes by trace)")
+
     def add_input(sp):
         sp.add_argument("input", help="radar file (DZT, DT1/HD, RD3/RAD, gprMax .h5/.out, gpr3d .h5)")
         sp.add_argument("--channel", type=int, default=0, help="channel of a multi-channel file (default 0)")
@@ -919,6 +932,7 @@ def build_parser() -> argparse.ArgumentParser:
              "example:\n  gpr3d show FILE____032.DZT --out b.png --steps time_zero dewow --axis depth --cmap hot\n\n"
              + steps_help)
     add_input(sp)
+    add_track(sp)
     sp.add_argument("--out", required=True, help="PNG file to write")
     sp.add_argument("--axis", choices=("time", "depth"), default="time", help="vertical axis (default time)")
     sp.add_argument("--eps-r", type=float, default=None, help="eps_r for the depth axis (default: file header)")
@@ -933,6 +947,7 @@ def build_parser() -> argparse.ArgumentParser:
              "examples:\n  gpr3d migrate XLINE00.DT1 --eps-r 9 --steps time_zero dewow remove_background --out mig\n"
              "  gpr3d migrate line.DZT --velocity 0.1 --method stolt --trace-spacing 0.02 --out mig")
     add_input(sp)
+    add_track(sp)
     sp.add_argument("--out", required=True, help="output folder (profile.h5, profile.png)")
     sp.add_argument("--method", default="kirchhoff", choices=("kirchhoff", "backprojection", "stolt", "rtm"),
                     help="kirchhoff (default: obliquity weight, 50 deg aperture), backprojection (no weights), "
@@ -948,12 +963,14 @@ def build_parser() -> argparse.ArgumentParser:
              "example:\n  gpr3d process FILE____032.DZT --steps time_zero dewow remove_background "
              "gain_tpow:power=1.5 --out p.h5\n\n" + steps_help)
     add_input(sp)
+    add_track(sp)
     sp.add_argument("--steps", nargs="+", required=True, help="processing steps in order")
     sp.add_argument("--out", required=True, help="output: .h5 (gpr3d), .sgy/.segy (SEG-Y) or .png")
 
     sp = add("convert", cmd_convert, "convert a radar file to gpr3d HDF5, SEG-Y or PNG",
              "example:\n  gpr3d convert XLINE00.DT1 xline00.sgy")
     add_input(sp)
+    add_track(sp)
     sp.add_argument("out", help="output: .h5 (gpr3d), .sgy/.segy (SEG-Y) or .png")
 
     sp = add("grid", cmd_grid, "put parallel line files together into one survey with positions",
@@ -974,6 +991,7 @@ def build_parser() -> argparse.ArgumentParser:
              "example:\n  gpr3d cscan grid.h5 --steps time_zero dewow remove_background --window-ns 10 --cell 0.05 "
              "--eps-r 9 --out cscan")
     add_input(sp)
+    add_track(sp)
     sp.add_argument("--out", required=True, help="output folder (cscan.h5, cscan.png)")
     sp.add_argument("--cell", type=float, default=0.05, help="cell size (m; default 0.05)")
     sp.add_argument("--window-ns", type=float, default=10.0, help="slice thickness in two-way time (ns; default 10)")
@@ -1067,6 +1085,7 @@ def build_parser() -> argparse.ArgumentParser:
              "outputs: volume.h5, volume.vti (ParaView), top.png, front.png, view3d.png, targets.json\n"
              "(targets: x, y, depth positive down, metres; endpoints for lines)")
     add_input(sp)
+    add_track(sp)
     sp.add_argument("--out", required=True, help="output folder")
     sp.add_argument("--poses", default=None, help="TUM trajectory, one pose per trace in trace order")
     sp.add_argument("--eps-r", default=None,

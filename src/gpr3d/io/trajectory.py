@@ -18,7 +18,7 @@ from gpr3d.io._common import check_file
 from gpr3d.io.atomic import atomic_write_text
 
 __all__ = ["Trajectory", "read_tum", "write_tum", "read_csv_trajectory", "read_trajectory", "read_xyz_track",
-           "attach_poses", "attach_track"]
+           "attach_poses", "attach_track", "read_track", "apply_track"]
 
 
 def _rows(path, text: str, ncols: int, what: str) -> np.ndarray:
@@ -183,4 +183,73 @@ def attach_track(survey, track_xyz: np.ndarray):
     out.metadata["positions_source"] = "along-line distance placed on an xyz track"
     if s[-1] > s_track[-1] * 1.05:
         out.metadata["track_warning"] = f"survey line {s[-1]:.2f} m is longer than the track {s_track[-1]:.2f} m"
+    return out
+
+
+def read_track(path):
+    """A surveyed track for :func:`apply_track`: ``("points", (n, 3) xyz)`` from an ``x y z`` text file or a CSV
+    whose header names x, y, z (optionally more columns), or ``("per_trace", (trace_index, (k, 3) local ENU m))``
+    from a GSSI ``.DZG`` (GPS fixes tagged with their scan number, in metres east/north/up from the first fix)."""
+    p = check_file(path)
+    ext = p.suffix.lower()
+    if ext == ".dzg":
+        from gpr3d.io._common import gps_positions
+        from gpr3d.io.dzt import read_dzg
+
+        g = read_dzg(p)
+        if len(g["scan"]) < 2:
+            raise FormatError(p, f"holds {len(g['scan'])} GPS fix(es) with a fix quality > 0: two at least needed")
+        scans = np.asarray(g["scan"], float)
+        pos, _origin = gps_positions(scans, np.asarray(g["lat"]), np.asarray(g["lon"]), np.asarray(g["alt"]),
+                                     scans)
+        if pos is None:
+            raise FormatError(p, "GPS fixes do not advance with the scan number")
+        return "per_trace", (scans, pos)
+    text = p.read_text(encoding="utf-8", errors="replace")
+    if ext == ".csv":
+        reader = csv.reader(_io.StringIO(text))
+        try:
+            header = [h.strip().lower() for h in next(reader)]
+        except StopIteration:
+            raise FormatError(p, "empty CSV") from None
+        cols = {}
+        for key in ("x", "y", "z"):
+            found = [header.index(n) for n in _CSV_NAMES[key] if n in header]
+            if not found:
+                raise FormatError(p, f"CSV header lacks a {key} column (has {header})")
+            cols[key] = found[0]
+        rows = []
+        for lineno, row in enumerate(reader, 2):
+            if not row or all(not c.strip() for c in row):
+                continue
+            try:
+                rows.append([float(row[cols[k]]) for k in ("x", "y", "z")])
+            except (ValueError, IndexError):
+                raise FormatError(p, f"line {lineno}: x, y, z must be numbers, got {row}") from None
+        pts = np.asarray(rows, float).reshape(-1, 3)
+    else:
+        pts = _rows(p, text, 3, "x y z")
+    if len(pts) < 2 or not np.all(np.isfinite(pts)):
+        raise FormatError(p, "a track needs two finite x y z points at least")
+    return "points", pts
+
+
+def apply_track(survey, track) -> "object":
+    """Place ``survey`` on a track from :func:`read_track`: along an xyz track by each trace's along-line
+    distance (:func:`attach_track`), or on GPS fixes by trace number (linear between fixes; traces before the
+    first fix or after the last take the nearest fix's position, and are reported in the metadata)."""
+    kind, value = track
+    if kind == "points":
+        return attach_track(survey, value)
+    scans, pos = value
+    idx = np.arange(survey.n_traces, dtype=float)
+    xyz = np.stack([np.interp(idx, scans, pos[:, k]) for k in range(3)], axis=1)
+    outside = int(np.count_nonzero((idx < scans[0]) | (idx > scans[-1])))
+    from gpr3d.core.poses import quat_from_yaw
+
+    d = np.gradient(xyz[:, :2], axis=0)
+    out = survey.replace(positions_xyz=xyz, orientations_quat_wxyz=quat_from_yaw(np.arctan2(d[:, 1], d[:, 0])))
+    out.metadata["positions_source"] = "GPS fixes by trace number"
+    if outside:
+        out.metadata["track_warning"] = f"{outside} traces lie outside the GPS fixes' span"
     return out

@@ -158,8 +158,7 @@ def _prepare(survey, cfg):
         raise InvalidDataError("the survey has no antenna positions: give --poses (a TUM file, one pose per trace)")
     s = survey
     if cfg.time_zero != "none":
-        # time zero only noted (t0_s), not cut: the migration honours it, and a fractional shift would resample
-        s = s.time_zero(method=cfg.time_zero, search_s=min(s.time_window_s / 4, 10e-9), shift=False)
+        s = s.time_zero(method=cfg.time_zero, search_s=min(s.time_window_s / 4, 10e-9))
     if cfg.remove_background:
         s = s.remove_background()
     return s

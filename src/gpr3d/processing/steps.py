@@ -124,10 +124,36 @@ def resample_spacing(s, *, spacing_m: float):
     return changes, {"n_traces": int(data.shape[0])}
 
 
+def topo_correct(s, *, eps_r: float | None = None, velocity_m_s: float | None = None):
+    """Static (topographic) correction: each trace is delayed by the two-way time through the ground between the
+    highest antenna position and its own, ``2 (z_max - z) / v``, so that equal times mean equal elevations; the
+    record grows by the largest delay (zeros before). ``eps_r`` (default the survey's) or ``velocity_m_s``."""
+    if s.positions_xyz is None:
+        raise InvalidDataError("topo_correct needs trace positions with elevations (a track or GPS)")
+    if velocity_m_s is None:
+        eps = eps_r if eps_r is not None else s.eps_r
+        if eps is None:
+            raise InvalidDataError("topo_correct: give eps_r or velocity_m_s (the survey has no eps_r)")
+        velocity_m_s = C0 / np.sqrt(eps)
+    z = s.positions_xyz[:, 2]
+    delay = 2.0 * (z.max() - z) / velocity_m_s
+    shift = delay / s.dt_s
+    n_extra = int(np.ceil(shift.max() - 1e-9))
+    if n_extra > 20 * s.n_samples:
+        raise InvalidDataError(f"topo_correct: {np.ptp(z):.1f} m of relief would lengthen the record "
+                               f"{n_extra / s.n_samples:.0f}-fold: are the elevations in metres?")
+    pad = np.zeros((s.n_traces, n_extra), np.float32)
+    padded = np.concatenate([pad, np.asarray(s.data, np.float32), pad], axis=1)
+    # a delay by shift = an advance of the front-padded trace by n_extra - shift; the highest trace keeps its times
+    data = timezero.shift_traces(padded, n_extra - shift)[:, : s.n_samples + n_extra]
+    return ({"data": data}, {"datum_elevation_m": float(z.max()), "max_delay_s": float(delay.max()),
+                             "velocity_m_s": float(velocity_m_s)})
+
+
 STEPS: dict[str, Callable] = {
     f.__name__: f
     for f in (time_zero, dewow, remove_dc, remove_background, gain_tpow, gain_sec, gain_agc,
-              bandpass, envelope, resample_spacing)
+              bandpass, envelope, resample_spacing, topo_correct)
 }
 
 
@@ -160,6 +186,8 @@ _RULES: dict[tuple[str, str], tuple[Callable, str]] = {
     ("bandpass", "fmin_hz"): (lambda v, s: 0 < v < 0.5 / s.dt_s, "between 0 and the Nyquist frequency"),
     ("bandpass", "fmax_hz"): (lambda v, s: 0 < v < 0.5 / s.dt_s, "between 0 and the Nyquist frequency"),
     ("resample_spacing", "spacing_m"): (lambda v, s: v > 0, "positive"),
+    ("topo_correct", "eps_r"): (lambda v, s: v >= 1, ">= 1"),
+    ("topo_correct", "velocity_m_s"): (lambda v, s: 1e6 <= v <= C0, "a wave speed in m/s, at most c"),
 }
 
 _BOOL_WORDS = {"true": True, "yes": True, "on": True, "1": True, "false": False, "no": False, "off": False, "0": False}

@@ -118,6 +118,14 @@ def shift_traces(data: np.ndarray, shift_samples) -> np.ndarray:
     n_out = int(np.floor(n_s - 1 - shift.max() + 1e-9)) + 1
     if n_out < 2:
         raise ValueError("time zero is at the end of the traces: nothing left after cutting")
+    if np.all(shift == shift[0]):  # one shift for all: two slices instead of a gather per sample
+        i0 = int(np.floor(shift[0]))
+        w = np.float32(shift[0] - i0)
+        lo = x[:, i0:i0 + n_out]
+        hi = x[:, i0 + 1:i0 + 1 + n_out]
+        if hi.shape[1] < n_out:  # the last output sample reads past the end: the last sample again (weight 0)
+            hi = np.concatenate([hi, x[:, -1:]], axis=1)
+        return (lo * (1 - w) + hi * w).astype(np.float32)
     pos = np.arange(n_out)[None, :] + shift[:, None]
     i0 = np.minimum(np.floor(pos).astype(np.int64), n_s - 1)
     i1 = np.minimum(i0 + 1, n_s - 1)
