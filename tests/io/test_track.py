@@ -34,3 +34,30 @@ def test_process_with_a_track_and_topographic_correction(tmp_path, capsys):
     assert out.history[-1]["result"]["datum_elevation_m"] == pytest.approx(0.3)
     assert out.n_samples > 32
     capsys.readouterr()
+
+
+def test_a_dzg_places_the_traces_on_their_gps_fixes(tmp_path):
+    """GPS fixes tagged with their scan (trace) number: traces between fixes are interpolated; 0.001 minute of
+    latitude is 1.853 m north."""
+    lines = []
+    for scan, lat_min in ((0, 39.2552), (100, 39.2562), (200, 39.2572)):
+        lines += [f"$GSSIS,{scan},-1", f"$GPGGA,000320,47{lat_min:.4f},N,12218.5815,W,1,08,1.0,12.0,M,,M,,*00", ""]
+    (tmp_path / "g.DZG").write_text("\n".join(lines))
+    kind, (scans, pos) = read_track(tmp_path / "g.DZG")
+    assert kind == "per_trace" and list(scans) == [0, 100, 200]
+    placed = apply_track(line_survey(n=201), (kind, (scans, pos)))
+    north = placed.positions_xyz[:, 1] - placed.positions_xyz[0, 1]
+    assert north[100] == pytest.approx(1.853, rel=0.01) and north[50] == pytest.approx(north[100] / 2, rel=1e-6)
+    assert abs(placed.positions_xyz[:, 0] - placed.positions_xyz[0, 0]).max() < 1e-6  # due north
+
+
+def test_a_dzg_without_fixes_is_one_line():
+    """The real SIR-4000 file's DZG logs GGA sentences with fix quality 0 (no fix): refused, naming the file."""
+    from tests.conftest import real_file
+
+    try:
+        dzg = real_file("impdar_gssi_sir4000/test_gssi.DZG")
+    except Exception:  # noqa: BLE001
+        pytest.skip("../shared/data/real is absent")
+    with pytest.raises(FormatError, match="test_gssi.DZG: holds 0 GPS fix"):
+        read_track(dzg)
