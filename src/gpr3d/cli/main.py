@@ -179,6 +179,14 @@ def cmd_convert(args):
     return 0
 
 
+def _out_folder(path, command) -> Path:
+    """``--out`` of a command that writes a folder: refused (before any work) where it names a file."""
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise GPR3DError(f"--out {out} is a file; {command} writes a folder (give a new or existing folder)")
+    return out
+
+
 def _number_list(text, what, kind=float):
     if not text:
         return None
@@ -222,12 +230,10 @@ def cmd_cscan(args):
     if not args.window_ns > 0:
         raise GPR3DError(f"--window-ns must be positive, got {args.window_ns:g}")
     eps = _eps_argument(args.eps_r)
+    out = _out_folder(args.out, "cscan")
     s = _apply_steps(_read_channel(args), args.steps)
     eps_r = s.eps_r if eps == "file" else eps
     cs = cscan(s, cell_m=args.cell, window_s=args.window_ns * 1e-9, eps_r=eps_r, fill_m=args.fill)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise GPR3DError(f"--out {out} is a file; cscan writes a folder")
     out.mkdir(parents=True, exist_ok=True)
     write_cscan(out / "cscan.h5", cs)
     save_cscan_sheet(out / "cscan.png", cs, title=f"{Path(args.input).name}: C-scans ({args.window_ns:g} ns slices)")
@@ -249,9 +255,7 @@ def cmd_migrate(args):
                         ("--trace-spacing", args.trace_spacing)):
         if value is not None and not value > 0:
             raise GPR3DError(f"{flag} must be positive, got {value:g}")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise GPR3DError(f"--out {out} is a file; migrate writes a folder")
+    out = _out_folder(args.out, "migrate")
     eps = _eps_argument(args.eps_r) if args.eps_r is not None else (0.299792458 / args.velocity) ** 2
     s = _apply_steps(_read_channel(args), args.steps)
     if eps == "file":
@@ -476,8 +480,7 @@ def cmd_reconstruct(args):
 
     if args.mask == "detect" and args.boxes:
         raise GPR3DError("give --boxes or --mask detect, not both")
-    if Path(args.out).exists() and not Path(args.out).is_dir():
-        raise GPR3DError(f"--out {args.out} is a file; reconstruct writes a folder (give a new or existing folder)")
+    _out_folder(args.out, "reconstruct")
     site = dict(tile_m=args.tile, workers=args.workers, scheduler=args.scheduler,
                 checkpoint=str(Path(args.out) / "tiles") if args.resume else None)
     from gpr3d.migration.reconstruct import check_config
