@@ -71,7 +71,7 @@ def migrate_profile(survey, *, eps_r: float, method: str = "kirchhoff", max_dept
         raise InvalidDataError(f"spacings must be positive, got {step!r} along and {dd!r} in depth")
     n_along = int(np.floor(s_along[-1] / step)) + 1
     nd = int(np.floor(depth / dd)) + 1
-    if n_along * nd > 2e8:
+    if n_along * nd > 5e7:
         raise InvalidDataError(f"the image of {n_along} x {nd} cells is too large: use larger spacings")
     along = np.arange(n_along) * step
     depths = np.arange(nd) * dd

@@ -47,8 +47,9 @@ def cscan(survey, *, cell_m: float, window_s: float, t_start_s=None, eps_r: floa
     lo = xy.min(axis=0)
     idx = np.floor((xy - lo) / cell_m + 0.5).astype(np.int64)
     nx, ny = idx.max(axis=0) + 1
-    if nx * ny > 50_000_000:
-        raise InvalidDataError(f"{nx} x {ny} cells of {cell_m:g} m: too many; use a larger cell")
+    if nx * ny * len(starts) > 100_000_000:
+        raise InvalidDataError(f"{len(starts)} slices of {nx} x {ny} cells of {cell_m:g} m: too many; use a larger "
+                               "cell or thicker slices")
     flat = idx[:, 0] * ny + idx[:, 1]
     count = np.bincount(flat, minlength=nx * ny).reshape(nx, ny).astype(float)
     sigma = max(fill / cell_m / 2, 0.5)

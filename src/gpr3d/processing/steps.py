@@ -161,8 +161,11 @@ def _record_s(s) -> float:
     return s.n_samples * s.dt_s
 
 
-def _positive(v) -> bool:
-    return v > 0
+def _path_m(s) -> float:
+    """Length of the survey's path (m; 0 without positions)."""
+    if s.positions_xyz is None:
+        return 0.0
+    return float(np.hypot(*np.diff(s.positions_xyz[:, :2], axis=0).T).sum())
 
 
 #: value checks per step argument, beyond its type: (test(value, survey), what it must be); each names the
@@ -185,7 +188,8 @@ _RULES: dict[tuple[str, str], tuple[Callable, str]] = {
     ("bandpass", "order"): (lambda v, s: 1 <= v <= 10, "a whole number from 1 to 10"),
     ("bandpass", "fmin_hz"): (lambda v, s: 0 < v < 0.5 / s.dt_s, "between 0 and the Nyquist frequency"),
     ("bandpass", "fmax_hz"): (lambda v, s: 0 < v < 0.5 / s.dt_s, "between 0 and the Nyquist frequency"),
-    ("resample_spacing", "spacing_m"): (lambda v, s: v > 0, "positive"),
+    ("resample_spacing", "spacing_m"): (lambda v, s: v > 0 and _path_m(s) / v <= 20 * s.n_traces + 1,
+                                        "positive and give at most 20 times the traces there are"),
     ("topo_correct", "eps_r"): (lambda v, s: v >= 1, ">= 1"),
     ("topo_correct", "velocity_m_s"): (lambda v, s: 1e6 <= v <= C0, "a wave speed in m/s, at most c"),
 }
