@@ -72,6 +72,7 @@ def one_line_error(capsys, argv, *needles):
     (["process", DZT, "--out", "{d}/p.h5", "--steps", "gain_tpow:t_ref_s=0"], ["gain_tpow: t_ref_s", "positive"]),
     (["process", DZT, "--out", "{d}/p.h5", "--steps", "time_zero:shift=maybe"], ["time_zero: shift", "true or false"]),
     (["process", DZT, "--out", "{d}/p.h5", "--steps", "remove_background:method=mode"], ["'mean' or 'median'"]),
+    (["process", DZT, "--out", "{d}/p.h5", "--steps", "remove_background:window_traces=1"], ["window_traces", ">= 2"]),
     (["simulate", "--engine", "forward", "--n", "1", "--workers", "-2", "--out", "{d}/sim"], ["--workers", "-2"]),
     (["simulate", "--engine", "forward", "--n", "1", "--workers", "0", "--out", "{d}/sim"], ["--workers", ">= 1"]),
     (["simulate", "--engine", "forward", "--n", "1", "--scheduler", "notaurl", "--out", "{d}/sim"], ["--scheduler"]),

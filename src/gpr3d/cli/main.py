@@ -123,10 +123,11 @@ def cmd_show(args):
     from gpr3d.viz.bscan import check_plot_args, save_bscan_png
 
     _check_suffix(args.out, (".png",), "--out")
-    try:
-        check_plot_args(cmap=args.cmap, clip_percentile=args.clip)
-    except GPR3DError as exc:
-        raise GPR3DError(f"--{'cmap' if 'colour' in str(exc) else 'clip'}: {exc}") from None
+    for flag, kw in (("--cmap", {"cmap": args.cmap}), ("--clip", {"clip_percentile": args.clip})):
+        try:
+            check_plot_args(**kw)
+        except GPR3DError as exc:
+            raise GPR3DError(f"{flag}: {exc}") from None
     s = _apply_steps(_read_channel(args), args.steps)
     if args.ascan is not None or args.style == "wiggle":
         from gpr3d.viz._figures import plot_to_png
@@ -491,14 +492,7 @@ def cmd_reconstruct(args):
                     aperture_deg=None if args.aperture == 0 else args.aperture, threshold=args.threshold,
                     min_line_m=args.min_line, engine=args.engine, time_zero="none" if args.no_time_zero else "peak",
                     min_target_depth_m=args.min_depth)
-    try:
-        check_config(ReconstructConfig(**settings, **site))  # one line naming the setting, before any work
-    except GPR3DError as exc:
-        msg = str(exc)
-        for name, flag in _RECONSTRUCT_FLAGS.items():
-            if msg.startswith(name + " "):
-                msg = flag + msg[len(name):]
-        raise GPR3DError(msg) from None
+    check_config(ReconstructConfig(**settings, **site), names=_RECONSTRUCT_FLAGS)  # one line, before any work
     eps_given = _eps_argument(args.eps_r)
     estimate = eps_given is None
     # weights checked before the work starts

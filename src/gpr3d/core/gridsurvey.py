@@ -142,8 +142,7 @@ def assemble_grid(surveys, *, names=None, line_spacing_m: float | None = None, d
     for line, d, s in zip(lines, dist, surveys):
         first_trace.append(sum(len(p) for p in pos))
         xy = line.start[None, :] + d[:, None] * line.direction[None, :]
-        z = np.zeros((len(d), 1)) if s.positions_xyz is None else s.positions_xyz[:, 2:3] * 0.0
-        pos.append(np.hstack([xy, z]))
+        pos.append(np.hstack([xy, np.zeros((len(d), 1))]))  # on flat ground (elevations: --track, topo_correct)
         yaw.append(np.full(len(d), np.arctan2(line.direction[1], line.direction[0])))
     t0 = [s.t0_s for s in surveys]
     data = np.concatenate([s.data[:, :ns] for s in surveys], axis=0)

@@ -160,8 +160,9 @@ def read_segy(path, *, dt_unit: str = "auto") -> list:
     upper = text.upper()
     unit = dt_unit if dt_unit != "auto" else ("ns" if "NANOSECOND" in upper and "PICOSECOND" not in upper
                                               and not ours else "ps")
-    if ours and _text_value(text, "DT S"):
-        dt = _text_value(text, "DT S")
+    dt_text = _text_value(text, "DT S") if ours else None
+    if dt_text:
+        dt = dt_text
     elif rev_major >= 2 and np.isfinite(ext) and ext > 0:
         dt = ext * units[unit]
     elif interval > 0:
@@ -170,6 +171,9 @@ def read_segy(path, *, dt_unit: str = "auto") -> list:
         raise FormatError(p, "gives no sample interval (binary and trace headers hold 0)")
     if not np.all(np.isfinite(data)):
         raise FormatError(p, "holds NaN/inf samples")
+    if dt > 1e-6:
+        raise FormatError(p, f"sample interval {dt:g} s (the field read as {unit}) is no GPR interval: a seismic "
+                             "file, or its interval unit is not the default (gpr3d.read(..., dt_unit=...))")
 
     def scaled(value, scalar):
         return value / -scalar if scalar < 0 else value * (scalar if scalar > 0 else 1)
@@ -179,9 +183,6 @@ def read_segy(path, *, dt_unit: str = "auto") -> list:
                      scaled(h[TF.ReceiverGroupElevation], h[TF.ElevationScalar])] for h in heads], float)
     positions = xyz if np.any(xyz != 0) else None
     freq = _text_value(text, "FREQUENCY HZ") if ours else None
-    if dt > 1e-6:
-        raise FormatError(p, f"sample interval {dt:g} s (the field read as {unit}) is no GPR interval: a seismic "
-                             "file, or its interval unit is not the default (gpr3d.read(..., dt_unit=...))")
     return [Survey(data=data, dt_s=float(dt), positions_xyz=positions,
                    t0_s=(_text_value(text, "T0 S") or 0.0) if ours else 0.0,
                    frequency_hz=freq or None, offset_m=(_text_value(text, "OFFSET M") or 0.0) if ours else 0.0,

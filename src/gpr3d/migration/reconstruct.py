@@ -76,11 +76,13 @@ class Reconstruction:
     eps_r_source: str = "given"  #: where eps_r came from (``config.json`` records it)
 
 
-def check_config(cfg: ReconstructConfig) -> None:
-    """One line naming the first setting of ``cfg`` out of its range (before any work)."""
+def check_config(cfg: ReconstructConfig, names: dict | None = None) -> None:
+    """One line naming the first setting of ``cfg`` out of its range (before any work); ``names`` maps a setting
+    to what the caller calls it (the CLI: ``{"spacing_m": "--spacing", ...}``)."""
+    names = names or {}
 
     def bad(name, must):
-        raise InvalidDataError(f"{name} must be {must}, got {getattr(cfg, name)!r}")
+        raise InvalidDataError(f"{names.get(name, name)} must be {must}, got {getattr(cfg, name)!r}")
 
     def number(name, *, positive=False, none_ok=False, lo=None, hi=None, lo_open=False, hi_open=False):
         v = getattr(cfg, name)

@@ -85,12 +85,6 @@ def _pca(p, w):
     return c, vt[0]
 
 
-def _seg_point_dist(p, a, b):
-    ab = b - a
-    t = np.clip((p - a) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
-    return float(np.hypot(*(p - (a + t * ab))))
-
-
 def _extent(s, w, q):
     """The extent along a line of its inlier columns (positions ``s``): the ``q`` and ``1 - q`` quantiles of ``s``
     weighted by the columns' ridge values ``w`` (weak columns at the ends, the smear past a pipe's end, count for
@@ -323,7 +317,7 @@ def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.
     2 cells) is the inlier distance of the line fits and the Hough bin; ``band_m`` (default ``max(4 tol, 0.1 m)``;
     ``reconstruct`` gives ``max(2 tol, half a wavelength)``) the band removed around an accepted line. Columns
     whose gaps are narrower than ``group_gap_m`` (default 3 bands) are searched together; a line's inliers split
-    at gaps wider than ``run_gap_m`` (default 4 bands). A line needs ``min_line_m`` of length (shorter: points),
+    at gaps wider than ``run_gap_m`` (default 4 bands, at most 0.5 m). A line needs ``min_line_m`` of length (shorter: points),
     ``min_density`` inlier columns per cell of its length, and a mean ridge value of ``line_contrast`` x the
     threshold (a smear just above the threshold is not a pipe). Its ends: the ``end_weight`` and
     ``1 - end_weight`` quantiles, weighted by ridge value, of its inlier columns at least ``end_rel`` times their

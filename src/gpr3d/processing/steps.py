@@ -177,7 +177,7 @@ _RULES: dict[tuple[str, str], tuple[Callable, str]] = {
     ("dewow", "window_s"): (lambda v, s: 2 * s.dt_s <= v <= _record_s(s),
                             "between two samples and the record's length"),
     ("remove_background", "method"): (lambda v, s: v in ("mean", "median"), "'mean' or 'median'"),
-    ("remove_background", "window_traces"): (lambda v, s: 1 <= v, "a whole number >= 1"),
+    ("remove_background", "window_traces"): (lambda v, s: 2 <= v, "a whole number >= 2"),
     ("gain_tpow", "t_ref_s"): (lambda v, s: v > 0, "positive"),
     ("gain_sec", "t_ref_s"): (lambda v, s: v > 0, "positive"),
     ("gain_sec", "alpha_per_s"): (lambda v, s: v >= 0, ">= 0"),
