@@ -247,6 +247,20 @@ def _random_motion_stage(out: Path, cfg: DemoConfig, log) -> dict:
                       "random_walk_bscan.png"]}
 
 
+def _named(ev: dict) -> dict:
+    """``evaluate_targets``' target indices as the names ``targets.json`` and the figures give them (T1, ...)."""
+    from gpr3d.migration.targets import target_name
+
+    for r in ev["truth"]:
+        r["found_as"] = [target_name(i) for i in r["found_as"]]
+    ev["false"] = [target_name(i) for i in ev["false"]]
+    return ev
+
+
+def _as(r) -> str:
+    return f" as {', '.join(r['found_as'])}" if r["found_as"] else ""
+
+
 def _reconstruction_stage(out: Path, log) -> dict:
     from gpr3d.core.survey import Survey
     from gpr3d.io.trajectory import read_tum
@@ -266,9 +280,9 @@ def _reconstruction_stage(out: Path, log) -> dict:
         wall = time.perf_counter() - t
         if folder:
             write_reconstruction(result, out / folder, source="random_walk_survey.h5")
-        ev = evaluate_targets(result.targets, truth_lines_from_pipes(pipes))
+        ev = _named(evaluate_targets(result.targets, truth_lines_from_pipes(pipes)))
         rows[key] = {"wall_s": wall, "n_targets": len(result.targets), "false_targets": ev["false_targets"],
-                     "false_lines": ev["false_lines"], "false_points": ev["false_points"],
+                     "false_lines": ev["false_lines"], "false_points": ev["false_points"], "false": ev["false"],
                      "excess_fraction": ev["excess_fraction"],
                      "truth": [{"target": n, **r} for n, r in zip(names, ev["truth"])],
                      "updates_per_s": result.updates_per_s, "grid": result.grid.to_dict()}
@@ -288,9 +302,11 @@ def _reconstruction_stage(out: Path, log) -> dict:
                          f"off, complete {r['completeness'] * 100:3.0f} %" if "position_error_m" in r
                          else f"found as points only, complete {r['completeness'] * 100:3.0f} %" if r["completeness"] > 0
                          else "not found")
-        log(f"      {name:<16} {cells[0]}  ({cells[1]})")
+        log(f"      {name:<16}{_as(rows['estimated']['truth'][i]):<9} {cells[0]}  ({cells[1]})")
     est_, tru_ = rows["estimated"], rows["true"]
-    log(f"      {est_['n_targets']} targets: {est_['false_lines']} false lines, {est_['false_points']} false points, "
+    false_names = f" ({', '.join(est_['false'])})" if est_["false"] else ""
+    log(f"      {est_['n_targets']} targets (T1..T{est_['n_targets']} in reconstruction/: targets.json and the "
+        f"figures): {est_['false_lines']} false lines, {est_['false_points']} false points{false_names}, "
         f"overshoot {est_['excess_fraction'] * 100:.0f} % of the true length ({tru_['n_targets']} targets, "
         f"{tru_['false_lines']} false lines, {tru_['false_points']} false points, {tru_['excess_fraction'] * 100:.0f} % "
         "from the true poses)")
@@ -308,7 +324,7 @@ def _reconstruction_stage(out: Path, log) -> dict:
     est = rows["estimated"]
     return {"wall_s": est["wall_s"], "grid": est["grid"], "updates_per_s": est["updates_per_s"],
             "n_targets": est["n_targets"], "false_targets": est["false_targets"], "truth": est["truth"],
-            "false_lines": est["false_lines"], "false_points": est["false_points"],
+            "false_lines": est["false_lines"], "false_points": est["false_points"], "false": est["false"],
             "excess_fraction": est["excess_fraction"],
             "poses": "estimated (visual-inertial fusion)", "with_true_poses": rows["true"], "folder": "reconstruction",
             "tiles": {"n": n_tiles, "tile_m": 0.64, "wall_s": wall_tiles, "equal_to_one_pass": same}}
@@ -376,17 +392,18 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
     wall = time.perf_counter() - t
     write_reconstruction(result, out / "reconstruction_masked", source="random_walk_survey.h5")
     names = ["L leg along x", "L leg along y", "diagonal pipe", "rebar at x=0.2", "rebar at x=1.85"]
-    ev = evaluate_targets(result.targets, truth_lines_from_pipes(demo_scene().pipes))
+    ev = _named(evaluate_targets(result.targets, truth_lines_from_pipes(demo_scene().pipes)))
     for name, r in zip(names, ev["truth"]):
         if "position_error_m" in r:
-            log(f"      {name:<16} position {r['position_error_m'] * 100:4.1f} cm, complete "
+            log(f"      {name:<16}{_as(r):<9} position {r['position_error_m'] * 100:4.1f} cm, complete "
                 f"{r['completeness'] * 100:3.0f} %")
         else:
-            log(f"      {name:<16} not found")
+            log(f"      {name:<16}{_as(r):<9} " + ("found as points only" if r["found_as"] else "not found"))
     log(f"      migrated inside the detected boxes only, with the estimated eps_r {eps_est:.2f}, in {wall:.1f} s: "
-        f"{len(result.targets)} targets, {ev['false_targets']} false (noise map in reconstruction_masked/)")
+        f"{len(result.targets)} targets, {ev['false_targets']} false"
+        + (f" ({', '.join(ev['false'])})" if ev["false"] else "") + " (noise map in reconstruction_masked/)")
     row.update({"masked_eps_r": eps_est, "masked_eps_r_source": "estimated (migration focus)", "masked_wall_s": wall, "masked_targets": len(result.targets),
-                "masked_false_targets": ev["false_targets"], "masked_truth": ev["truth"],
+                "masked_false_targets": ev["false_targets"], "masked_false": ev["false"], "masked_truth": ev["truth"],
                 "folder": "reconstruction_masked"})
     return row
 

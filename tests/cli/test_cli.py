@@ -153,7 +153,11 @@ def test_demo_end_to_end(tmp_path):
             "synthetic_processed.png", "synthetic_rtm.png", "random_walk_survey.h5", "random_walk.tum", "random_walk_truth.tum",
             "random_walk_map.png",
             "reconstruction"} <= names
-    assert (tmp_path / "d" / "reconstruction" / "targets.json").exists()
+    # the names the summary gives the targets found (and the false ones) are those of targets.json and the figures
+    listed = [t["name"] for t in json.loads((tmp_path / "d" / "reconstruction" / "targets.json").read_text())["targets"]]
+    assert listed == [f"T{i + 1}" for i in range(rec["n_targets"])]
+    named = [n for row in rec["truth"] for n in row["found_as"]] + rec["false"]
+    assert sorted(named) == sorted(listed) and len(rec["false"]) == rec["false_targets"]
     assert not [n for n in names if n.endswith(".part")]
     det = summary["stages"]["detection"]
     if "skipped" not in det:  # PyTorch installed: depth from the data, and the masked migration uses it

@@ -45,7 +45,8 @@ def test_extracts_an_l_a_diagonal_and_a_point():
         assert row["depth_error_m"] < 0.015
     assert ev["false_targets"] == 1  # the point is not on any truth line
     js = targets_to_json(t)
-    assert {k for k in js["targets"][0]} == {"kind", "points_xyz", "depth_m", "score"}
+    assert {k for k in js["targets"][0]} == {"name", "kind", "points_xyz", "depth_m", "score"}
+    assert [x["name"] for x in js["targets"]] == [f"T{i + 1}" for i in range(len(t))]
 
 
 def test_metrics_on_known_offsets():
@@ -73,15 +74,17 @@ def test_endpoint_error_overshoot_and_excess_on_known_lines():
     assert ev["excess_m"] == pytest.approx(0.2 + 0.8, abs=0.02)
     assert ev["excess_fraction"] == pytest.approx(1.0 / 2.0, abs=0.01)
     assert ev["false_lines"] == 1 and ev["false_points"] == 0
+    assert row["found_as"] == [0] and ev["false"] == [1]  # indices into the target list (names T1, T2)
 
 
 def test_a_rebar_found_as_points_counts_as_found():
     """Points along a truth bar cover it around them (5 cm each side) and are not false; a point far off is."""
     truth = truth_lines_from_pipes([Pipe((0, 0, -0.06), (1, 0, -0.06), 0.01)])
     pts = [Target3D("point", [[x, 0.01, 0.05]], 0.05, 1.0) for x in np.arange(0.05, 1.0, 0.1)]
-    ev = evaluate_targets(pts + [Target3D("point", [[0.5, 0.6, 0.05]], 0.05, 1.0)], truth)
+    ev = evaluate_targets([Target3D("point", [[0.5, 0.6, 0.05]], 0.05, 1.0)] + pts, truth)
     assert ev["truth"][0]["completeness"] > 0.95
     assert ev["false_points"] == 1 and ev["false_lines"] == 0
+    assert ev["truth"][0]["found_as"] == list(range(1, len(pts) + 1)) and ev["false"] == [0]
 
 
 def test_collinear_pieces_across_a_gap_are_joined():

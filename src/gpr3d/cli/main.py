@@ -145,6 +145,7 @@ def cmd_show(args):
     if args.axis == "depth" and args.eps_r is None and s.eps_r is None:
         raise GPR3DError("--axis depth needs --eps-r (the file gives no eps_r)")
     save_bscan_png(s, args.out, axis=args.axis, eps_r=args.eps_r, cmap=args.cmap, clip_percentile=args.clip,
+                   envelope=args.envelope,
                    title=f"{Path(args.input).name}" + (f" ({', '.join(h['step'] for h in s.history)})" if s.history else ""))
     print(f"wrote {args.out}")
     return 0
@@ -478,6 +479,7 @@ def cmd_reconstruct(args):
     from gpr3d.io.registry import read
     from gpr3d.io.trajectory import attach_poses, read_trajectory
     from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct, write_reconstruction
+    from gpr3d.migration.targets import target_name
 
     if args.mask == "detect" and args.boxes:
         raise GPR3DError("give --boxes or --mask detect, not both")
@@ -552,9 +554,11 @@ def cmd_reconstruct(args):
     g = result.grid
     print(f"migrated {result.n_traces} traces onto {g.nx} x {g.ny} x {g.nd} voxels in "
           f"{result.timings_s['migrate']:.1f} s ({result.updates_per_s / 1e9:.2f} G voxel-trace updates/s)")
-    for t in result.targets:
+    if result.frame is not None:
+        print("one straight profile: migrated in 2D (the vertical plane under it); targets crossing it are points")
+    for i, t in enumerate(result.targets):
         pts = "  ".join("(" + ", ".join(f"{v:.2f}" for v in p) + ")" for p in t.points_xyz)
-        print(f"  {t.kind:5s} depth {t.depth_m:.2f} m  score {t.score:.2f}  {pts}")
+        print(f"  {target_name(i):>4} {t.kind:5s} depth {t.depth_m:.2f} m  score {t.score:.2f}  {pts}")
     print(f"wrote {', '.join(files)} to {args.out}/")
     return 0
 
@@ -939,6 +943,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--style", choices=("image", "wiggle"), default="image",
                     help="image (default) or wiggle traces (at most 60, evenly spread)")
     sp.add_argument("--ascan", type=int, default=None, metavar="TRACE", help="draw this one trace (an A-scan) instead")
+    sp.add_argument("--envelope", action="store_true",
+                    help="draw the envelope (instantaneous amplitude) instead of the signed amplitude")
 
     sp = add("migrate", cmd_migrate, "migrate one profile in 2D (Kirchhoff, back projection, Stolt or RTM)",
              "examples:\n  gpr3d migrate XLINE00.DT1 --eps-r 9 --steps time_zero dewow remove_background --out mig\n"

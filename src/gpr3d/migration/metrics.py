@@ -47,6 +47,8 @@ def evaluate_targets(targets, truth: list[dict], *, tol_m: float = 0.1, max_angl
     endpoint error (m), completeness; per scene: false lines and points, excess length (m and fraction)."""
     lines = [t for t in targets if t.kind == "line"]
     points = [np.array(t.points_xyz[0], float) for t in targets if t.kind == "point"]
+    line_at = [i for i, t in enumerate(targets) if t.kind == "line"]  # index in ``targets`` of lines[k]
+    point_at = [i for i, t in enumerate(targets) if t.kind == "point"]
     per_truth = []
     matched = set()
     cover_by = {}
@@ -66,11 +68,13 @@ def evaluate_targets(targets, truth: list[dict], *, tol_m: float = 0.1, max_angl
             if hit.any():
                 cover_by.setdefault(li, []).append((hit.sum(), ti))
                 covered |= hit
-        for q in points:  # points on the line cover it around them
+        on_it = []
+        for pi, q in enumerate(points):  # points on the line cover it around them
             d_line, _ = _seg_dist(q[None], a, b)
             if d_line[0] < tol_m:
                 covered |= np.linalg.norm(samp - q, axis=1) < max(point_cover_m, tol_m)
-        per_truth.append({"samples": samp, "covered": covered})
+                on_it.append(point_at[pi])
+        per_truth.append({"samples": samp, "covered": covered, "points": on_it})
     for li, lst in cover_by.items():
         matched.add(li)
         best_ti = max(lst)[1]
@@ -82,7 +86,9 @@ def evaluate_targets(targets, truth: list[dict], *, tol_m: float = 0.1, max_angl
         info = per_truth[ti]
         lis = info.get("lines", [])
         row = {"truth": ti, "length_m": float(np.linalg.norm(b - a)), "n_segments": len(lis),
-               "completeness": float(info["covered"].mean())}
+               "completeness": float(info["covered"].mean()),
+               # which targets (indices into ``targets``: lines matched to it, points on it) found this one
+               "found_as": sorted([line_at[li] for li in lis] + info["points"])}
         if lis:
             pos_err, dep_err, ang_err, wts = [], [], [], []
             for li in lis:
@@ -115,11 +121,14 @@ def evaluate_targets(targets, truth: list[dict], *, tol_m: float = 0.1, max_angl
                             "overshoot_m": float(max(0.0, -ends.min()) + max(0.0, ends.max() - length))})
         rows.append(row)
     false_lines = [i for i in range(len(lines)) if i not in matched]
+    false_at = [line_at[i] for i in false_lines]
     # points are false when no truth line passes within tol
     false_points = 0
-    for p in points:
+    for pi, p in enumerate(points):
         dmin = min((_seg_dist(p[None], np.array(tr["p0"]), np.array(tr["p1"]))[0][0] for tr in truth), default=np.inf)
         false_points += int(dmin > tol_m)
+        if dmin > tol_m:
+            false_at.append(point_at[pi])
     # excess: extracted line length far from every truth line
     excess = 0.0
     for ln in lines:
@@ -131,5 +140,5 @@ def evaluate_targets(targets, truth: list[dict], *, tol_m: float = 0.1, max_angl
         excess += float(np.count_nonzero(dmin > excess_m)) * step
     true_len = float(sum(np.linalg.norm(np.subtract(tr["p1"], tr["p0"])) for tr in truth))
     return {"truth": rows, "false_targets": len(false_lines) + false_points, "false_lines": len(false_lines),
-            "false_points": false_points, "n_extracted": len(targets), "excess_m": excess,
+            "false_points": false_points, "false": sorted(false_at), "n_extracted": len(targets), "excess_m": excess,
             "true_length_m": true_len, "excess_fraction": excess / true_len if true_len > 0 else 0.0}

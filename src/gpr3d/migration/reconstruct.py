@@ -13,7 +13,7 @@ import json
 import os
 import time
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -25,9 +25,10 @@ from gpr3d.io.atomic import atomic_write_text
 from gpr3d.core.grid import Grid3D
 from gpr3d.migration.masking import box_mask, check_boxes, image_envelope
 from gpr3d.migration.operator import BackProjection, antenna_positions
-from gpr3d.migration.targets import extract_targets, targets_to_json
+from gpr3d.migration.targets import extract_profile_targets, extract_targets, targets_to_json
 
-__all__ = ["Reconstruction", "ReconstructConfig", "check_site_settings", "reconstruct", "write_reconstruction"]
+__all__ = ["ProfileFrame", "Reconstruction", "ReconstructConfig", "check_site_settings", "reconstruct",
+           "write_reconstruction"]
 
 
 @dataclass
@@ -74,6 +75,57 @@ class Reconstruction:
     timings_s: dict
     updates_per_s: float | None  #: traces x voxels / migration seconds
     eps_r_source: str = "given"  #: where eps_r came from (``config.json`` records it)
+    #: None: a 3D image on a world grid; a :class:`ProfileFrame`: one straight profile migrated in 2D, the grid's
+    #: x running along the line from ``frame.origin_xy`` (ny = 1, y = 0), targets mapped back to the world
+    frame: "ProfileFrame | None" = None
+
+    def world_points(self, idx) -> np.ndarray:
+        """World coordinates ``(n, 3)`` (z = -depth) of voxel indices ``(n, 3)`` (either kind of grid)."""
+        pts = self.grid.points(idx)
+        if self.frame is None:
+            return pts
+        return np.column_stack([self.frame.to_world(pts[:, 0], pts[:, 1]), pts[:, 2]])
+
+
+@dataclass(frozen=True)
+class ProfileFrame:
+    """A straight profile's own horizontal frame: ``along`` from ``origin_xy`` in ``direction_xy`` (a unit
+    vector), ``across`` to its left."""
+
+    origin_xy: tuple
+    direction_xy: tuple
+
+    @classmethod
+    def fit(cls, positions_xyz) -> "ProfileFrame":
+        """The main horizontal direction of ``positions_xyz`` (pointing from the first trace towards the last),
+        its origin at the rearmost position's projection onto it (every position has ``along >= 0``)."""
+        xy = np.asarray(positions_xyz, dtype=float)[:, :2]
+        c = xy.mean(axis=0)
+        _, _, vt = np.linalg.svd(xy - c, full_matrices=False)
+        d = vt[0]
+        if (xy[-1] - xy[0]) @ d < 0:
+            d = -d
+        o = c + float(((xy - c) @ d).min()) * d
+        return cls((float(o[0]), float(o[1])), (float(d[0]), float(d[1])))
+
+    def to_line(self, xyz) -> np.ndarray:
+        """``(n, 3)`` world points as ``[along, across, z]``."""
+        p = np.asarray(xyz, dtype=float).reshape(-1, 3)
+        rel = p[:, :2] - np.asarray(self.origin_xy)
+        d = np.asarray(self.direction_xy)
+        n = np.array([-d[1], d[0]])
+        return np.ascontiguousarray(np.column_stack([rel @ d, rel @ n, p[:, 2]]))
+
+    def to_world(self, along, across=0.0) -> np.ndarray:
+        """``(n, 2)`` world x, y of profile coordinates."""
+        a = np.asarray(along, dtype=float).reshape(-1)
+        c = np.broadcast_to(np.asarray(across, dtype=float), a.shape)
+        d = np.asarray(self.direction_xy)
+        n = np.array([-d[1], d[0]])
+        return np.asarray(self.origin_xy) + a[:, None] * d + c[:, None] * n
+
+    def to_dict(self) -> dict:
+        return {"kind": "profile", "origin_xy": list(self.origin_xy), "direction_xy": list(self.direction_xy)}
 
 
 def check_config(cfg: ReconstructConfig, names: dict | None = None) -> None:
@@ -183,18 +235,31 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     t = time.perf_counter()
     s = _prepare(survey, cfg)
     t_prep = time.perf_counter() - t
+    frame = None
+    positions = s.positions_xyz
+    tx, rx = antenna_positions(s.positions_xyz, s.orientations_quat_wxyz, s.offset_m)
     width = cross_line_extent(s.positions_xyz)
     if width < max(2 * cfg.spacing_m, 0.05):
+        # one straight profile: a 3D image would mirror every target to both sides of the line; image the
+        # vertical plane under the line instead (the same back projection on a grid one cell wide)
+        frame = ProfileFrame.fit(s.positions_xyz)
+        positions = frame.to_line(s.positions_xyz)
+        length = float(np.ptp(positions[:, 0]))
+        if length < 2 * cfg.spacing_m:
+            raise InvalidDataError(f"the antenna positions all lie within {max(length, width) * 100:.1f} cm: no "
+                                   "profile and no area to image")
+        tx, rx = frame.to_line(tx), frame.to_line(rx)
         warnings.warn(f"the antenna positions span only {width * 100:.1f} cm across their main direction (one "
-                      "straight profile): a 3D image cannot tell one side of the line from the other, and targets "
-                      "off the line come out mirrored on both sides; migrate the profile in 2D instead (gpr3d migrate)",
-                      GeometryWarning, stacklevel=2)
+                      f"straight profile, {length:.2f} m long): a 3D image cannot tell one side of the line from the "
+                      "other, so the profile is migrated in 2D (the vertical plane under it) and targets crossing it "
+                      "come out as points on it", GeometryWarning, stacklevel=2)
     v = velocity_from_eps_r(eps)
     depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s - s.t0_s) * 0.95
-    grid = Grid3D.covering(s.positions_xyz, depth_m=depth, spacing_m=cfg.spacing_m,
+    grid = Grid3D.covering(positions, depth_m=depth, spacing_m=cfg.spacing_m,
                            depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m)
+    if frame is not None:
+        grid = replace(grid, y0=0.0, ny=1)
     check_grid_fits(grid)  # (site tiles too: the whole volume is put together in memory)
-    tx, rx = antenna_positions(s.positions_xyz, s.orientations_quat_wxyz, s.offset_m)
     op = BackProjection(grid, tx, rx, dt_s=s.dt_s, n_samples=s.n_samples, t0_s=s.t0_s, eps_r=eps,
                         aperture_deg=cfg.aperture_deg, obliquity=cfg.obliquity, spreading=cfg.spreading,
                         engine=cfg.engine)
@@ -237,12 +302,21 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     # the band cleared around each line found: half a wavelength (the width of a pipe's image), at least two cells
     tol = 2.0 * max(grid.dx, grid.dy)
     band = max(2 * tol, 0.5 * v / survey.frequency_hz) if survey.frequency_hz else None
-    targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band,
-                              min_depth_m=cfg.min_target_depth_m)
+    if frame is None:
+        targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band,
+                                  min_depth_m=cfg.min_target_depth_m)
+    else:
+        targets = extract_profile_targets(env[:, 0, :], grid.x, grid.depth, threshold=cfg.threshold,
+                                          min_line_m=cfg.min_line_m, min_depth_m=cfg.min_target_depth_m)
+        for t in targets:  # [along, 0, depth] -> [x, y, depth]
+            along = [p[0] for p in t.points_xyz]
+            xy = frame.to_world(along)
+            t.extra["along_m"] = along
+            t.points_xyz = [[float(q[0]), float(q[1]), float(p[2])] for q, p in zip(xy, t.points_xyz)]
     return Reconstruction(image=image, envelope=env, noise_map=noise_map, fold=fold, grid=grid, targets=targets,
                           eps_r=float(eps), config=asdict(cfg), n_traces=s.n_traces,
                           timings_s={"prepare": t_prep, "migrate": t_mig},
-                          updates_per_s=s.n_traces * grid.size / t_mig if t_mig > 0 else None)
+                          updates_per_s=s.n_traces * grid.size / t_mig if t_mig > 0 else None, frame=frame)
 
 
 def write_reconstruction(result: "Reconstruction", out_dir, *, source: str = "") -> list[str]:
@@ -255,13 +329,17 @@ def write_reconstruction(result: "Reconstruction", out_dir, *, source: str = "")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     g = result.grid
+    frame = None if result.frame is None else json.dumps(result.frame.to_dict())
     write_volume(out / "volume.h5", g, {"image": result.image, "envelope": result.envelope,
-                                        "noise_map": result.noise_map}, eps_r=result.eps_r, source=source)
+                                        "noise_map": result.noise_map}, eps_r=result.eps_r, source=source,
+                 frame_json=frame)
     write_vti(out / "volume.vti", g, {"envelope": result.envelope, "noise_map": result.noise_map})
     atomic_write_text(out / "targets.json", json.dumps(targets_to_json(result.targets), indent=1))
     atomic_write_text(out / "config.json", json.dumps({"gpr3d": __version__, "source": source,
                                                        "eps_r": result.eps_r, "eps_r_source": result.eps_r_source,
                                                        "config": result.config, "grid": g.to_dict(),
+                                                       "frame": None if result.frame is None
+                                                       else result.frame.to_dict(),
                                                        "timings_s": result.timings_s}, indent=1))
     reconstruction_figures(result, out)
     return sorted(p.name for p in out.iterdir())

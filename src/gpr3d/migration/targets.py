@@ -35,7 +35,7 @@ from scipy import ndimage, stats
 
 from gpr3d.core.grid import Grid3D
 
-__all__ = ["Target3D", "ridge_map", "extract_targets", "targets_to_json"]
+__all__ = ["Target3D", "ridge_map", "extract_targets", "extract_profile_targets", "targets_to_json", "target_name"]
 
 
 @dataclass
@@ -431,7 +431,83 @@ def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.
     return out
 
 
+def extract_profile_targets(envelope: np.ndarray, along_m: np.ndarray, depth_m: np.ndarray, *,
+                            threshold: float = 0.3, reference_percentile: float = 99.5, min_line_m: float = 0.3,
+                            line_contrast: float = 4.0 / 3.0, min_columns: int = 2, end_weight: float = 0.02,
+                            end_rel: float = 0.5, min_depth_m: float | None = None) -> list[Target3D]:
+    """Targets in one migrated profile ``envelope (n_along, n_depth)``: what a 3D reconstruction of a single
+    straight line falls back to. Coordinates are ``[along, 0, depth]`` (the caller maps them to the world).
+
+    The image's parts above ``threshold`` x the ``reference_percentile`` of its column maxima (as
+    :func:`extract_targets`' ridge map) are targets: a part that is at least ``min_line_m`` long, not steeper than
+    45 deg and whose columns' mean maximum reaches ``line_contrast`` x the threshold is a line in the profile's
+    plane (a pipe along the line, or a layer; ends and depth as for 3D lines); a shorter one of at least
+    ``min_columns`` columns is a point (a target crossing the profile) at its maximum, refined to sub-cell along
+    and in depth by parabolas.
+    """
+    env = np.asarray(envelope, dtype=np.float32)
+    along_m = np.asarray(along_m, float)
+    depth_m = np.asarray(depth_m, float)
+    if env.ndim != 2 or env.shape != (len(along_m), len(depth_m)):
+        raise ValueError(f"envelope {env.shape} does not match {len(along_m)} positions x {len(depth_m)} depths")
+    if min_depth_m is not None:
+        env = np.where(depth_m[None, :] >= min_depth_m - 1e-9, env, 0.0)
+    if env.size == 0:
+        return []
+    cols = env.max(axis=1)
+    peak = float(np.percentile(cols, reference_percentile))
+    if not peak > 0:
+        return []
+    dx = float(np.median(np.diff(along_m))) if len(along_m) > 1 else 1.0
+    dd = float(np.median(np.diff(depth_m))) if len(depth_m) > 1 else 1.0
+    parts, n = ndimage.label(env >= threshold * peak, structure=np.ones((3, 3)))
+    out: list[Target3D] = []
+    for lab, sl in enumerate(ndimage.find_objects(parts), start=1):
+        if sl is None:
+            continue
+        sub = np.where(parts[sl] == lab, env[sl], 0.0)
+        ia = np.arange(sl[0].start, sl[0].stop)
+        present = sub.max(axis=1) > 0
+        if present.sum() < min_columns:
+            continue
+        ia, sub = ia[present], sub[present]
+        w = sub.max(axis=1).astype(float)
+        kd = sl[1].start + np.argmax(sub, axis=1)
+        s, dep = along_m[ia], depth_m[kd]
+        if s[-1] - s[0] >= min_line_m and w.mean() >= line_contrast * threshold * peak:
+            strong = w >= end_rel * np.median(w)
+            lo, hi = _extent(s[strong], w[strong], end_weight)
+            coef = _depth_fit(s, dep, w, dd)
+            if abs(coef[0]) <= 1.0:  # steeper than 45 deg: a hyperbola's unfocused flank, not a reflector
+                a, b = [lo, 0.0, coef[0] * lo + coef[1]], [hi, 0.0, coef[0] * hi + coef[1]]
+                out.append(Target3D("line", [a, b], float(min(a[2], b[2])), float(w.mean() / peak), int(len(s)),
+                                    extra={"profile": True}))
+                continue
+        # a point: the part's maximum, refined by parabolas through its neighbours (in the full image)
+        i, k = np.unravel_index(np.argmax(np.where(parts == lab, env, 0.0)), env.shape)
+
+        def vertex(y0, y1, y2):
+            den = y0 - 2 * y1 + y2
+            return float(np.clip(0.5 * (y0 - y2) / den, -0.5, 0.5)) if den < 0 else 0.0
+
+        da = vertex(env[i - 1, k], env[i, k], env[i + 1, k]) if 0 < i < env.shape[0] - 1 else 0.0
+        dk = vertex(env[i, k - 1], env[i, k], env[i, k + 1]) if 0 < k < env.shape[1] - 1 else 0.0
+        pa, pd = along_m[i] + da * dx, depth_m[k] + dk * dd
+        out.append(Target3D("point", [[float(pa), 0.0, float(pd)]], float(pd), float(env[i, k] / peak), int(len(s)),
+                            extra={"profile": True}))
+    out.sort(key=lambda t: -t.score * t.n_voxels)
+    return out
+
+
 def targets_to_json(targets: list[Target3D]) -> dict:
-    """The ``targets.json`` contract of CONVENTIONS.md."""
-    return {"targets": [{"kind": t.kind, "points_xyz": [[float(v) for v in p] for p in t.points_xyz],
-                         "depth_m": float(t.depth_m), "score": float(t.score)} for t in targets]}
+    """The ``targets.json`` contract of CONVENTIONS.md: each target named ``T1``, ``T2``, ... in list order (the
+    names the figures label them with, see :func:`target_name`)."""
+    return {"targets": [{"name": target_name(i), "kind": t.kind,
+                         "points_xyz": [[float(v) for v in p] for p in t.points_xyz],
+                         "depth_m": float(t.depth_m), "score": float(t.score)} for i, t in enumerate(targets)]}
+
+
+def target_name(index: int) -> str:
+    """The name of the target at ``index`` (0-based) of a target list: ``T1``, ``T2``, ... (``targets.json``,
+    the reconstruction figures, the CLI's listing and the demo's ``summary.json`` all use it)."""
+    return f"T{index + 1}"

@@ -48,6 +48,7 @@ def plot_bscan(
         ``eps_r`` or the survey's hint; a second axis shows the time).
     cmap : any matplotlib colour map; ``"hot"`` matches the reference paper's
         figures (it shows absolute amplitude).
+    envelope : draw the envelope (the analytic signal's magnitude along time) instead of the amplitude.
     clip_percentile : colour limits at this percentile of |amplitude|.
     boxes : iterable of ``(trace_start, t_start_s, trace_end, t_end_s)`` to outline.
     apexes : iterable of ``(trace, t_s)`` (times from the first sample) to mark with a cross.
@@ -58,7 +59,11 @@ def plot_bscan(
         _, ax = plt.subplots(figsize=(8, 4.5))
     img = survey.data.T.astype(np.float64)
     one_sided = cmap in ("hot", "afmhot", "gist_heat", "inferno", "magma") or envelope
-    if one_sided:
+    if envelope:  # the instantaneous amplitude: |analytic signal| along time, one smooth lobe per echo
+        from scipy.signal import hilbert
+
+        img = np.abs(hilbert(img, axis=0))
+    elif one_sided:
         img = np.abs(img)
     lim = float(np.percentile(np.abs(img), clip_percentile)) or 1.0
     vmin, vmax = (0.0, lim) if one_sided else (-lim, lim)
@@ -98,7 +103,8 @@ def plot_bscan(
             ya = (float(np.interp(ts, survey.times_s, survey.depths_m(eps_r))) if axis == "depth"
                   else (ts - survey.t0_s) * 1e9)
             ax.plot([xa], [ya], marker="+", color="lime", ms=12, mew=1.5)
-    ax.figure.colorbar(im, ax=ax, fraction=0.04, pad=0.02, label="|amplitude|" if one_sided else "amplitude")
+    ax.figure.colorbar(im, ax=ax, fraction=0.04, pad=0.02,
+                       label="envelope" if envelope else "|amplitude|" if one_sided else "amplitude")
     return ax
 
 

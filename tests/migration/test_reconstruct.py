@@ -1,0 +1,100 @@
+"""reconstruct(): one straight profile falls back to a 2D migration of the plane under it, with targets mapped
+back to the world (checked against the forward model's pipes)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from gpr3d import Survey
+from gpr3d.core.errors import GeometryWarning, InvalidDataError
+from gpr3d.core.poses import quat_from_yaw
+from gpr3d.migration.reconstruct import ProfileFrame, ReconstructConfig, reconstruct, write_reconstruction
+from gpr3d.migration.targets import extract_profile_targets
+from gpr3d.simulation.forward import ForwardScene, Pipe, forward_model
+
+EPS = 6.0
+START = np.array([0.2, 0.1])
+DIRECTION = np.array([0.6, 0.8])  # the profile runs north-east, not along a grid axis
+
+
+def _profile(pipes, n=201, length=2.0):
+    along = np.linspace(0.0, length, n)
+    xy = START + along[:, None] * DIRECTION
+    pos = np.c_[xy, np.zeros(n)]
+    quat = quat_from_yaw(np.full(n, np.arctan2(DIRECTION[1], DIRECTION[0])))
+    data = forward_model(ForwardScene(eps_r=EPS, pipes=pipes), pos, quat, offset_m=0.05, frequency_hz=800e6,
+                         n_samples=256, time_window_s=16e-9, air_wave=1.0, ground_wave=0.5)
+    return Survey(data=data, dt_s=16e-9 / 256, offset_m=0.05, frequency_hz=800e6, eps_r=EPS, positions_xyz=pos,
+                  orientations_quat_wxyz=quat)
+
+
+def _crossing(along, top, r=0.02):
+    """A pipe crossing the profile at right angles, its top ``top`` deep, ``along`` metres from the start."""
+    c = START + along * DIRECTION
+    n = np.array([-DIRECTION[1], DIRECTION[0]])
+    a, b = c - 1.0 * n, c + 1.0 * n
+    return Pipe((a[0], a[1], -top - r), (b[0], b[1], -top - r), r)
+
+
+def test_profile_frame_maps_both_ways():
+    pos = np.c_[START + np.linspace(0, 2, 5)[:, None] * DIRECTION, np.zeros(5)]
+    f = ProfileFrame.fit(pos)
+    assert f.direction_xy == pytest.approx(tuple(DIRECTION))
+    assert f.origin_xy == pytest.approx(tuple(START))
+    line = f.to_line(pos)
+    np.testing.assert_allclose(line[:, 0], np.linspace(0, 2, 5), atol=1e-12)
+    np.testing.assert_allclose(line[:, 1], 0.0, atol=1e-12)
+    np.testing.assert_allclose(f.to_world(line[:, 0], line[:, 1]), pos[:, :2], atol=1e-12)
+    # a point to the left of the line
+    left = np.array([[*(START + 0.5 * DIRECTION + 0.3 * np.array([-0.8, 0.6])), -1.0]])
+    np.testing.assert_allclose(f.to_line(left), [[0.5, 0.3, -1.0]], atol=1e-12)
+
+
+def test_one_straight_profile_falls_back_to_2d(tmp_path):
+    s = _profile([_crossing(0.6, 0.3), _crossing(1.4, 0.5)])
+    with pytest.warns(GeometryWarning, match="migrated in 2D"):
+        rec = reconstruct(s, ReconstructConfig(spacing_m=0.01, max_depth_m=0.7))
+    assert rec.frame is not None and rec.grid.ny == 1
+    pts = [t for t in rec.targets if t.kind == "point"]
+    assert len(rec.targets) == 2 and len(pts) == 2, [(t.kind, t.points_xyz) for t in rec.targets]
+    got = sorted(pts, key=lambda t: t.extra["along_m"][0])
+    for t, (along, top) in zip(got, ((0.6, 0.3), (1.4, 0.5))):
+        want_xy = START + along * DIRECTION
+        assert t.points_xyz[0][:2] == pytest.approx(tuple(want_xy), abs=0.02)
+        assert t.depth_m == pytest.approx(top, abs=0.02)
+    files = write_reconstruction(rec, tmp_path, source="line")
+    assert {"top.png", "front.png", "view3d.png", "targets.json", "config.json"} <= set(files)
+    names = [t["name"] for t in json.loads((tmp_path / "targets.json").read_text())["targets"]]
+    assert names == ["T1", "T2"]
+    frame = json.loads((tmp_path / "config.json").read_text())["frame"]
+    assert frame["kind"] == "profile" and frame["direction_xy"] == pytest.approx(list(DIRECTION))
+
+
+def test_profile_targets_from_a_known_image():
+    """extract_profile_targets on an analytic envelope: a flat bar (a line), a compact blob off the cell centres (a
+    point, found to sub-cell accuracy) and a faint smear below the threshold (nothing)."""
+    along = np.arange(0, 3.0, 0.01)
+    depth = np.arange(0.02, 1.0, 0.01)
+    A, D = np.meshgrid(along, depth, indexing="ij")
+    bar = np.exp(-0.5 * ((D - 0.5) / 0.02) ** 2) * ((A > 1.0) & (A < 2.0))
+    blob = np.exp(-0.5 * (((A - 0.5034) / 0.03) ** 2 + ((D - 0.2976) / 0.02) ** 2))
+    faint = 0.1 * np.exp(-0.5 * ((D - 0.8) / 0.02) ** 2)
+    targets = extract_profile_targets(bar + blob + faint, along, depth, threshold=0.3, min_line_m=0.3)
+    assert sorted(t.kind for t in targets) == ["line", "point"]
+    line = next(t for t in targets if t.kind == "line")
+    (a0, _, d0), (a1, _, d1) = line.points_xyz
+    assert (a0, a1) == (pytest.approx(1.01, abs=0.03), pytest.approx(1.99, abs=0.03))
+    assert d0 == pytest.approx(0.5, abs=0.005) and d1 == pytest.approx(0.5, abs=0.005)
+    point = next(t for t in targets if t.kind == "point")
+    assert point.points_xyz[0][0] == pytest.approx(0.5034, abs=0.002)
+    assert point.depth_m == pytest.approx(0.2976, abs=0.002)
+    # nothing shallower than min_depth_m
+    deep = extract_profile_targets(bar + blob, along, depth, threshold=0.3, min_depth_m=0.4)
+    assert [t.kind for t in deep] == ["line"]
+
+
+def test_traces_all_in_one_place_are_refused():
+    s = _profile([_crossing(0.6, 0.3)], n=20, length=0.01)
+    with pytest.raises(InvalidDataError, match="no profile and no area"):
+        reconstruct(s, ReconstructConfig(spacing_m=0.02, max_depth_m=0.5))
