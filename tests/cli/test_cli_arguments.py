@@ -226,7 +226,8 @@ def test_migrate_a_profile_and_draw_wiggles_and_an_ascan(tmp_path, capsys):
         assert f["image"].shape == (f["along_m"].shape[0], f["depth_m"].shape[0])
         assert f["depth_m"][-1] <= 2.0 + 1e-9 and np.isfinite(f["image"][()]).all()
     assert (tmp_path / "m" / "profile.png").stat().st_size > 10_000
-    for extra, name in ((["--style", "wiggle"], "w.png"), (["--ascan", "500"], "a.png")):
+    for extra, name in ((["--style", "wiggle"], "w.png"), (["--ascan", "500"], "a.png"),
+                        (["--envelope", "--axis", "depth", "--cmap", "hot"], "e.png")):
         assert main(["show", DZT, "--out", str(tmp_path / name), *extra]) == 0
         assert (tmp_path / name).stat().st_size > 5_000
     capsys.readouterr()
