@@ -37,7 +37,15 @@ def test_grid_then_cscan_on_real_lines(real_lines, tmp_path, capsys):
     assert cs.values.shape[2] == 7 and cs.y0 == pytest.approx(0.0) and cs.cell_m == 0.1  # 0..0.6 m
     assert np.isfinite(cs.values).all()  # 0.2 m between lines, gaps filled within two cells
     assert cs.depth_m[0] == pytest.approx(0.5 * 299792458.0 / np.sqrt(12) * 5e-9)
-    capsys.readouterr()
+    # two perpendicular sets in one call: the last two lines as cross lines along y at x = 1 and 3 m
+    assert main([*map(str, ["grid", *real_lines[:2], "--cross", *real_lines[2:], "--spacing", "0.2",
+                            "--cross-spacing", "2", "--cross-origin", "1", "--out", tmp_path / "gx.h5"])]) == 0
+    gx = Survey.load(tmp_path / "gx.h5")
+    first = gx.metadata["grid"]["first_trace"]
+    np.testing.assert_allclose(gx.positions_xyz[first[2]:first[3], 0], 1.0)
+    np.testing.assert_allclose(gx.positions_xyz[first[3]:, 0], 3.0)
+    assert gx.positions_xyz[first[3]:, 1].min() == pytest.approx(0.0, abs=1e-9)
+    assert "2 + 2 perpendicular lines" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("extra, words", [
@@ -46,6 +54,8 @@ def test_grid_then_cscan_on_real_lines(real_lines, tmp_path, capsys):
     (["--spacing", "-1"], "--spacing must be a positive distance"),
     (["--spacing", "0.2", "--reversed", "a,b"], "--reversed must be a comma-separated list of whole numbers"),
     (["--spacing", "0.2", "--reversed", "9"], "reversed lines must be line indices 0..3"),
+    (["--spacing", "0.2", "--cross-spacing", "0", "--cross", "x.DT1"], "--cross-spacing must be a positive"),
+    (["--layout", "x.txt", "--cross", "x.DT1"], "--cross goes with --spacing"),
 ])
 def test_bad_grid_arguments_are_one_line(real_lines, tmp_path, capsys, extra, words):
     rc = main([*map(str, ["grid", *real_lines, "--out", tmp_path / "g.h5", *extra])])

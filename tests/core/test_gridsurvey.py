@@ -62,3 +62,27 @@ def test_lines_that_do_not_match_are_refused():
         assemble_grid([line(5), line(5)], line_spacing_m=-1.0)
     with pytest.raises(InvalidDataError, match="reversed lines must be line indices"):
         assemble_grid([line(5), line(5)], line_spacing_m=0.2, reversed_lines=[2])
+
+
+def test_a_perpendicular_set_lies_across_the_first():
+    """3 lines along x at y = 0, 0.5, 1.0 and 2 cross lines along y at x = 0.2 + 0.4 j, the second walked back."""
+    main = [line(21, seed=k, name=f"X{k}.h5") for k in range(3)]  # 1 m long
+    cross = [line(25, seed=10 + k, name=f"Y{k}.h5") for k in range(2)]  # 1.2 m long
+    g = assemble_grid(main + cross, line_spacing_m=0.5, cross_lines=2, cross_spacing_m=0.4, cross_origin_m=0.2,
+                      reversed_lines=[4])
+    assert g.n_traces == 3 * 21 + 2 * 25
+    np.testing.assert_allclose(g.positions_xyz[21:42, 1], 0.5)
+    y0, y1 = g.positions_xyz[63:88], g.positions_xyz[88:]
+    np.testing.assert_allclose(y0[:, 0], 0.2)
+    np.testing.assert_allclose(y0[:, 1], np.arange(25) * 0.05, atol=1e-12)
+    np.testing.assert_allclose(y1[:, 0], 0.6)
+    np.testing.assert_allclose(y1[:, 1], 1.2 - np.arange(25) * 0.05, atol=1e-12)  # walked back from y = 1.2
+    np.testing.assert_array_equal(g.data[88:], cross[1].data)
+    # headings: +y on the first cross line (yaw 90 deg: w = cos 45 deg), -y on the reversed one
+    np.testing.assert_allclose(g.orientations_quat_wxyz[63, [0, 3]], [np.sqrt(0.5), np.sqrt(0.5)], atol=1e-12)
+    np.testing.assert_allclose(abs(g.orientations_quat_wxyz[88, 0]), np.sqrt(0.5), atol=1e-12)
+    assert g.orientations_quat_wxyz[88, 0] * g.orientations_quat_wxyz[88, 3] < 0
+    for bad, words in (({"cross_lines": 5}, "0..4"), ({"cross_lines": 2, "cross_spacing_m": 0.0}, "cross lines' spacing"),
+                       ({"cross_lines": 2, "cross_origin_m": float("nan")}, "origin")):
+        with pytest.raises(InvalidDataError, match=words):
+            assemble_grid(main + cross, line_spacing_m=0.5, **bad)

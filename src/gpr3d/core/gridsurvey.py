@@ -7,6 +7,10 @@ trace counter); where the lines lie is a fact of the field, given by the user:
   ``x = k * spacing``), from ``start_offsets_m[k]`` (default 0) onwards; with ``serpentine`` every
   second line was walked back (its first trace at the far end, ``start + length``);
   ``reversed_lines`` names single lines walked back;
+* a second, perpendicular set (``cross_lines``: the last lines given): cross line ``j`` runs along the other
+  axis at ``cross_spacing_m * j`` (default the same spacing) plus ``cross_origin_m``; start offsets, reversals
+  and ``serpentine`` apply to it as to the first set (offsets and reversals indexed over all lines, the
+  first set's then the cross set's; the zig-zag counted within each set);
 * or a layout (:func:`read_layout`): per line, its start and end points ``x0 y0 x1 y1``; the traces
   lie along that segment by their along-line distance.
 
@@ -108,9 +112,10 @@ def _lines_from_spacing(lengths, *, line_spacing_m, direction, start_offsets_m, 
 
 
 def assemble_grid(surveys, *, names=None, line_spacing_m: float | None = None, direction: str = "x",
-                  start_offsets_m=None, serpentine: bool = False, reversed_lines=None, layout: dict | None = None):
+                  start_offsets_m=None, serpentine: bool = False, reversed_lines=None, layout: dict | None = None,
+                  cross_lines: int = 0, cross_spacing_m: float | None = None, cross_origin_m: float = 0.0):
     """One :class:`Survey` from line surveys (see the module's docstring); ``names`` (default the files' names)
-    match ``layout`` entries."""
+    match ``layout`` entries; the last ``cross_lines`` surveys form the perpendicular set."""
     surveys = list(surveys)
     if len(surveys) < 2:
         raise InvalidDataError(f"a grid needs two lines at least, got {len(surveys)}")
@@ -135,9 +140,35 @@ def assemble_grid(surveys, *, names=None, line_spacing_m: float | None = None, d
                                    f"{' ...' if len(missing) > 3 else ''} (its names: {', '.join(list(layout)[:3])})")
         lines = [layout[n] for n in names]
     else:
-        lines = _lines_from_spacing([d[-1] for d in dist], line_spacing_m=line_spacing_m, direction=direction,
-                                    start_offsets_m=start_offsets_m, serpentine=serpentine,
-                                    reversed_lines=reversed_lines)
+        n = len(surveys)
+        if isinstance(cross_lines, bool) or not isinstance(cross_lines, (int, np.integer)) \
+                or not 0 <= cross_lines <= n - 1:
+            raise InvalidDataError(f"cross lines must be a count in 0..{n - 1} (the first set keeps one line at "
+                                   f"least), got {cross_lines!r}")
+        if cross_spacing_m is not None and not (isinstance(cross_spacing_m, (int, float))
+                                                and np.isfinite(cross_spacing_m) and cross_spacing_m > 0):
+            raise InvalidDataError(f"the cross lines' spacing must be a positive number of metres, got "
+                                   f"{cross_spacing_m!r}")
+        if not (isinstance(cross_origin_m, (int, float)) and np.isfinite(cross_origin_m)):
+            raise InvalidDataError(f"the cross lines' origin must be a finite number of metres, got {cross_origin_m!r}")
+        offs = np.zeros(n) if start_offsets_m is None else np.asarray(start_offsets_m, dtype=float).reshape(-1)
+        if offs.size != n:
+            raise InvalidDataError(f"start offsets: one finite number per line ({n}), got {start_offsets_m!r}")
+        back = sorted(reversed_lines or [])
+        if any(not isinstance(k, (int, np.integer)) or not 0 <= k < n for k in back):
+            raise InvalidDataError(f"reversed lines must be line indices 0..{n - 1}, got {back}")
+        m = n - cross_lines
+        lengths = [d[-1] for d in dist]
+        lines = _lines_from_spacing(lengths[:m], line_spacing_m=line_spacing_m, direction=direction,
+                                    start_offsets_m=offs[:m], serpentine=serpentine,
+                                    reversed_lines=[k for k in back if k < m])
+        if cross_lines:
+            other = "y" if direction == "x" else "x"
+            cross = _lines_from_spacing(lengths[m:], line_spacing_m=line_spacing_m if cross_spacing_m is None
+                                        else cross_spacing_m, direction=other, start_offsets_m=offs[m:],
+                                        serpentine=serpentine, reversed_lines=[k - m for k in back if k >= m])
+            shift = np.array([cross_origin_m, 0.0]) if direction == "x" else np.array([0.0, cross_origin_m])
+            lines += [GridLine(c.start + shift, c.end + shift) for c in cross]
     pos, yaw, first_trace = [], [], []
     for line, d, s in zip(lines, dist, surveys):
         first_trace.append(sum(len(p) for p in pos))

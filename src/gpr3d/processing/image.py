@@ -54,7 +54,7 @@ def normalise_window(block: np.ndarray, *, clip_percentile: float = 99.5, scale:
 
 
 def bscan_image(survey, height: int) -> np.ndarray:
-    """RGB uint8 image ``(height, n_traces, 3)``: 'hot' colour map of |background-removed data|."""
+    """RGB uint8 image ``(height, n_traces, 3)``: 'hot' colour map of the absolute background-removed data."""
     x = survey.remove_background().data
     img = np.abs(resample_rows(x, height).T)  # (height, n_traces)
     scale = np.percentile(img, 99.5) or 1.0
@@ -106,5 +106,5 @@ def render_channels(block: np.ndarray, style: str = "channels", *, scale: float 
 
 
 def record_scale(processed: np.ndarray) -> float:
-    """The amplitude that every window of one record is normalised by (99.5th percentile of |data|)."""
+    """The amplitude that every window of one record is normalised by (99.5th percentile of the absolute data)."""
     return float(np.percentile(np.abs(processed), 99.5)) or 1.0

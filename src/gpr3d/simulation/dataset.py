@@ -6,7 +6,7 @@ run through an engine, written to ``OUT/samples/{i:06d}/``:
 * ``scene.json`` - the scene (with the derived grid step and time window),
 * ``bscan.h5`` - the B-scan as a gpr3d Survey (engine, version and inputs in its metadata),
 * ``labels.json`` - apexes, boxes, depths (:func:`~gpr3d.simulation.labels.label_scene`),
-* ``image.png`` - the detector's input image ('hot' colour map of |background-removed data|,
+* ``image.png`` - the detector's input image ('hot' colour map of the absolute background-removed data,
   ``image_height`` rows x one column per trace).
 
 A sample is built in ``OUT/samples/{i:06d}.part-*`` and renamed into place when

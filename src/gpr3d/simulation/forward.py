@@ -121,7 +121,7 @@ def wavelet_table(frequency_hz: float, kind: str = "ricker", step_s: float | Non
     ``kind``: ``"ricker"`` (peak 1 at t = 0), ``"ricker_d1"`` (its time derivative,
     the 3D far field of a Hertzian dipole driven by a Ricker current), or
     ``"ricker_half"`` (the half-derivative: the far field of a 2D line source, as in
-    2D FDTD). All are normalised to a maximum |value| of 1.
+    2D FDTD). All are normalised to a maximum absolute value of 1.
     """
     step = step_s or 1.0 / (frequency_hz * 400)
     half = 3.0 / frequency_hz

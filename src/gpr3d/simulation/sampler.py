@@ -2,14 +2,14 @@
 
 Ranges (stated, so a dataset can be described and regenerated):
 
-=========  ==============  ======  ============  ===============================================
-host       frequency       eps_r   sigma (S/m)   targets (radius)
-=========  ==============  ======  ============  ===============================================
-concrete   1.5 - 2.6 GHz   4 - 12  0.001 - 0.02  rebar 4-16 mm, steel pipe 15-40 mm, PVC pipe
-                                                 15-40 mm (air or water filled), void 10-30 mm
-soil       0.4 - 1.0 GHz   3 - 20  0.0005 - 0.01 steel pipe 25-100 mm, PVC pipe 25-100 mm,
-                                                 void 30-100 mm, tank 120-250 mm, rebar 6-16 mm
-=========  ==============  ======  ============  ===============================================
+=========  ==============  ======  =============  ===============================================
+host       frequency       eps_r   sigma (S/m)    targets (radius)
+=========  ==============  ======  =============  ===============================================
+concrete   1.5 - 2.6 GHz   4 - 12  0.001 - 0.02   rebar 4-16 mm, steel pipe 15-40 mm, PVC pipe
+                                                  15-40 mm (air or water filled), void 10-30 mm
+soil       0.4 - 1.0 GHz   3 - 20  0.0005 - 0.01  steel pipe 25-100 mm, PVC pipe 25-100 mm,
+                                                  void 30-100 mm, tank 120-250 mm, rebar 6-16 mm
+=========  ==============  ======  =============  ===============================================
 
 1 to 6 targets, crossing the line (gprMax runs in 2D), never overlapping. The scene
 scales with the wavelength in the host, ``lambda = v / f``: 7 lambda wide, 3.5 lambda deep,

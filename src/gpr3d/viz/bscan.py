@@ -49,7 +49,7 @@ def plot_bscan(
     cmap : any matplotlib colour map; ``"hot"`` matches the reference paper's
         figures (it shows absolute amplitude).
     envelope : draw the envelope (the analytic signal's magnitude along time) instead of the amplitude.
-    clip_percentile : colour limits at this percentile of |amplitude|.
+    clip_percentile : colour limits at this percentile of the absolute amplitude.
     boxes : iterable of ``(trace_start, t_start_s, trace_end, t_end_s)`` to outline.
     apexes : iterable of ``(trace, t_s)`` (times from the first sample) to mark with a cross.
     """
