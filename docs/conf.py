@@ -29,6 +29,8 @@ autodoc_typehints = "none"
 # Open3D is optional (and needs a system library): its module documents without it
 autodoc_mock_imports = ["open3d"]
 
+nitpicky = True  # every cross-reference must resolve (the build runs with -W)
+
 html_theme = "alabaster"
 html_title = f"gpr3d {version}"
 html_static_path = []

@@ -1,4 +1,4 @@
-"""Grid surveys: parallel (or any straight) lines recorded one by one, put together into one :class:`Survey`.
+"""Grid surveys: parallel (or any straight) lines recorded one by one, put together into one :class:`~gpr3d.core.survey.Survey`.
 
 A line file knows how far along its own line each trace was taken (survey wheel or
 trace counter); where the lines lie is a fact of the field, given by the user:
@@ -114,7 +114,7 @@ def _lines_from_spacing(lengths, *, line_spacing_m, direction, start_offsets_m, 
 def assemble_grid(surveys, *, names=None, line_spacing_m: float | None = None, direction: str = "x",
                   start_offsets_m=None, serpentine: bool = False, reversed_lines=None, layout: dict | None = None,
                   cross_lines: int = 0, cross_spacing_m: float | None = None, cross_origin_m: float = 0.0):
-    """One :class:`Survey` from line surveys (see the module's docstring); ``names`` (default the files' names)
+    """One :class:`~gpr3d.core.survey.Survey` from line surveys (see the module's docstring); ``names`` (default the files' names)
     match ``layout`` entries; the last ``cross_lines`` surveys form the perpendicular set."""
     surveys = list(surveys)
     if len(surveys) < 2:

@@ -291,13 +291,13 @@ class Survey:
         return out
 
     def apply(self, step: str, **kwargs) -> "Survey":
-        """Run a named processing step (see :data:`gpr3d.processing.STEPS`)."""
+        """Run a named processing step (see :data:`gpr3d.processing.steps.STEPS`)."""
         from gpr3d.processing.steps import run_step
 
         return run_step(self, step, **kwargs)
 
     def time_zero(self, **kwargs) -> "Survey":
-        """Estimate time zero and (by default) cut the samples before it; see :func:`gpr3d.processing.steps.time_zero`."""
+        """Estimate time zero and (by default) cut the samples before it; see :func:`gpr3d.processing.timezero.estimate_time_zero`."""
         return self.apply("time_zero", **kwargs)
 
     def dewow(self, **kwargs) -> "Survey":
@@ -305,27 +305,27 @@ class Survey:
         return self.apply("dewow", **kwargs)
 
     def remove_dc(self, **kwargs) -> "Survey":
-        """Subtract each trace's mean; see :func:`gpr3d.processing.remove_dc`."""
+        """Subtract each trace's mean; see :func:`gpr3d.processing.background.remove_dc`."""
         return self.apply("remove_dc", **kwargs)
 
     def remove_background(self, **kwargs) -> "Survey":
-        """Subtract the mean or median trace; see :func:`gpr3d.processing.remove_background`."""
+        """Subtract the mean or median trace; see :func:`gpr3d.processing.background.remove_background`."""
         return self.apply("remove_background", **kwargs)
 
     def gain_tpow(self, **kwargs) -> "Survey":
-        """Multiply by a power of two-way time; see :func:`gpr3d.processing.gain_tpow`."""
+        """Multiply by a power of two-way time; see :func:`gpr3d.processing.gain.gain_tpow`."""
         return self.apply("gain_tpow", **kwargs)
 
     def gain_sec(self, **kwargs) -> "Survey":
-        """Spreading and exponential compensation; see :func:`gpr3d.processing.gain_sec`."""
+        """Spreading and exponential compensation; see :func:`gpr3d.processing.gain.gain_sec`."""
         return self.apply("gain_sec", **kwargs)
 
     def gain_agc(self, **kwargs) -> "Survey":
-        """Automatic gain control; see :func:`gpr3d.processing.gain_agc`."""
+        """Automatic gain control; see :func:`gpr3d.processing.gain.gain_agc`."""
         return self.apply("gain_agc", **kwargs)
 
     def bandpass(self, **kwargs) -> "Survey":
-        """Zero-phase Butterworth band-pass; see :func:`gpr3d.processing.bandpass`."""
+        """Zero-phase Butterworth band-pass; see :func:`gpr3d.processing.filters.bandpass`."""
         return self.apply("bandpass", **kwargs)
 
     def envelope(self, **kwargs) -> "Survey":
@@ -333,7 +333,7 @@ class Survey:
         return self.apply("envelope", **kwargs)
 
     def resample_spacing(self, **kwargs) -> "Survey":
-        """Traces at a constant spacing along the path; see :func:`gpr3d.processing.resample_traces`."""
+        """Traces at a constant spacing along the path; see :func:`gpr3d.processing.resample.resample_traces`."""
         return self.apply("resample_spacing", **kwargs)
 
     # ------------------------------------------------------------------ files

@@ -112,7 +112,7 @@ def onnx_nms(boxes: np.ndarray, scores: np.ndarray, iou: float) -> np.ndarray:
 
 
 class OnnxDetector(Detector):
-    """A :class:`Detector` whose network runs in ONNX Runtime (no PyTorch needed)."""
+    """A :class:`~gpr3d.detection.infer.Detector` whose network runs in ONNX Runtime (no PyTorch needed)."""
 
     nms = staticmethod(onnx_nms)
 

@@ -58,7 +58,7 @@ class WindowConfig:
 
 @dataclass
 class Window:
-    """One block of a record: ``image (3, rows, traces)`` float32 and its :class:`PixelMap`."""
+    """One block of a record: ``image (3, rows, traces)`` float32 and its :class:`~gpr3d.io.coco.PixelMap`."""
 
     image: np.ndarray
     pixmap: PixelMap

@@ -87,7 +87,7 @@ def is_dt1(path) -> bool:
 
 
 def read_dt1(path) -> list[Survey]:
-    """Read a DT1/HD pair (give either file) as a one-element list of :class:`Survey`."""
+    """Read a DT1/HD pair (give either file) as a one-element list of :class:`~gpr3d.core.survey.Survey`."""
     dt1, hd_path = data_and_header(path, (".dt1",), ".hd", "pulseEKKO")
     hd = read_hd(hd_path)
     n_hd = int(_hd_number(hd_path, hd, "NUMBER OF TRACES"))

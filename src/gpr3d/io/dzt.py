@@ -184,7 +184,7 @@ def read_dzg(path) -> dict:
 
 
 def read_dzt(path, *, gps: bool = True) -> list[Survey]:
-    """Read every channel of a DZT file as a list of :class:`Survey`.
+    """Read every channel of a DZT file as a list of :class:`~gpr3d.core.survey.Survey`.
 
     Positions come from the DZG sidecar when it holds at least two GPS fixes
     (local east-north-up metres about the first fix), else from the survey wheel

@@ -85,7 +85,7 @@ def read_gprmax_waveform(path, source: str = "src1"):
 
 
 def read_gprmax(path, *, component: str = "Ez") -> list[Survey]:
-    """Read every receiver of a gprMax output as a :class:`Survey` of ``component``.
+    """Read every receiver of a gprMax output as a :class:`~gpr3d.core.survey.Survey` of ``component``.
 
     Parameters
     ----------

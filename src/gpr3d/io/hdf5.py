@@ -1,4 +1,4 @@
-"""gpr3d's own HDF5 file: lossless, versioned storage of one or more :class:`Survey`.
+"""gpr3d's own HDF5 file: lossless, versioned storage of one or more :class:`~gpr3d.core.survey.Survey`.
 
 Schema ``gpr3d.survey`` version 1::
 

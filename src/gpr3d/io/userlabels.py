@@ -8,7 +8,7 @@ where the labels came from.
 What an image's ``file_name`` (COCO) or ``<filename>``/``<path>`` (VOC) names, relative
 to the label file's folder:
 
-* **a radar file** (anything :func:`gpr3d.read` reads): the record is the file. The
+* **a radar file** (anything :func:`gpr3d.io.registry.read` reads): the record is the file. The
   image's pixels map onto it by, in this order: the image's ``gpr3d_pixel_map`` object
   (``{"trace0", "traces_per_px", "t0_s", "s_per_px"}``, see :class:`~gpr3d.io.coco.PixelMap`),
   the ``row_s`` field of gpr3d's own COCO export (one column per trace), or else the
@@ -45,7 +45,7 @@ _MAP_KEYS = ("trace0", "traces_per_px", "t0_s", "s_per_px")
 
 
 def parse_pixel_map(spec) -> PixelMap:
-    """A :class:`PixelMap` from ``"s_per_px=1e-10,t0_s=0,traces_per_px=1,trace0=0"`` or a dict.
+    """A :class:`~gpr3d.io.coco.PixelMap` from ``"s_per_px=1e-10,t0_s=0,traces_per_px=1,trace0=0"`` or a dict.
 
     ``s_per_px`` (seconds per pixel row) is required; the rest default to 0 / 1.
     """

@@ -1,7 +1,7 @@
 """Migrated volumes on disk: the ``gpr3d.volume`` HDF5 schema (read and written) and VTK image data for ParaView.
 
 ``volume.h5``: attributes ``schema = "gpr3d.volume"``, ``schema_version = 1``, ``gpr3d_version``, ``grid_json``
-(:meth:`Grid3D.to_dict` as JSON), ``axes``, and any others the writer passes (``eps_r``, ``source``); one float32
+(:meth:`~gpr3d.core.grid.Grid3D.to_dict` as JSON), ``axes``, and any others the writer passes (``eps_r``, ``source``); one float32
 dataset of the grid's shape ``(nx, ny, nd)`` per volume (``image``, ``envelope``, ``noise_map``, ``fold``), x, y,
 then depth positive down, in metres.
 
@@ -61,7 +61,7 @@ def write_volume(path, grid: Grid3D, arrays: dict, **attrs) -> Path:
 
 def read_volume(path, names=None) -> Volume:
     """Read a ``volume.h5`` (all its volumes, or those in ``names``); a file that is not one, or is damaged, gives
-    one :class:`FormatError` naming the problem."""
+    one :class:`~gpr3d.core.errors.FormatError` naming the problem."""
     import h5py
 
     from gpr3d.core.errors import InvalidDataError

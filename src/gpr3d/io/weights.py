@@ -18,7 +18,7 @@ def half_state_dict(model) -> dict:
 
 def read_weights_file(path, fmt: str, what: str) -> dict:
     """The dict of a weights file whose ``"format"`` is ``fmt`` and ``"version"`` 1, or a one-line
-    :class:`FormatError` (``what`` names the kind of file: "detector", "DepthNet")."""
+    :class:`~gpr3d.core.errors.FormatError` (``what`` names the kind of file: "detector", "DepthNet")."""
     torch = require("torch")
     p = Path(path)
     if not p.is_file():

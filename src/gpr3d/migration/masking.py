@@ -40,7 +40,7 @@ def box_mask(n_traces: int, n_samples: int, dt_s: float, boxes, *, taper_traces:
 
 
 def check_boxes(boxes, n_traces: int, window_s: float) -> list[tuple[float, float, float, float]]:
-    """The boxes as float tuples, or a one-line :class:`InvalidDataError` naming the first bad one."""
+    """The boxes as float tuples, or a one-line :class:`~gpr3d.core.errors.InvalidDataError` naming the first bad one."""
     return [_check_box(k, b, n_traces, window_s) for k, b in enumerate(boxes)]
 
 

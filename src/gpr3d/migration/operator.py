@@ -14,8 +14,8 @@ from the antenna midpoint), an obliquity weight ``cos(theta)`` and a spreading
 weight ``r``. ``v_eff(d)`` is constant or, for layers, the vertical average
 velocity down to ``d`` (straight rays).
 
-Engines: ``"numba"`` (parallel kernels in :mod:`._kernels`; the adjoint's depth loop
-in explicit SIMD, :mod:`._simd`) and ``"numpy"`` (the readable reference below,
+Engines: ``"numba"`` (parallel kernels in ``gpr3d.migration._kernels``; the adjoint's depth loop
+in explicit SIMD, ``gpr3d.migration._simd``) and ``"numpy"`` (the readable reference below,
 vectorised over voxels, one trace at a time).
 """
 
@@ -74,7 +74,7 @@ class BackProjection:
 
     Parameters
     ----------
-    grid : :class:`Grid3D`
+    grid : :class:`~gpr3d.core.grid.Grid3D`
     tx, rx : ``(n_traces, 3)`` transmitter and receiver positions (world, m; z = height above the surface)
     dt_s, n_samples : the data's time axis; ``t0_s`` is time zero (s after the first sample)
     eps_r / layers : the velocity (see :func:`effective_slowness`)

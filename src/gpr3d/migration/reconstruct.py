@@ -68,7 +68,7 @@ class Reconstruction:
     noise_map: np.ndarray | None  #: with boxes: the envelope of the data outside them, migrated; else None
     fold: np.ndarray | None  #: how many traces see each voxel (weighted); None with ``normalize="none"``
     grid: Grid3D
-    targets: list  #: :class:`gpr3d.migration.targets.Target`
+    targets: list  #: :class:`gpr3d.migration.targets.Target3D`
     eps_r: float
     config: dict  #: the :class:`ReconstructConfig` as a dict
     n_traces: int

@@ -1,7 +1,7 @@
 """Site-scale migration: the grid cut into tiles of columns, each migrated on its own (on Dask workers).
 
 A tile needs only the traces whose aperture reaches it: those whose tx-rx midpoint lies within the operator's
-reach (:attr:`BackProjection.reach_m`, the cone's radius at the deepest voxel) of the tile's rectangle, the
+reach (:attr:`~gpr3d.migration.operator.BackProjection.reach_m`, the cone's radius at the deepest voxel) of the tile's rectangle, the
 "halo". So a worker holds one tile's image and fold and its traces, whatever the size of the site, and the
 tiles run in parallel on a local cluster or on a real one (``scheduler="tcp://host:8786"``).
 

@@ -323,7 +323,7 @@ def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.
     ``1 - end_weight`` quantiles, weighted by ridge value, of its inlier columns at least ``end_rel`` times their
     median value. Collinear lines across gaps up to ``join_gap_m`` are joined. A line must stand out from its
     sides (its mean ridge value ``lateral_contrast`` times the level 2.5 and 5 bands to the brighter side, see
-    :func:`_side_level`: a dipping layer's image is bright beside a line through it, a pipe's is not) and dip
+    ``_side_level``: a dipping layer's image is bright beside a line through it, a pipe's is not) and dip
     less than ``max_dip_deg``. ``min_depth_m``: nothing shallower is looked at (e.g. where the direct wave
     rings). At most ``max_segments`` lines and ``max_peaks`` Hough peaks per group are examined.
     """

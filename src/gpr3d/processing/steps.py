@@ -1,9 +1,9 @@
 """Named processing steps on a :class:`~gpr3d.core.survey.Survey`, with provenance.
 
-Each step wraps one pure array function from :mod:`gpr3d.processing`, fills in
+Each step wraps one pure array function from the ``gpr3d.processing`` modules, fills in
 defaults from the survey (sample interval, time zero, centre frequency), and
 appends ``{"step", "args", "result"?}`` to the survey's history. The CLI's
-``--steps`` and :meth:`Survey.apply` use the :data:`STEPS` table.
+``--steps`` and :meth:`~gpr3d.core.survey.Survey.apply` use the :data:`STEPS` table.
 """
 
 from __future__ import annotations
@@ -150,6 +150,7 @@ def topo_correct(s, *, eps_r: float | None = None, velocity_m_s: float | None = 
                              "velocity_m_s": float(velocity_m_s)})
 
 
+#: every step by name: what ``--steps`` and :meth:`~gpr3d.core.survey.Survey.apply` run
 STEPS: dict[str, Callable] = {
     f.__name__: f
     for f in (time_zero, dewow, remove_dc, remove_background, gain_tpow, gain_sec, gain_agc,
@@ -199,7 +200,7 @@ _BOOL_WORDS = {"true": True, "yes": True, "on": True, "1": True, "false": False,
 
 def _typed(step: str, name: str, value, annotation: str, survey):
     """``value`` as the type its parameter's annotation names (``bool``, ``int``, ``float``, ``str``, optional
-    ``None``), checked by :data:`_RULES`; otherwise an :class:`InvalidDataError` naming the step and argument."""
+    ``None``), checked by :data:`_RULES`; otherwise an :class:`~gpr3d.core.errors.InvalidDataError` naming the step and argument."""
     kinds = [k.strip() for k in str(annotation).split("|")]
     where = f"{step}: {name}"
     if value is None:
@@ -246,7 +247,7 @@ def _check_sample_range(value, survey):
 
 def check_step_args(survey, step: str, kwargs: dict) -> dict:
     """``kwargs`` of ``step`` checked against its signature and rules (types, ranges, the survey's record), as the
-    values the step will use; one :class:`InvalidDataError` naming the step and argument otherwise."""
+    values the step will use; one :class:`~gpr3d.core.errors.InvalidDataError` naming the step and argument otherwise."""
     func = STEPS[step]
     sig = inspect.signature(func)
     try:

@@ -27,7 +27,7 @@ receiver ``b``, both rotating with the antenna heading; see CONVENTIONS.md):
   optional Gaussian taper ``exp(-(theta / theta0)^2 / 2)`` models a shielded antenna.
 * **penetrable targets** (voids, plastic or water-filled pipes, stones) add the
   echo of their far side, and hollow pipes the echo of their wall's inner
-  surface (see :func:`_echo_table`).
+  surface (see ``_echo_table``).
 * **source strength**: a short dipole fed a given current radiates a far field
   that grows as ``f`` (3D) or ``sqrt(f)`` (2D): wavelets are scaled by ``(f / 1 GHz)``
   to that power.

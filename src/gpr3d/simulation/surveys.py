@@ -166,7 +166,7 @@ def sample_gprmax_survey_scene(seed: int, index: int, *, max_cell_steps: float =
 
     Targets under 1.5 grid cells in radius (gprMax cannot build them) are drawn at 1.5
     cells, stones under 1.5 cells are left out, and draws over ``max_cell_steps`` of FDTD
-    work (:func:`gprmax_runner.following_cost`) or with targets that then touch are
+    work (:func:`~gpr3d.simulation.gprmax_runner.following_cost`) or with targets that then touch are
     redrawn, so the set leans to the cheaper scans of each range.
     """
     from gpr3d.simulation.gprmax_runner import following_cost
