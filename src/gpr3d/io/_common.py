@@ -106,6 +106,73 @@ def local_metres(lat_deg, lon_deg, alt_m, origin=None):
     return np.stack([east, north, alt - alt0], axis=1), origin
 
 
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+#: files already walked by :func:`check_hdf5_survives` in this process: (path, size, mtime) -> True
+_HDF5_SURVIVED: dict = {}
+
+
+def _walk_hdf5(path: str, max_bytes: int) -> None:
+    """Read every attribute and every dataset (up to ``max_bytes`` each) of an HDF5 file: what readers will do."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        dict(f.attrs)
+
+        def visit(_name, obj):
+            dict(obj.attrs)
+            if isinstance(obj, h5py.Dataset) and obj.size * obj.dtype.itemsize <= max_bytes:
+                obj[()]
+
+        f.visititems(visit)
+
+
+def check_hdf5_survives(path, *, max_bytes: int = 256 * 2**20, timeout_s: float = 60.0) -> None:
+    """Walk an HDF5 file in a forked child before this process opens it, and raise :class:`FormatError` if the
+    HDF5 library crashes there (a corrupt file can make libhdf5 segfault, which no ``except`` catches).
+
+    Errors the child meets are left for the reader (it reports them by name); a child that does not finish
+    within ``timeout_s`` is ended and the file read as usual. Each file (path, size, mtime) is walked once per
+    process; not on systems without ``fork``, nor with ``GPR3D_HDF5_PRECHECK=0``."""
+    if not hasattr(os, "fork") or os.environ.get("GPR3D_HDF5_PRECHECK", "1") == "0":
+        return
+    p = Path(path)
+    try:
+        st = p.stat()
+        with open(p, "rb") as fh:
+            if fh.read(8) != HDF5_SIGNATURE:
+                return
+    except OSError:
+        return
+    key = (str(p.resolve()), st.st_size, st.st_mtime_ns)
+    if key in _HDF5_SURVIVED:
+        return
+    import signal
+    import time
+
+    pid = os.fork()
+    if pid == 0:  # the child: walk, then leave without running any of the parent's exit handlers
+        try:
+            _walk_hdf5(str(p), max_bytes)
+        except BaseException:  # noqa: BLE001 - errors are the reader's to report
+            pass
+        os._exit(0)
+    deadline = time.monotonic() + timeout_s
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        if time.monotonic() > deadline:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            return
+        time.sleep(0.002)
+    if os.WIFSIGNALED(status):
+        sig = os.WTERMSIG(status)
+        name = signal.Signals(sig).name if sig in signal.Signals._value2member_map_ else str(sig)
+        raise FormatError(p, f"HDF5 content is corrupt: the HDF5 library crashed reading it ({name})")
+    _HDF5_SURVIVED[key] = True
+
+
 @contextlib.contextmanager
 def hdf5_errors(path):
     """Turn the low-level errors h5py raises on damaged files into one FormatError naming the file.

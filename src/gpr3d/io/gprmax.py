@@ -25,7 +25,7 @@ import numpy as np
 from gpr3d.core.errors import FormatError
 from gpr3d.core.poses import quat_from_yaw
 from gpr3d.core.survey import Survey
-from gpr3d.io._common import check_file, hdf5_errors
+from gpr3d.io._common import check_file, check_hdf5_survives, hdf5_errors
 
 __all__ = ["is_gprmax", "read_gprmax", "read_gprmax_waveform", "gprmax_to_world", "COMPONENTS"]
 
@@ -98,6 +98,7 @@ def read_gprmax(path, *, component: str = "Ez") -> list[Survey]:
         raise FormatError(p, f"unknown field component {component!r}; choose from {', '.join(COMPONENTS)}")
     if not _is_hdf5(p):
         raise FormatError(p, "not an HDF5 file, so not a gprMax output")
+    check_hdf5_survives(p)
     with hdf5_errors(p):
         return _read_gprmax(p, component)
 

@@ -19,7 +19,7 @@ import h5py
 
 from gpr3d.core.errors import FormatError
 from gpr3d.core.survey import Survey
-from gpr3d.io._common import check_file, hdf5_errors
+from gpr3d.io._common import check_file, check_hdf5_survives, hdf5_errors
 from gpr3d.io.atomic import atomic_path
 
 __all__ = ["SCHEMA", "SCHEMA_VERSION", "write_survey", "write_surveys", "read_surveys", "read_survey", "is_gpr3d_h5"]
@@ -77,6 +77,7 @@ def write_survey(survey: Survey, path) -> None:
 def read_surveys(path) -> list[Survey]:
     """Read every survey in a gpr3d HDF5 file."""
     p = check_file(path)
+    check_hdf5_survives(p)
     with hdf5_errors(p):
         return _read_surveys(p)
 

@@ -14,7 +14,7 @@ import h5py
 import numpy as np
 
 from gpr3d.core.errors import FormatError
-from gpr3d.io._common import check_file, hdf5_errors
+from gpr3d.io._common import check_file, check_hdf5_survives, hdf5_errors
 
 __all__ = ["PackedDataset", "SCHEMA", "labelled_records"]
 
@@ -26,6 +26,7 @@ class PackedDataset:
 
     def __init__(self, path):
         self.path = check_file(path)
+        check_hdf5_survives(self.path)
         with hdf5_errors(self.path), h5py.File(self.path, "r") as f:
             if f.attrs.get("schema") != SCHEMA:
                 raise FormatError(self.path, "not a gpr3d packed dataset")

@@ -80,6 +80,10 @@ def read_all(path, *, format: str | None = None, **kwargs) -> list:
     ``format`` forces a reader (``dzt``, ``dt1``, ``rd3``, ``gprmax``, ``gpr3d``);
     extra keyword arguments go to that reader (e.g. ``component="Ey"`` for gprMax).
     """
+    from gpr3d.io._common import check_hdf5_survives
+
+    check_file(path)
+    check_hdf5_survives(path)  # before any reader or detector opens an HDF5 file that could crash libhdf5
     name = format or detect_format(path)
     if name not in FORMATS:
         raise FormatError(path, f"unknown format {name!r}; known: {', '.join(FORMATS)}")

@@ -19,7 +19,7 @@ import numpy as np
 from gpr3d import __version__
 from gpr3d.core.errors import FormatError
 from gpr3d.core.grid import Grid3D
-from gpr3d.io._common import check_file, hdf5_errors
+from gpr3d.io._common import check_file, check_hdf5_survives, hdf5_errors
 from gpr3d.io.atomic import atomic_path
 
 __all__ = ["SCHEMA", "SCHEMA_VERSION", "Volume", "read_volume", "write_volume", "write_vti"]
@@ -67,6 +67,7 @@ def read_volume(path, names=None) -> Volume:
     from gpr3d.core.errors import InvalidDataError
 
     path = check_file(path)
+    check_hdf5_survives(path)
     with hdf5_errors(path), h5py.File(path, "r") as f:
         schema = f.attrs.get("schema")
         schema = schema.decode() if isinstance(schema, bytes) else schema
