@@ -95,6 +95,11 @@ def one_line_error(capsys, argv, *needles):
     (["migrate", DZT, "--out", "{d}/m", "--velocity", "5"], ["--velocity", "0.2998"]),
     (["migrate", DZT, "--out", "{d}/m", "--eps-r", "6", "--max-depth", "-2"], ["--max-depth"]),
     (["show", DZT, "--out", "{d}/a.png", "--ascan", "99999"], ["--ascan", "0..1039"]),
+    (["convert", DZT, "{d}/c.h5", "--marks-every", "-1"], ["--marks-every", "positive"]),
+    (["convert", DZT, "{d}/c.h5", "--marks", "0,5"], ["--marks needs --marks-every"]),
+    (["convert", DZT, "{d}/c.h5", "--marks-every", "1", "--marks", "a,b"], ["--marks", "whole numbers"]),
+    (["convert", DZT, "{d}/c.h5", "--marks-every", "1", "--marks", "9,3"], ["marks", "increasing"]),
+    (["convert", DZT, "{d}/c.h5", "--marks-every", "1", "--track", "{d}/t.xyz"], ["--track or --marks-every"]),
 ])
 def test_a_wrong_argument_is_one_line_naming_it_and_leaves_nothing(files, capsys, argv, needles):
     """Each case the issue lists (tracebacks, a hang, wrong results with no error, unhelpful messages)."""
@@ -176,7 +181,8 @@ _hostile = st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr), s
                      st.sampled_from(["", "abc", "-0", "nan", "inf", "1e400", "[0,10]", "true", "none", "0x10",
                                       "--", "-1", "0", "1e-30", "☃"]))
 _SHOW = {"--clip": _hostile, "--cmap": st.sampled_from(["gray", "hot", "notacmap", "", "jet_r"]) | _hostile,
-         "--axis": st.sampled_from(["time", "depth", "width"]), "--eps-r": _hostile}
+         "--axis": st.sampled_from(["time", "depth", "width"]), "--eps-r": _hostile, "--marks-every": _hostile,
+         "--marks": st.sampled_from(["0,100", "100,0", "", "0", "5,99999"]) | _hostile}
 _STEPS = st.sampled_from(["dewow:window_s", "gain_tpow:power", "gain_tpow:t_ref_s", "gain_agc:window_s",
                           "bandpass:order", "bandpass:fmin_hz", "remove_dc:sample_range", "time_zero:threshold",
                           "time_zero:shift", "time_zero:search_s", "remove_background:window_traces",

@@ -86,3 +86,23 @@ def test_a_perpendicular_set_lies_across_the_first():
                        ({"cross_lines": 2, "cross_origin_m": float("nan")}, "origin")):
         with pytest.raises(InvalidDataError, match=words):
             assemble_grid(main + cross, line_spacing_m=0.5, **bad)
+
+
+def test_marks_spread_the_traces_between_known_distances():
+    """Marks at traces 10, 30 and 70, one every 2 m from 1 m: 20 traces to the first 2 m, 40 to the next; before the
+    first and after the last mark the nearest interval's rate."""
+    from gpr3d.core.gridsurvey import marks_distance, place_by_marks
+
+    d = marks_distance(81, [10, 30, 70], 2.0, start_m=1.0)
+    assert d[[10, 30, 70]] == pytest.approx([1.0, 3.0, 5.0])
+    assert d[20] == pytest.approx(2.0) and d[50] == pytest.approx(4.0)
+    assert d[0] == pytest.approx(1.0 - 10 * 0.1) and d[80] == pytest.approx(5.0 + 10 * 0.05)
+    s = place_by_marks(line(81), 2.0, marks=[10, 30, 70])
+    np.testing.assert_allclose(s.positions_xyz[:, 0], marks_distance(81, [10, 30, 70], 2.0))
+    np.testing.assert_allclose(s.positions_xyz[:, 1:], 0.0)
+    for marks, spacing, words in (([5], 1.0, "at least two"), ([5, 3], 1.0, "increasing"), ([0, 81], 1.0, "0..80"),
+                                  ([0, 5], 0.0, "positive")):
+        with pytest.raises(InvalidDataError, match=words):
+            marks_distance(81, marks, spacing)
+    with pytest.raises(InvalidDataError, match="holds 0 mark"):
+        place_by_marks(line(81), 1.0)

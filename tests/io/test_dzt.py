@@ -26,6 +26,20 @@ def test_gssi_400mhz_header_facts():
     assert s.distances_m[-1] == pytest.approx(1039 / 50)
 
 
+def test_marks_are_read_and_place_the_traces_as_the_wheel_does():
+    """FILE____032.DZT carries a mark every 100 scans in its traces' mark word; its header says 50 scans per
+    metre, so marks every 2 m place every trace where the survey wheel does (two independent records)."""
+    from gpr3d.core.gridsurvey import place_by_marks
+
+    s = gpr3d.read(real_file("gprpy_gssi_400MHz/FILE____032.DZT"))
+    assert s.metadata["marks"] == list(range(0, 1001, 100))
+    placed = place_by_marks(s, 2.0)
+    np.testing.assert_allclose(placed.positions_xyz, s.positions_xyz, atol=1e-9)
+    assert placed.metadata["positions_source"] == "marks every 2 m"
+    # the SIR-4000 file has no marks set
+    assert gpr3d.read(real_file("impdar_gssi_sir4000/test_gssi.DZT")).metadata["marks"] == []
+
+
 def test_sir4000_32bit_large_header():
     p = real_file("impdar_gssi_sir4000/test_gssi.DZT")
     hdr = read_dzt_header(p)

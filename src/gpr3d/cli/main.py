@@ -97,7 +97,29 @@ def cmd_info(args):
     return 1 if failed else 0
 
 
+def _check_marks_args(args) -> None:
+    """One line for a wrong --marks-every / --marks (before any file is read)."""
+    every, marks = getattr(args, "marks_every", None), getattr(args, "marks", None)
+    if marks is not None and every is None:
+        raise GPR3DError("--marks needs --marks-every (the distance between two marks)")
+    if every is not None and not (math.isfinite(every) and every > 0):
+        raise GPR3DError(f"--marks-every must be a positive distance in metres, got {every:g}")
+    if every is not None and getattr(args, "track", None):
+        raise GPR3DError("give --track or --marks-every, not both (each places the traces)")
+    if isinstance(marks, str):
+        args.marks = _number_list(marks, "--marks", int)
+
+
+def _with_marks(survey, args):
+    if getattr(args, "marks_every", None) is not None:
+        from gpr3d.core.gridsurvey import place_by_marks
+
+        survey = place_by_marks(survey, args.marks_every, marks=getattr(args, "marks", None))
+    return survey
+
+
 def _with_track(survey, args):
+    survey = _with_marks(survey, args)
     if getattr(args, "track", None):
         from gpr3d.io.trajectory import apply_track, read_track
 
@@ -220,7 +242,7 @@ def cmd_grid(args):
             raise GPR3DError(f"{flag} must be a {'positive' if flag == '--cross-spacing' else 'finite'} distance in "
                              f"metres, got {v:g}")
     files = list(args.lines) + cross
-    surveys = [_apply_steps(read(f), args.steps) for f in files]
+    surveys = [_apply_steps(_with_marks(read(f), args), args.steps) for f in files]
     g = assemble_grid(surveys, names=[Path(f).name for f in files], line_spacing_m=args.spacing,
                       direction=args.direction, start_offsets_m=offsets, serpentine=args.serpentine,
                       reversed_lines=reversed_lines, layout=layout, cross_lines=len(cross),
@@ -923,10 +945,18 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--trace-spacing", type=float, default=None,
                         help="trace spacing in metres (default: the file's positions)")
 
+    def add_marks(sp):
+        sp.add_argument("--marks-every", type=float, default=None, metavar="M",
+                        help="place the traces by their marks, one every M metres along x (the file's marks: GSSI "
+                             "DZT; or --marks)")
+        sp.add_argument("--marks", default=None, metavar="TRACES",
+                        help="the marked traces, e.g. 0,210,415 (with --marks-every; default the file's marks)")
+
     def add_track(sp):
         sp.add_argument("--track", default=None,
                         help="place the traces on a surveyed track: x y z text, CSV (x,y,z columns) or GSSI .DZG "
                              "(GPS fixes by trace)")
+        add_marks(sp)
 
     def add_input(sp):
         sp.add_argument("input", help="radar file (DZT, DT1/HD, RD3/RAD, gprMax .h5/.out, gpr3d .h5)")
@@ -999,6 +1029,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--serpentine", action="store_true", help="every second line was walked back (zig-zag)")
     sp.add_argument("--reversed", default="", help="lines walked back, as indices: 1,3,7")
     sp.add_argument("--start-offsets", default="", help="each line's start along its direction (m): 0,0.1,...")
+    add_marks(sp)
     sp.add_argument("--cross", nargs="+", default=None, metavar="LINE",
                     help="a second set of lines, perpendicular to the first, in the order recorded")
     sp.add_argument("--cross-spacing", type=float, default=None,
@@ -1235,6 +1266,8 @@ def main(argv=None) -> int:
         return 2
     warnings.showwarning = _one_line_warning
     try:
+        if hasattr(args, "marks_every"):
+            _check_marks_args(args)  # before any file is read
         return int(args.func(args) or 0)
     except GPR3DError as exc:
         print(f"gpr3d: error: {exc}", file=sys.stderr)

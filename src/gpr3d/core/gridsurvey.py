@@ -30,7 +30,7 @@ import numpy as np
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.poses import quat_from_yaw
 
-__all__ = ["GridLine", "assemble_grid", "read_layout", "along_line_distance"]
+__all__ = ["GridLine", "assemble_grid", "read_layout", "along_line_distance", "marks_distance", "place_by_marks"]
 
 
 class GridLine:
@@ -62,6 +62,44 @@ def along_line_distance(survey) -> np.ndarray:
                                "the trace spacing")
     step = np.hypot(*np.diff(p[:, :2], axis=0).T)
     return np.concatenate([[0.0], np.cumsum(step)])
+
+
+def marks_distance(n_traces: int, marks, spacing_m: float, *, start_m: float = 0.0) -> np.ndarray:
+    """Each trace's distance along its line (m) from marks: trace ``marks[k]`` lies at ``start_m + k *
+    spacing_m``; traces between marks are spread evenly (piecewise linear), those before the first and after the
+    last mark at the rate of the nearest interval. ``marks``: increasing trace indices, at least two."""
+    m = np.asarray(marks)
+    if m.ndim != 1 or m.size < 2 or not np.issubdtype(m.dtype, np.integer):
+        raise InvalidDataError(f"marks: at least two trace indices are needed, got {list(np.ravel(marks))[:6]}")
+    if m[0] < 0 or m[-1] >= n_traces or np.any(np.diff(m) <= 0):
+        raise InvalidDataError(f"marks must be increasing trace indices in 0..{n_traces - 1}, got "
+                               f"{m[:6].tolist()}{' ...' if m.size > 6 else ''}")
+    if not (isinstance(spacing_m, (int, float)) and np.isfinite(spacing_m) and spacing_m > 0):
+        raise InvalidDataError(f"the distance between marks must be a positive number of metres, got {spacing_m!r}")
+    at = start_m + spacing_m * np.arange(m.size)
+    i = np.arange(n_traces, dtype=float)
+    d = np.interp(i, m, at)
+    first, last = spacing_m / (m[1] - m[0]), spacing_m / (m[-1] - m[-2])
+    d = np.where(i < m[0], at[0] - (m[0] - i) * first, d)
+    return np.where(i > m[-1], at[-1] + (i - m[-1]) * last, d)
+
+
+def place_by_marks(survey, spacing_m: float, *, marks=None, start_m: float = 0.0):
+    """``survey`` with its traces placed along world x by its marks (``marks``, else the file's own:
+    ``metadata["marks"]``, which the DZT reader fills), one every ``spacing_m`` metres (:func:`marks_distance`);
+    headings along +x. The survey's own positions, if any, are replaced."""
+    own = survey.metadata.get("marks")
+    if marks is None:
+        if not own or len(own) < 2:
+            raise InvalidDataError(f"{survey.metadata.get('path', 'the survey')}: the file holds "
+                                   f"{len(own or [])} mark(s); give the marked traces")
+        marks = own
+    d = marks_distance(survey.n_traces, np.asarray(marks, dtype=np.int64) if len(marks) else marks, spacing_m,
+                       start_m=start_m)
+    pos = np.zeros((survey.n_traces, 3))
+    pos[:, 0] = d
+    meta = dict(survey.metadata, positions_source=f"marks every {spacing_m:g} m", marks=[int(k) for k in marks])
+    return survey.replace(positions_xyz=pos, orientations_quat_wxyz=None, metadata=meta)
 
 
 def read_layout(path) -> dict:

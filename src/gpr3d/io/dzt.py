@@ -7,7 +7,9 @@ The data start at ``1024 * rh_data`` when ``rh_data < 1024``, else at
 ``1024 * n_channels`` (SIR-4000 files use ``rh_data = 128``: byte 131072).
 The sample interval is ``range / n_samples``. The first two samples of every
 trace hold a scan counter and a mark word, not signal: the reader replaces them
-with the third sample (``metadata["header_samples_replaced"] = 2``).
+with the third sample (``metadata["header_samples_replaced"] = 2``), and lists the
+traces whose mark word is set (the operator's marks, pressed at known distances) in
+``metadata["marks"]`` (see :func:`gpr3d.core.gridsurvey.place_by_marks`).
 """
 
 from __future__ import annotations
@@ -225,6 +227,8 @@ def read_dzt(path, *, gps: bool = True) -> list[Survey]:
         positions[:, 0] = np.arange(n) / hdr["scans_per_m"]
         pos_source = "survey wheel (header scans per metre), along world x"
 
+    # the mark word (second sample) of the first channel: nonzero where the operator pressed the mark button
+    marks = np.nonzero(raw[:, 0, 1])[0].tolist() if nsamp > 2 else []
     surveys = []
     for ch in range(nchan):
         data = raw[:, ch, :].astype(np.float32)
@@ -250,6 +254,7 @@ def read_dzt(path, *, gps: bool = True) -> list[Survey]:
             "data_offset": hdr["data_offset"],
             "positions_source": pos_source,
             "header_samples_replaced": 2 if nsamp > 2 else 0,
+            "marks": marks,
         }
         if meta_gps is not None:
             meta["gps"] = meta_gps
