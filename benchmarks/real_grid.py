@@ -7,10 +7,11 @@ the direct wave, dewow, background removal), put together with ``gpr3d.core.grid
 
 * C-scans: 8 ns slices of the gridded envelope (``gpr3d.processing.cscan``);
 * the host's eps_r: the median over the lines of ``gpr3d depth``'s hybrid estimate (hyperbolas in each line);
-* pseudo-3D: each line migrated in 2D (Kirchhoff) and the planes interpolated between lines;
+* pseudo-3D: each line migrated in 2D (Kirchhoff) and the planes interpolated between lines
+  (``reconstruct(method="pseudo3d")``, ``gpr3d reconstruct --method pseudo3d``);
 * 3D: ``gpr3d.migration.reconstruct`` (back projection from every trace's position).
 
-Targets come from ``gpr3d.migration.targets.extract_targets`` on both volumes. Writes
+Targets come from ``gpr3d.migration.targets.extract_targets`` on both volumes (inside ``reconstruct``). Writes
 ``docs/figures/real_grid_cscans.png``, ``real_grid_pseudo3d.png``, ``real_grid_3d.png`` and
 ``benchmarks/results/real_grid.md``.
 
@@ -33,12 +34,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _report import cpu_name, write_table  # noqa: E402
 
 import gpr3d  # noqa: E402
-from gpr3d.core.grid import Grid3D  # noqa: E402
 from gpr3d.core.gridsurvey import assemble_grid  # noqa: E402
-from gpr3d.migration.masking import image_envelope  # noqa: E402
 from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct  # noqa: E402
-from gpr3d.migration.targets import extract_targets  # noqa: E402
-from gpr3d.migration.traditional import pseudo3d  # noqa: E402
 from gpr3d.processing.cscan import cscan  # noqa: E402
 from gpr3d.viz._figures import pyplot, save_figure  # noqa: E402
 from gpr3d.viz.maps import save_cscan_sheet  # noqa: E402
@@ -106,17 +103,18 @@ def main(argv=None):
     save_cscan_sheet(fig_dir / "real_grid_cscans.png", cs, dpi=70, title=f"{len(files)} lines, 100 MHz: C-scans "
                      f"(8 ns slices; depths for eps_r {eps:.1f})")
     depth = 4.0
-    g = Grid3D.covering(grid_survey.positions_xyz, depth_m=depth, spacing_m=0.1)
-    t = time.perf_counter()
-    p3 = image_envelope(pseudo3d(grid_survey, g, eps_r=eps, method="kirchhoff")[0])
-    t_p3 = time.perf_counter() - t
     v = 299792458.0 / np.sqrt(eps)
-    band = max(0.2, 0.5 * v / 100e6)
     ring = 0.5 * v * (1.0 / 100e6)  # one period of the 100 MHz pulse after time zero: the direct wave rings there
-    tg_p3 = extract_targets(p3, g, band_m=band, min_depth_m=ring)
+    # the same settings as `gpr3d reconstruct grid.h5 --method pseudo3d|backprojection --eps-r ... --spacing 0.1
+    # --max-depth 4 --min-depth ... --no-time-zero` (the lines were background-removed one by one above)
+    same = dict(eps_r=eps, spacing_m=0.1, max_depth_m=depth, time_zero="none", remove_background=False,
+                min_target_depth_m=ring)
     t = time.perf_counter()
-    rec = reconstruct(grid_survey, ReconstructConfig(eps_r=eps, spacing_m=0.1, max_depth_m=depth, time_zero="none",
-                                                     remove_background=False, min_target_depth_m=ring))
+    rec_p3 = reconstruct(grid_survey, ReconstructConfig(**same, method="pseudo3d"))
+    t_p3 = time.perf_counter() - t
+    p3, g, tg_p3 = rec_p3.envelope, rec_p3.grid, rec_p3.targets
+    t = time.perf_counter()
+    rec = reconstruct(grid_survey, ReconstructConfig(**same))
     t_3d = time.perf_counter() - t
     plt = pyplot()
     for name, env, grid, tg, title in (("pseudo3d", p3, g, tg_p3, "pseudo-3D (2D Kirchhoff per line, interpolated)"),

@@ -1,5 +1,7 @@
 """gpr3d grid and gpr3d cscan: line files in, one survey and C-scans out."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -46,6 +48,15 @@ def test_grid_then_cscan_on_real_lines(real_lines, tmp_path, capsys):
     np.testing.assert_allclose(gx.positions_xyz[first[3]:, 0], 3.0)
     assert gx.positions_xyz[first[3]:, 1].min() == pytest.approx(0.0, abs=1e-9)
     assert "2 + 2 perpendicular lines" in capsys.readouterr().out
+    # pseudo-3D and 3D from the same lines: the same kind of output folder
+    for method in ("pseudo3d", "backprojection"):
+        assert main(["reconstruct", str(tmp_path / "g.h5"), "--method", method, "--eps-r", "12", "--spacing", "0.1",
+                     "--max-depth", "2", "--min-depth", "0.42", "--no-time-zero", "--out", str(tmp_path / method)]) == 0
+        out = capsys.readouterr().out
+        assert ("line by line (pseudo-3D)" in out) == (method == "pseudo3d")
+        cfg = json.loads((tmp_path / method / "config.json").read_text())
+        assert cfg["config"]["method"] == method and cfg["frame"] is None
+        assert (tmp_path / method / "top.png").stat().st_size > 10_000
 
 
 @pytest.mark.parametrize("extra, words", [

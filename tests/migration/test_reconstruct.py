@@ -98,3 +98,48 @@ def test_traces_all_in_one_place_are_refused():
     s = _profile([_crossing(0.6, 0.3)], n=20, length=0.01)
     with pytest.raises(InvalidDataError, match="no profile and no area"):
         reconstruct(s, ReconstructConfig(spacing_m=0.02, max_depth_m=0.5))
+
+
+@pytest.fixture(scope="module")
+def grid_lines():
+    """Seven 1.6 m lines along x, 0.2 m apart, over a pipe along y at x = 0.8 m, its top 0.3 m deep (forward
+    model), put together as a grid survey."""
+    from gpr3d.core.gridsurvey import assemble_grid
+
+    n = 161
+    along = np.linspace(0.0, 1.6, n)
+    pipe = Pipe((0.8, -0.3, -0.32), (0.8, 1.5, -0.32), 0.02)
+    lines = []
+    for k in range(7):
+        pos = np.c_[along, np.full(n, 0.2 * k), np.zeros(n)]
+        data = forward_model(ForwardScene(eps_r=EPS, pipes=[pipe]), pos, quat_from_yaw(np.zeros(n)), offset_m=0.05,
+                             frequency_hz=800e6, n_samples=256, time_window_s=16e-9, air_wave=1.0, ground_wave=0.5)
+        lines.append(Survey(data=data, dt_s=16e-9 / 256, offset_m=0.05, frequency_hz=800e6, eps_r=EPS,
+                            positions_xyz=np.c_[along, np.zeros(n), np.zeros(n)], metadata={"path": f"L{k}"}))
+    return assemble_grid(lines, line_spacing_m=0.2)
+
+
+@pytest.mark.parametrize("method", ["pseudo3d", "backprojection"])
+def test_pseudo3d_and_3d_find_the_pipe_across_the_lines(grid_lines, method):
+    rec = reconstruct(grid_lines, ReconstructConfig(spacing_m=0.02, max_depth_m=0.6, method=method))
+    lines = [t for t in rec.targets if t.kind == "line"]
+    assert lines, [(t.kind, t.points_xyz) for t in rec.targets]
+    best = max(lines, key=lambda t: t.length_m)
+    p = np.array(best.points_xyz)
+    assert np.all(np.abs(p[:, 0] - 0.8) < 0.03) and abs(best.direction[1]) > 0.99
+    assert best.depth_m == pytest.approx(0.3, abs=0.03) and best.length_m > 0.8
+    assert (rec.fold is None) == (method == "pseudo3d")
+
+
+def test_pseudo3d_refuses_what_it_cannot_do(grid_lines):
+    from gpr3d.migration.reconstruct import check_config
+
+    with pytest.raises(InvalidDataError, match="method must be 'backprojection' for site tiles"):
+        check_config(ReconstructConfig(method="pseudo3d", tile_m=1.0))
+    with pytest.raises(InvalidDataError, match="method must be 'backprojection' or 'pseudo3d'"):
+        check_config(ReconstructConfig(method="kirchhoff3d"))
+    # lines turned 30 deg off the axes
+    c, s_ = np.cos(np.radians(30)), np.sin(np.radians(30))
+    turned = grid_lines.positions_xyz @ np.array([[c, s_, 0], [-s_, c, 0], [0, 0, 1]])
+    with pytest.raises(InvalidDataError, match="pseudo-3D needs lines along x or y; line 0 .* 30 deg"):
+        reconstruct(grid_lines.replace(positions_xyz=turned), ReconstructConfig(eps_r=EPS, method="pseudo3d"))

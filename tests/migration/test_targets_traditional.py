@@ -213,3 +213,19 @@ def test_a_dipping_layer_is_no_pipe_and_shallow_ringing_is_skipped():
     plunge = blob_image(g, [((0.5, 1.0, 0.2), (1.5, 1.0, 1.93))], [], sigma=0.06)  # 60 deg
     assert not [t for t in extract_targets(plunge, g, band_m=0.1) if t.kind == "line"]
     assert [t for t in extract_targets(plunge, g, band_m=0.1, max_dip_deg=80) if t.kind == "line"]
+
+
+def test_the_ringing_tail_below_the_depth_cut_is_no_target():
+    """A bright, mottled ringing that decays from the surface, cut at 0.15 m, leaves a floor at the cut depth
+    brighter than the threshold; the pipe at 0.4 m (x from 0.3 to 1.3 m) must keep its own ends, not run along
+    that floor to the map's edges."""
+    g = Grid3D(0, 0, 0.01, 0.02, 0.02, 0.01, 80, 60, 60)
+    x, y, d = np.meshgrid(g.x, g.y, g.depth, indexing="ij")
+    rng = np.random.default_rng(0)
+    ring = 3.0 * np.exp(-(d - 0.01) / 0.06) * (1 + 0.3 * rng.random((g.nx, g.ny, 1)))
+    pipe = np.exp(-0.5 * (((y - 0.6) / 0.03) ** 2 + ((d - 0.4) / 0.02) ** 2)) * ((x > 0.3) & (x < 1.3))
+    t = extract_targets((ring + pipe).astype(np.float32), g, min_depth_m=0.15)
+    assert [x.kind for x in t] == ["line"]
+    (x0, y0, d0), (x1, y1, d1) = sorted(t[0].points_xyz)
+    assert (x0, x1) == (pytest.approx(0.3, abs=0.04), pytest.approx(1.3, abs=0.04))
+    assert d0 == pytest.approx(0.4, abs=0.01) and y0 == pytest.approx(0.6, abs=0.01)

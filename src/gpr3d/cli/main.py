@@ -504,7 +504,7 @@ def _reconstruct_defaults():
 #: ReconstructConfig's names for the settings that reconstruct's options set
 _RECONSTRUCT_FLAGS = {"spacing_m": "--spacing", "max_depth_m": "--max-depth", "aperture_deg": "--aperture",
                       "threshold": "--threshold", "min_line_m": "--min-line", "engine": "--engine",
-                      "min_target_depth_m": "--min-depth"}
+                      "min_target_depth_m": "--min-depth", "method": "--method", "tile_m": "--tile"}
 
 
 def cmd_reconstruct(args):
@@ -526,7 +526,7 @@ def cmd_reconstruct(args):
     settings = dict(spacing_m=args.spacing, max_depth_m=args.max_depth,
                     aperture_deg=None if args.aperture == 0 else args.aperture, threshold=args.threshold,
                     min_line_m=args.min_line, engine=args.engine, time_zero="none" if args.no_time_zero else "peak",
-                    min_target_depth_m=args.min_depth)
+                    min_target_depth_m=args.min_depth, method=args.method)
     check_config(ReconstructConfig(**settings, **site), names=_RECONSTRUCT_FLAGS)  # one line, before any work
     eps_given = _eps_argument(args.eps_r)
     estimate = eps_given is None
@@ -585,8 +585,10 @@ def cmd_reconstruct(args):
     result.eps_r_source = f"estimated ({args.depth})" if estimate else ("file header" if eps_given == "file" else "given")
     files = write_reconstruction(result, args.out, source=str(args.input))
     g = result.grid
-    print(f"migrated {result.n_traces} traces onto {g.nx} x {g.ny} x {g.nd} voxels in "
-          f"{result.timings_s['migrate']:.1f} s ({result.updates_per_s / 1e9:.2f} G voxel-trace updates/s)")
+    rate = f" ({result.updates_per_s / 1e9:.2f} G voxel-trace updates/s)" if result.updates_per_s else ""
+    how = "line by line (pseudo-3D)" if args.method == "pseudo3d" else "onto"
+    print(f"migrated {result.n_traces} traces {how} {g.nx} x {g.ny} x {g.nd} voxels in "
+          f"{result.timings_s['migrate']:.1f} s{rate}")
     if result.frame is not None:
         print("one straight profile: migrated in 2D (the vertical plane under it); targets crossing it are points")
     for i, t in enumerate(result.targets):
@@ -1144,6 +1146,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="relative permittivity, or 'file' for the header's (default: estimated from the data, "
                          "see --depth)")
     sp.add_argument("--boxes", default=None, help="JSON boxes (gpr3d detect output or a list): migrate only these")
+    sp.add_argument("--method", default="backprojection", choices=("backprojection", "pseudo3d"),
+                    help="backprojection (default: every trace into the 3D grid from its pose) or pseudo3d (a grid "
+                         "survey's lines migrated one by one in 2D, interpolated between lines)")
     rc = _reconstruct_defaults()
     sp.add_argument("--spacing", type=float, default=rc.spacing_m, help=f"voxel size in metres (default {rc.spacing_m:g})")
     sp.add_argument("--max-depth", type=float, default=rc.max_depth_m, help="deepest voxel (m; default: the time window)")

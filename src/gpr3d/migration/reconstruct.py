@@ -49,6 +49,10 @@ class ReconstructConfig:
     min_target_depth_m: float | None = None  #: no targets shallower (e.g. where the direct wave rings)
     taper_traces: float = 3.0
     engine: str = "numba"
+    #: "backprojection": every trace migrated into the 3D grid from its pose; "pseudo3d": each straight line (along
+    #: x or y) migrated in its vertical plane (2D Kirchhoff), the planes interpolated between lines
+    #: (:func:`gpr3d.migration.traditional.pseudo3d`; grid surveys only)
+    method: str = "backprojection"
     #: site scale (see :mod:`.sitetiles`): all unset, the whole grid in one pass; otherwise tiles of ``tile_m``
     #: (m; ``sitetiles.DEFAULT_TILE_M`` where unset), on ``workers`` local Dask processes (0: in this process) or
     #: on the Dask scheduler at ``scheduler``; ``checkpoint``: a folder keeping finished tiles (a rerun resumes)
@@ -165,7 +169,11 @@ def check_config(cfg: ReconstructConfig, names: dict | None = None) -> None:
         bad("time_zero", "'peak', 'first_break' or 'none'")
     if cfg.normalize not in ("sqrt_fold", "fold", "none"):
         bad("normalize", "'sqrt_fold', 'fold' or 'none'")
+    if cfg.method not in ("backprojection", "pseudo3d"):
+        bad("method", "'backprojection' or 'pseudo3d'")
     check_site_settings(cfg)
+    if cfg.method == "pseudo3d" and (cfg.tile_m is not None or cfg.workers or cfg.scheduler or cfg.checkpoint):
+        bad("method", "'backprojection' for site tiles (pseudo-3D migrates line by line)")
 
 
 def cross_line_extent(positions_xyz) -> float:
@@ -239,6 +247,8 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     positions = s.positions_xyz
     tx, rx = antenna_positions(s.positions_xyz, s.orientations_quat_wxyz, s.offset_m)
     width = cross_line_extent(s.positions_xyz)
+    if cfg.method == "pseudo3d":
+        return _reconstruct_pseudo3d(survey, s, cfg, eps, boxes, t_prep)
     if width < max(2 * cfg.spacing_m, 0.05):
         # one straight profile: a 3D image would mirror every target to both sides of the line; image the
         # vertical plane under the line instead (the same back projection on a grid one cell wide)
@@ -317,6 +327,50 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
                           eps_r=float(eps), config=asdict(cfg), n_traces=s.n_traces,
                           timings_s={"prepare": t_prep, "migrate": t_mig},
                           updates_per_s=s.n_traces * grid.size / t_mig if t_mig > 0 else None, frame=frame)
+
+
+def _reconstruct_pseudo3d(survey, s, cfg, eps, boxes, t_prep) -> "Reconstruction":
+    """``reconstruct`` with ``method="pseudo3d"``: the lines of a grid survey migrated one by one (2D Kirchhoff),
+    their envelopes interpolated between lines; the same target extraction."""
+    from gpr3d.migration.traditional import pseudo3d, survey_lines
+
+    lines = survey_lines(s)
+    for k, idx in enumerate(lines):
+        d = s.positions_xyz[idx[-1], :2] - s.positions_xyz[idx[0], :2]
+        off_axis = np.degrees(np.arctan2(min(abs(d[0]), abs(d[1])), max(abs(d[0]), abs(d[1]), 1e-12)))
+        if off_axis > 5.0:
+            raise InvalidDataError(f"pseudo-3D needs lines along x or y; line {k} (traces {idx[0]}..{idx[-1]}) runs "
+                                   f"{off_axis:.0f} deg off both: use method 'backprojection'")
+    if len(lines) < 2:
+        raise InvalidDataError(f"pseudo-3D needs two lines at least, the survey has {len(lines)}: migrate one "
+                               "profile with 'gpr3d migrate', or use method 'backprojection'")
+    v = velocity_from_eps_r(eps)
+    depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s - s.t0_s) * 0.95
+    grid = Grid3D.covering(s.positions_xyz, depth_m=depth, spacing_m=cfg.spacing_m,
+                           depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m)
+    check_grid_fits(grid)
+    aperture = cfg.aperture_deg if cfg.aperture_deg is not None else 89.0
+    t = time.perf_counter()
+    noise_map = None
+    data = s.data
+    if boxes:
+        cut = survey.n_samples - s.n_samples
+        shifted = [[b[0], b[1] - cut * s.dt_s, b[2], b[3] - cut * s.dt_s] for b in boxes]
+        mask = box_mask(s.n_traces, s.n_samples, s.dt_s, shifted, taper_traces=cfg.taper_traces)
+        noise_map, _ = pseudo3d(s.replace(data=s.data * (1 - mask)), grid, eps_r=eps, aperture_deg=aperture,
+                                engine=cfg.engine)
+        data = s.data * mask
+    env, _ = pseudo3d(s.replace(data=data), grid, eps_r=eps, aperture_deg=aperture, engine=cfg.engine)
+    t_mig = time.perf_counter() - t
+    tol = 2.0 * max(grid.dx, grid.dy)
+    band = max(2 * tol, 0.5 * v / survey.frequency_hz) if survey.frequency_hz else None
+    targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band,
+                              min_depth_m=cfg.min_target_depth_m)
+    # the envelopes of the line images are all there is (no signed 3D image): the image is the envelope
+    return Reconstruction(image=env, envelope=env, noise_map=noise_map, fold=None, grid=grid, targets=targets,
+                          eps_r=float(eps), config=asdict(cfg), n_traces=s.n_traces,
+                          timings_s={"prepare": t_prep, "migrate": t_mig},
+                          updates_per_s=None)
 
 
 def write_reconstruction(result: "Reconstruction", out_dir, *, source: str = "") -> list[str]:

@@ -59,6 +59,18 @@ class Target3D:
         return float(np.linalg.norm(np.subtract(self.points_xyz[1], self.points_xyz[0]))) if self.kind == "line" else 0.0
 
 
+def _cut_tails(envelope: np.ndarray, k0: int) -> np.ndarray:
+    """The envelope from depth cell ``k0`` down, without the tail of what rings above the cut: in each column, the
+    cells from ``k0`` on while the envelope still falls from the cell above. A column's maximum in that tail is
+    the cut, not a target; left in, the ridge map gets a bright floor at the cut depth that any line can run
+    along."""
+    below = envelope[:, :, k0:]
+    if k0 == 0 or below.shape[2] == 0:
+        return below
+    falling = np.logical_and.accumulate(below < envelope[:, :, k0 - 1:-1], axis=2)
+    return np.where(falling, np.float32(0.0), below)
+
+
 def ridge_map(envelope: np.ndarray, grid: Grid3D):
     """``(value (nx, ny), depth_m (nx, ny))`` of each column's envelope maximum (parabolic sub-cell depth)."""
     k = np.argmax(envelope, axis=2)
@@ -330,7 +342,7 @@ def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.
     envelope = np.asarray(envelope, dtype=np.float32)
     if min_depth_m is not None and min_depth_m > grid.d0:
         k0 = min(int(np.ceil((min_depth_m - grid.d0) / grid.dd - 1e-9)), grid.nd - 1)
-        envelope = envelope[:, :, k0:]
+        envelope = _cut_tails(envelope, k0)
         grid = replace(grid, d0=grid.d0 + k0 * grid.dd, nd=grid.nd - k0)
     val, dep = ridge_map(envelope, grid)
     peak = float(np.percentile(val, reference_percentile))

@@ -16,7 +16,7 @@ from gpr3d.core.units import velocity_from_eps_r
 from gpr3d.core.grid import Grid3D
 from gpr3d.migration.operator import BackProjection, antenna_positions
 
-__all__ = ["stolt_migrate", "split_lines", "kirchhoff_line", "pseudo3d"]
+__all__ = ["stolt_migrate", "split_lines", "survey_lines", "kirchhoff_line", "pseudo3d"]
 
 
 def stolt_migrate(data: np.ndarray, dx_m: float, dt_s: float, eps_r: float, *, pad: int = 2):
@@ -78,6 +78,17 @@ def split_lines(positions_xyz: np.ndarray, *, max_gap_m: float | None = None, ma
     return [np.asarray(line) for line in lines if len(line) >= min_traces]
 
 
+def survey_lines(survey) -> list:
+    """The trace indices of each straight line of ``survey``: the line files of a grid put together by
+    :func:`gpr3d.core.gridsurvey.assemble_grid` (``metadata["grid"]["first_trace"]``), else
+    :func:`split_lines` on the positions; lines of fewer than 10 traces are left out."""
+    starts = survey.metadata.get("grid", {}).get("first_trace")
+    if starts:
+        bounds = [*starts, survey.n_traces]
+        return [np.arange(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b - a >= 10]
+    return split_lines(survey.positions_xyz)
+
+
 def kirchhoff_line(data, positions_xyz, orientations, offset_m, *, dt_s, t0_s, eps_r, grid: Grid3D, axis: str,
                    coord: float, aperture_deg=50.0, engine="numba"):
     """Kirchhoff-migrate one line onto its vertical plane: image ``(n_along, nd)`` on ``grid``'s axis."""
@@ -118,12 +129,7 @@ def pseudo3d(survey, grid: Grid3D, *, eps_r: float, method: str = "kirchhoff", a
     """
     from scipy.signal import hilbert
 
-    starts = survey.metadata.get("grid", {}).get("first_trace")  # a grid put together from line files
-    if starts:
-        bounds = [*starts, survey.n_traces]
-        lines = [np.arange(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b - a >= 10]
-    else:
-        lines = split_lines(survey.positions_xyz)
+    lines = survey_lines(survey)
     planes_x, planes_y = {}, {}
     for idx in lines:
         p = survey.positions_xyz[idx]
