@@ -57,8 +57,9 @@ def write_dzt(path, n_traces=7, n_samples=64, n_channels=1, bits=16, range_ns=20
 
 
 def write_dt1(stem, n_traces=6, n_points=50, window_ns=100.0, step=0.25, units="m", freq=250.0, sep=0.4,
-              hd_traces=None, bad_trace=None):
-    """A pulseEKKO DT1/HD pair; returns the DT1 path."""
+              hd_traces=None, bad_trace=None, bits=16):
+    """A pulseEKKO DT1/HD pair (16- or 32-bit samples, as the trace header's bytes per point says); returns the
+    DT1 path."""
     stem = Path(stem)
     hd = (
         "1234\nData Collected with test maker\n2020-01-02\n"
@@ -69,16 +70,16 @@ def write_dt1(stem, n_traces=6, n_points=50, window_ns=100.0, step=0.25, units="
         "NUMBER OF STACKS   = 4\n"
     )
     stem.with_suffix(".HD").write_text(hd)
-    vals = expected_values(n_traces, n_points, 1, 16)[0]
+    vals = expected_values(n_traces, n_points, 1, bits)[0]
     with open(stem.with_suffix(".DT1"), "wb") as f:
         for i in range(n_traces):
             h = np.zeros(32, dtype="<f4")
-            h[0], h[1], h[2], h[5], h[6], h[7] = i + 1, i * step, n_points, 2, window_ns, 4
+            h[0], h[1], h[2], h[5], h[6], h[7] = i + 1, i * step, n_points, bits // 8, window_ns, 4
             if bad_trace == i:
                 h[2] = n_points + 1
             h[23] = 1000.0 + 0.5 * i
             f.write(h.tobytes())
-            f.write(vals[i].astype("<i2").tobytes())
+            f.write(vals[i].astype("<i2" if bits == 16 else "<i4").tobytes())
     return stem.with_suffix(".DT1")
 
 
@@ -95,8 +96,10 @@ def write_rd3(stem, n_traces=5, n_samples=40, fs_mhz=2000.0, window_ns=None, las
     return stem.with_suffix(".rd3")
 
 
-def write_gprmax3_out(path, n_traces=4, iterations=30, dt=1e-11, rxsteps=(2, 0, 0), dl=(0.002, 0.002, 0.002)):
-    """A merged gprMax 3 style .out file (no trace_metadata): positions follow the step attributes."""
+def write_gprmax3_out(path, n_traces=4, iterations=30, dt=1e-11, rxsteps=(2, 0, 0), dl=(0.002, 0.002, 0.002),
+                      srcsteps=None):
+    """A merged gprMax 3 style .out file (no trace_metadata): positions follow the step attributes (``srcsteps``
+    defaults to ``rxsteps``)."""
     import h5py
 
     with h5py.File(path, "w") as f:
@@ -108,7 +111,7 @@ def write_gprmax3_out(path, n_traces=4, iterations=30, dt=1e-11, rxsteps=(2, 0, 
         f.attrs["nx_ny_nz"] = (100, 80, 1)
         f.attrs["nrx"] = 1
         f.attrs["nsrc"] = 1
-        f.attrs["srcsteps"] = rxsteps
+        f.attrs["srcsteps"] = rxsteps if srcsteps is None else srcsteps
         f.attrs["rxsteps"] = rxsteps
         f.create_group("srcs/src1").attrs.update({"Position": (0.02, 0.1, 0.0), "Type": "HertzianDipole"})
         rx = f.create_group("rxs/rx1")

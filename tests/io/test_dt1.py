@@ -67,6 +67,15 @@ def test_synthetic_dt1_exact(tmp_path):
     assert s[0].timestamps_s[1] - s[0].timestamps_s[0] == pytest.approx(0.5)
 
 
+def test_32_bit_samples_read_exactly(tmp_path):
+    """Trace headers saying 4 bytes per point: 32-bit samples, values beyond the 16-bit range kept exactly."""
+    p = write_dt1(tmp_path / "WIDE", n_traces=5, n_points=40, bits=32)
+    s = gpr3d.read(p)
+    want = expected_values(5, 40, 1, 32)[0]
+    assert np.abs(want).max() > 2**15  # no 16-bit reading could give these
+    np.testing.assert_array_equal(s.data, want.astype(np.float32))
+
+
 def test_header_claims_more_traces_warns(tmp_path):
     p = write_dt1(tmp_path / "CUT", n_traces=4, hd_traces=9)
     with pytest.warns(TruncatedRecordingWarning, match="HD header says 9 traces, file holds 4"):

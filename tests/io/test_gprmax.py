@@ -89,6 +89,19 @@ def test_gprmax3_out_positions_from_steps(tmp_path):
     assert s.offset_m == pytest.approx(0.04)
 
 
+def test_source_and_receiver_step_on_their_own(tmp_path):
+    """A fixed source and a receiver stepping 3 cells (6 mm) a trace: each trace's midpoint and the median
+    offset, by hand (the source's own steps, not the receiver's, move the source)."""
+    p = write_gprmax3_out(tmp_path / "wa.out", n_traces=4, iterations=30, rxsteps=(3, 0, 0), srcsteps=(0, 0, 0))
+    s = gpr3d.read(p)
+    tx = 0.02
+    rx = 0.06 + 0.006 * np.arange(4)
+    np.testing.assert_allclose(s.positions_xyz[:, 0], (tx + rx) / 2)
+    np.testing.assert_allclose(s.positions_xyz[:, 1], 0.0, atol=1e-12)  # gprMax z = 0 -> world y = 0
+    np.testing.assert_allclose(s.positions_xyz[:, 2], 0.1)  # gprMax y (up) -> world z
+    assert s.offset_m == pytest.approx(np.median(rx - tx))
+
+
 def test_missing_component_and_nan(tmp_path):
     import h5py
 

@@ -19,6 +19,10 @@ def test_dewow_equals_explicit_running_mean():
     # interior: x - mean of the 21 samples around each sample
     ref = x - np.stack([np.convolve(r.astype(float), np.ones(21) / 21, mode="same") for r in x])
     np.testing.assert_allclose(got[:, 10:-10], ref[:, 10:-10], atol=1e-5)
+    # the ends: the window runs over the edge sample repeated (not zeros, not a shorter window)
+    padded = np.pad(x.astype(float), ((0, 0), (10, 10)), mode="edge")
+    ref_all = x - np.stack([np.convolve(r, np.ones(21) / 21, mode="valid") for r in padded])
+    np.testing.assert_allclose(got, ref_all, atol=1e-5)
 
 
 def test_dewow_removes_a_slow_trend_and_keeps_a_wavelet():
@@ -38,6 +42,10 @@ def test_background_mean_median_and_window():
     np.testing.assert_allclose(remove_background(x, method="median"), x - np.median(x, axis=0), atol=1e-6)
     w = remove_background(x, window_traces=5)
     np.testing.assert_allclose(w[10], x[10] - x[8:13].mean(axis=0), atol=1e-5)
+    # the windowed median: over 5 neighbouring traces, sample by sample (not along time)
+    wm = remove_background(x, method="median", window_traces=5)
+    np.testing.assert_allclose(wm[10], x[10] - np.median(x[8:13], axis=0), atol=1e-6)
+    np.testing.assert_allclose(wm[0], x[0] - np.median(x[[0, 0, 0, 1, 2]], axis=0), atol=1e-6)  # edge repeated
     with pytest.raises(ValueError, match="unknown background method"):
         remove_background(x, method="mode")
 
@@ -113,3 +121,22 @@ def test_resample_to_constant_spacing_is_exact_for_linear_data():
     np.testing.assert_allclose(out[:, 0], s_new, atol=1e-6)
     with pytest.raises(ValueError, match="shorter than one spacing"):
         resample_traces(data, pos, 1.0)
+
+
+@pytest.mark.parametrize("f_hz, dt_s, corners", [
+    (400e6, 0.09375e-9, (160e6, 800e6)),  # 2 f below 0.9 Nyquist
+    (3e9, 0.1e-9, (1.2e9, 4.5e9)),  # 2 f above it: the upper corner is 0.45 / dt
+])
+def test_bandpass_default_corners(f_hz, dt_s, corners):
+    """Without corners, the band-pass step runs 0.4 f to min(2 f, 0.9 Nyquist): the recorded corners and the data
+    against scipy's Butterworth with those corners."""
+    from scipy.signal import butter, sosfiltfilt
+
+    from gpr3d import Survey
+
+    rng = np.random.default_rng(3)
+    s = Survey(data=rng.standard_normal((4, 512)).astype(np.float32), dt_s=dt_s, frequency_hz=f_hz)
+    out = s.bandpass()
+    assert (out.history[-1]["result"]["fmin_hz"], out.history[-1]["result"]["fmax_hz"]) == pytest.approx(corners)
+    sos = butter(4, list(corners), btype="bandpass", fs=1 / dt_s, output="sos")
+    np.testing.assert_allclose(out.data, sosfiltfilt(sos, s.data.astype(float), axis=1), atol=1e-5)

@@ -147,7 +147,7 @@ class BackProjection:
         if self.tan_ap > 0:
             hm = np.hypot(X - 0.5 * (self.tx[j, 0] + self.rx[j, 0]), Y - 0.5 * (self.tx[j, 1] + self.rx[j, 1]))
             # the kernels start at the first depth sample at or below hm / tan
-            kmin = np.ceil((hm / self.tan_ap - self.depth[0]) / (self.depth[1] - self.depth[0]) - 1e-12)
+            kmin = np.ceil((hm / self.tan_ap - self.depth[0]) / self.grid.dd - 1e-12)
             w = np.where(np.arange(len(self.depth))[None, None, :] >= kmin, w, 0.0)
         u = np.clip(u, 0.0, self.n_samples)  # past the end: the zero padding
         i0 = np.floor(u).astype(np.int64)

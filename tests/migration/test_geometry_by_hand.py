@@ -1,0 +1,66 @@
+"""Physical checks of the migration's shared inputs, each against numbers worked out by hand (issue 13, item 2):
+where every engine takes the same antenna positions, slowness and aperture, only an outside reference can tell a
+wrong one."""
+
+import math
+
+import numpy as np
+import pytest
+
+from gpr3d.core.grid import Grid3D
+from gpr3d.migration.operator import BackProjection, antenna_positions
+
+C = 299792458.0
+
+
+@pytest.mark.parametrize("yaw_deg, tx_xy, rx_xy", [
+    (0.0, (0.8, 2.0), (1.2, 2.0)),  # heading +x: tx behind, rx ahead, 0.2 m each way
+    (90.0, (1.0, 1.8), (1.0, 2.2)),  # heading +y
+    (180.0, (1.2, 2.0), (0.8, 2.0)),
+    (30.0, (1.0 - 0.2 * math.cos(math.radians(30)), 2.0 - 0.2 * math.sin(math.radians(30))),
+     (1.0 + 0.2 * math.cos(math.radians(30)), 2.0 + 0.2 * math.sin(math.radians(30)))),
+])
+def test_tx_and_rx_lie_along_the_heading(yaw_deg, tx_xy, rx_xy):
+    p = np.array([[1.0, 2.0, 0.05]])
+    for kw in ({"headings_rad": [math.radians(yaw_deg)]},
+               {"orientations_quat_wxyz": [[math.cos(math.radians(yaw_deg) / 2), 0, 0, math.sin(math.radians(yaw_deg) / 2)]]}):
+        tx, rx = antenna_positions(p, offset_m=0.4, **kw)
+        np.testing.assert_allclose(tx[0], [*tx_xy, 0.05], atol=1e-12)
+        np.testing.assert_allclose(rx[0], [*rx_xy, 0.05], atol=1e-12)
+
+
+def _spike_time(op, ix, iy, k):
+    """Where the forward operator puts a unit voxel: the time (s after the first sample) of the centroid of the
+    two samples it spreads the voxel over."""
+    m = np.zeros(op.grid.shape, np.float32)
+    m[ix, iy, k] = 1.0
+    d = op.forward(m)[0].astype(float)
+    idx = np.nonzero(d)[0]
+    assert idx.size and idx.max() - idx.min() <= 1, idx
+    return float(np.sum(idx * d[idx]) / np.sum(d[idx])) * op.dt
+
+
+@pytest.mark.parametrize("engine", ["numba", "numpy"])
+def test_travel_time_from_eps_r_offset_and_time_zero(engine):
+    """A voxel 0.4 m below the midpoint of a 0.2 m tx-rx pair, eps_r 9 (v = c/3), time zero 2 ns: the two-way
+    time is 2 ns + 2 sqrt(0.4^2 + 0.1^2) / (c/3)."""
+    g = Grid3D(0.0, 0.0, 0.4, 0.1, 0.1, 0.1, 1, 1, 1)
+    tx, rx = np.array([[-0.1, 0.0, 0.0]]), np.array([[0.1, 0.0, 0.0]])
+    op = BackProjection(g, tx, rx, dt_s=0.01e-9, n_samples=2000, t0_s=2e-9, eps_r=9.0, engine=engine)
+    want = 2e-9 + 2 * math.hypot(0.4, 0.1) / (C / 3)
+    assert _spike_time(op, 0, 0, 0) == pytest.approx(want, abs=1e-13)
+
+
+@pytest.mark.parametrize("engine", ["numba", "numpy"])
+def test_aperture_is_a_half_angle_in_degrees_about_the_midpoint(engine):
+    """Aperture 30 deg: a voxel 0.5 m deep is seen from a midpoint up to 0.5 tan 30 = 0.2887 m away, not beyond;
+    the tx-rx pair lies across the line to the voxel, so it is the midpoint that counts."""
+    g = Grid3D(0.0, 0.0, 0.5, 0.1, 0.1, 0.1, 1, 1, 1)
+    reach = 0.5 * math.tan(math.radians(30))
+    for dist, seen in ((0.97 * reach, True), (1.03 * reach, False)):
+        mid = np.array([dist, 0.0, 0.0])
+        tx, rx = mid - [0, 0.15, 0], mid + [0, 0.15, 0]
+        op = BackProjection(g, tx[None], rx[None], dt_s=0.02e-9, n_samples=600, eps_r=4.0, aperture_deg=30.0,
+                            engine=engine)
+        m = np.ones(g.shape, np.float32)
+        assert bool(np.any(op.forward(m))) == seen, dist
