@@ -64,3 +64,45 @@ def test_aperture_is_a_half_angle_in_degrees_about_the_midpoint(engine):
                             engine=engine)
         m = np.ones(g.shape, np.float32)
         assert bool(np.any(op.forward(m))) == seen, dist
+
+
+def test_sub_cell_depth_is_the_parabola_vertex():
+    """Columns whose envelope is a parabola in depth: the ridge depth is its vertex, between cells, exactly; a
+    column peaking on the grid's first cell stays there (no neighbour above to fit)."""
+    from gpr3d.migration.targets import ridge_map
+
+    g = Grid3D(0.0, 0.0, 0.1, 0.1, 0.1, 0.02, 3, 1, 30)
+    vertex = np.array([0.437, 0.3013, 0.1])
+    env = np.clip(1.0 - 40.0 * (g.depth[None, :] - vertex[:, None]) ** 2, 0, None)[:, None, :]
+    val, dep = ridge_map(env.astype(np.float64), g)
+    assert dep[0, 0] == pytest.approx(0.437, abs=1e-9) and dep[1, 0] == pytest.approx(0.3013, abs=1e-9)
+    assert dep[2, 0] == pytest.approx(0.1, abs=1e-12)
+    assert val[0, 0] == pytest.approx(1.0 - 40.0 * (0.44 - 0.437) ** 2)  # the sampled maximum, not the vertex
+
+
+def test_boxes_follow_the_samples_that_time_zero_cuts(monkeypatch):
+    """A symmetric direct wave peaking at sample 40 (4 ns): reconstruct cuts the 4 ns before it, so a box given in
+    the recording's times (10 to 14 ns) reaches the mask as 6 to 10 ns. With a lopsided wave time zero falls
+    between samples, and the boxes move by that estimate, not by the whole samples cut."""
+    from gpr3d import Survey
+    from gpr3d.migration import reconstruct as R
+
+    n, ns, dt = 30, 200, 0.1e-9
+    pos = np.c_[np.linspace(0, 0.6, n), np.linspace(0, 0.4, n) ** 2, np.zeros(n)]  # a curve: a 3D survey
+    seen = {}
+    real = R.box_mask
+
+    def spy(n_traces, n_samples, dt_s, boxes, **kw):
+        seen["boxes"], seen["n_samples"] = [list(b) for b in boxes], n_samples
+        return real(n_traces, n_samples, dt_s, boxes, **kw)
+
+    monkeypatch.setattr(R, "box_mask", spy)
+    for wave, t0 in (((0.5, 1.0, 0.5), 4e-9), ((0.0, 1.0, -0.5), None)):
+        data = np.zeros((n, ns), np.float32)
+        data[:, 39:42] = wave
+        s = Survey(data=data, dt_s=dt, positions_xyz=pos, frequency_hz=1e9)
+        if t0 is None:  # what time zero itself estimates for this wave
+            t0 = s.time_zero(method="peak", search_s=10e-9).history[-1]["result"]["t0_s"]
+            assert abs(t0 / dt - round(t0 / dt)) > 0.05  # between samples
+        R.reconstruct(s, R.ReconstructConfig(eps_r=4.0, spacing_m=0.05, max_depth_m=0.3), boxes=[[5, 10e-9, 20, 14e-9]])
+        assert seen["boxes"][0] == pytest.approx([5, 10e-9 - t0, 20, 14e-9 - t0], abs=1e-15)

@@ -216,14 +216,19 @@ def check_site_settings(cfg: ReconstructConfig) -> None:
 
 
 def _prepare(survey, cfg):
+    """Time zero and background removal as ``cfg`` says; returns the survey and how much recording time time zero
+    cut from the front (s): a time ``t`` after the recording's first sample is ``t - cut`` after the new first."""
     if survey.positions_xyz is None:
         raise InvalidDataError("the survey has no antenna positions: give --poses (a TUM file, one pose per trace)")
     s = survey
+    cut_s = 0.0
     if cfg.time_zero != "none":
         s = s.time_zero(method=cfg.time_zero, search_s=min(s.time_window_s / 4, 10e-9))
+        # the estimate, to a fraction of a sample: the traces were shifted by it, not by whole samples
+        cut_s = float(s.history[-1]["result"]["t0_s"]) - s.t0_s
     if cfg.remove_background:
         s = s.remove_background()
-    return s
+    return s, cut_s
 
 
 def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log=None) -> "Reconstruction":
@@ -241,14 +246,14 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
             raise InvalidDataError("no boxes: nothing to migrate inside them (give boxes=None for the whole record)")
         boxes = check_boxes(boxes, survey.n_traces, survey.n_samples * survey.dt_s)
     t = time.perf_counter()
-    s = _prepare(survey, cfg)
+    s, cut_s = _prepare(survey, cfg)
     t_prep = time.perf_counter() - t
     frame = None
     positions = s.positions_xyz
     tx, rx = antenna_positions(s.positions_xyz, s.orientations_quat_wxyz, s.offset_m)
     width = cross_line_extent(s.positions_xyz)
     if cfg.method == "pseudo3d":
-        return _reconstruct_pseudo3d(survey, s, cfg, eps, boxes, t_prep)
+        return _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s)
     if width < max(2 * cfg.spacing_m, 0.05):
         # one straight profile: a 3D image would mirror every target to both sides of the line; image the
         # vertical plane under the line instead (the same back projection on a grid one cell wide)
@@ -292,8 +297,7 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
 
     if boxes:
         # boxes refer to the recording's samples; time zero cut some: shift them
-        cut = survey.n_samples - s.n_samples
-        shifted = [[b[0], b[1] - cut * s.dt_s, b[2], b[3] - cut * s.dt_s] for b in boxes]
+        shifted = [[b[0], b[1] - cut_s, b[2], b[3] - cut_s] for b in boxes]
         mask = box_mask(s.n_traces, s.n_samples, s.dt_s, shifted, taper_traces=cfg.taper_traces)
         out = migrate(s.data * mask, want_fold)
         noise_map = image_envelope(migrate(s.data * (1 - mask), False, "noise"))
@@ -329,7 +333,7 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
                           updates_per_s=s.n_traces * grid.size / t_mig if t_mig > 0 else None, frame=frame)
 
 
-def _reconstruct_pseudo3d(survey, s, cfg, eps, boxes, t_prep) -> "Reconstruction":
+def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s) -> "Reconstruction":
     """``reconstruct`` with ``method="pseudo3d"``: the lines of a grid survey migrated one by one (2D Kirchhoff),
     their envelopes interpolated between lines; the same target extraction."""
     from gpr3d.migration.traditional import pseudo3d, survey_lines
@@ -354,8 +358,7 @@ def _reconstruct_pseudo3d(survey, s, cfg, eps, boxes, t_prep) -> "Reconstruction
     noise_map = None
     data = s.data
     if boxes:
-        cut = survey.n_samples - s.n_samples
-        shifted = [[b[0], b[1] - cut * s.dt_s, b[2], b[3] - cut * s.dt_s] for b in boxes]
+        shifted = [[b[0], b[1] - cut_s, b[2], b[3] - cut_s] for b in boxes]
         mask = box_mask(s.n_traces, s.n_samples, s.dt_s, shifted, taper_traces=cfg.taper_traces)
         noise_map, _ = pseudo3d(s.replace(data=s.data * (1 - mask)), grid, eps_r=eps, aperture_deg=aperture,
                                 engine=cfg.engine)
@@ -363,7 +366,7 @@ def _reconstruct_pseudo3d(survey, s, cfg, eps, boxes, t_prep) -> "Reconstruction
     env, _ = pseudo3d(s.replace(data=data), grid, eps_r=eps, aperture_deg=aperture, engine=cfg.engine)
     t_mig = time.perf_counter() - t
     tol = 2.0 * max(grid.dx, grid.dy)
-    band = max(2 * tol, 0.5 * v / survey.frequency_hz) if survey.frequency_hz else None
+    band = max(2 * tol, 0.5 * v / s.frequency_hz) if s.frequency_hz else None
     targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band,
                               min_depth_m=cfg.min_target_depth_m)
     # the envelopes of the line images are all there is (no signed 3D image): the image is the envelope
