@@ -25,6 +25,21 @@ def test_dewow_equals_explicit_running_mean():
     np.testing.assert_allclose(got, ref_all, atol=1e-5)
 
 
+def test_dewow_window_rounding_and_output_type():
+    """The window in samples: rounded, made odd by adding one (an odd count stays), at least two samples before
+    that; float32 out whatever comes in."""
+    rng = np.random.default_rng(2)
+    x = rng.standard_normal((2, 300))
+    for window, n in ((2.1e-9, 21), (2.0e-9, 21), (2 * DT, 3)):  # 21 stays 21; 20 -> 21; 2 -> 3
+        padded = np.pad(x, ((0, 0), (n // 2, n // 2)), mode="edge")
+        ref = x - np.stack([np.convolve(r, np.ones(n) / n, mode="valid") for r in padded])
+        got = dewow(x, DT, window)
+        assert got.dtype == np.float32
+        np.testing.assert_allclose(got, ref, atol=1e-5)
+    with pytest.raises(ValueError, match="shorter than two samples"):
+        dewow(x, DT, 1.4 * DT)
+
+
 def test_dewow_removes_a_slow_trend_and_keeps_a_wavelet():
     t = np.arange(600) * DT
     wow = 5.0 * np.exp(-t / 30e-9)
@@ -54,6 +69,30 @@ def test_remove_dc():
     x = np.arange(20, dtype=np.float32).reshape(2, 10) + np.array([[5.0], [-3.0]], dtype=np.float32)
     np.testing.assert_allclose(remove_dc(x).mean(axis=1), 0, atol=1e-6)
     np.testing.assert_allclose(remove_dc(x, sample_range=(0, 2))[:, 0], [-0.5, -0.5])
+    np.testing.assert_allclose(remove_dc(x, sample_range=(3, 4)), x - x[:, 3:4])  # one sample is enough
+    assert remove_dc(x.astype(np.float64)).dtype == np.float32
+    with pytest.raises(ValueError, match=r"sample_range \(5, 5\) selects no samples"):
+        remove_dc(x, sample_range=(5, 5))
+
+
+def test_background_window_edges_and_limits():
+    """A window of all traces (or more) is the whole-survey background; 2 traces is the smallest (the trace and
+    the one before it, by scipy's convention for even windows); the ends repeat the edge trace."""
+    rng = np.random.default_rng(8)
+    x = rng.standard_normal((30, 50)).astype(np.float32)
+    whole = x - x.mean(axis=0)
+    for w in (30, 40):  # 40 traces: more than there are (fewer than the 50 samples)
+        np.testing.assert_allclose(remove_background(x, window_traces=w), whole, atol=1e-5)
+    two = remove_background(x, window_traces=2)
+    np.testing.assert_allclose(two[5], x[5] - (x[4] + x[5]) / 2, atol=1e-6)
+    five = remove_background(x, window_traces=5)
+    np.testing.assert_allclose(five[0], x[0] - x[[0, 0, 0, 1, 2]].mean(axis=0), atol=1e-6)  # nearest, not reflect
+    np.testing.assert_allclose(five[29], x[29] - x[[27, 28, 29, 29, 29]].mean(axis=0), atol=1e-6)
+    for method in ("mean", "median"):
+        assert remove_background(x.astype(np.float64), method=method).dtype == np.float32
+        assert remove_background(x, method=method, window_traces=3).dtype == np.float32
+    with pytest.raises(ValueError, match="^window_traces must be >= 2, got 1$"):
+        remove_background(x, window_traces=1)
 
 
 def test_gains_closed_form():
@@ -109,6 +148,7 @@ def test_envelope_of_an_amplitude_modulated_carrier():
     a = 1.0 + 0.5 * np.sin(2 * np.pi * 5e6 * t)
     x = (a * np.cos(2 * np.pi * 1e9 * t))[None, :]
     np.testing.assert_allclose(envelope(x)[0, 200:-200], a[200:-200], atol=2e-3)
+    assert envelope(x).dtype == np.float32
 
 
 def test_resample_to_constant_spacing_is_exact_for_linear_data():
@@ -140,3 +180,60 @@ def test_bandpass_default_corners(f_hz, dt_s, corners):
     assert (out.history[-1]["result"]["fmin_hz"], out.history[-1]["result"]["fmax_hz"]) == pytest.approx(corners)
     sos = butter(4, list(corners), btype="bandpass", fs=1 / dt_s, output="sos")
     np.testing.assert_allclose(out.data, sosfiltfilt(sos, s.data.astype(float), axis=1), atol=1e-5)
+
+
+def test_butterworth_kinds_against_scipy():
+    """Band-pass (default order 4), high-pass (fmin only) and low-pass (fmax only): scipy's zero-phase Butterworth
+    with the same corners; float32 out."""
+    from scipy.signal import butter, sosfiltfilt
+
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal((3, 400)).astype(np.float32)
+    fs = 1 / DT
+    for kw, args in (({"fmin_hz": 2e8, "fmax_hz": 1.5e9}, ([2e8, 1.5e9], "bandpass")),
+                     ({"fmin_hz": 3e8}, (3e8, "highpass")), ({"fmax_hz": 1e9}, (1e9, "lowpass"))):
+        got = bandpass(x, DT, **kw)
+        assert got.dtype == np.float32
+        want = sosfiltfilt(butter(4, args[0], btype=args[1], fs=fs, output="sos"), x.astype(float), axis=1)
+        np.testing.assert_allclose(got, want, atol=2e-5)
+    got6 = bandpass(x, DT, fmax_hz=1e9, order=6)
+    np.testing.assert_allclose(got6, sosfiltfilt(butter(6, 1e9, btype="lowpass", fs=fs, output="sos"), x.astype(float),
+                                                 axis=1), atol=2e-5)
+
+
+@pytest.mark.parametrize("kw, words", [
+    ({}, "^give fmin_hz, fmax_hz or both$"),
+    ({"fmin_hz": 0.0}, "fmin_hz = 0 Hz must lie between the lowest frequency"),
+    ({"fmin_hz": 5e9}, "fmin_hz = 5e\\+09 Hz must lie between .* and the Nyquist frequency 5e\\+09"),
+    ({"fmax_hz": 5e9}, "fmax_hz = 5e\\+09 Hz"),
+    ({"fmin_hz": 1e9, "fmax_hz": 1e9}, "fmin_hz \\(1e\\+09\\) must be below fmax_hz"),
+])
+def test_bandpass_refuses_corners_it_cannot_use(kw, words):
+    with pytest.raises(ValueError, match=words):
+        bandpass(np.zeros((2, 400), np.float32), DT, **kw)
+
+
+def test_corners_below_what_the_trace_holds_are_refused():
+    """400 samples of 0.1 ns hold nothing below 1 / 40 ns = 25 MHz: a corner there (e.g. 0.5: MHz given as Hz)
+    is refused in one line, 25 MHz itself is taken."""
+    from scipy.signal import butter, sosfiltfilt
+
+    x = np.random.default_rng(6).standard_normal((2, 400))
+    with pytest.raises(ValueError, match=r"fmin_hz = 0.5 Hz must lie between the lowest frequency the 400-sample "
+                                         r"traces hold \(2.5e\+07 Hz\)"):
+        bandpass(x, DT, fmin_hz=0.5)
+    with pytest.raises(ValueError, match="fmax_hz = 2.49e\+07 Hz"):
+        bandpass(x, DT, fmax_hz=2.49e7)
+    sos = butter(4, 2.5e7, btype="highpass", fs=1 / DT, output="sos")
+    np.testing.assert_allclose(bandpass(x, DT, fmin_hz=2.5e7), sosfiltfilt(sos, x, axis=1), atol=2e-5)
+
+
+def test_bandpass_needs_traces_longer_than_its_padding():
+    """scipy pads 3 (2 sections + 1) samples at each end: an order-4 band-pass (4 sections) needs more than 27."""
+    from scipy.signal import butter, sosfiltfilt
+
+    with pytest.raises(ValueError, match="traces of 27 samples are too short for an order-4 filter"):
+        bandpass(np.ones((2, 27), np.float32), DT, fmin_hz=4e8, fmax_hz=1.5e9)
+    x = np.random.default_rng(5).standard_normal((2, 28))
+    sos = butter(4, [4e8, 1.5e9], btype="bandpass", fs=1 / DT, output="sos")
+    np.testing.assert_allclose(bandpass(x, DT, fmin_hz=4e8, fmax_hz=1.5e9), sosfiltfilt(sos, x, axis=1), atol=2e-5)

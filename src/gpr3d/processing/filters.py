@@ -23,9 +23,14 @@ def bandpass(
     """
     fs = 1.0 / dt_s
     nyq = fs / 2
+    x = np.asarray(data, dtype=np.float64)
+    # the lowest frequency a trace holds: a corner below it acts on nothing the record can show, and a Butterworth
+    # filter that far below the sampling rate is numerically meaningless (a wrong unit, e.g. MHz given as Hz)
+    lowest = 1.0 / (x.shape[1] * dt_s)
     for name, f in (("fmin_hz", fmin_hz), ("fmax_hz", fmax_hz)):
-        if f is not None and not 0 < f < nyq:
-            raise ValueError(f"{name} = {f:g} Hz must lie between 0 and the Nyquist frequency {nyq:g} Hz")
+        if f is not None and not lowest <= f < nyq:
+            raise ValueError(f"{name} = {f:g} Hz must lie between the lowest frequency the {x.shape[1]}-sample "
+                             f"traces hold ({lowest:g} Hz) and the Nyquist frequency {nyq:g} Hz")
     if fmin_hz is None and fmax_hz is None:
         raise ValueError("give fmin_hz, fmax_hz or both")
     if fmin_hz is not None and fmax_hz is not None:
@@ -36,7 +41,6 @@ def bandpass(
         sos = butter(order, fmin_hz, btype="highpass", fs=fs, output="sos")
     else:
         sos = butter(order, fmax_hz, btype="lowpass", fs=fs, output="sos")
-    x = np.asarray(data, dtype=np.float64)
     if x.shape[1] <= 3 * (2 * sos.shape[0] + 1):
         raise ValueError(f"traces of {x.shape[1]} samples are too short for an order-{order} filter")
     return sosfiltfilt(sos, x, axis=1).astype(np.float32)

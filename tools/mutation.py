@@ -1,0 +1,213 @@
+"""Mutation testing of gpr3d's core with mutmut (issue 13): one module at a time, with the tests of its package.
+
+For each module named (default: all of ``MODULES``) this copies ``src/`` and ``tests/`` into
+``build/mutation/<module>/``, writes a ``pyproject.toml`` there that tells mutmut to mutate that one file and
+run the tests of its package, runs ``mutmut run``, and reads back what each mutant did. Survivors listed in
+``tools/mutation_equivalents.toml`` (the removed and the added line, and why the two behave the same) count as
+equivalent; the score is killed (or timed out) over all mutants that are not equivalent. The table and every
+surviving mutant's diff go to ``benchmarks/results/mutation.md`` (``--out``); the exit code is 1 when a module
+scores below ``--fail-under``.
+
+    python tools/mutation.py processing.dewow io.dt1        # some modules
+    python tools/mutation.py --changed main                 # the modules a change touches (the CI guard)
+    python tools/mutation.py                                # all of MODULES (long: see the report's times)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+MUTMUT = [sys.executable, "-m", "mutmut"]
+
+#: module (under gpr3d) -> the tests that judge it (default: its package's test folder)
+MODULES = {
+    "io.dt1": None, "io.dzt": None, "io.rd3": None, "io.gprmax": None, "io.segy": None, "io.hdf5": None,
+    "io.trajectory": None, "io.volume": None, "io.detections": None, "io.coco": None, "io.atomic": None,
+    "io._common": None, "io.registry": None,
+    "processing.dewow": None, "processing.background": None, "processing.gain": None, "processing.filters": None,
+    "processing.envelope": None, "processing.resample": None, "processing.timezero": None,
+    "processing.steps": None, "processing.cscan": None, "processing.picking": None,
+    "migration.operator": None, "migration.masking": None, "migration.targets": None, "migration.metrics": None,
+    "migration.profile": None, "migration.traditional": None, "migration.reconstruct": None,
+    "migration.velocity": None, "migration.sitetiles": None,
+    "simulation.forward": ["tests/simulation"], "simulation.labels": ["tests/simulation"],
+}
+
+
+def tests_for(module: str) -> list[str]:
+    given = MODULES.get(module)
+    if given:
+        return given
+    return [f"tests/{module.split('.')[0]}"]
+
+
+def source_of(module: str) -> Path:
+    return Path("src/gpr3d") / (module.replace(".", "/") + ".py")
+
+
+def load_equivalents(path: Path) -> dict:
+    """``{module: [(removed line, added line, reason), ...]}`` (lines compared without surrounding spaces)."""
+    if not path.exists():
+        return {}
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    out = {}
+
+    def walk(node, names):  # [[processing.dewow.mutant]] nests as {"processing": {"dewow": {"mutant": [...]}}}
+        for key, val in node.items():
+            if key == "mutant":
+                out[".".join(names)] = [(r["removed"].strip(), r["added"].strip(), r["reason"]) for r in val]
+            elif isinstance(val, dict):
+                walk(val, [*names, key])
+
+    walk(data, [])
+    return out
+
+
+def _diff(workdir: Path, name: str) -> tuple[str, str]:
+    """The removed and the added line of mutant ``name`` (several lines joined by ' / ')."""
+    r = subprocess.run([*MUTMUT, "show", name], cwd=workdir, capture_output=True, text=True)
+    minus = [ln[1:].strip() for ln in r.stdout.splitlines() if ln.startswith("-") and not ln.startswith("---")]
+    plus = [ln[1:].strip() for ln in r.stdout.splitlines() if ln.startswith("+") and not ln.startswith("+++")]
+    return " / ".join(minus), " / ".join(plus)
+
+
+def run_module(module: str, *, max_children: int, equivalents: list, keep: bool) -> dict:
+    src = ROOT / source_of(module)
+    if not src.exists():
+        raise SystemExit(f"{module}: no such module ({src})")
+    work = ROOT / "build" / "mutation" / module
+    if work.exists():
+        shutil.rmtree(work)
+    work.mkdir(parents=True)
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    shutil.copytree(ROOT / "src", work / "src", ignore=ignore)
+    shutil.copytree(ROOT / "tests", work / "tests", ignore=ignore)
+    tests = tests_for(module)
+    cfg = (
+        "[tool.mutmut]\n"
+        'source_paths = ["src"]\n'
+        f'only_mutate = ["{source_of(module).as_posix()}"]\n'
+        f"pytest_add_cli_args_test_selection = {json.dumps(tests)}\n"
+        'pytest_add_cli_args = ["-p", "no:cacheprovider", "-q", "-x"]\n'
+        "\n[tool.pytest.ini_options]\n"
+        'testpaths = ["tests"]\n'
+        'filterwarnings = ["ignore::DeprecationWarning"]\n'
+    )
+    (work / "pyproject.toml").write_text(cfg, encoding="utf-8")
+    # the copies' tests must still find the real recordings beside the repository
+    env = dict(os.environ, PYTHONPATH=str(work), NUMBA_NUM_THREADS="1", GPR3D_FUZZ_EXAMPLES="10",
+               GPR3D_REAL_DATA=os.environ.get("GPR3D_REAL_DATA", str(ROOT.parent / "shared" / "data" / "real")))
+    t = time.perf_counter()
+    r = subprocess.run([*MUTMUT, "run", "--max-children", str(max_children)], cwd=work, env=env,
+                       capture_output=True, text=True)
+    wall = time.perf_counter() - t
+    subprocess.run([*MUTMUT, "export-cicd-stats"], cwd=work, env=env, capture_output=True, text=True)
+    stats_file = work / "mutants" / "mutmut-cicd-stats.json"
+    if r.returncode != 0 or not stats_file.exists():
+        tail = (r.stdout + r.stderr)[-1500:]
+        return {"module": module, "error": tail.strip().splitlines()[-1] if tail.strip() else f"exit {r.returncode}",
+                "wall_s": wall}
+    stats = json.loads(stats_file.read_text())
+    res = subprocess.run([*MUTMUT, "results"], cwd=work, env=env, capture_output=True, text=True).stdout
+    alive = [m.group(1) for m in re.finditer(r"^\s*(\S+): (survived|no tests)", res, flags=re.M)]
+    survivors, equivalent = [], []
+    for name in alive:
+        removed, added = _diff(work, name)
+        why = next((w for a, b, w in equivalents if a == removed and b == added), None)
+        (equivalent if why else survivors).append({"name": name, "removed": removed, "added": added, "why": why})
+    total = stats["total"] - stats.get("skipped", 0)
+    killed = stats["killed"] + stats.get("timeout", 0) + stats.get("segfault", 0)
+    judged = total - len(equivalent)
+    if not keep:
+        shutil.rmtree(work, ignore_errors=True)
+    return {"module": module, "tests": tests, "total": total, "killed": killed, "survived": len(survivors),
+            "equivalent": len(equivalent), "suspicious": stats.get("suspicious", 0),
+            "score": killed / judged if judged else 1.0, "wall_s": wall, "survivors": survivors,
+            "equivalents": equivalent}
+
+
+def changed_modules(base: str) -> list[str]:
+    r = subprocess.run(["git", "diff", "--name-only", base, "--", "src/gpr3d"], cwd=ROOT, capture_output=True,
+                       text=True, check=True)
+    names = [p[len("src/gpr3d/"):-3].replace("/", ".") for p in r.stdout.split() if p.endswith(".py")]
+    return [n for n in names if n in MODULES]
+
+
+def write_report(rows: list[dict], path: Path, command: str) -> None:
+    cpu = platform.processor() or platform.machine()
+    try:
+        import numba
+
+        cpu = numba.config.CPU_NAME or __import__("llvmlite.binding", fromlist=["x"]).get_host_cpu_name()
+    except Exception:  # noqa: BLE001 - the CPU name is a label only
+        pass
+    lines = [f"Host CPU: {cpu}, {os.cpu_count()} cores; mutmut, one module at a time with its package's tests", "",
+             "| module | mutants | killed | survived | equivalent | score | time (s) |", "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if "error" in r:
+            lines.append(f"| {r['module']} | error: {r['error'][:80]} | | | | | {r['wall_s']:.0f} |")
+            continue
+        lines.append(f"| {r['module']} | {r['total']} | {r['killed']} | {r['survived']} | {r['equivalent']} | "
+                     f"{100 * r['score']:.1f} % | {r['wall_s']:.0f} |")
+    for r in rows:
+        if r.get("survivors"):
+            lines += ["", f"### {r['module']}: surviving mutants", ""]
+            lines += [f"- `{s['removed']}` -> `{s['added']}`" for s in r["survivors"]]
+        if r.get("equivalents"):
+            lines += ["", f"### {r['module']}: equivalent mutants (tools/mutation_equivalents.toml)", ""]
+            lines += [f"- `{s['removed']}` -> `{s['added']}`: {s['why']}" for s in r["equivalents"]]
+    lines += ["", f"command: {command}", ""]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".part")
+    tmp.write_text("\n".join(lines), encoding="utf-8")
+    tmp.replace(path)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("modules", nargs="*", help="modules under gpr3d (processing.dewow, io.dt1, ...)")
+    ap.add_argument("--changed", metavar="BASE", help="the modules that differ from git revision BASE")
+    ap.add_argument("--max-children", type=int, default=os.cpu_count() or 2)
+    ap.add_argument("--fail-under", type=float, default=85.0, help="score (%%) every module must reach")
+    ap.add_argument("--out", default=str(ROOT / "benchmarks/results/mutation.md"))
+    ap.add_argument("--equivalents", default=str(ROOT / "tools/mutation_equivalents.toml"))
+    ap.add_argument("--keep", action="store_true", help="keep build/mutation/<module>/ (to browse with mutmut)")
+    args = ap.parse_args(argv)
+    if args.max_children < 1:
+        ap.error(f"--max-children must be >= 1, got {args.max_children}")
+    mods = changed_modules(args.changed) if args.changed else (args.modules or list(MODULES))
+    unknown = [m for m in mods if not (ROOT / source_of(m)).exists()]
+    if unknown:
+        ap.error(f"no such module: {', '.join(unknown)}")
+    if not mods:
+        print("no core module changed")
+        return 0
+    eq = load_equivalents(Path(args.equivalents))
+    rows = []
+    for m in mods:
+        row = run_module(m, max_children=args.max_children, equivalents=eq.get(m, []), keep=args.keep)
+        rows.append(row)
+        msg = (f"error: {row['error']}" if "error" in row else
+               f"{row['total']} mutants, {row['killed']} killed, {row['survived']} survived, {row['equivalent']} "
+               f"equivalent: {100 * row['score']:.1f} %")
+        print(f"{m:28s} {msg} ({row['wall_s']:.0f} s)", flush=True)
+    write_report(rows, Path(args.out), "python tools/mutation.py " + " ".join(argv if argv is not None else sys.argv[1:]))
+    low = [r["module"] for r in rows if "error" in r or 100 * r["score"] < args.fail_under]
+    if low:
+        print(f"below {args.fail_under:g} %: {', '.join(low)}")
+    return 1 if low else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
