@@ -106,6 +106,47 @@ def test_gains_closed_form():
     assert gain_sec(x, DT, alpha_per_s=1e10, max_gain=50)[0].max() == pytest.approx(50)
 
 
+def test_gain_defaults_by_hand():
+    """The defaults, each against its closed form: the plain curve is flat; t-power is (t / 1 ns)^1 from t = 0;
+    SEC is (t / 1 ns) exp(alpha t) capped at 1e6; t_ref is passed through."""
+    from gpr3d.processing.gain import gain_curve_sec
+
+    t = np.arange(100) * DT
+    np.testing.assert_array_equal(gain_curve_sec(100, DT), np.ones(100))
+    np.testing.assert_allclose(gain_curve_sec(100, DT, power=1.0), np.maximum(t / 1e-9, 1.0), rtol=1e-12)
+    x = np.full((2, 100), 2.0)
+    out = gain_tpow(x, DT)
+    assert out.dtype == np.float32
+    np.testing.assert_allclose(out[1], 2.0 * np.maximum(t / 1e-9, 1.0), rtol=1e-6)
+    np.testing.assert_allclose(gain_tpow(x, DT, t_ref_s=2e-9)[0], 2.0 * np.maximum(t / 2e-9, 1.0), rtol=1e-6)
+    sec = gain_sec(x, DT, alpha_per_s=5e7)
+    assert sec.dtype == np.float32
+    np.testing.assert_allclose(sec[0], 2.0 * np.maximum(t / 1e-9, 1.0) * np.exp(5e7 * t), rtol=1e-6)
+    np.testing.assert_allclose(gain_sec(x, DT, alpha_per_s=0.0, t_ref_s=4e-9)[0], 2.0 * np.maximum(t / 4e-9, 1.0),
+                               rtol=1e-6)
+    big = gain_sec(np.ones((1, 100)), DT, alpha_per_s=3e9)[0]  # exp(3e9 t) passes 1e6 within the record
+    assert big.max() == 1e6 and np.sum(big == 1e6) > 10
+
+
+def test_agc_by_hand():
+    """AGC divides by the RMS over a centred window (edges repeat the end sample), never by less than eps times the
+    whole record's RMS; a window under one sample is one sample (sign of the data); silent data stay zero."""
+    x = np.array([[3.0, -4.0, 0.0, 1e-6, 5.0, 0.0, -2e-6, 12.0]])
+    out = gain_agc(x, DT, window_s=5 * DT)[0]
+    assert gain_agc(x, DT, window_s=5 * DT).dtype == np.float32
+    floor = 1e-3 * np.sqrt(np.mean(x * x))
+    padded = np.pad(x[0], 2, mode="edge")
+    rms = np.sqrt(np.convolve(padded ** 2, np.ones(5) / 5, mode="valid"))
+    np.testing.assert_allclose(out, x[0] / np.maximum(rms, floor), rtol=1e-6)
+    np.testing.assert_allclose(out[0], 3.0 / np.sqrt((9 + 9 + 9 + 16 + 0) / 5), rtol=1e-6)  # edge: 3 repeated
+    tiny = gain_agc(np.array([[1.0, 1e-9, 1e-9, 1e-9, 1e-9, 1e-9, 1e-9, 1.0]]), DT, window_s=DT)[0]
+    np.testing.assert_allclose(tiny[3], 1e-9 / (1e-3 * np.sqrt(2 / 8)), rtol=1e-6)  # held up by the floor
+    one = gain_agc(x, DT, window_s=0.2 * DT)[0]
+    np.testing.assert_allclose(one[[0, 1, 4, 7]], [1.0, -1.0, 1.0, 1.0], rtol=1e-6)
+    silent = gain_agc(np.zeros((2, 8)), DT, window_s=3 * DT)
+    assert silent.dtype == np.float32 and np.array_equal(silent, np.zeros((2, 8)))
+
+
 def test_agc_equalises_rms():
     t = np.arange(2000) * DT
     carrier = np.sin(2 * np.pi * 1e9 * t)
