@@ -200,8 +200,37 @@ def test_resample_to_constant_spacing_is_exact_for_linear_data():
     out, s_new, src = resample_traces(data, pos, 0.02)
     np.testing.assert_allclose(s_new, np.arange(0, 0.12 + 1e-9, 0.02))
     np.testing.assert_allclose(out[:, 0], s_new, atol=1e-6)
-    with pytest.raises(ValueError, match="shorter than one spacing"):
+    with pytest.raises(ValueError, match="^the path is 0.12 m long, shorter than one spacing of 1 m$"):
         resample_traces(data, pos, 1.0)
+    assert out.dtype == np.float32 and src.dtype == np.float64
+    # the fractional source index: new trace k between the kept traces around s = 0.02 k (trace 1 stands for the
+    # standing run 1-3, so 0.02 m lies 7/18 of the way from index 1 to index 4)
+    np.testing.assert_allclose(src[[0, 1, 3]], [0.0, 1 + 3 * (0.02 - 0.013) / (0.031 - 0.013),
+                                                5 + (0.06 - 0.05) / 0.021], atol=1e-6)
+
+
+def test_resample_standing_still_and_limits():
+    """Steps of at most spacing / 100 (default) or min_step_m are standing still: the first of the run is kept;
+    which traces are kept decides where the new traces between them come from. A path exactly one spacing long
+    gives two traces; a spacing must be positive."""
+    pos = np.zeros((4, 3))
+    pos[:, 0] = [0.0, 0.005, 0.6, 1.1]  # the 5 mm step is spacing / 100 for a 0.5 m spacing: standing still
+    data = np.arange(4, dtype=np.float32)[:, None] * np.ones((1, 4), np.float32)
+    _, s_new, src = resample_traces(data, pos, 0.5)
+    np.testing.assert_allclose(s_new, [0.0, 0.5, 1.0])
+    np.testing.assert_allclose(src[1], 2 * 0.5 / 0.6, atol=1e-6)  # merged: from traces 0 and 2
+    _, _, src = resample_traces(data, pos, 0.5, min_step_m=0.001)  # 5 mm is a step now
+    np.testing.assert_allclose(src[1], 1 + (0.5 - 0.005) / 0.595, atol=1e-6)
+    _, _, src = resample_traces(data, pos, 0.25)  # default 2.5 mm: the 5 mm step counts
+    np.testing.assert_allclose(src[1], 1 + (0.25 - 0.005) / 0.595, atol=1e-6)
+    _, _, src = resample_traces(data, pos, 0.25, min_step_m=0.005)  # exactly the step: standing
+    np.testing.assert_allclose(src[1], 2 * 0.25 / 0.6, atol=1e-6)
+    line = np.c_[[0.0, 0.25, 0.5], np.zeros(3), np.zeros(3)]
+    out, s_new, _ = resample_traces(np.ones((3, 4)), line, 0.5)
+    np.testing.assert_allclose(s_new, [0.0, 0.5])
+    for bad in (0.0, -1.0):
+        with pytest.raises(ValueError, match=f"^spacing_m must be > 0, got {bad}$"):
+            resample_traces(np.ones((3, 4)), line, bad)
 
 
 @pytest.mark.parametrize("f_hz, dt_s, corners", [

@@ -37,14 +37,12 @@ def resample_traces(
     keep = np.concatenate([[True], np.diff(s) > min_step])
     # a run of standing traces keeps its first; path distance stays strictly increasing
     idx = np.nonzero(keep)[0]
-    s_keep = s[idx]
-    if s_keep[-1] - s_keep[0] < spacing_m:
-        raise ValueError(
-            f"the path is {s_keep[-1] - s_keep[0]:.3g} m long, shorter than one spacing of {spacing_m:g} m"
-        )
+    s_keep = s[idx]  # s_keep[0] = 0: the first trace is always kept
+    if s_keep[-1] < spacing_m:
+        raise ValueError(f"the path is {s_keep[-1]:.3g} m long, shorter than one spacing of {spacing_m:g} m")
     s_new = np.arange(0.0, s_keep[-1] + 1e-9 * spacing_m, spacing_m)
-    frac_kept = np.interp(s_new, s_keep, np.arange(idx.size))
-    j0 = np.minimum(np.floor(frac_kept).astype(np.int64), idx.size - 1)
+    frac_kept = np.interp(s_new, s_keep, np.arange(idx.size))  # in [0, idx.size - 1]
+    j0 = np.floor(frac_kept).astype(np.int64)
     j1 = np.minimum(j0 + 1, idx.size - 1)
     w = (frac_kept - j0).astype(np.float32)[:, None]
     out = x[idx[j0]] * (1 - w) + x[idx[j1]] * w
