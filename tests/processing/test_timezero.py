@@ -84,3 +84,74 @@ def test_peak_time_zero_is_not_taken_by_a_shallow_echo_stronger_than_the_direct_
     np.testing.assert_allclose(direct_wave_peak(x, rel=0.5) * DT, t_direct, atol=0.01e-9)
     with pytest.raises(ValueError, match="rel"):
         direct_wave_peak(x, rel=0.0)
+
+
+def test_first_break_by_hand():
+    """First sample at 0.1 (default) of the trace's largest |amplitude|, interpolated on the rising edge; a trace
+    that starts above the level is at 0; one that reaches it at sample 1 interpolates from sample 0."""
+    x = np.array([[0.0, 0.1, 0.4, -2.0, 0.3, 0.7],   # level 0.2: between 0.1 and 0.4 -> 1 + 1/3
+                  [2.0, 0.5, 0.3, 0.0, 0.0, 0.9],    # already above at sample 0 (the last sample is not "before")
+                  [0.0, 1.0, 0.0, 0.0, 0.0, 0.0]])   # level 0.1 reached at sample 1: 0 + 0.1
+    np.testing.assert_allclose(first_break(x), [1 + 1 / 3, 0.0, 0.1])
+    np.testing.assert_allclose(first_break(x, 1.0), [3.0, 0.0, 1.0])  # the maximum itself
+    for bad in (0.0, 1.5):
+        with pytest.raises(ValueError, match=rf"^threshold must be in \(0, 1\], got {bad}$"):
+            first_break(x, bad)
+
+
+def test_direct_wave_peak_by_hand():
+    """The first local maximum of |amplitude| reaching rel x the largest, refined by the parabola through it and
+    its neighbours; ends count as peaks (no refinement); the search window cuts the trace."""
+    x = np.array([[0.0, 1.0, 3.0, 2.0, 0.0, 5.0, 0.0],  # rel 1: sample 5 (y 0, 5, 0: no shift)
+                  [5.0, 3.0, 4.0, 0.0, 0.0, 0.0, 0.0],  # the first sample is the peak
+                  [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0]])  # rising to the last sample
+    np.testing.assert_allclose(direct_wave_peak(x), [5.0, 0.0, 6.0])
+    # rel 0.5: row 0 stops at sample 2 (3 >= 2.5): vertex of (1, 3, 2) = 2 + 0.5 (1 - 2) / (1 - 6 + 2) = 2 + 1/6
+    np.testing.assert_allclose(direct_wave_peak(x, rel=0.5)[:2], [2 + 1 / 6, 0.0])
+    # the search window: 3 samples (the least) of row 0 -> the rising edge ends at sample 2
+    np.testing.assert_allclose(direct_wave_peak(x, 3)[0], 2.0)
+    np.testing.assert_allclose(direct_wave_peak(x, 1)[0], 2.0)  # fewer than 3 asked: 3 searched
+    # peaks at sample 1 and at the second-to-last sample are refined too
+    y = np.array([[1.0, 4.0, 2.0, 0.0, 0.0], [0.0, 0.0, 1.0, 4.0, 2.0]])
+    np.testing.assert_allclose(direct_wave_peak(y), [1 + 0.5 * (1 - 2) / (1 - 8 + 2), 3 + 0.5 * (1 - 2) / (1 - 8 + 2)])
+    # a flat top of three samples: the first of them, refined towards the rise (not the last, refined back)
+    np.testing.assert_allclose(direct_wave_peak(np.array([[0.0, 2.0, 2.0, 2.0, 0.0]])), [1.5])
+    with pytest.raises(ValueError, match=r"^rel must be in \(0, 1\], got 1.5$"):
+        direct_wave_peak(x, rel=1.5)
+
+
+def test_estimate_time_zero_options_by_hand():
+    dt = 1e-9
+    x = np.zeros((3, 40))
+    x[:, 10] = 1.0  # the direct wave at 10 ns in every trace
+    x[:, 9] = x[:, 11] = 0.5
+    x[0, 25] = 3.0  # a strong late echo in one trace
+    assert estimate_time_zero(x, dt) == pytest.approx(np.median(first_break(x)) * dt)  # first break, 0.1
+    assert estimate_time_zero(x, dt, threshold=0.5) == pytest.approx(np.median(first_break(x, 0.5)) * dt)
+    # the mean trace peaks on the echo (3 / 3 = 1 ties the direct wave: the first wins), per trace row 0 does not
+    # without a search window, and does with one of 15 ns
+    assert estimate_time_zero(x, dt, method="peak") == pytest.approx(10e-9)
+    per = estimate_time_zero(x, dt, method="peak", per_trace=True)
+    np.testing.assert_allclose(per, [25e-9, 10e-9, 10e-9])
+    np.testing.assert_allclose(estimate_time_zero(x, dt, method="peak", per_trace=True, search_s=15e-9), 10e-9)
+    x[1:, 25] = 3.0  # now the echo outshines the direct wave in the mean trace too
+    assert estimate_time_zero(x, dt, method="peak") == pytest.approx(25e-9)
+    assert estimate_time_zero(x, dt, method="peak", search_s=15e-9) == pytest.approx(10e-9)
+    with pytest.raises(ValueError, match=r"^unknown time-zero method 'max' \(use 'first_break' or 'peak'\)$"):
+        estimate_time_zero(x, dt, method="max")
+
+
+def test_shift_traces_limits_and_types():
+    x = np.arange(20, dtype=np.float64).reshape(2, 10)
+    out = shift_traces(x, 8.0)  # exactly two samples left
+    assert out.dtype == np.float32 and out.shape == (2, 2)
+    np.testing.assert_allclose(out, x[:, 8:])
+    general = shift_traces(x, [8.0, 7.5])
+    assert general.dtype == np.float32
+    np.testing.assert_allclose(general, [[8.0, 9.0], [17.5, 18.5]])
+    one = shift_traces(x[:1], 2.25)  # a single trace
+    np.testing.assert_allclose(one, [np.arange(2.25, 9.0, 1.0)])
+    with pytest.raises(ValueError, match=r"^time zero is at the end of the traces: nothing left after cutting$"):
+        shift_traces(x, 8.5)
+    with pytest.raises(ValueError, match=r"^shifts must be >= 0 \(time zero lies after the first sample\)$"):
+        shift_traces(x, [1.0, -0.5])

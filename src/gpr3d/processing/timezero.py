@@ -34,10 +34,8 @@ def first_break(data: np.ndarray, threshold: float = 0.1) -> np.ndarray:
     if rows.size:
         i = idx[rows]
         lo, hi = a[rows, i - 1], a[rows, i]
-        lv = level[rows, 0]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            frac = np.where(hi > lo, (lv - lo) / (hi - lo), 1.0)
-        out[rows] = i - 1 + np.clip(frac, 0.0, 1.0)
+        # sample i is the first to reach the level, so lo < level <= hi: the fraction lies in (0, 1]
+        out[rows] = i - 1 + (level[rows, 0] - lo) / (hi - lo)
     return out
 
 
@@ -66,10 +64,9 @@ def direct_wave_peak(data: np.ndarray, search_samples: int | None = None, rel: f
     if r.size:
         i = idx[r]
         y0, y1, y2 = a[r, i - 1], a[r, i], a[r, i + 1]
-        denom = y0 - 2 * y1 + y2
-        with np.errstate(invalid="ignore", divide="ignore"):
-            delta = np.where(denom != 0, 0.5 * (y0 - y2) / denom, 0.0)
-        out[r] = i + np.clip(delta, -0.5, 0.5)
+        # the first peak reaching the level has y1 >= y0, y2 and y0 < y1 (were y0 = y1, sample i - 1 would be an
+        # earlier peak): the parabola through the three is concave, its vertex within half a sample of i
+        out[r] = i + 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
     return out
 
 
@@ -126,8 +123,8 @@ def shift_traces(data: np.ndarray, shift_samples) -> np.ndarray:
         if hi.shape[1] < n_out:  # the last output sample reads past the end: the last sample again (weight 0)
             hi = np.concatenate([hi, x[:, -1:]], axis=1)
         return (lo * (1 - w) + hi * w).astype(np.float32)
-    pos = np.arange(n_out)[None, :] + shift[:, None]
-    i0 = np.minimum(np.floor(pos).astype(np.int64), n_s - 1)
+    pos = np.arange(n_out)[None, :] + shift[:, None]  # at most n_s - 1 (n_out above)
+    i0 = np.floor(pos).astype(np.int64)
     i1 = np.minimum(i0 + 1, n_s - 1)
     w = (pos - i0).astype(np.float32)
     rows = np.arange(n_tr)[:, None]
