@@ -54,12 +54,13 @@ def cscan(survey, *, cell_m: float, window_s: float, t_start_s=None, eps_r: floa
     count = np.bincount(flat, minlength=nx * ny).reshape(nx, ny).astype(float)
     sigma = max(fill / cell_m / 2, 0.5)
     near = ndimage.gaussian_filter(count, sigma, mode="constant")
-    reach = ndimage.binary_dilation(count > 0, iterations=max(int(round(fill / cell_m)), 0)) if fill > 0 else count > 0
+    steps = int(round(fill / cell_m))  # (binary_dilation repeats until nothing changes when told 0 iterations)
+    reach = ndimage.binary_dilation(count > 0, iterations=steps) if steps > 0 else count > 0
     out = np.full((len(starts), nx, ny), np.nan, np.float32)
     for k, v in enumerate(per_trace):
         total = np.bincount(flat, weights=v, minlength=nx * ny).reshape(nx, ny)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            cell_mean = np.where(count > 0, total / np.maximum(count, 1), 0.0)
+        cell_mean = total / np.maximum(count, 1)  # (used where count > 0 only)
+        with np.errstate(invalid="ignore"):  # cells beyond the kernel: 0 / 0 (never x / 0), left NaN below
             smooth = ndimage.gaussian_filter(total, sigma, mode="constant") / near
         out[k] = np.where(count > 0, cell_mean, np.where(reach, smooth, np.nan))
     depth = None
