@@ -9,8 +9,13 @@ surviving mutant's diff go to ``benchmarks/results/mutation.md`` (``--out``); th
 scores below ``--fail-under``.
 
     python tools/mutation.py processing.dewow io.dt1        # some modules
-    python tools/mutation.py --changed main                 # the modules a change touches (the CI guard)
+    python tools/mutation.py --changed main                 # the modules that differ from a git revision
+    python tools/mutation.py --guard                        # the CI guard (below)
     python tools/mutation.py                                # all of MODULES (long: see the report's times)
+
+The guard (``--guard``, run by ``tests/tools/test_mutation_guard.py``) reads the report, which records the commit
+it was made at, and re-runs the modules it lists that have changed since: a module in the report cannot land
+with a score below ``--fail-under``. Its report goes to ``build/mutation/guard.md``, not over the real one.
 """
 
 from __future__ import annotations
@@ -139,10 +144,26 @@ def run_module(module: str, *, max_children: int, equivalents: list, keep: bool)
 
 
 def changed_modules(base: str) -> list[str]:
+    # the working tree against ``base``: committed and uncommitted changes alike
     r = subprocess.run(["git", "diff", "--name-only", base, "--", "src/gpr3d"], cwd=ROOT, capture_output=True,
                        text=True, check=True)
     names = [p[len("src/gpr3d/"):-3].replace("/", ".") for p in r.stdout.split() if p.endswith(".py")]
     return [n for n in names if n in MODULES]
+
+
+def head_commit() -> str | None:
+    r = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True)
+    return r.stdout.strip() if r.returncode == 0 else None
+
+
+def guarded(report: Path) -> tuple[str | None, list[str]]:
+    """The commit a report was made at and the modules it scores."""
+    if not report.exists():
+        return None, []
+    text = report.read_text(encoding="utf-8")
+    m = re.search(r"^commit: ([0-9a-f]{40})", text, flags=re.M)
+    mods = re.findall(r"^\| ([a-z_]+\.[a-z_.]+) \| \d+ \|", text, flags=re.M)
+    return (m.group(1) if m else None), mods
 
 
 def write_report(rows: list[dict], path: Path, command: str) -> None:
@@ -168,7 +189,8 @@ def write_report(rows: list[dict], path: Path, command: str) -> None:
         if r.get("equivalents"):
             lines += ["", f"### {r['module']}: equivalent mutants (tools/mutation_equivalents.toml)", ""]
             lines += [f"- `{s['removed']}` -> `{s['added']}`: {s['why']}" for s in r["equivalents"]]
-    lines += ["", f"command: {command}", ""]
+    lines += ["", f"command: {command}", f"commit: {head_commit() or 'unknown'} (the tree mutated: that commit plus "
+                                                "any uncommitted changes)", ""]
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".part")
     tmp.write_text("\n".join(lines), encoding="utf-8")
@@ -184,10 +206,27 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "benchmarks/results/mutation.md"))
     ap.add_argument("--equivalents", default=str(ROOT / "tools/mutation_equivalents.toml"))
     ap.add_argument("--keep", action="store_true", help="keep build/mutation/<module>/ (to browse with mutmut)")
+    ap.add_argument("--guard", action="store_true",
+                    help="re-run the modules of the report (--out) that changed since its commit; report to build/")
     args = ap.parse_args(argv)
     if args.max_children < 1:
         ap.error(f"--max-children must be >= 1, got {args.max_children}")
-    mods = changed_modules(args.changed) if args.changed else (args.modules or list(MODULES))
+    if args.guard:
+        base, listed = guarded(Path(args.out))
+        if base is None:
+            print(f"{args.out}: no report with a commit to guard")
+            return 0
+        try:
+            changed = set(changed_modules(base))
+        except subprocess.CalledProcessError:
+            print(f"commit {base[:10]} of the report is not in this checkout: nothing to compare with")
+            return 0
+        mods = [m for m in listed if m in changed]
+        args.out = str(ROOT / "build" / "mutation" / "guard.md")
+        print(f"guard: {len(listed)} modules in the report (commit {base[:10]}); changed since: "
+              f"{', '.join(mods) or 'none'}")
+    else:
+        mods = changed_modules(args.changed) if args.changed else (args.modules or list(MODULES))
     unknown = [m for m in mods if not (ROOT / source_of(m)).exists()]
     if unknown:
         ap.error(f"no such module: {', '.join(unknown)}")

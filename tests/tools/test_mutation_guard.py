@@ -1,0 +1,57 @@
+"""tools/mutation.py: its equivalents list stays true to the code, and the CI guard re-runs every module of the
+mutation report that changed since the report was made (none changed: nothing to run)."""
+
+import importlib.util
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _tool():
+    spec = importlib.util.spec_from_file_location("mutation_tool", ROOT / "tools" / "mutation.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_every_listed_equivalent_is_still_in_its_module():
+    tool = _tool()
+    eq = tool.load_equivalents(ROOT / "tools" / "mutation_equivalents.toml")
+    assert len(eq) >= 10
+    for module, rows in eq.items():
+        assert module in tool.MODULES, module
+        source = (ROOT / tool.source_of(module)).read_text(encoding="utf-8")
+        lines = {ln.strip() for ln in source.splitlines()}
+        for removed, added, reason in rows:
+            assert removed != added and reason.strip(), (module, removed)
+            for part in removed.split(" / "):
+                assert part in lines, f"{module}: '{part}' is no longer in the code: take it off the list"
+
+
+def test_the_report_names_its_commit_and_modules(tmp_path):
+    tool = _tool()
+    report = tmp_path / "m.md"
+    tool.write_report([{"module": "processing.dewow", "total": 10, "killed": 9, "survived": 1, "equivalent": 0,
+                        "score": 0.9, "wall_s": 1.0, "survivors": [{"removed": "a", "added": "b", "why": None}],
+                        "equivalents": []}], report, "python tools/mutation.py processing.dewow")
+    base, mods = tool.guarded(report)
+    assert mods == ["processing.dewow"]
+    head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    assert base == (head or None)
+    assert "- `a` -> `b`" in report.read_text()
+
+
+def test_the_guard_passes_on_this_checkout():
+    pytest.importorskip("mutmut")
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout")
+    r = subprocess.run([sys.executable, str(ROOT / "tools" / "mutation.py"), "--guard", "--max-children", "2"],
+                       cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    assert re.search(r"^guard: \d+ modules in the report", r.stdout, flags=re.M) or "no report" in r.stdout
