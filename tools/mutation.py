@@ -81,11 +81,11 @@ def load_equivalents(path: Path) -> dict:
 
 
 def _diff(workdir: Path, name: str) -> tuple[str, str]:
-    """The removed and the added line of mutant ``name`` (several lines joined by ' / ')."""
+    """The removed and the added line of mutant ``name`` (several lines joined by " ¶ ")."""
     r = subprocess.run([*MUTMUT, "show", name], cwd=workdir, capture_output=True, text=True)
     minus = [ln[1:].strip() for ln in r.stdout.splitlines() if ln.startswith("-") and not ln.startswith("---")]
     plus = [ln[1:].strip() for ln in r.stdout.splitlines() if ln.startswith("+") and not ln.startswith("+++")]
-    return " / ".join(minus), " / ".join(plus)
+    return " ¶ ".join(minus), " ¶ ".join(plus)
 
 
 def run_module(module: str, *, max_children: int, equivalents: list, keep: bool) -> dict:

@@ -30,7 +30,7 @@ def test_every_listed_equivalent_is_still_in_its_module():
         lines = {ln.strip() for ln in source.splitlines()}
         for removed, added, reason in rows:
             assert removed != added and reason.strip(), (module, removed)
-            for part in removed.split(" / "):
+            for part in removed.split(" ¶ "):
                 assert part in lines, f"{module}: '{part}' is no longer in the code: take it off the list"
 
 

@@ -101,8 +101,9 @@ def is_segy(path) -> bool:
     with open(p, "rb") as f:
         f.seek(3200)
         binhdr = f.read(400)
-    big = struct.unpack(">h", binhdr[20:22])[0], struct.unpack(">h", binhdr[24:26])[0]
-    little = struct.unpack("<h", binhdr[20:22])[0], struct.unpack("<h", binhdr[24:26])[0]
+    # samples per trace: unsigned (rev 2 allows 65535); the format code is small either way
+    big = struct.unpack(">H", binhdr[20:22])[0], struct.unpack(">H", binhdr[24:26])[0]
+    little = struct.unpack("<H", binhdr[20:22])[0], struct.unpack("<H", binhdr[24:26])[0]
     return any(ns > 0 and fmt in (1, 2, 3, 5, 8, 10, 11, 12, 16) for ns, fmt in (big, little))
 
 
@@ -145,12 +146,10 @@ def read_segy(path, *, dt_unit: str = "auto") -> list:
                     interval = int(heads[0][TF.TRACE_SAMPLE_INTERVAL])
             big_endian = endian == "big"
             break
-        except (RuntimeError, OSError, ValueError) as exc:
+        except (RuntimeError, OSError, ValueError, IndexError) as exc:  # (segyio: IndexError on 0 traces)
             failure = exc
     else:
         raise FormatError(p, f"not a readable SEG-Y file ({failure})")
-    if data.size == 0:
-        raise FormatError(p, "holds no traces")
     with open(p, "rb") as raw:
         raw.seek(EXT_INTERVAL_AT)
         ext = struct.unpack(">d" if big_endian else "<d", raw.read(8))[0]
