@@ -120,3 +120,104 @@ def test_pulseekko_gps_sidecar(tmp_path):
     assert s.metadata["gps"]["fixes"] == 2
     assert s.positions_xyz[-1, 0] == pytest.approx(0.01 / 60 * np.pi / 180 * 6378137.0, rel=1e-6)
     np.testing.assert_allclose(np.diff(s.positions_xyz[:, 0]), s.positions_xyz[-1, 0] / 4)
+
+
+def test_hd_header_by_hand(tmp_path):
+    """Keys upper-cased, values after the first '=', the date and system lines; binary bytes refused."""
+    hd = tmp_path / "H.HD"
+    hd.write_text("1234\nData Collected with pulseEKKO PRO\n2021-03-04\nnumber of traces = 12\n"
+                  "TOTAL TIME WINDOW  =  100.5 ns\nNOTE = a=b\n")
+    out = read_hd(hd)
+    assert out["NUMBER OF TRACES"] == "12" and out["TOTAL TIME WINDOW"] == "100.5 ns" and out["NOTE"] == "a=b"
+    assert out["_date"] == "2021-03-04" and out["_system"] == "Data Collected with pulseEKKO PRO"
+    hd.write_bytes(b"1234\nNUMBER OF TRACES = 1\x00\n")
+    with pytest.raises(FormatError, match=r"H.HD: HD header holds binary bytes: not a pulseEKKO header or corrupt$"):
+        read_hd(hd)
+    hd.write_bytes(b"1234\n" + b" " * 5000 + b"\x00")  # a zero beyond the first 4096 bytes is not looked for
+    assert read_hd(hd) == {}
+
+
+def test_hd_fields_the_reader_needs_and_uses(tmp_path):
+    """Frequency, antenna separation (in the position unit), time-zero point, stacks, step, and the lines the
+    reader refuses, each by its message."""
+    p = write_dt1(tmp_path / "F", n_traces=6, n_points=50, units="cm", step=2.0, freq=250.0, sep=40.0)
+    s = gpr3d.read(p)
+    assert s.frequency_hz == 250e6 and s.offset_m == pytest.approx(0.40)
+    m = s.metadata
+    assert (m["format"], m["channel"], m["n_channels"], m["bytes_per_point"]) == ("dt1", 0, 1, 2)
+    assert m["antenna"] == "250 MHz pulseEKKO" and m["range_s"] == pytest.approx(100e-9)
+    assert m["step_m"] == pytest.approx(0.02) and m["stacks"] == 4 and m["header_timezero_point"] == 3.5
+    assert m["system"] == "Data Collected with test maker" and m["date"] == "2020-01-02"
+    assert m["path"].endswith("F.DT1") and m["header_path"].endswith("F.HD") and m["position_units"] == "cm"
+    assert m["positions_source"] == "trace header positions (cm), along world x"
+    assert m["timestamps_source"] == "trace header time of day (s)"
+    hd = p.with_suffix(".HD")
+    text = hd.read_text()
+    for old, new, words in (("NUMBER OF PTS/TRC  = 50", "NUMBER OF PTS/TRC  = 1", "NUMBER OF PTS/TRC = 1 is implausible"),
+                            ("NUMBER OF TRACES   = 6", "NUMBER OF TRACES   = 0", "NUMBER OF TRACES = 0: no traces"),
+                            ("NUMBER OF TRACES   = 6\n", "", "HD header lacks 'NUMBER OF TRACES'"),
+                            ("TOTAL TIME WINDOW  = 100.0", "TOTAL TIME WINDOW  = lots",
+                             "HD field 'TOTAL TIME WINDOW' = 'lots' is not a number"),
+                            ("POSITION UNITS     = cm", "POSITION UNITS     = furlongs", "unknown POSITION UNITS 'furlongs'")):
+        hd.write_text(text.replace(old, new))
+        with pytest.raises(FormatError, match=words):
+            gpr3d.read(p)
+    # no frequency, separation or step given: none, 0, none
+    hd.write_text("\n".join(ln for ln in text.splitlines() if not ln.startswith(("NOMINAL", "ANTENNA", "STEP"))))
+    s = gpr3d.read(p)
+    assert s.frequency_hz is None and s.offset_m == 0.0 and s.metadata["antenna"] == "" and s.metadata["step_m"] is None
+
+
+def test_two_points_per_trace_and_one_trace_are_enough(tmp_path):
+    s = gpr3d.read(write_dt1(tmp_path / "TINY", n_traces=1, n_points=2))
+    assert s.shape == (1, 2) and s.positions_xyz is None  # one trace has no extent along the line
+    np.testing.assert_array_equal(s.data, expected_values(1, 2)[0])
+
+
+def test_positions_and_times_only_when_they_make_sense(tmp_path):
+    """Trace positions all equal: none; times of day that go backwards, or all zero: none."""
+    import struct
+
+    p = write_dt1(tmp_path / "T", n_traces=4, n_points=10)
+    raw = bytearray(p.read_bytes())
+    rec = 128 + 10 * 2
+    for i in range(4):
+        raw[i * rec + 4:i * rec + 8] = struct.pack("<f", 1.5)  # the same position in every trace
+    raw[2 * rec + 92:2 * rec + 96] = struct.pack("<f", 999.0)  # trace 2 later than trace 3
+    p.write_bytes(bytes(raw))
+    s = gpr3d.read(p)
+    assert s.positions_xyz is None and s.timestamps_s is None and s.metadata["timestamps_source"] is None
+    for i in range(4):
+        raw[i * rec + 92:i * rec + 96] = struct.pack("<f", 0.0)
+    p.write_bytes(bytes(raw))
+    assert gpr3d.read(p).timestamps_s is None
+
+
+def test_the_gps_file_by_hand(tmp_path):
+    """Trace lines and GGA sentences; fixes of quality 0, other sentences and broken lines are skipped; a missing
+    altitude is 0; southern and western hemispheres are negative."""
+    from gpr3d.io.dt1 import read_sns_gps
+
+    g = tmp_path / "x.GPS"
+    g.write_text("Trace #3 at position 0.0\n$GPGGA,120000,4530.0000,S,01015.0000,W,1,08,1.0,,M,,M,,*00\n"
+                 "Trace #4 at position 0.1\n$GPGGA,120001,4530.0000,N,01015.0000,E,0,08,1.0,5.0,M,,M,,*00\n"
+                 "Trace #5 at position 0.2\n$GPRMC,120002,A,4530.0000,N,01015.0000,E*00\n"
+                 "$GPGGA,120002,4530.0000,N,01015.0000,E,1,08,1.0,7.0,M,,M,,*00\n"
+                 "Trace #6 at position 0.3\n$GPGGA,120003,4530.0000,N\n"
+                 "Trace #7 at position 0.4\n$GPGGA,120004,4531.5000,N,01016.5000,E,2,08,1.0,9.5,M,,M,,*00\n")
+    out = read_sns_gps(g)
+    # trace 5: the GGA after another sentence counts; trace 6's GGA is cut short
+    np.testing.assert_array_equal(out["trace"], [3.0, 5.0, 7.0])
+    np.testing.assert_allclose(out["lat"], [-45.5, 45.5, 45.525])
+    np.testing.assert_allclose(out["lon"], [-10.25, 10.25, 10.275])
+    np.testing.assert_allclose(out["alt"], [0.0, 7.0, 9.5])
+
+
+def test_is_dt1_needs_both_files(tmp_path):
+    from gpr3d.io.dt1 import is_dt1
+
+    p = write_dt1(tmp_path / "PAIR")
+    assert is_dt1(p) and is_dt1(p.with_suffix(".HD"))
+    assert not is_dt1(tmp_path / "PAIR.txt")
+    p.with_suffix(".HD").unlink()
+    assert not is_dt1(p)
