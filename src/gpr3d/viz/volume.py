@@ -38,7 +38,7 @@ def reconstruction_figures(rec, out) -> list[str]:
     plt = pyplot()
     out = Path(out)
     g, env = rec.grid, rec.envelope
-    frame = getattr(rec, "frame", None)
+    frame = rec.frame
     figs = {}
     vmax = float(np.percentile(env.max(axis=2), 99.9)) or None
     if frame is None:
@@ -100,7 +100,7 @@ def reconstruction_figures(rec, out) -> list[str]:
     idx = np.argwhere(env >= thr)
     if len(idx) > 20000:
         idx = idx[np.random.default_rng(0).choice(len(idx), 20000, replace=False)]
-    pts = rec.world_points(idx) if hasattr(rec, "world_points") else g.points(idx)
+    pts = rec.world_points(idx)
     sc = ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], c=env[tuple(idx.T)], cmap="hot", s=2, alpha=0.5)
     fig.colorbar(sc, ax=ax, fraction=0.03, pad=0.08, label="envelope (image units)")
     for i, t in enumerate(rec.targets):
