@@ -106,3 +106,34 @@ def test_boxes_follow_the_samples_that_time_zero_cuts(monkeypatch):
             assert abs(t0 / dt - round(t0 / dt)) > 0.05  # between samples
         R.reconstruct(s, R.ReconstructConfig(eps_r=4.0, spacing_m=0.05, max_depth_m=0.3), boxes=[[5, 10e-9, 20, 14e-9]])
         assert seen["boxes"][0] == pytest.approx([5, 10e-9 - t0, 20, 14e-9 - t0], abs=1e-15)
+
+
+def _fermat_leg(h, d, rho, eps_r, n=200001):
+    """The least one-way time from h above the ground to d below it, rho apart, over a dense set of crossing
+    points (brute force: no Newton, no critical angle)."""
+    s = np.linspace(0.0, rho, n)  # horizontal distance run in the air
+    return float(np.min(np.hypot(h, s) / C + np.hypot(d, rho - s) * math.sqrt(eps_r) / C))
+
+
+@pytest.mark.parametrize("engine", ["numba", "numpy"])
+def test_antennas_above_the_ground_refract_at_the_surface(engine):
+    """Antennas held 0.1 m above flat ground (eps_r 9): straight down to a voxel 0.3 m deep the two-way time is
+    2 (0.1 / c + 0.3 * 3 / c) = 6.67 ns, not the 8 ns of 0.4 m of ground; off to the side each leg takes the least
+    time over where it crosses the surface (brute force here). The same antenna z = 0.1 with no air gap means
+    ground up to the antenna: 8 ns."""
+    g = Grid3D(0.0, 0.0, 0.3, 0.1, 0.1, 0.1, 1, 1, 1)
+    kw = dict(dt_s=0.005e-9, n_samples=4000, eps_r=9.0, engine=engine)
+    on = np.array([[0.0, 0.0, 0.0]])
+    op = BackProjection(g, on, on, air_gap_m=0.1, **kw)
+    assert _spike_time(op, 0, 0, 0) == pytest.approx(2 * (0.1 / C + 0.9 / C), abs=2e-14)
+    op = BackProjection(g, on + [0, 0, 0.1], on + [0, 0, 0.1], **kw)
+    assert _spike_time(op, 0, 0, 0) == pytest.approx(2 * 0.4 * 3 / C, abs=2e-14)
+    # tx 0.35 m and rx 0.15 m from the voxel's column, held 0.1 and (per trace) 0.25 m up
+    tx, rx = np.array([[0.35, 0.0, 0.0]] * 2), np.array([[0.0, 0.15, 0.0]] * 2)
+    g2 = Grid3D(0.0, 0.0, 0.3, 0.1, 0.1, 0.1, 1, 1, 1)
+    for gap in (0.1, 0.25):
+        op = BackProjection(g2, tx[:1], rx[:1], air_gap_m=[gap], **kw)
+        want = _fermat_leg(gap, 0.3, 0.35, 9.0) + _fermat_leg(gap, 0.3, 0.15, 9.0)
+        assert _spike_time(op, 0, 0, 0) == pytest.approx(want, abs=5e-14), gap
+        # a straight ray through the air gap at ground speed (the old way) is 0.4 ns and more off
+        assert abs(want - (math.hypot(0.35, 0.3 + gap) + math.hypot(0.15, 0.3 + gap)) * 3 / C) > 3e-10

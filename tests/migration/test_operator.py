@@ -14,11 +14,15 @@ YAW = RNG.uniform(-3, 3, 25)
 GRID = Grid3D(0, 0, 0.04, 0.05, 0.05, 0.02, 21, 21, 25)
 
 
-def make(engine, heights=False, **kw):
-    """engine "numba" (SIMD adjoint), "numba-scalar" (the plain numba adjoint) or "numpy"."""
+def make(engine, heights=False, air=False, **kw):
+    """engine "numba" (SIMD adjoint), "numba-scalar" (the plain numba adjoint) or "numpy"; ``heights``: the ground
+    under the antennas 0..5 cm above z = 0; ``air``: every other antenna held 2..30 cm above the ground."""
     pos = POS.copy()
-    if heights:  # antennas lifted 0..5 cm above the surface
+    if heights:
         pos[:, 2] = np.random.default_rng(7).uniform(0, 0.05, len(pos))
+    if air:
+        kw["air_gap_m"] = np.where(np.arange(len(pos)) % 2 == 0, np.random.default_rng(8).uniform(0.02, 0.3, len(pos)),
+                                   0.0)
     tx, rx = antenna_positions(pos, headings_rad=YAW, offset_m=0.1)
     op = BackProjection(GRID, tx, rx, dt_s=0.1e-9, n_samples=200, eps_r=6.0, engine=engine.split("-")[0], **kw)
     op.simd = engine == "numba"
@@ -33,7 +37,8 @@ def test_the_simd_kernel_builds_here():
 
 @pytest.mark.parametrize("engine", ["numba", "numba-scalar", "numpy"])
 @pytest.mark.parametrize("kw", [{}, {"aperture_deg": 40}, {"obliquity": True, "spreading": True},
-                                {"layers": [(0.0, 4.0), (0.2, 9.0)], "t0_s": 1e-9}])
+                                {"layers": [(0.0, 4.0), (0.2, 9.0)], "t0_s": 1e-9},
+                                {"air": True, "aperture_deg": 40, "obliquity": True, "spreading": True}])
 def test_dot_test(engine, kw):
     if "layers" in kw:
         kw = dict(kw)
@@ -54,7 +59,9 @@ def test_dot_test(engine, kw):
 @pytest.mark.parametrize("engine", ["numba", "numba-scalar"])
 @pytest.mark.parametrize("kw", [{}, {"aperture_deg": 40, "obliquity": True}, {"spreading": True},
                                 {"obliquity": True}, {"aperture_deg": 30, "obliquity": True, "spreading": True},
-                                {"heights": True, "aperture_deg": 40}, {"heights": True, "t0_s": -2e-9}])
+                                {"heights": True, "aperture_deg": 40}, {"heights": True, "t0_s": -2e-9},
+                                {"air": True}, {"air": True, "heights": True, "aperture_deg": 40, "obliquity": True},
+                                {"air": True, "spreading": True}])
 def test_numba_matches_numpy_reference(engine, kw):
     a, b = make("numpy", **kw), make(engine, **kw)
     d = RNG.standard_normal((25, 200)).astype(np.float32)
@@ -119,15 +126,16 @@ def scattered_antennas(rng, n, lo, hi, lift, offset=0.1):
 def test_tiled_adjoint_sums_what_every_trace_sees(read):
     """With an aperture the adjoint visits, per tile of columns, only the traces whose cone reaches it. Traces
     scattered over 3 m x 3 m around a 1.3 m x 1.1 m grid (most far out of reach, some beyond the grid's edges, some
-    lifted): the tiled image equals the untiled one and the numpy reference, with the SIMD loop reading the trace
-    by hardware gathers or by scalar loads, and with the scalar loop."""
+    lifted, a third held above the ground): the tiled image equals the untiled one and the numpy reference, with
+    the SIMD loop reading the trace by hardware gathers or by scalar loads, and with the scalar loop."""
     simd, gather = READS[read]
     rng = np.random.default_rng(11)
     n = 300
     tx, rx = scattered_antennas(rng, n, -1, 2, 0.05)
     grid = Grid3D(0.0, 0.0, 0.04, 0.05, 0.05, 0.02, 27, 23, 30)
     d = rng.standard_normal((n, 200)).astype(np.float32)
-    kw = dict(dt_s=0.1e-9, n_samples=200, eps_r=6.0, aperture_deg=25, obliquity=True, spreading=True)
+    gap = np.where(rng.uniform(size=n) < 1 / 3, rng.uniform(0.05, 0.4, n), 0.0)
+    kw = dict(dt_s=0.1e-9, n_samples=200, eps_r=6.0, aperture_deg=25, obliquity=True, spreading=True, air_gap_m=gap)
     ref = BackProjection(grid, tx, rx, engine="numpy", **kw).adjoint(d)
     images = {}
     for tiled in (True, False):
@@ -155,7 +163,8 @@ def test_fold_in_the_same_pass_equals_migrating_a_trace_of_ones(read, weights):
     n = 120
     tx, rx = scattered_antennas(rng, n, -0.5, 1.5, 0.05)
     grid = Grid3D(0.0, 0.0, 0.04, 0.05, 0.05, 0.02, 21, 19, 30)
-    kw = dict(dt_s=0.1e-9, n_samples=60, eps_r=6.0, aperture_deg=35, **weights)
+    gap = np.where(np.arange(n) % 4 == 0, 0.2, 0.0)  # a quarter held 20 cm above the ground
+    kw = dict(dt_s=0.1e-9, n_samples=60, eps_r=6.0, aperture_deg=35, air_gap_m=gap, **weights)
     d = rng.standard_normal((n, 60)).astype(np.float32)
     ref = BackProjection(grid, tx, rx, engine="numpy", **kw)
     want_img, want_fold = ref.adjoint(d), ref.adjoint(np.ones((n, 60), np.float32))
@@ -234,8 +243,11 @@ def test_the_depth_loop_stops_where_the_record_ends():
     d0, dd, nd = 0.02, 0.01, 200
     slow = np.full(nd, 1 / 1e8, np.float32)  # 0.1 m/ns
     t0, inv_dt, umax = np.float32(1e-9), np.float32(1e10), np.float32(300.0)  # record: 30 ns, 29 ns after t0
-    lmax2 = record_path(slow, 0, t0, inv_dt, umax)
+    lmax2 = record_path(slow, 0, t0, inv_dt, umax, np.inf)
     assert lmax2 == pytest.approx((29e-9 * 1e8) ** 2, rel=1e-3)
+    # rays partly in air (antennas above the ground) run at up to c: the bound lengthens to c times the record
+    assert record_path(slow, 0, t0, inv_dt, umax, np.float32(1 / C0)) == pytest.approx((29e-9 * C0) ** 2, rel=1e-3)
+    assert record_path(slow, 0, t0, inv_dt, umax, np.float32(1e-7)) == pytest.approx(lmax2)  # a slower cap: none
     for h in (0.0, 0.5, 1.0, 1.4):
         z_last = np.sqrt(lmax2 / 4 - h * h)  # 2 sqrt(h^2 + z^2) = path
         k_true = int(np.floor((z_last - d0) / dd))
@@ -243,4 +255,28 @@ def test_the_depth_loop_stops_where_the_record_ends():
         assert k_true + 1 <= k1 <= k_true + 2, (h, k_true, k1)
     assert end_depth(0.3, 0.0, 0.3, 0.0, 0.0, 0.0, lmax2, d0, dd, 50) == 50  # the column ends at 0.51 m: all in reach
     assert end_depth(1.5, 0.0, 1.5, 0.0, 0.0, 0.0, lmax2, d0, dd, nd) == 0  # 3 m of path before any depth
-    assert record_path(slow, 0, np.float32(31e-9), inv_dt, umax) < 0  # a record that ends before time zero
+    assert record_path(slow, 0, np.float32(31e-9), inv_dt, umax, np.inf) < 0  # a record that ends before time zero
+
+
+def test_an_antenna_held_above_the_ground_focuses_only_with_its_air_gap():
+    """Antennas 0.15 m above ground of eps_r 9 over a sphere whose top is 0.3 m deep: migrated with the air gap
+    the image peaks at the top (within a cell and a half); migrated as if the antennas sat on the ground, the
+    0.3 m of air taken at c count as 0.05 m of this ground (c/3), and the peak comes out 0.05 m too deep."""
+    rng = np.random.default_rng(1)
+    n = 400
+    pos = np.c_[rng.uniform(0.2, 0.8, n), rng.uniform(0.2, 0.8, n), np.zeros(n)]
+    yaw = rng.uniform(-3, 3, n)
+    top, r, gap = np.array([0.52, 0.47, 0.30]), 0.02, 0.15
+    scene = ForwardScene(eps_r=9.0, spheres=[Sphere((top[0], top[1], -top[2] - r), r)])
+    f, dt, ns = 1e9, 0.05e-9, 300
+    data = forward_model(scene, pos, headings_rad=yaw, offset_m=0.06, frequency_hz=f, n_samples=ns, dt_s=dt,
+                         source_delay_s=0.0, air_gap_m=gap)
+    grid = Grid3D(0.2, 0.2, 0.1, 0.01, 0.01, 0.005, 61, 61, 61)
+    tx, rx = antenna_positions(pos, headings_rad=yaw, offset_m=0.06)
+    found = {}
+    for g in (gap, 0.0):
+        env = image_envelope(BackProjection(grid, tx, rx, dt_s=dt, n_samples=ns, eps_r=9.0, air_gap_m=g).adjoint(data))
+        i, j, k = np.unravel_index(np.argmax(env), env.shape)
+        found[g] = np.array([grid.x[i], grid.y[j], grid.depth[k]])
+    np.testing.assert_allclose(found[gap], top, atol=0.015)
+    assert found[0.0][2] == pytest.approx(top[2] + 0.05, abs=0.015)

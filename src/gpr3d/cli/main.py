@@ -290,6 +290,11 @@ def cmd_migrate(args):
                         ("--trace-spacing", args.trace_spacing)):
         if value is not None and not value > 0:
             raise GPR3DError(f"{flag} must be positive, got {value:g}")
+    if not (math.isfinite(args.air_gap) and args.air_gap >= 0):
+        raise GPR3DError(f"--air-gap must be a height >= 0 in metres, got {args.air_gap:g}")
+    if args.air_gap > 0 and args.method not in ("kirchhoff", "backprojection"):
+        raise GPR3DError(f"--air-gap needs --method kirchhoff or backprojection (refraction at the surface), not "
+                         f"{args.method}")
     out = _out_folder(args.out, "migrate")
     eps = _eps_argument(args.eps_r) if args.eps_r is not None else (0.299792458 / args.velocity) ** 2
     s = _apply_steps(_read_channel(args), args.steps)
@@ -298,7 +303,7 @@ def cmd_migrate(args):
             raise GPR3DError(f"--eps-r file: {args.input} gives no eps_r; give a number")
         eps = s.eps_r
     prof = migrate_profile(s, eps_r=float(eps), method=args.method, max_depth_m=args.max_depth,
-                           spacing_m=args.spacing, trace_spacing_m=args.trace_spacing)
+                           spacing_m=args.spacing, trace_spacing_m=args.trace_spacing, air_gap_m=args.air_gap)
     out.mkdir(parents=True, exist_ok=True)
     write_profile(out / "profile.h5", prof)
     save_profile_png(out / "profile.png", prof, title=f"{Path(args.input).name}: {args.method}, eps_r {eps:.3g}")
@@ -504,7 +509,8 @@ def _reconstruct_defaults():
 #: ReconstructConfig's names for the settings that reconstruct's options set
 _RECONSTRUCT_FLAGS = {"spacing_m": "--spacing", "max_depth_m": "--max-depth", "aperture_deg": "--aperture",
                       "threshold": "--threshold", "min_line_m": "--min-line", "engine": "--engine",
-                      "min_target_depth_m": "--min-depth", "method": "--method", "tile_m": "--tile"}
+                      "min_target_depth_m": "--min-depth", "method": "--method", "tile_m": "--tile",
+                      "air_gap_m": "--air-gap"}
 
 
 def cmd_reconstruct(args):
@@ -526,7 +532,7 @@ def cmd_reconstruct(args):
     settings = dict(spacing_m=args.spacing, max_depth_m=args.max_depth,
                     aperture_deg=None if args.aperture == 0 else args.aperture, threshold=args.threshold,
                     min_line_m=args.min_line, engine=args.engine, time_zero="none" if args.no_time_zero else "peak",
-                    min_target_depth_m=args.min_depth, method=args.method)
+                    min_target_depth_m=args.min_depth, method=args.method, air_gap_m=args.air_gap)
     check_config(ReconstructConfig(**settings, **site), names=_RECONSTRUCT_FLAGS)  # one line, before any work
     eps_given = _eps_argument(args.eps_r)
     estimate = eps_given is None
@@ -1003,6 +1009,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--max-depth", type=float, default=None, help="deepest depth (m; default: the record's reach)")
     sp.add_argument("--spacing", type=float, default=None, help="image cell along the line (m; default trace step)")
     sp.add_argument("--trace-spacing", type=float, default=None, help="trace spacing (m; default: the positions)")
+    sp.add_argument("--air-gap", type=float, default=0.0,
+                    help="the antenna's height above the ground (m; kirchhoff and backprojection; default 0)")
     sp.add_argument("--steps", nargs="*", default=[], metavar="STEP", help="processing first")
 
     sp = add("process", cmd_process, "process a radar file and write the result",
@@ -1160,6 +1168,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--min-depth", type=float, default=rc.min_target_depth_m,
                     help="no targets shallower than this (m; e.g. where the direct wave rings)")
     sp.add_argument("--no-time-zero", action="store_true", help="the data already start at time zero")
+    sp.add_argument("--air-gap", type=float, default=rc.air_gap_m,
+                    help="the antennas' height above the ground (m) when held a wavelength or more above it (an "
+                         f"air-launched antenna: the rays refract at the surface; default {rc.air_gap_m:g})")
     sp.add_argument("--engine", choices=("numba", "numpy"), default=rc.engine, help="migration kernel")
     sp.add_argument("--mask", choices=("none", "detect"), default="none",
                     help="detect: run the detector on the trace sequence and migrate only its boxes")

@@ -16,9 +16,15 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from gpr3d.core.raypath import S_AIR
 from gpr3d.migration import _simd
 
 f32 = np.float32
+#: slowness of air, float32 (for antennas held above the ground: ``gap``)
+S_AIR32 = f32(S_AIR)
+#: Newton steps of the refracted legs: within a 56 deg cone (horizontal reach up to 1.5 x the depth, 2 cm to 1 m of
+#: air, eps_r 3-30) three reach Fermat's time to 0.01 ps (gpr3d.core.raypath takes four, for any geometry)
+STEPS = 3
 W = _simd.W
 _CACHE = {}
 #: columns per tile side in the tiled adjoint
@@ -42,11 +48,12 @@ def start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd):
     return min(max(k0, 0), nd)
 
 @njit(fastmath=True, cache=True, inline="always")
-def record_path(slow, off, t0, inv_dt, umax):
+def record_path(slow, off, t0, inv_dt, umax, scap):
     # the square of the longest path (tx -> voxel -> rx, m) whose two-way time still lands inside the record, at the
-    # fastest depth's speed (a little longer, for float32 rounding); inf when the slowness is not positive, -1 when
-    # the record ends before time zero
-    smin = slow[off]
+    # fastest depth's speed or ``scap``, whichever is faster (S_AIR for antennas above the ground, whose rays run
+    # partly through air; inf for none), a little longer for float32 rounding; inf when the slowness is not
+    # positive, -1 when the record ends before time zero
+    smin = min(slow[off], scap)
     for k in range(off + 1, slow.shape[0]):
         smin = min(smin, slow[k])
     if not smin > 0.0:
@@ -84,6 +91,40 @@ def sample_position(dk, ha, hb, h2a, h2b, sk, t0, inv_dt, umax):
     return min(max(u, f32(0.0)), umax), za, zb, ra, rb
 
 @njit(fastmath=True, cache=True, inline="always")
+def refracted_leg(h, d, rho, s1, tanc):
+    # gpr3d.core.raypath.air_ground_time for h > 0 in float32 without branches (so that the depth loop
+    # vectorises): a point at or above the surface (d <= 0) is reached through the air alone, which the ground
+    # leg's length then clamped to zero gives; ``tanc``: tan of the critical angle, sin = S_AIR / s1
+    d = max(d, f32(0.0))
+    qmax = min(rho, d * tanc)
+    q = min(rho * d / (h + d), qmax)
+    for _ in range(STEPS):
+        s = rho - q
+        a = math.sqrt(h * h + s * s)
+        b = max(math.sqrt(d * d + q * q), f32(1e-30))
+        grad = s1 * q / b - S_AIR32 * s / a
+        curv = S_AIR32 * h * h / (a * a * a) + s1 * d * d / (b * b * b)
+        q = min(max(q - grad / max(curv, f32(1e-30)), f32(0.0)), qmax)
+    s = rho - q
+    return S_AIR32 * math.sqrt(h * h + s * s) + s1 * math.sqrt(d * d + q * q)
+
+
+@njit(fastmath=True, cache=True, inline="always")
+def sample_position_air(dk, ha, hb, h2a, h2b, sk, t0, inv_dt, umax, g):
+    # as sample_position for antennas held ``g`` above the ground: each leg refracts at the surface
+    # (gpr3d.core.raypath); the vertical legs and path lengths for the weights run up to the antennas
+    za = dk + ha
+    zb = dk + hb
+    n = min(S_AIR32 / sk, f32(0.9999999))
+    tanc = n / math.sqrt(f32(1.0) - n * n)
+    u = (t0 + refracted_leg(g, za, math.sqrt(h2a), sk, tanc) + refracted_leg(g, zb, math.sqrt(h2b), sk, tanc)) * inv_dt
+    za += g
+    zb += g
+    ra = math.sqrt(h2a + za * za)
+    rb = math.sqrt(h2b + zb * zb)
+    return min(max(u, f32(0.0)), umax), za, zb, ra, rb
+
+@njit(fastmath=True, cache=True, inline="always")
 def weight(za, zb, ra, rb, mode):
     # bit 0: obliquity (mean cosine of the two legs), bit 1: spreading (mean leg length)
     w = f32(1.0)
@@ -102,13 +143,15 @@ def depth_axis(depth, nd):
     return depth[off], (depth[off + 1] - depth[off] if nd > 1 else f32(1.0))
 
 @njit(parallel=True, fastmath=True, cache=True)
-def adjoint(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image):
+def adjoint(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image):
     # per (column, trace): pass 1 computes the sample positions and weights for all depths
-    # (vectorised: two square roots per voxel), pass 2 gathers and accumulates
+    # (vectorised: two square roots per voxel), pass 2 gathers and accumulates; ``gap`` (per trace): the antennas'
+    # height above the ground (> 0: the rays refract at the surface)
     nx, ny, nd = image.shape
     n_tr = data.shape[0]
     d0, dd = depth_axis(depth, nd)
-    lmax2 = record_path(slow, 0, t0, inv_dt, umax)
+    lmax2 = record_path(slow, 0, t0, inv_dt, umax, math.inf)
+    lmax2a = record_path(slow, 0, t0, inv_dt, umax, S_AIR32)
     for c in prange(nx * ny):
         ix = c // ny
         iy = c - ix * ny
@@ -121,15 +164,24 @@ def adjoint(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, ima
             ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
             ha = tx[j, 2]
             hb = rx[j, 2]
+            g = gap[j]
             k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
-            k1 = end_depth(ax, ay, bx, by, ha, hb, lmax2, d0, dd, nd)
-            if mode == 0:
+            if g > 0:
+                k1 = end_depth(ax, ay, bx, by, ha + g, hb + g, lmax2a, d0, dd, nd)
                 for k in range(k0, k1):
-                    uu[k] = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)[0]
-            else:
-                for k in range(k0, k1):
-                    uu[k], za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
+                    uu[k], za, zb, ra, rb = sample_position_air(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt,
+                                                                umax, g)
                     ww[k] = weight(za, zb, ra, rb, mode)
+            else:
+                k1 = end_depth(ax, ay, bx, by, ha, hb, lmax2, d0, dd, nd)
+                if mode == 0:
+                    for k in range(k0, k1):
+                        uu[k] = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)[0]
+                else:
+                    for k in range(k0, k1):
+                        uu[k], za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt,
+                                                                umax)
+                        ww[k] = weight(za, zb, ra, rb, mode)
             row = data[j]
             # unsigned indices (u >= 0 by the clamp): no negative-index wraparound, so the gathers vectorise
             if mode == 0:
@@ -148,7 +200,7 @@ def adjoint(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, ima
             col[k] += acc[k]
 
 @njit(parallel=True, fastmath=True, cache=True)
-def forward(image, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, data):
+def forward(image, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, data):
     nx, ny, nd = image.shape
     n_tr = data.shape[0]
     d0, dd = depth_axis(depth, nd)
@@ -156,13 +208,18 @@ def forward(image, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, da
         row = data[j]
         ha = tx[j, 2]
         hb = rx[j, 2]
+        g = gap[j]
         for ix in range(nx):
             for iy in range(ny):
                 ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
                 k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
                 col = image[ix, iy]
                 for k in range(k0, nd):
-                    u, za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
+                    if g > 0:
+                        u, za, zb, ra, rb = sample_position_air(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt,
+                                                                umax, g)
+                    else:
+                        u, za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
                     i0 = np.uint32(u)
                     f = u - f32(i0)
                     m = weight(za, zb, ra, rb, mode) * col[k]
@@ -224,22 +281,33 @@ def _stack(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, 
 
 
 @njit(parallel=True, fastmath=True, cache=True)
-def adjoint_simd(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image, path):
+def adjoint_simd(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image, path):
+    # the SIMD depth loop for antennas on the ground; a trace held above it (gap > 0) takes the scalar loop
     nx, ny, nd = image.shape
     n_tr = data.shape[0]
     nblk = depth.shape[0] // W
     off = depth.shape[0] - nd
     d0, dd = depth_axis(depth, nd)
-    lmax2 = record_path(slow, off, t0, inv_dt, umax)
+    lmax2 = record_path(slow, off, t0, inv_dt, umax, math.inf)
+    lmax2a = record_path(slow, off, t0, inv_dt, umax, S_AIR32)
     none = np.zeros(1, np.float32)
     for c in prange(nx * ny):
         ix = c // ny
         iy = c - ix * ny
         col = image[ix, iy]
         acc = np.zeros(depth.shape[0], np.float32)
+        uu = np.empty(nd, np.float32)
+        ww = np.empty(nd, np.float32)
         for j in range(n_tr):
             ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
             k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
+            g = gap[j]
+            if g > 0:
+                k1 = end_depth(ax, ay, bx, by, tx[j, 2] + g, rx[j, 2] + g, lmax2a, d0, dd, nd)
+                if k0 < k1:
+                    _scalar_depths(data[j], depth[off:], slow[off:], acc[off:], none, h2a, h2b, tx[j, 2], rx[j, 2],
+                                   t0, inv_dt, umax, k0, k1, mode, False, uu, ww, g)
+                continue
             k1 = end_depth(ax, ay, bx, by, tx[j, 2], rx[j, 2], lmax2, d0, dd, nd)
             if k0 >= k1:
                 continue
@@ -254,7 +322,7 @@ def _probe(fn, *extra):
     one = np.zeros((1, 3), f32)
     try:
         for mode in range(4):
-            fn(np.zeros((1, 4), f32), one, one, np.zeros(1, f32), np.zeros(1, f32), np.arange(W, dtype=f32),
+            fn(np.zeros((1, 4), f32), one, one, np.zeros(1, f32), np.zeros(1, f32), np.zeros(1, f32), np.arange(W, dtype=f32),
                np.ones(W, f32), f32(0), f32(1), f32(2), f32(0.5), mode, np.zeros((1, 1, 2), f32), *extra)
     except Exception:  # noqa: BLE001 - any failure to build means: use the scalar kernel
         return None
@@ -278,15 +346,23 @@ def simd_adjoint(path: int = GATHER):
 
 
 @njit(fastmath=True, cache=True, inline="always")
-def _scalar_depths(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode, fold, uu, ww):
+def _scalar_depths(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nd, mode, fold, uu, ww,
+                   g):
     # two passes, as in the plain adjoint: the positions and weights (vectorised: square roots in SIMD lanes),
-    # then the reads of the trace (scalar loads: no hardware gather, which is slow on some CPUs)
+    # then the reads of the trace (scalar loads: no hardware gather, which is slow on some CPUs); ``g``: the
+    # antennas' height above the ground (> 0: refracted rays)
     one = np.uint32(1)
-    for k in range(k0, nd):
-        u, za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
-        w = weight(za, zb, ra, rb, mode)
-        uu[k] = u
-        ww[k] = w
+    if g > 0:
+        for k in range(k0, nd):
+            u, za, zb, ra, rb = sample_position_air(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax, g)
+            uu[k] = u
+            ww[k] = weight(za, zb, ra, rb, mode)
+    else:
+        for k in range(k0, nd):
+            u, za, zb, ra, rb = sample_position(depth[k], ha, hb, h2a, h2b, slow[k], t0, inv_dt, umax)
+            w = weight(za, zb, ra, rb, mode)
+            uu[k] = u
+            ww[k] = w
     if fold:  # a trace of ones read at u: 1 inside the record, 1 - frac on the last sample, 0 past it
         for k in range(k0, nd):  # (a loop of its own: a branch in the one above would keep it from vectorising)
             facc[k] += ww[k] * min(max(umax - uu[k], f32(0.0)), f32(1.0))
@@ -298,7 +374,7 @@ def _scalar_depths(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, um
 
 
 @njit(parallel=True, fastmath=True, cache=True)
-def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image,
+def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image,
                   order, bin_start, bx0, by0, bsize, nbx, nby, mid, reach, fold_img, path, fold):
     """The adjoint with an aperture, at a cost that follows the aperture.
 
@@ -316,7 +392,8 @@ def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mod
     d0, dd = depth_axis(depth, nd)
     nblk = depth.shape[0] // W
     off = depth.shape[0] - nd  # top padding of the SIMD blocks (0 for the scalar loop)
-    lmax2 = record_path(slow, off, t0, inv_dt, umax)
+    lmax2 = record_path(slow, off, t0, inv_dt, umax, math.inf)
+    lmax2a = record_path(slow, off, t0, inv_dt, umax, S_AIR32)
     ntx = (nx + TILE - 1) // TILE
     nty = (ny + TILE - 1) // TILE
     for t in prange(ntx * nty):
@@ -348,20 +425,24 @@ def adjoint_tiled(data, tx, rx, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mod
                     row = data[j]
                     ha = tx[j, 2]
                     hb = rx[j, 2]
+                    g = gap[j]
                     for ix in range(tx0, tx1):
                         for iy in range(ty0, ty1):
                             ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
                             k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
-                            k1 = end_depth(ax, ay, bx, by, ha, hb, lmax2, d0, dd, nd)
+                            if g > 0:
+                                k1 = end_depth(ax, ay, bx, by, ha + g, hb + g, lmax2a, d0, dd, nd)
+                            else:
+                                k1 = end_depth(ax, ay, bx, by, ha, hb, lmax2, d0, dd, nd)
                             if k0 < k1:
                                 c = (ix - tx0) * TILE + (iy - ty0)
-                                if path:
+                                if path and g <= 0:
                                     _stack(row, depth, slow, acc[c], facc[c], h2a, h2b, ha, hb, t0, inv_dt, umax,
                                            k0 + off, min(nblk, (k1 + off + W - 1) // W), mode, fold, path)
                                 else:
                                     _scalar_depths(row, depth[off:], slow[off:], acc[c, off:],
                                                    facc[c, off:] if fold else facc[c], h2a, h2b, ha, hb, t0, inv_dt,
-                                                   umax, k0, k1, mode, fold, uu, ww)
+                                                   umax, k0, k1, mode, fold, uu, ww, g)
         for ix in range(tx0, tx1):
             for iy in range(ty0, ty1):
                 c = (ix - tx0) * TILE + (iy - ty0)

@@ -5,6 +5,11 @@ offset rotates with the antenna heading) and voxel ``p`` at depth ``d``::
 
     t_j(p) = t0 + (|a_j - p| + |p - b_j|) / v_eff(d)
 
+The antennas' z is the elevation of the ground under them (0 on flat ground; a higher antenna has that much more
+ground above the voxel, as in the static correction). An antenna held ``g`` above the ground (``air_gap_m``: a
+horn antenna, a cart with a gap) adds an air leg: each leg then refracts at the surface, its time the least over
+the crossing point (Fermat; :mod:`gpr3d.core.raypath`).
+
 ``forward`` (demigration, diffraction summation) spreads each voxel's value onto
 every trace at ``t_j(p)`` by linear interpolation; ``adjoint`` (migration, back
 projection) gathers ``data_j(t_j(p))`` into the voxel (a trace reads as zero past its last
@@ -29,6 +34,7 @@ import numpy as np
 
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.poses import quat_from_yaw, rotate_vectors
+from gpr3d.core.raypath import S_AIR, air_ground_times
 from gpr3d.core.units import C0
 from gpr3d.core.grid import Grid3D
 
@@ -75,17 +81,19 @@ class BackProjection:
     Parameters
     ----------
     grid : :class:`~gpr3d.core.grid.Grid3D`
-    tx, rx : ``(n_traces, 3)`` transmitter and receiver positions (world, m; z = height above the surface)
+    tx, rx : ``(n_traces, 3)`` transmitter and receiver positions (world, m; z = the elevation of the ground under
+        the antenna, 0 on flat ground)
     dt_s, n_samples : the data's time axis; ``t0_s`` is time zero (s after the first sample)
     eps_r / layers : the velocity (see :func:`effective_slowness`)
     aperture_deg : beam half-angle from the vertical (None: no limit)
     obliquity, spreading : weights ``cos(theta)`` and ``r``
+    air_gap_m : the antennas' height above the ground (m): one number or one per trace (0: ground-coupled)
     engine : ``"numba"`` or ``"numpy"``
     """
 
     def __init__(self, grid: Grid3D, tx, rx, *, dt_s: float, n_samples: int, t0_s: float = 0.0, eps_r=None,
                  layers=None, aperture_deg: float | None = None, obliquity: bool = False, spreading: bool = False,
-                 engine: str = "numba"):
+                 air_gap_m=0.0, engine: str = "numba"):
         self.grid = grid
         self.tx = np.ascontiguousarray(tx, dtype=np.float64)
         self.rx = np.ascontiguousarray(rx, dtype=np.float64)
@@ -93,6 +101,13 @@ class BackProjection:
             raise InvalidDataError("tx and rx must both be (n_traces, 3)")
         if engine not in self._ENGINES:
             raise InvalidDataError(f"engine must be one of {', '.join(map(repr, self._ENGINES))}, got {engine!r}")
+        gap = np.asarray(air_gap_m, dtype=np.float64)
+        if gap.ndim > 1 or (gap.ndim == 1 and gap.shape != (self.tx.shape[0],)):
+            raise InvalidDataError(f"air_gap_m must be one number or one per trace ({self.tx.shape[0]}), got shape "
+                                   f"{gap.shape}")
+        if not np.all(np.isfinite(gap)) or np.any(gap < 0):
+            raise InvalidDataError("air_gap_m must be finite and >= 0 (the antennas' height above the ground, m)")
+        self.air_gap = np.ascontiguousarray(np.broadcast_to(gap, (self.tx.shape[0],)))
         self.dt = float(dt_s)
         self.n_samples = int(n_samples)
         self.t0 = float(t0_s)
@@ -136,9 +151,18 @@ class BackProjection:
         ys = self.y if ys is None else ys
         X, Y, D = np.meshgrid(xs, ys, self.depth, indexing="ij")
         za, zb = D + self.tx[j, 2], D + self.rx[j, 2]
-        ra = np.sqrt((X - self.tx[j, 0]) ** 2 + (Y - self.tx[j, 1]) ** 2 + za**2)
-        rb = np.sqrt((X - self.rx[j, 0]) ** 2 + (Y - self.rx[j, 1]) ** 2 + zb**2)
-        u = (self.t0 + (ra + rb) * self.slow[None, None, :]) / self.dt
+        ha2 = (X - self.tx[j, 0]) ** 2 + (Y - self.tx[j, 1]) ** 2
+        hb2 = (X - self.rx[j, 0]) ** 2 + (Y - self.rx[j, 1]) ** 2
+        g = self.air_gap[j]
+        if g > 0:  # each leg refracts at the surface; the weights' legs run up to the antennas
+            s = self.slow[None, None, :]
+            u = (self.t0 + air_ground_times(g, za, np.sqrt(ha2), S_AIR, s)
+                 + air_ground_times(g, zb, np.sqrt(hb2), S_AIR, s)) / self.dt
+            za, zb = za + g, zb + g
+            ra, rb = np.sqrt(ha2 + za**2), np.sqrt(hb2 + zb**2)
+        else:
+            ra, rb = np.sqrt(ha2 + za**2), np.sqrt(hb2 + zb**2)
+            u = (self.t0 + (ra + rb) * self.slow[None, None, :]) / self.dt
         w = np.ones_like(u)
         if self.obliquity:
             w *= 0.5 * (za / np.maximum(ra, 1e-12) + zb / np.maximum(rb, 1e-12))  # r = 0 at an antenna: cos 0
@@ -216,8 +240,8 @@ class BackProjection:
             # partly idle (padded at the bottom, a grid of 65 depths paid a whole block for its last voxel); the pad
             # voxels are never live and are discarded
             extra = -nd % W
-            args[4] = np.r_[np.full(extra, self.depth[0]), self.depth].astype(np.float32)
-            args[5] = np.r_[np.full(extra, self.slow[0]), self.slow].astype(np.float32)
+            args[5] = np.r_[np.full(extra, self.depth[0]), self.depth].astype(np.float32)
+            args[6] = np.r_[np.full(extra, self.slow[0]), self.slow].astype(np.float32)
         tiled = (_kernels.tiled_adjoint(path if simd is not None else 0, with_fold) if self.tan_ap > 0 and self.tiled
                  else None)
         if tiled is not None:
@@ -259,6 +283,7 @@ class BackProjection:
         sub = copy.copy(self)
         sub.tx = np.ascontiguousarray(self.tx[idx])
         sub.rx = np.ascontiguousarray(self.rx[idx])
+        sub.air_gap = np.ascontiguousarray(self.air_gap[idx])
         return sub
 
     @property
@@ -272,7 +297,7 @@ class BackProjection:
         xs = self.x if xs is None else xs
         ys = self.y if ys is None else ys
         mode = (1 if self.obliquity else 0) | (2 if self.spreading else 0)
-        return (self.tx.astype(f), self.rx.astype(f), xs.astype(f), ys.astype(f), self.depth.astype(f),
+        return (self.tx.astype(f), self.rx.astype(f), self.air_gap.astype(f), xs.astype(f), ys.astype(f), self.depth.astype(f),
                 self.slow.astype(f), f(self.t0), f(1.0 / self.dt), f(self.n_samples), f(self.tan_ap), mode)
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.grid import Grid3D
-from gpr3d.core.units import velocity_from_eps_r
+from gpr3d.core.units import C0, velocity_from_eps_r
 
 __all__ = ["ProfileImage", "migrate_profile", "METHODS"]
 
@@ -50,10 +50,17 @@ def _along(survey, trace_spacing_m):
 
 def migrate_profile(survey, *, eps_r: float, method: str = "kirchhoff", max_depth_m: float | None = None,
                     spacing_m: float | None = None, depth_spacing_m: float | None = None,
-                    trace_spacing_m: float | None = None, aperture_deg: float = 50.0) -> ProfileImage:
-    """Migrate the profile ``survey`` (time zero at ``survey.t0_s``) with ``method`` (see the module docstring)."""
+                    trace_spacing_m: float | None = None, aperture_deg: float = 50.0,
+                    air_gap_m: float = 0.0) -> ProfileImage:
+    """Migrate the profile ``survey`` (time zero at ``survey.t0_s``) with ``method`` (see the module docstring);
+    ``air_gap_m``: the antenna's height above the ground (Kirchhoff and back projection: the rays refract at the
+    surface)."""
     if method not in METHODS:
         raise InvalidDataError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if not (np.isfinite(air_gap_m) and air_gap_m >= 0):
+        raise InvalidDataError(f"air gap must be a height >= 0 in metres, got {air_gap_m!r}")
+    if air_gap_m > 0 and method not in ("kirchhoff", "backprojection"):
+        raise InvalidDataError(f"an air gap needs method kirchhoff or backprojection, not {method!r}")
     if not (np.isfinite(eps_r) and eps_r >= 1):
         raise InvalidDataError(f"eps_r must be a relative permittivity >= 1, got {eps_r!r}")
     t_start = time.perf_counter()
@@ -62,7 +69,7 @@ def migrate_profile(survey, *, eps_r: float, method: str = "kirchhoff", max_dept
         raise InvalidDataError("the profile's traces all lie at one place: nothing to migrate along")
     v = velocity_from_eps_r(eps_r)
     record = survey.n_samples * survey.dt_s - survey.t0_s
-    depth = 0.5 * v * record * 0.95 if max_depth_m is None else float(max_depth_m)
+    depth = 0.5 * v * (record - 2 * air_gap_m / C0) * 0.95 if max_depth_m is None else float(max_depth_m)
     if not (np.isfinite(depth) and depth > 0):
         raise InvalidDataError(f"max depth must be positive, got {max_depth_m!r}")
     step = float(np.median(np.diff(s_along)[np.diff(s_along) > 0])) if spacing_m is None else float(spacing_m)
@@ -84,7 +91,7 @@ def migrate_profile(survey, *, eps_r: float, method: str = "kirchhoff", max_dept
         kirch = method == "kirchhoff"
         op = BackProjection(grid, tx, rx, dt_s=survey.dt_s, n_samples=survey.n_samples, t0_s=survey.t0_s,
                             eps_r=eps_r, aperture_deg=aperture_deg if kirch else None, obliquity=kirch,
-                            spreading=False)
+                            spreading=False, air_gap_m=air_gap_m)
         img = op.adjoint(survey.data)[:, 0, :]
     elif method == "stolt":
         from gpr3d.migration.traditional import stolt_migrate

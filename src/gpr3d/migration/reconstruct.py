@@ -20,7 +20,7 @@ import numpy as np
 
 from gpr3d import __version__
 from gpr3d.core.errors import GeometryWarning, InvalidDataError
-from gpr3d.core.units import velocity_from_eps_r
+from gpr3d.core.units import C0, velocity_from_eps_r
 from gpr3d.io.atomic import atomic_write_text
 from gpr3d.core.grid import Grid3D
 from gpr3d.migration.masking import box_mask, check_boxes, image_envelope
@@ -48,6 +48,8 @@ class ReconstructConfig:
     min_line_m: float = 0.3
     min_target_depth_m: float | None = None  #: no targets shallower (e.g. where the direct wave rings)
     taper_traces: float = 3.0
+    #: the antennas' height above the ground (m; an air-launched antenna): the rays refract at the surface
+    air_gap_m: float = 0.0
     engine: str = "numba"
     #: "backprojection": every trace migrated into the 3D grid from its pose; "pseudo3d": each straight line (along
     #: x or y) migrated in its vertical plane (2D Kirchhoff), the planes interpolated between lines
@@ -162,6 +164,7 @@ def check_config(cfg: ReconstructConfig, names: dict | None = None) -> None:
     number("min_line_m", lo=0.0)
     number("min_target_depth_m", none_ok=True, lo=0.0)
     number("taper_traces", lo=0.0)
+    number("air_gap_m", lo=0.0)
     for name in ("obliquity", "spreading", "remove_background"):
         if not isinstance(getattr(cfg, name), bool):
             bad(name, "true or false")
@@ -269,7 +272,7 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
                       "other, so the profile is migrated in 2D (the vertical plane under it) and targets crossing it "
                       "come out as points on it", GeometryWarning, stacklevel=2)
     v = velocity_from_eps_r(eps)
-    depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s - s.t0_s) * 0.95
+    depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s - s.t0_s - 2 * cfg.air_gap_m / C0) * 0.95
     grid = Grid3D.covering(positions, depth_m=depth, spacing_m=cfg.spacing_m,
                            depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m)
     if frame is not None:
@@ -277,7 +280,7 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     check_grid_fits(grid)  # (site tiles too: the whole volume is put together in memory)
     op = BackProjection(grid, tx, rx, dt_s=s.dt_s, n_samples=s.n_samples, t0_s=s.t0_s, eps_r=eps,
                         aperture_deg=cfg.aperture_deg, obliquity=cfg.obliquity, spreading=cfg.spreading,
-                        engine=cfg.engine)
+                        air_gap_m=cfg.air_gap_m, engine=cfg.engine)
     t = time.perf_counter()
     noise_map = None
     # the fold (how many traces see each voxel inside their aperture and record) comes with the image: in the same
@@ -349,7 +352,7 @@ def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s) -> "Reconstruction"
         raise InvalidDataError(f"pseudo-3D needs two lines at least, the survey has {len(lines)}: migrate one "
                                "profile with 'gpr3d migrate', or use method 'backprojection'")
     v = velocity_from_eps_r(eps)
-    depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s - s.t0_s) * 0.95
+    depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s - s.t0_s - 2 * cfg.air_gap_m / C0) * 0.95
     grid = Grid3D.covering(s.positions_xyz, depth_m=depth, spacing_m=cfg.spacing_m,
                            depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m)
     check_grid_fits(grid)
@@ -361,9 +364,10 @@ def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s) -> "Reconstruction"
         shifted = [[b[0], b[1] - cut_s, b[2], b[3] - cut_s] for b in boxes]
         mask = box_mask(s.n_traces, s.n_samples, s.dt_s, shifted, taper_traces=cfg.taper_traces)
         noise_map, _ = pseudo3d(s.replace(data=s.data * (1 - mask)), grid, eps_r=eps, aperture_deg=aperture,
-                                engine=cfg.engine)
+                                engine=cfg.engine, air_gap_m=cfg.air_gap_m)
         data = s.data * mask
-    env, _ = pseudo3d(s.replace(data=data), grid, eps_r=eps, aperture_deg=aperture, engine=cfg.engine)
+    env, _ = pseudo3d(s.replace(data=data), grid, eps_r=eps, aperture_deg=aperture, engine=cfg.engine,
+                      air_gap_m=cfg.air_gap_m)
     t_mig = time.perf_counter() - t
     tol = 2.0 * max(grid.dx, grid.dy)
     band = max(2 * tol, 0.5 * v / s.frequency_hz) if s.frequency_hz else None

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.units import velocity_from_eps_r
 from gpr3d.core.grid import Grid3D
 from gpr3d.migration.operator import BackProjection, antenna_positions
@@ -90,15 +91,16 @@ def survey_lines(survey) -> list:
 
 
 def kirchhoff_line(data, positions_xyz, orientations, offset_m, *, dt_s, t0_s, eps_r, grid: Grid3D, axis: str,
-                   coord: float, aperture_deg=50.0, engine="numba"):
-    """Kirchhoff-migrate one line onto its vertical plane: image ``(n_along, nd)`` on ``grid``'s axis."""
+                   coord: float, aperture_deg=50.0, engine="numba", air_gap_m=0.0):
+    """Kirchhoff-migrate one line onto its vertical plane: image ``(n_along, nd)`` on ``grid``'s axis
+    (``air_gap_m``: the antennas' height above the ground, see :class:`.BackProjection`)."""
     if axis == "x":  # a line along x at y = coord
         g2 = Grid3D(grid.x0, coord, grid.d0, grid.dx, grid.dy, grid.dd, grid.nx, 1, grid.nd)
     else:
         g2 = Grid3D(coord, grid.y0, grid.d0, grid.dx, grid.dy, grid.dd, 1, grid.ny, grid.nd)
     tx, rx = antenna_positions(positions_xyz, orientations, offset_m)
     op = BackProjection(g2, tx, rx, dt_s=dt_s, n_samples=data.shape[1], t0_s=t0_s, eps_r=eps_r,
-                        aperture_deg=aperture_deg, obliquity=True, engine=engine)
+                        aperture_deg=aperture_deg, obliquity=True, air_gap_m=air_gap_m, engine=engine)
     img = op.adjoint(data)
     return img[:, 0, :] if axis == "x" else img[0, :, :]
 
@@ -121,12 +123,16 @@ def _fill_between(planes: dict, n: int, origin: float, step: float, shape):
     return out
 
 
-def pseudo3d(survey, grid: Grid3D, *, eps_r: float, method: str = "kirchhoff", aperture_deg=50.0, engine="numba"):
+def pseudo3d(survey, grid: Grid3D, *, eps_r: float, method: str = "kirchhoff", aperture_deg=50.0, engine="numba",
+             air_gap_m: float = 0.0):
     """Pseudo-3D volume ``(nx, ny, nd)`` from a survey made of straight lines along x and/or y.
 
     ``survey`` must already be time-zero corrected (``t0_s`` is honoured by
-    Kirchhoff; Stolt needs ``t0_s == 0``) and background-removed.
+    Kirchhoff; Stolt needs ``t0_s == 0``) and background-removed. ``air_gap_m``: the antennas' height above the
+    ground (Kirchhoff only; Stolt refuses one).
     """
+    if air_gap_m and method != "kirchhoff":
+        raise InvalidDataError(f"an air gap needs method 'kirchhoff' (refraction at the surface), not {method!r}")
     from scipy.signal import hilbert
 
     lines = survey_lines(survey)
@@ -140,7 +146,8 @@ def pseudo3d(survey, grid: Grid3D, *, eps_r: float, method: str = "kirchhoff", a
         if method == "kirchhoff":
             q = None if survey.orientations_quat_wxyz is None else survey.orientations_quat_wxyz[idx]
             img = kirchhoff_line(data, p, q, survey.offset_m, dt_s=survey.dt_s, t0_s=survey.t0_s, eps_r=eps_r,
-                                 grid=grid, axis=axis, coord=coord, aperture_deg=aperture_deg, engine=engine)
+                                 grid=grid, axis=axis, coord=coord, aperture_deg=aperture_deg, engine=engine,
+                                 air_gap_m=air_gap_m)
         elif method == "stolt":
             along = p[:, 0] if axis == "x" else p[:, 1]
             order = np.argsort(along)

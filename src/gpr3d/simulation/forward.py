@@ -9,8 +9,14 @@ Physics, per trace and reflector (antenna midpoint ``m``, transmitter ``a``,
 receiver ``b``, both rotating with the antenna heading; see CONVENTIONS.md):
 
 * **time**: ``p`` = the point of the reflector's surface nearest ``m``; the path
-  ``|a - p| + |p - b|`` runs through the host at ``v = c / sqrt(eps_r)``; an
-  antenna above the surface adds its height twice at the speed of light.
+  ``|a - p| + |p - b|`` runs through the host at ``v = c / sqrt(eps_r)``. The
+  ground is flat (z = 0): an antenna at z > 0 (a cart's bounce: small next to a
+  wavelength) adds its height twice at the speed of light. An antenna held
+  ``air_gap_m`` above the ground (air-launched: a gap of a wavelength or more) sends
+  each leg through the air first, refracted at the surface (the least time over
+  the crossing point, :func:`gpr3d.core.raypath.air_ground_time`), as the migration
+  does with its ``air_gap_m``. (For a gap much smaller than a wavelength the ground
+  wave's straight ray dominates, and the refracted ray is the weaker head wave.)
 * **reflection coefficient**: ``-1`` for metal, ``(sqrt(eps_h) - sqrt(eps_t)) /
   (sqrt(eps_h) + sqrt(eps_t))`` for dielectrics (normal incidence).
 * **spreading** (geometric optics, ``R`` = half the path): 3D: a sphere of radius
@@ -150,6 +156,7 @@ def _kernel():
         return _KERNEL
     numba = require("numba")
     njit, prange = numba.njit, numba.prange
+    from gpr3d.core.raypath import S_AIR, air_ground_time
 
     @njit(cache=True, fastmath=True)
     def add_wavelet(out_row, t_arr, amp, dt, wt0, wstep, wvals):
@@ -197,9 +204,16 @@ def _kernel():
             f *= math.exp(-0.5 * (th / theta0) ** 2)
         return f
 
+    @njit(cache=True, fastmath=True)
+    def travel(ax, ay, az, bx, by, bz, px, py, pz, gap, v):
+        # two-way time tx -> p -> rx: each leg straight through the host, or refracted at the surface when the
+        # antennas are held ``gap`` above it (air_ground_time takes both)
+        return (air_ground_time(gap, az - pz, math.hypot(ax - px, ay - py), S_AIR, 1.0 / v)
+                + air_ground_time(gap, bz - pz, math.hypot(bx - px, by - py), S_AIR, 1.0 / v))
+
     @njit(parallel=True, cache=True, fastmath=True)
     def kernel(out, tx, rx, dip, caps, cap_pol, echoes, boxes, box_gamma, layers, v, n_host, alpha, dt, t_src,
-               wt0, wstep, wvals, air_amp, ground_amp, spread2d, footprint, theta0, noise, seed):
+               wt0, wstep, wvals, air_amp, ground_amp, spread2d, footprint, theta0, noise, seed, gap):
         n_tr = out.shape[0]
         for i in prange(n_tr):
             row = out[i]
@@ -207,7 +221,7 @@ def _kernel():
                 row[k] = 0.0
             ax, ay, az = tx[i, 0], tx[i, 1], tx[i, 2]
             bx, by, bz = rx[i, 0], rx[i, 1], rx[i, 2]
-            h_air = (max(az, 0.0) + max(bz, 0.0)) / 299792458.0
+            h_air = (max(az, 0.0) + max(bz, 0.0)) / 299792458.0  # a bounce above the flat ground
             az = min(az, 0.0)
             bz = min(bz, 0.0)
             mx, my, mz = 0.5 * (ax + bx), 0.5 * (ay + by), 0.5 * (az + bz)
@@ -248,7 +262,7 @@ def _kernel():
                 amp *= leg_factor(ax, ay, az, px, py, pz, n_host, footprint, theta0)
                 amp *= leg_factor(bx, by, bz, px, py, pz, n_host, footprint, theta0)
                 amp *= math.exp(-alpha * path)
-                t_arr = t_src + h_air + path / v
+                t_arr = t_src + h_air + travel(ax, ay, az, bx, by, bz, px, py, pz, gap, v)
                 for e in range(echoes.shape[1]):
                     a_e = echoes[c, e, 1]
                     if a_e == 0.0:
@@ -273,15 +287,17 @@ def _kernel():
                 amp *= leg_factor(ax, ay, az, px, py, pz, n_host, footprint, theta0)
                 amp *= leg_factor(bx, by, bz, px, py, pz, n_host, footprint, theta0)
                 amp *= box_gamma[b] * math.exp(-alpha * path)
-                add_wavelet(row, t_src + h_air + path / v, amp, dt, wt0, wstep, wvals)
+                add_wavelet(row, t_src + h_air + travel(ax, ay, az, bx, by, bz, px, py, pz, gap, v), amp, dt, wt0, wstep,
+                            wvals)
             for ly in range(layers.shape[0]):
-                d = layers[ly, 0] + mz  # from the antenna (z = mz <= 0) down to z = -depth
+                d = layers[ly, 0] + mz  # from the ground under the antenna (z = mz) down to z = -depth
                 if d <= 0.0:
                     continue
                 path = 2.0 * math.sqrt(d * d + 0.25 * sep * sep)
                 amp = 1.0 / path if not spread2d else 1.0 / math.sqrt(path)
                 amp *= layers[ly, 1] * math.exp(-alpha * path)
-                add_wavelet(row, t_src + h_air + path / v, amp, dt, wt0, wstep, wvals)
+                t_l = h_air + 2.0 * air_ground_time(gap, d, 0.5 * sep, S_AIR, 1.0 / v)
+                add_wavelet(row, t_src + t_l, amp, dt, wt0, wstep, wvals)
             if noise > 0.0:
                 np.random.seed(seed + i)
                 for k in range(row.shape[0]):
@@ -348,6 +364,7 @@ def forward_model(
     clutter_amplitude: float = 0.05,
     noise: float = 0.0,
     seed: int = 0,
+    air_gap_m: float = 0.0,
     out: np.ndarray | None = None,
 ) -> np.ndarray:
     """A-scans ``(n_traces, n_samples)`` float32 for antenna poses over ``scene``.
@@ -358,7 +375,10 @@ def forward_model(
     Give ``dt_s`` or ``time_window_s`` (then ``dt = window / n_samples``).
     ``footprint="interface"`` applies the pattern of a dipole on the ground
     (``"none"`` switches it off); ``beam_half_angle_deg`` adds a Gaussian taper.
+    ``air_gap_m``: the antennas held that high above the ground (refracted rays; see the module's notes).
     """
+    if not (math.isfinite(air_gap_m) and air_gap_m >= 0):
+        raise ValueError(f"air_gap_m must be a height >= 0 in metres, got {air_gap_m!r}")
     pos = np.ascontiguousarray(np.atleast_2d(np.asarray(positions_xyz, dtype=np.float64)))
     n = pos.shape[0]
     if orientations_quat_wxyz is None:
@@ -415,7 +435,8 @@ def forward_model(
     kernel(out, tx, rx, dip, caps_a, pol_a, echo_a, boxes, box_g, layers, v, math.sqrt(eps), alpha, float(dt_s),
            t_src, wt0, wstep, wvals, float(air_wave), float(ground_wave), spreading == "2d",
            1 if footprint == "interface" else 0,
-           0.0 if beam_half_angle_deg is None else math.radians(beam_half_angle_deg), float(noise), int(seed))
+           0.0 if beam_half_angle_deg is None else math.radians(beam_half_angle_deg), float(noise), int(seed),
+           float(air_gap_m))
     return out
 
 
