@@ -4,18 +4,19 @@ For each module named (default: all of ``MODULES``) this copies ``src/`` and ``t
 ``build/mutation/<module>/``, writes a ``pyproject.toml`` there that tells mutmut to mutate that one file and
 run the tests of its package, runs ``mutmut run``, and reads back what each mutant did. Survivors listed in
 ``tools/mutation_equivalents.toml`` (the removed and the added line, and why the two behave the same) count as
-equivalent; the score is killed (or timed out) over all mutants that are not equivalent. The table and every
-surviving mutant's diff go to ``benchmarks/results/mutation.md`` (``--out``); the exit code is 1 when a module
-scores below ``--fail-under``.
+equivalent; the score is killed (or timed out) over all mutants that are not equivalent. Each module's result
+(with the commit and CPU it was measured on) is kept in ``benchmarks/results/mutation/<module>.json``, and the
+report ``benchmarks/results/mutation.md`` (``--out``) is made from all of them: the table and every surviving
+mutant's diff. The exit code is 1 when a module run now scores below ``--fail-under``.
 
     python tools/mutation.py processing.dewow io.dt1        # some modules
     python tools/mutation.py --changed main                 # the modules that differ from a git revision
     python tools/mutation.py --guard                        # the CI guard (below)
     python tools/mutation.py                                # all of MODULES (long: see the report's times)
 
-The guard (``--guard``, run by ``tests/tools/test_mutation_guard.py``) reads the report, which records the commit
-it was made at, and re-runs the modules it lists that have changed since: a module in the report cannot land
-with a score below ``--fail-under``. Its report goes to ``build/mutation/guard.md``, not over the real one.
+The guard (``--guard``, run by ``tests/tools/test_mutation_guard.py``) reads the stored results, each with the
+commit it was measured at, and re-runs the modules that have changed since theirs: a scored module cannot land
+with a score below ``--fail-under``. Its report goes to ``build/mutation/guard.md``; the stored results stay.
 """
 
 from __future__ import annotations
@@ -156,32 +157,64 @@ def head_commit() -> str | None:
     return r.stdout.strip() if r.returncode == 0 else None
 
 
-def guarded(report: Path) -> tuple[str | None, list[str]]:
-    """The commit a report was made at and the modules it scores."""
-    if not report.exists():
-        return None, []
-    text = report.read_text(encoding="utf-8")
-    m = re.search(r"^commit: ([0-9a-f]{40})", text, flags=re.M)
-    mods = re.findall(r"^\| ([a-z_]+\.[a-z_.]+) \| \d+ \|", text, flags=re.M)
-    return (m.group(1) if m else None), mods
+STORE = ROOT / "benchmarks" / "results" / "mutation"
+
+
+def cpu_label() -> str:
+    try:
+        import llvmlite.binding as llb
+
+        return f"{llb.get_host_cpu_name()}, {os.cpu_count()} cores"
+    except Exception:  # noqa: BLE001 - the CPU name is a label only
+        return f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores"
+
+
+def save_result(row: dict, store: Path, command: str) -> Path:
+    """Keep one module's result, with the commit, CPU and command it was measured with."""
+    store.mkdir(parents=True, exist_ok=True)
+    rec = {**row, "commit": head_commit(), "cpu": cpu_label(), "command": command,
+           "date": time.strftime("%Y-%m-%d", time.gmtime())}
+    path = store / f"{row['module']}.json"
+    tmp = path.with_suffix(".part")
+    tmp.write_text(json.dumps(rec, indent=1) + "\n", encoding="utf-8")
+    tmp.replace(path)
+    return path
+
+
+def load_results(store: Path) -> list[dict]:
+    """The stored results, in the order of ``MODULES`` (then any others by name)."""
+    rows = [json.loads(p.read_text(encoding="utf-8")) for p in sorted(store.glob("*.json"))] if store.exists() else []
+    order = {m: i for i, m in enumerate(MODULES)}
+    return sorted(rows, key=lambda r: (order.get(r["module"], len(order)), r["module"]))
+
+
+def guarded(store: Path) -> dict:
+    """``{module: commit}`` of the stored results."""
+    return {r["module"]: r.get("commit") for r in load_results(store)}
 
 
 def write_report(rows: list[dict], path: Path, command: str) -> None:
-    cpu = platform.processor() or platform.machine()
-    try:
-        import numba
-
-        cpu = numba.config.CPU_NAME or __import__("llvmlite.binding", fromlist=["x"]).get_host_cpu_name()
-    except Exception:  # noqa: BLE001 - the CPU name is a label only
-        pass
-    lines = [f"Host CPU: {cpu}, {os.cpu_count()} cores; mutmut, one module at a time with its package's tests", "",
-             "| module | mutants | killed | survived | equivalent | score | time (s) |", "|---|---|---|---|---|---|---|"]
+    """The table (score per module, with the host CPU and commit each was measured on) and every survivor's and
+    listed equivalent's diff."""
+    lines = ["mutmut, one module at a time with the tests of its package; score = killed / (mutants - equivalent)", "",
+             "| module | mutants | killed | survived | equivalent | score | time (s) | host CPU | commit |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
+        where = f"{r.get('cpu', cpu_label())} | {(r.get('commit') or head_commit() or '?')[:10]}"
         if "error" in r:
-            lines.append(f"| {r['module']} | error: {r['error'][:80]} | | | | | {r['wall_s']:.0f} |")
+            lines.append(f"| {r['module']} | error: {r['error'][:80]} | | | | | {r['wall_s']:.0f} | {where} |")
             continue
         lines.append(f"| {r['module']} | {r['total']} | {r['killed']} | {r['survived']} | {r['equivalent']} | "
-                     f"{100 * r['score']:.1f} % | {r['wall_s']:.0f} |")
+                     f"{100 * r['score']:.1f} % | {r['wall_s']:.0f} | {where} |")
+    done = [r for r in rows if "error" not in r]
+    if done:
+        tot = sum(r["total"] - r["equivalent"] for r in done)
+        lines.append(f"| **all {len(done)}** | {sum(r['total'] for r in done)} | {sum(r['killed'] for r in done)} | "
+                     f"{sum(r['survived'] for r in done)} | {sum(r['equivalent'] for r in done)} | "
+                     f"{100 * sum(r['killed'] for r in done) / max(tot, 1):.1f} % | "
+                     f"{sum(r['wall_s'] for r in done):.0f} | | |")
+        lines += ["", "Not yet scored: " + (", ".join(m for m in MODULES if m not in {r['module'] for r in rows})
+                                           or "none")]
     for r in rows:
         if r.get("survivors"):
             lines += ["", f"### {r['module']}: surviving mutants", ""]
@@ -189,8 +222,8 @@ def write_report(rows: list[dict], path: Path, command: str) -> None:
         if r.get("equivalents"):
             lines += ["", f"### {r['module']}: equivalent mutants (tools/mutation_equivalents.toml)", ""]
             lines += [f"- `{s['removed']}` -> `{s['added']}`: {s['why']}" for s in r["equivalents"]]
-    lines += ["", f"command: {command}", f"commit: {head_commit() or 'unknown'} (the tree mutated: that commit plus "
-                                                "any uncommitted changes)", ""]
+    lines += ["", f"command: {command} (each module's own command is in benchmarks/results/mutation/<module>.json; "
+                  "the tree mutated is its commit plus any uncommitted changes)", ""]
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".part")
     tmp.write_text("\n".join(lines), encoding="utf-8")
@@ -207,24 +240,26 @@ def main(argv=None) -> int:
     ap.add_argument("--equivalents", default=str(ROOT / "tools/mutation_equivalents.toml"))
     ap.add_argument("--keep", action="store_true", help="keep build/mutation/<module>/ (to browse with mutmut)")
     ap.add_argument("--guard", action="store_true",
-                    help="re-run the modules of the report (--out) that changed since its commit; report to build/")
+                    help="re-run the scored modules that changed since their commits; report to build/")
+    ap.add_argument("--store", default=str(STORE), help="folder of the per-module results")
     args = ap.parse_args(argv)
     if args.max_children < 1:
         ap.error(f"--max-children must be >= 1, got {args.max_children}")
+    store = Path(args.store)
     if args.guard:
-        base, listed = guarded(Path(args.out))
-        if base is None:
-            print(f"{args.out}: no report with a commit to guard")
+        listed = guarded(store)
+        if not listed:
+            print(f"{store}: no stored results to guard")
             return 0
-        try:
-            changed = set(changed_modules(base))
-        except subprocess.CalledProcessError:
-            print(f"commit {base[:10]} of the report is not in this checkout: nothing to compare with")
-            return 0
-        mods = [m for m in listed if m in changed]
+        mods = []
+        for module, commit in listed.items():
+            try:
+                if commit and module in changed_modules(commit):
+                    mods.append(module)
+            except subprocess.CalledProcessError:
+                print(f"{module}: commit {commit[:10]} is not in this checkout: not compared")
         args.out = str(ROOT / "build" / "mutation" / "guard.md")
-        print(f"guard: {len(listed)} modules in the report (commit {base[:10]}); changed since: "
-              f"{', '.join(mods) or 'none'}")
+        print(f"guard: {len(listed)} modules scored; changed since their commits: {', '.join(mods) or 'none'}")
     else:
         mods = changed_modules(args.changed) if args.changed else (args.modules or list(MODULES))
     unknown = [m for m in mods if not (ROOT / source_of(m)).exists()]
@@ -235,14 +270,17 @@ def main(argv=None) -> int:
         return 0
     eq = load_equivalents(Path(args.equivalents))
     rows = []
+    command = "python tools/mutation.py " + " ".join(argv if argv is not None else sys.argv[1:])
     for m in mods:
         row = run_module(m, max_children=args.max_children, equivalents=eq.get(m, []), keep=args.keep)
         rows.append(row)
+        if not args.guard and "error" not in row:
+            save_result(row, store, f"python tools/mutation.py {m}")
         msg = (f"error: {row['error']}" if "error" in row else
                f"{row['total']} mutants, {row['killed']} killed, {row['survived']} survived, {row['equivalent']} "
                f"equivalent: {100 * row['score']:.1f} %")
         print(f"{m:28s} {msg} ({row['wall_s']:.0f} s)", flush=True)
-    write_report(rows, Path(args.out), "python tools/mutation.py " + " ".join(argv if argv is not None else sys.argv[1:]))
+    write_report(rows if args.guard else load_results(store), Path(args.out), command)
     low = [r["module"] for r in rows if "error" in r or 100 * r["score"] < args.fail_under]
     if low:
         print(f"below {args.fail_under:g} %: {', '.join(low)}")

@@ -83,9 +83,13 @@ def test_read_rad_keys_values_and_binary(tmp_path):
     # keys stripped and upper-cased; the value is everything after the first colon, stripped
     assert rad == {"SAMPLES": "40", "DATE": "2024-05-01", "TIME": "12:30:05", "ANTENNAS": "500 MHz shielded"}
     p.write_bytes(b"SAMPLES:40\n\x00\x01binary")
+    with pytest.raises(FormatError, match="^h.rad: RAD header holds binary bytes: not a MALA header or corrupt$"):
+        read_rad(p)
+    head = b"SAMPLES:40\nX:" + b"x" * (4095 - 13)
+    p.write_bytes(head + b"\x00")  # a NUL at byte 4095, the last one looked at
     with pytest.raises(FormatError, match="binary bytes"):
         read_rad(p)
-    p.write_bytes(b"SAMPLES:40\n" + b"x" * 5000 + b"\x00")  # a NUL past the first 4096 bytes is not looked for
+    p.write_bytes(head + b"x\x00")  # a NUL at byte 4096 is not looked for
     assert read_rad(p)["SAMPLES"] == "40"
 
 
@@ -98,6 +102,7 @@ def test_read_cor_fixes_hemispheres_and_bad_lines(tmp_path):
                  "9 2024-05-01 12:00:03 1.0 S 2.0 W 4.0\n"  # exactly eight fields
                  "7 2024-05-01 12:00:04 abc N 2.0 E 4.0 M\n")  # latitude not a number
     g = read_cor(p)
+    assert g["trace"].dtype == np.float64
     np.testing.assert_array_equal(g["trace"], [1, 5, 9])
     np.testing.assert_array_equal(g["lat"], [75.5, -10.25, -1.0])
     np.testing.assert_array_equal(g["lon"], [36.25, -20.5, -2.0])
@@ -136,7 +141,7 @@ def test_every_header_field_the_reader_uses(tmp_path):
     assert (m["format"], m["channel"], m["n_channels"], m["antenna"]) == ("rd3", 0, 1, "1.2 GHz custom")
     assert m["range_s"] == pytest.approx(8 * 0.25e-9)
     assert m["header_timewindow_s"] == pytest.approx(3.5e-9)
-    assert m["sampling_frequency_hz"] == pytest.approx(4e9)
+    assert m["sampling_frequency_hz"] == 4e9
     assert m["stacks"] == 16.0
     assert m["positions_source"] == "header DISTANCE INTERVAL, along world x"
     assert m["path"].endswith("line.rd3") and m["header_path"].endswith("line.rad") and "gps" not in m
@@ -165,22 +170,43 @@ def test_rd7_is_32_bit(tmp_path):
     ("FREQUENCY:1000\n", ["lacks 'SAMPLES'"]),
     ("SAMPLES:1\nFREQUENCY:1000\n", ["SAMPLES = 1", "implausible"]),
     ("SAMPLES:1000001\nFREQUENCY:1000\n", ["SAMPLES = 1000001"]),
+    ("SAMPLES:eight\nFREQUENCY:1000\n", ["RAD field 'SAMPLES' = 'eight' is not a number"]),
     ("SAMPLES:8\n", ["lacks 'TIMEWINDOW'"]),  # neither FREQUENCY nor TIMEWINDOW
-    ("SAMPLES:8\nFREQUENCY:0\n", ["FREQUENCY", "positive"]),
-    ("SAMPLES:8\nTIMEWINDOW:-4\n", ["TIMEWINDOW", "positive"]),
+    ("SAMPLES:8\nFREQUENCY:0\n", ["header field FREQUENCY = 0.0 is not a positive number"]),
+    ("SAMPLES:8\nTIMEWINDOW:-4\n", ["header field TIMEWINDOW = -4.0 is not"]),
+    ("SAMPLES:8\nFREQUENCY:fast\n", ["'FREQUENCY' = 'fast'"]),
+    ("SAMPLES:8\nTIMEWINDOW:long\n", ["'TIMEWINDOW' = 'long'"]),
+    ("SAMPLES:8\nFREQUENCY:1000\nLAST TRACE:end\n", ["'LAST TRACE' = 'end'"]),
+    ("SAMPLES:8\nFREQUENCY:1000\nDISTANCE INTERVAL:?\n", ["'DISTANCE INTERVAL' = '?'"]),
+    ("SAMPLES:8\nFREQUENCY:1000\nTIME INTERVAL:?\n", ["'TIME INTERVAL' = '?'"]),
+    ("SAMPLES:8\nFREQUENCY:1000\nANTENNA SEPARATION:wide\n", ["'ANTENNA SEPARATION' = 'wide'"]),
     ("SAMPLES:8\nFREQUENCY:0.5\n", ["sample interval", "implausible"]),  # 2 us
     ("SAMPLES:8\nFREQUENCY:1000\nSTACKS:many\n", ["STACKS", "'many'"]),
 ])
 def test_header_errors_name_the_field(tmp_path, rad, needles):
     with pytest.raises(FormatError) as e:
         read_rd3(_pair(tmp_path, rad, np.ones((4, 8))))
+    assert str(e.value).startswith("line.rad: ")  # the file first, then the field
     for n in needles:
         assert n in str(e.value)
+
+
+def test_a_missing_half_of_the_pair_is_named(tmp_path):
+    d = _pair(tmp_path, "SAMPLES:4\nFREQUENCY:1000\n", np.ones((2, 4)))
+    d.with_suffix(".rad").unlink()
+    with pytest.raises(FormatError, match=r"^line.rd3: no \.rad header beside the data \(MALA needs both\)$"):
+        read_rd3(d)
+    h = tmp_path / "head.rad"
+    h.write_text("SAMPLES:4\n")
+    with pytest.raises(FormatError, match=r"^head.rad: no \.rd3/\.rd7 data file beside the header$"):
+        read_rd3(h)
 
 
 def test_the_boundaries_of_the_plausible(tmp_path):
     s = read_rd3(_pair(tmp_path, "SAMPLES:2\nFREQUENCY:1\n", np.ones((3, 2))))[0]  # 2 samples, 1 us: allowed
     assert s.shape == (3, 2) and s.dt_s == pytest.approx(1e-6)
+    s = read_rd3(_pair(tmp_path, "SAMPLES:1000000\nFREQUENCY:1000\n", np.ones((1, 10**6)), name="long"))[0]
+    assert s.shape == (1, 10**6)
 
 
 def test_last_trace_more_than_the_file_warns_and_reads_what_is_there(tmp_path):
@@ -188,13 +214,13 @@ def test_last_trace_more_than_the_file_warns_and_reads_what_is_there(tmp_path):
     with pytest.warns(TruncatedRecordingWarning, match="LAST TRACE says 5 traces, file holds 3"):
         s = read_rd3(d)[0]
     assert s.n_traces == 3
-    with pytest.raises(FormatError, match="holds 3 traces but LAST TRACE says 2"):
+    with pytest.raises(FormatError, match="^c.rd3: file holds 3 traces but LAST TRACE says 2"):
         read_rd3(_pair(tmp_path, "SAMPLES:4\nFREQUENCY:1000\nLAST TRACE:2\n", np.ones((3, 4)), name="c"))
 
 
 def test_a_partial_last_trace_is_dropped(tmp_path):
     d = _pair(tmp_path, "SAMPLES:4\nFREQUENCY:1000\n", np.arange(10))  # 2 traces and half of one
-    with pytest.warns(TruncatedRecordingWarning, match="dropped 1 partial"):
+    with pytest.warns(TruncatedRecordingWarning, match="ends mid-trace; dropped 1 partial trace"):
         s = read_rd3(d)[0]
     np.testing.assert_array_equal(s.data, np.arange(8).reshape(2, 4))
 
@@ -206,7 +232,7 @@ def test_cor_gps_places_the_traces(tmp_path):
     d.with_suffix(".cor").write_text("1 2024-05-01 12:00:00 60.000 N 10.0 E 100.0 M 1.0\n"
                                      "3 2024-05-01 12:00:02 60.001 N 10.0 E 102.0 M 1.0\n")
     s = read_rd3(d)[0]
-    assert s.metadata["positions_source"].startswith("COR GPS")
+    assert s.metadata["positions_source"] == "COR GPS (local ENU metres about origin)"
     assert s.metadata["gps"] == {"file": "line.cor", "fixes": 2, "origin_lat_lon_alt": pytest.approx([60.0, 10.0,
                                                                                                       100.0])}
     north = s.positions_xyz[:, 1]

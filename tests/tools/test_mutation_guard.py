@@ -1,5 +1,5 @@
 """tools/mutation.py: its equivalents list stays true to the code, and the CI guard re-runs every module of the
-mutation report that changed since the report was made (none changed: nothing to run)."""
+stored results that changed since the commit it was scored at (none changed: nothing to run)."""
 
 import importlib.util
 import re
@@ -34,17 +34,24 @@ def test_every_listed_equivalent_is_still_in_its_module():
                 assert part in lines, f"{module}: '{part}' is no longer in the code: take it off the list"
 
 
-def test_the_report_names_its_commit_and_modules(tmp_path):
+def test_stored_results_keep_their_commit_and_make_the_report(tmp_path):
     tool = _tool()
-    report = tmp_path / "m.md"
-    tool.write_report([{"module": "processing.dewow", "total": 10, "killed": 9, "survived": 1, "equivalent": 0,
-                        "score": 0.9, "wall_s": 1.0, "survivors": [{"removed": "a", "added": "b", "why": None}],
-                        "equivalents": []}], report, "python tools/mutation.py processing.dewow")
-    base, mods = tool.guarded(report)
-    assert mods == ["processing.dewow"]
+    store, report = tmp_path / "store", tmp_path / "m.md"
+    row = {"module": "processing.dewow", "total": 10, "killed": 9, "survived": 1, "equivalent": 0, "score": 0.9,
+           "wall_s": 1.0, "survivors": [{"removed": "a", "added": "b", "why": None}], "equivalents": []}
+    tool.save_result(row, store, "python tools/mutation.py processing.dewow")
+    tool.save_result({**row, "module": "io.dt1", "total": 20, "killed": 15, "survived": 2, "equivalent": 3,
+                      "score": 15 / 17, "survivors": []}, store, "python tools/mutation.py io.dt1")
     head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
-    assert base == (head or None)
-    assert "- `a` -> `b`" in report.read_text()
+    assert tool.guarded(store) == {"io.dt1": head or None, "processing.dewow": head or None}
+    rows = tool.load_results(store)
+    assert [r["module"] for r in rows] == ["io.dt1", "processing.dewow"]  # the order of MODULES
+    tool.write_report(rows, report, "python tools/mutation.py")
+    text = report.read_text()
+    assert "- `a` -> `b`" in text
+    assert "| io.dt1 | 20 | 15 | 2 | 3 | 88.2 % |" in text and "| processing.dewow | 10 | 9 | 1 | 0 | 90.0 % |" in text
+    # the total: 24 killed of 30 - 3 equivalent
+    assert "| **all 2** | 30 | 24 | 3 | 3 | 88.9 % |" in text
 
 
 def test_the_guard_passes_on_this_checkout():
@@ -54,4 +61,4 @@ def test_the_guard_passes_on_this_checkout():
     r = subprocess.run([sys.executable, str(ROOT / "tools" / "mutation.py"), "--guard", "--max-children", "2"],
                        cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
-    assert re.search(r"^guard: \d+ modules in the report", r.stdout, flags=re.M) or "no report" in r.stdout
+    assert re.search(r"^guard: \d+ modules scored", r.stdout, flags=re.M) or "no stored results" in r.stdout
