@@ -39,15 +39,20 @@ MUTMUT = [sys.executable, "-m", "mutmut"]
 #: module (under gpr3d) -> the tests that judge it (default: its package's test folder)
 MODULES = {
     "io.dt1": None, "io.dzt": None, "io.rd3": None, "io.gprmax": None, "io.segy": None, "io.hdf5": None,
-    "io.trajectory": None, "io.volume": None, "io.detections": None, "io.coco": None, "io.atomic": None,
+    "io.volume": None, "io.detections": None, "io.coco": None, "io.atomic": None,
     "io._common": None, "io.registry": None,
+    # (the other tests of tests/io that reach the trajectory readers are slow: rosbag, inertial)
+    "io.trajectory": ["tests/io/test_trajectory.py", "tests/io/test_track.py"],
     "processing.dewow": None, "processing.background": None, "processing.gain": None, "processing.filters": None,
     "processing.envelope": None, "processing.resample": None, "processing.timezero": None,
     "processing.steps": None, "processing.cscan": None,
     "processing.picking": ["tests/processing"],
-    "migration.operator": None, "migration.masking": None, "migration.targets": None, "migration.metrics": None,
+    "migration.operator": None,
+    "migration.masking": ["tests/migration/test_masking.py"],
+    "migration.velocity": ["tests/migration/test_velocity.py", "-k", "not oblique"],
+    "migration.targets": None, "migration.metrics": None,
     "migration.profile": None, "migration.traditional": None, "migration.reconstruct": None,
-    "migration.velocity": None, "migration.sitetiles": None,
+    "migration.sitetiles": None,
     "simulation.forward": ["tests/simulation"], "simulation.labels": ["tests/simulation"],
 }
 

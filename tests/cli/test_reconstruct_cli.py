@@ -67,16 +67,30 @@ def test_reconstruct_errors_are_one_line(pipe_survey, tmp_path):
 
 
 def test_boxes_make_a_noise_map(pipe_survey, tmp_path):
-    import h5py
+    """The noise map is the data outside the boxes, migrated: with a box around the pipe's echo (2-12 ns) the pipe
+    (0.4 m deep along y = 0.6) is in the envelope and not in the noise map; with the box after the echo (12-16 ns)
+    it is the other way round."""
+    from gpr3d.io.volume import read_volume
 
-    d, _ = pipe_survey
-    boxes = {"targets": [{"box": [0, 2e-9, 2499, 12e-9]}]}
-    (tmp_path / "b.json").write_text(json.dumps(boxes))
-    r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--boxes", tmp_path / "b.json",
-                "--out", tmp_path / "o", "--max-depth", "0.7", "--eps-r", "6")
-    assert r.returncode == 0, r.stderr
-    with h5py.File(tmp_path / "o" / "volume.h5") as f:
-        assert "noise_map" in f and f["noise_map"].shape == f["envelope"].shape
+    d, top = pipe_survey
+    maps = {}
+    for name, box in (("around", [0, 2e-9, 2499, 12e-9]), ("after", [0, 12e-9, 2499, 16e-9])):
+        (tmp_path / f"{name}.json").write_text(json.dumps({"targets": [{"box": box}]}))
+        r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--boxes", tmp_path / f"{name}.json",
+                    "--out", tmp_path / name, "--max-depth", "0.7", "--eps-r", "6")
+        assert r.returncode == 0, r.stderr
+        vol = read_volume(tmp_path / name / "volume.h5")
+        y, depth = vol.grid.y, vol.grid.depth
+        maps[name] = (vol.arrays["envelope"], vol.arrays["noise_map"])
+    j = int(np.argmin(abs(y - 0.6)))
+    k = int(np.argmin(abs(depth - top)))
+    for name, (inside, outside) in maps.items():
+        at_pipe = (inside[:, j, k - 2 : k + 3].max(), outside[:, j, k - 2 : k + 3].max())
+        strong, weak = at_pipe if name == "around" else at_pipe[::-1]
+        assert weak < 0.2 * strong, (name, at_pipe)
+    # the pipe in the noise map when the box misses it: its maximum along y = 0.6 lies at the pipe's depth
+    _, outside = maps["after"]
+    assert abs(depth[int(np.argmax(outside[:, j, :].max(axis=0)))] - top) < 0.05
 
 
 @pytest.mark.parametrize("extra, words", [

@@ -158,3 +158,210 @@ def test_dzg_with_fixes_gives_local_positions(tmp_path):
 def test_partial_gps_dzg_is_tolerated():
     g = read_dzg(real_file("impdar_gssi_sir4000/test_gssi_partialgps.DZG"))
     assert g["records"] >= 10 and g["scan"].size == 0  # no fix, broken sentences skipped
+
+
+# ---------------------------------------------------------------- the header field by field
+
+import struct  # noqa: E402
+
+from gpr3d.io.dzt import _antenna_mhz, _decode_date, is_dzt  # noqa: E402
+
+
+def _patched(p, *patches):
+    raw = bytearray(p.read_bytes())
+    for off, b in patches:
+        raw[off : off + len(b)] = b
+    p.write_bytes(bytes(raw))
+    return p
+
+
+def _packed(year, month, day, hour, minute, sec):
+    return ((sec // 2) | (minute << 5) | (hour << 11) | (day << 16) | (month << 21) | ((year - 1980) << 25)).to_bytes(
+        4, "little")
+
+
+def test_packed_dates():
+    assert _decode_date(_packed(2019, 12, 31, 23, 59, 58)) == "2019-12-31T23:59:58"
+    assert _decode_date(_packed(1980, 1, 1, 0, 0, 0)) == "1980-01-01T00:00:00"
+    assert _decode_date(_packed(2107, 2, 3, 4, 5, 7)) == "2107-02-03T04:05:06"  # two-second steps, 7 bits of year
+    assert _decode_date(b"\0\0\0\0") is None  # not set
+    assert _decode_date(_packed(2020, 13, 1, 0, 0, 0)) is None  # month 13
+    assert _decode_date(_packed(2020, 2, 30, 0, 0, 0)) is None  # 30 February
+
+
+@pytest.mark.parametrize("name, mhz", [
+    ("5103", 400.0), ("  3101A ", 900.0), ("SS MINI", 1600.0), ("62300XT", 2300.0),
+    ("400MHz", 400.0), ("GSSI 270 MHz", 270.0), ("1.6 GHz", 1600.0), ("2.7ghz palm", 2700.0),
+    ("51600x3", 1600.0), ("3207xAP", 100.0),  # a known model before an 'x' suffix
+    ("model 5103", None), ("", None), ("custom", None), ("99999x", None),
+])
+def test_antenna_names_to_frequencies(name, mhz):
+    assert _antenna_mhz(name) == mhz
+
+
+def test_every_header_field(tmp_path):
+    p = write_dzt(tmp_path / "h.DZT", n_traces=3, n_samples=16, sps=32.0, spm=40.0, eps_r=4.5,
+                  antennas=("3101",))
+    _patched(p, (18, struct.pack("<f", 2.5)), (22, struct.pack("<f", 7.25)), (36, _packed(2022, 3, 4, 5, 6, 8)),
+             (113, bytes([0b10111_001])), (114, b"LINE007.DZT\0"))
+    h = read_dzt_header(p)
+    assert h["tag"] == 0x00FF and h["data_offset"] == 1024 and h["n_samples"] == 16 and h["bits"] == 16
+    assert h["zero"] == 0x8000 and h["n_channels"] == 1 and h["range_ns"] == 20.0
+    assert (h["scans_per_s"], h["scans_per_m"], h["m_per_mark"], h["position_ns"]) == (32.0, 40.0, 2.5, 7.25)
+    assert h["eps_r"] == 4.5 and h["antennas"] == ["3101"]
+    assert h["created"] == "2021-06-15T10:20:30" and h["modified"] == "2022-03-04T05:06:08"
+    assert h["system_code"] == 0b10111 and h["file_name"] == "LINE007.DZT"
+    assert h["file_bytes"] == 1024 + 3 * 16 * 2
+    s = read_dzt(p)[0]
+    m = s.metadata
+    assert (m["format"], m["channel"], m["n_channels"], m["bits"], m["antenna"]) == ("dzt", 0, 1, 16, "3101")
+    assert m["range_s"] == pytest.approx(20e-9) and m["position_s"] == pytest.approx(7.25e-9)
+    assert (m["scans_per_s"], m["scans_per_m"], m["system_code"], m["data_offset"]) == (32.0, 40.0, 23, 1024)
+    assert m["header_samples_replaced"] == 2 and m["path"].endswith("h.DZT") and "gps" not in m
+    assert m["positions_source"] == "survey wheel (header scans per metre), along world x"
+    np.testing.assert_allclose(s.positions_xyz[:, 0], [0.0, 0.025, 0.05])
+    np.testing.assert_allclose(s.timestamps_s, [0.0, 1 / 32, 2 / 32])
+    assert s.eps_r == 4.5 and s.frequency_hz == 900e6 and s.dt_s == pytest.approx(20e-9 / 16)
+
+
+@pytest.mark.parametrize("eps, kept", [(1.0, True), (100.0, True), (0.99, False), (100.5, False),
+                                       (float("nan"), False), (float("inf"), False)])
+def test_header_eps_r_only_when_plausible(tmp_path, eps, kept):
+    p = write_dzt(tmp_path / "e.DZT", eps_r=eps)
+    assert read_dzt_header(p)["eps_r"] == (eps if kept else None)
+
+
+@pytest.mark.parametrize("field, off", [("scans_per_s", 10), ("scans_per_m", 14)])
+@pytest.mark.parametrize("value", [0.0, -5.0, float("nan"), float("inf")])
+def test_rates_not_positive_and_finite_are_left_out(tmp_path, field, off, value):
+    p = _patched(write_dzt(tmp_path / "r.DZT"), (off, struct.pack("<f", value)))
+    h = read_dzt_header(p)
+    assert h[field] is None
+    s = read_dzt(p)[0]
+    if field == "scans_per_s":
+        assert s.timestamps_s is None
+    else:
+        assert s.positions_xyz is None and s.metadata["positions_source"] is None
+
+
+def test_mark_and_position_fields_not_finite(tmp_path):
+    p = _patched(write_dzt(tmp_path / "m.DZT"), (18, struct.pack("<f", float("nan"))),
+                 (22, struct.pack("<f", float("inf"))))
+    h = read_dzt_header(p)
+    assert h["m_per_mark"] is None and h["position_ns"] is None
+    assert read_dzt(p)[0].metadata["position_s"] is None
+    p = _patched(p, (18, struct.pack("<f", -1.0)), (22, struct.pack("<f", -3.0)))  # negative but finite: kept
+    assert (read_dzt_header(p)["m_per_mark"], read_dzt_header(p)["position_ns"]) == (-1.0, -3.0)
+
+
+@pytest.mark.parametrize("patch, message", [
+    ((52, struct.pack("<H", 17)), "header gives 17 channels (expected 1..16): not a DZT file or corrupt"),
+    ((6, struct.pack("<H", 24)), "header gives 24 bits per sample (expected 8, 16 or 32): not a DZT file or corrupt"),
+    ((26, struct.pack("<f", 2e6)), "header range 2e+06 ns is implausible"),
+    ((26, struct.pack("<f", 0.0)), "header field range (ns) = 0.0 is not a positive number"),
+    ((2, struct.pack("<H", 0)), "data offset 0 lies inside the 1 channel header(s)"),
+])
+def test_more_corrupt_headers(tmp_path, patch, message):
+    p = _patched(write_dzt(tmp_path / "bad.DZT"), patch)
+    with pytest.raises(FormatError) as e:
+        read_dzt_header(p)
+    assert str(e.value) == f"bad.DZT: {message}"
+
+
+def test_the_boundaries_of_the_header(tmp_path):
+    p = write_dzt(tmp_path / "b.DZT", n_samples=2, range_ns=1e6)  # 2 samples, a 1 ms range: allowed
+    s = read_dzt(p)[0]
+    assert s.n_samples == 2 and s.time_window_s == pytest.approx(1e-3)
+    # two samples: nothing replaced, no mark word read
+    assert s.metadata["header_samples_replaced"] == 0 and s.metadata["marks"] == []
+    np.testing.assert_array_equal(s.data, expected_values(7, 2)[0].astype(np.float32))
+    p = write_dzt(tmp_path / "c.DZT", n_channels=16, antennas=("5103",), n_traces=2, n_samples=4)
+    assert len(read_dzt(p)) == 16
+    short = tmp_path / "short.DZT"
+    short.write_bytes(b"\0" * 1023)
+    with pytest.raises(FormatError, match="short.DZT: file is 1023 bytes, shorter than one 1024-byte DZT header"):
+        read_dzt_header(short)
+    two = write_dzt(tmp_path / "two.DZT", n_channels=2, n_traces=0)
+    two.write_bytes(two.read_bytes()[:1500])
+    with pytest.raises(FormatError, match="two.DZT: file is 1500 bytes, shorter than 2 channel headers"):
+        read_dzt_header(two)
+    # rh_data of 1024 or more means 'after the channel headers'
+    p = write_dzt(tmp_path / "d.DZT", n_channels=2, rh_data=1024)
+    assert read_dzt_header(p)["data_offset"] == 2048
+    assert read_dzt_header(write_dzt(tmp_path / "e.DZT", rh_data=1023, n_traces=1))["data_offset"] == 1023 * 1024
+
+
+def test_the_mark_word_and_the_binary_zero(tmp_path):
+    p = write_dzt(tmp_path / "k.DZT", n_traces=6, n_samples=8, n_channels=2, bits=8)
+    raw = bytearray(p.read_bytes())
+    for tr in range(6):  # every mark word (sample 1) clear
+        raw[2048 + tr * 16 + 1] = raw[2048 + tr * 16 + 8 + 1] = 0
+    for tr in (1, 4):  # then channel 0's set on scans 1 and 4; channel 1's on scan 2 (not read)
+        raw[2048 + tr * 16 + 1] = 0x55
+    raw[2048 + 2 * 16 + 8 + 1] = 0x55
+    p.write_bytes(bytes(raw))
+    surveys = read_dzt(p)
+    assert surveys[0].metadata["marks"] == [1, 4] == surveys[1].metadata["marks"]
+    want = expected_values(6, 8, 2, 8)
+    for ch, s in enumerate(surveys):
+        np.testing.assert_array_equal(s.data[:, 2:], want[ch][:, 2:].astype(np.float32))  # 128 taken off
+        np.testing.assert_array_equal(s.data[:, 0], s.data[:, 2])
+        np.testing.assert_array_equal(s.data[:, 1], s.data[:, 2])
+
+
+def test_is_dzt(tmp_path):
+    p = write_dzt(tmp_path / "a.DZT", n_traces=2, n_samples=16)
+    assert is_dzt(p)
+    other = tmp_path / "a.bin"
+    other.write_bytes(p.read_bytes())
+    assert is_dzt(other)  # another suffix: a whole trace after the header is enough
+    other.write_bytes(p.read_bytes()[: 1024 + 31])  # one byte short of a 32-byte trace
+    assert not is_dzt(other)
+    other.write_bytes(p.read_bytes()[: 1024 + 32])
+    assert is_dzt(other)
+    named = tmp_path / "b.dzt"
+    named.write_bytes(p.read_bytes()[:1024])  # a .dzt suffix: the header alone is enough
+    assert is_dzt(named)
+    junk = tmp_path / "junk.dzt"
+    junk.write_bytes(b"\xff" * 4096)
+    assert not is_dzt(junk)
+
+
+def test_dzg_records_fixes_and_sentences(tmp_path):
+    g = tmp_path / "t.DZG"
+    g.write_text(
+        "$GPGGA,115959,4739.0000,N,12218.0000,W,1,08,1.0,9.0,M,,M,,*00\n"  # before any $GSSIS: ignored
+        "$GSSIS,3,-1\n$GPRMC,120000,A,4739.0000,N,12218.0000,W,0.0,0.0,010120,,*00\n"  # not GGA: ignored
+        "$GNGGA,120000,4739.0000,S,12218.0000,E,2,08,1.0,,M,,M,,*00\n"  # any talker; no altitude: 0
+        "$GNGGA,120000,4740.0000,N,12218.0000,E,2,08,1.0,5.0,M,,M,,*00\n"  # a second GGA of the record: ignored
+        "\n   \n"
+        "$GSSIS,7,-1\n$GPGGA,120001,4739.5000,N,00030.0000,W,0,08,1.0,11.0,M,,M,,*00\n"  # quality 0: no fix
+        "$GSSIS,9,-1\n$GPGGA,120002,4739.5000,N\n"  # cut short: malformed
+        "$GSSIS,12,-1\nGPGGA,120002,4739.5000,N,00030.0000,W,1,08,1.0,11.0,M,,M,,*00\n"  # no '$': ignored
+        "$GSSIS,15,-1\n$GPGGA,120003,4739.5000,N,00030.0000,W,1,08,1.0,11.5,M,,M,,*00\n"
+    )
+    d = read_dzg(g)
+    assert d["records"] == 5 and d["malformed"] == 1
+    np.testing.assert_array_equal(d["scan"], [3.0, 15.0])
+    assert d["scan"].dtype == np.float64
+    np.testing.assert_allclose(d["lat"], [-(47 + 39 / 60), 47 + 39.5 / 60])
+    np.testing.assert_allclose(d["lon"], [122 + 18 / 60, -0.5])
+    np.testing.assert_allclose(d["alt"], [0.0, 11.5])
+
+
+def test_the_dzg_is_read_only_when_asked_and_needs_two_fixes(tmp_path):
+    p = write_dzt(tmp_path / "g.DZT", n_traces=11, spm=50.0)
+    dzg = tmp_path / "g.DZG"
+    dzg.write_text("$GSSIS,0,-1\n$GPGGA,120000,4739.0000,N,12218.0000,W,1,08,1.0,10.0,M,,M,,*00\n"
+                   "$GSSIS,10,-1\n$GPGGA,120001,4739.0010,N,12218.0000,W,1,08,1.0,12.0,M,,M,,*00\n")
+    s = read_dzt(p)[0]
+    assert s.metadata["positions_source"] == "DZG GPS (local ENU metres about origin)"
+    assert s.metadata["gps"] == {"file": "g.DZG", "records": 2, "fixes": 2, "malformed": 0,
+                                 "origin_lat_lon_alt": pytest.approx([47.65, -(122 + 18 / 60), 10.0])}
+    off = read_dzt(p, gps=False)[0]  # the wheel instead, and no gps block
+    assert "gps" not in off.metadata and off.metadata["positions_source"].startswith("survey wheel")
+    np.testing.assert_allclose(off.positions_xyz[:, 0], np.arange(11) / 50.0)
+    dzg.write_text("$GSSIS,0,-1\n$GPGGA,120000,4739.0000,N,12218.0000,W,1,08,1.0,10.0,M,,M,,*00\n")
+    one = read_dzt(p)[0]  # one fix: the wheel places the traces; the DZG is still described
+    assert one.metadata["positions_source"].startswith("survey wheel")
+    assert one.metadata["gps"] == {"file": "g.DZG", "records": 1, "fixes": 1, "malformed": 0}

@@ -152,3 +152,168 @@ def test_gprmax3_merge_layout_without_the_gprmax_attribute(tmp_path):
         f["rxs/rx1/notes"] = np.zeros(3)
     with pytest.raises(FormatError, match="gprMax"):
         read_gprmax(q)
+
+
+# ---------------------------------------------------------------- files made here, field by field
+
+from gpr3d.io.gprmax import is_gprmax  # noqa: E402
+
+
+def _file(path, *, attrs=None, rxs=None, srcs=None, tm=None):
+    """A gprMax-like HDF5 file: root ``attrs``, ``rxs`` {name: {component: array, "@Position": ...}}, ``srcs``
+    {name: {"@Position": ..., "excitation": {attrs, "samples": array}}}, ``tm`` {path: array} under
+    trace_metadata."""
+    import h5py
+
+    with h5py.File(path, "w") as f:
+        f.attrs.update(attrs or {})
+        for name, comps in (rxs or {}).items():
+            g = f.create_group(f"rxs/{name}")
+            for k, v in comps.items():
+                if k.startswith("@"):
+                    g.attrs[k[1:]] = v
+                else:
+                    g[k] = v
+        for name, spec in (srcs or {}).items():
+            g = f.create_group(f"srcs/{name}")
+            if "@Position" in spec:
+                g.attrs["Position"] = spec["@Position"]
+            if "excitation" in spec:
+                e = g.create_group("excitation")
+                e.attrs.update(spec["excitation"].get("attrs", {}))
+                if "samples" in spec["excitation"]:
+                    e["samples"] = spec["excitation"]["samples"]
+        for key, v in (tm or {}).items():
+            f[f"trace_metadata/{key}"] = v
+    return path
+
+
+BASE = {"gprMax": "4.0.1", "Iterations": 6, "dt": 2e-12, "Title": "made here"}
+
+
+def test_receivers_in_number_order_with_metadata(tmp_path):
+    rxs = {f"rx{k}": {"Ez": np.full((6, 3), k, float), "@Position": (0.01 * k, 0.2, 0.0)} for k in (10, 2, 1)}
+    srcs = {"src1": {"@Position": (0.0, 0.2, 0.0),
+                     "excitation": {"attrs": {"WaveformType": b"ricker", "WaveformFrequency": np.float64(1.5e9),
+                                              "SourceType": "HertzianDipole"}}}}
+    p = _file(tmp_path / "m.h5", attrs={**BASE, "dx_dy_dz": (0.001, 0.002, 0.003), "srcsteps": (2, 0, 0),
+                                        "rxsteps": (1, 0, 0)}, rxs=rxs, srcs=srcs)
+    surveys = read_gprmax(p)
+    assert [s.metadata["receiver"] for s in surveys] == ["rx1", "rx2", "rx10"]
+    assert [float(s.data[0, 0]) for s in surveys] == [1.0, 2.0, 10.0]
+    s = surveys[1]
+    m = s.metadata
+    assert (m["format"], m["channel"], m["n_channels"], m["component"]) == ("gprmax", 1, 3, "Ez")
+    assert (m["gprmax_version"], m["title"], m["merged"]) == ("4.0.1", "made here", True)
+    assert m["dx_dy_dz"] == [0.001, 0.002, 0.003]
+    assert m["waveform"] == {"WaveformType": "ricker", "WaveformFrequency": 1.5e9, "SourceType": "HertzianDipole"}
+    assert m["antenna"] == "gprMax HertzianDipole" and s.frequency_hz == 1.5e9
+    assert m["positions_source"] == "gprMax receiver position + rxsteps"
+    # rx2 at x = 0.02 + 0.001 i, the source at 0 + 0.002 i (its own steps times the cell size)
+    np.testing.assert_allclose(m["tx_positions_gprmax"], [[0.0, 0.2, 0.0], [0.002, 0.2, 0.0], [0.004, 0.2, 0.0]])
+    np.testing.assert_allclose(s.positions_xyz[:, 0], (0.02 + 0.001 * np.arange(3) + 0.002 * np.arange(3)) / 2)
+    np.testing.assert_allclose(s.positions_xyz[:, 2], 0.2)
+    assert s.offset_m == pytest.approx(np.median(0.02 - 0.001 * np.arange(3)))
+    assert s.dt_s == 2e-12
+
+
+def test_a_single_trace_file_is_not_merged_and_a_source_without_waveform(tmp_path):
+    p = _file(tmp_path / "one.h5", attrs=BASE, rxs={"rx1": {"Ez": np.arange(6.0), "@Position": (0.05, 0.1, 0.0)}},
+              srcs={"src1": {"@Position": (0.03, 0.1, 0.0)}})
+    s = read_gprmax(p)[0]
+    assert s.shape == (1, 6) and not s.metadata["merged"]
+    assert s.metadata["waveform"] is None and s.metadata["antenna"] == "gprMax" and s.frequency_hz is None
+    np.testing.assert_array_equal(s.data[0], np.arange(6.0, dtype=np.float32))
+    np.testing.assert_allclose(s.positions_xyz, [[0.04, 0.0, 0.1]])
+    # tx at 0.03, rx at 0.05: 2 cm apart, the antenna heading along tx -> rx, world +x
+    assert s.offset_m == pytest.approx(0.02) and s.headings_rad[0] == pytest.approx(0.0)
+
+
+def test_trace_metadata_positions_win_and_must_match(tmp_path):
+    tx = np.c_[np.linspace(0, 0.04, 3), np.full(3, 0.1), np.zeros(3)]
+    rx = tx + [0.0, 0.0, 0.02]  # receiver 2 cm along gprMax z: world -y
+    p = _file(tmp_path / "tm.h5", attrs={**BASE, "rxsteps": (5, 0, 0)},
+              rxs={"rx1": {"Ez": np.ones((6, 3)), "@Position": (9.0, 9.0, 9.0)}},
+              srcs={"src1": {"@Position": (9.0, 9.0, 9.0)}},
+              tm={"rxs/rx1/Position": rx, "srcs/src1/Position": tx})
+    s = read_gprmax(p)[0]
+    assert s.metadata["positions_source"] == "gprMax trace_metadata"
+    np.testing.assert_allclose(s.positions_xyz, np.c_[tx[:, 0], np.full(3, -0.01), np.full(3, 0.1)])
+    np.testing.assert_allclose(s.headings_rad, -np.pi / 2)  # tx -> rx points to world -y
+    bad = _file(tmp_path / "tm2.h5", attrs=BASE, rxs={"rx1": {"Ez": np.ones((6, 3))}},
+                srcs={"src1": {"@Position": (0.0, 0.1, 0.0)}}, tm={"rxs/rx1/Position": rx[:2]})
+    with pytest.raises(FormatError, match="^tm2.h5: trace_metadata positions do not match the number of traces$"):
+        read_gprmax(bad)
+
+
+def test_a_receiver_without_position_or_steps_has_no_positions(tmp_path):
+    p = _file(tmp_path / "n.h5", attrs=BASE, rxs={"rx1": {"Ez": np.ones((6, 2))}})
+    s = read_gprmax(p)[0]
+    assert s.positions_xyz is None and s.orientations_quat_wxyz is None and s.offset_m == 0.0
+    assert s.metadata["positions_source"] == "none in the file (give the trace positions)"
+    assert s.metadata["tx_positions_gprmax"] is None
+    # a receiver with steps but no source: the source is taken at the receiver (zero offset, no heading)
+    p = _file(tmp_path / "r.h5", attrs={**BASE, "rxsteps": (1, 0, 0), "dx_dy_dz": (0.01, 0.01, 0.01)},
+              rxs={"rx1": {"Ez": np.ones((6, 2))}})
+    s = read_gprmax(p)[0]
+    np.testing.assert_allclose(s.positions_xyz, [[0, 0, 0], [0.01, 0, 0]])
+    assert s.offset_m == 0.0 and s.orientations_quat_wxyz is None
+
+
+@pytest.mark.parametrize("attrs, rxs, message", [
+    ({"Iterations": 6, "dt": 1e-12}, {}, "HDF5 file has neither a 'gprMax' attribute nor gprMax's layout"),
+    ({"gprMax": "4", "Iterations": 6}, {"rx1": {"Ez": np.ones(6)}}, "gprMax output lacks the 'dt' or 'Iterations'"),
+    ({"gprMax": "4", "dt": 1e-12}, {"rx1": {"Ez": np.ones(6)}}, "gprMax output lacks the 'dt' or 'Iterations'"),
+    ({"gprMax": "4", "Iterations": 6, "dt": 0.0}, {"rx1": {"Ez": np.ones(6)}}, "gprMax dt = 0.0 is not a positive"),
+    ({"gprMax": "4", "Iterations": 6, "dt": float("nan")}, {"rx1": {"Ez": np.ones(6)}}, "gprMax dt = nan"),
+    ({"gprMax": "4", "Iterations": 6, "dt": 1e-12}, {}, "gprMax output holds no receivers"),
+    ({"gprMax": "4", "Iterations": 7, "dt": 1e-12}, {"rx1": {"Ez": np.ones((6, 2))}},
+     "rx1/Ez has shape (6, 2), expected (7, n_traces)"),
+    ({"gprMax": "4", "Iterations": 6, "dt": 1e-12}, {"rx1": {"Ez": np.ones((6, 2, 2))}}, "rx1/Ez has shape (6, 2, 2)"),
+    ({"gprMax": "4", "Iterations": 6, "dt": 1e-12}, {"rx1": {"Hx": np.ones(6), "Other": np.ones(6)}},
+     "receiver rx1 has no Ez output (has Hx)"),
+    ({"gprMax": "4", "Iterations": 6, "dt": 1e-12}, {"rx1": {"Other": np.ones(6)}},
+     "receiver rx1 has no Ez output (has none)"),
+])
+def test_broken_outputs_are_named(tmp_path, attrs, rxs, message):
+    p = _file(tmp_path / "b.h5", attrs=attrs, rxs=rxs)
+    with pytest.raises(FormatError) as e:
+        read_gprmax(p)
+    assert str(e.value).startswith(f"b.h5: {message}")
+
+
+def test_not_hdf5_and_unknown_components(tmp_path):
+    t = tmp_path / "t.out"
+    t.write_text("not hdf5 at all")
+    with pytest.raises(FormatError, match="^t.out: not an HDF5 file, so not a gprMax output$"):
+        read_gprmax(t)
+    assert not is_gprmax(t)
+    p = write_gprmax3_out(tmp_path / "x.out")
+    with pytest.raises(FormatError, match="unknown field component 'Ew'; choose from Ex, Ey, Ez, Hx, Hy, Hz, Ix"):
+        read_gprmax(p, component="Ew")
+    np.testing.assert_array_equal(read_gprmax(p, component="Hx")[0].data,
+                                  0.5 * expected_values(4, 30, 1, 32)[0].astype(np.float32))
+
+
+def test_is_gprmax(tmp_path):
+    assert is_gprmax(write_gprmax3_out(tmp_path / "x.out"))
+    assert is_gprmax(_file(tmp_path / "v.h5", attrs={"gprMax": "4"}, rxs={"rx1": {"Ez": np.ones(3)}}))
+    assert not is_gprmax(_file(tmp_path / "a.h5", attrs={"gprMax": "4"}))  # no receivers
+    assert is_gprmax(_file(tmp_path / "l.h5", attrs={"Iterations": 3, "dt": 1e-12}, rxs={"rx1": {"Hz": np.ones(3)}}))
+    assert not is_gprmax(_file(tmp_path / "o.h5", attrs={"Iterations": 3, "dt": 1e-12},
+                               rxs={"rx1": {"Foo": np.ones(3)}}))  # no field component
+    assert not is_gprmax(_file(tmp_path / "d.h5", attrs={"Iterations": 3}, rxs={"rx1": {"Ez": np.ones(3)}}))
+    assert not is_gprmax(tmp_path / "missing.h5")
+
+
+def test_the_waveform_reader(tmp_path):
+    p = _file(tmp_path / "w.h5", attrs=BASE, rxs={"rx1": {"Ez": np.ones(6)}},
+              srcs={"src1": {"excitation": {"attrs": {"SampleInterval": 1e-12, "TimeSampleOffset": 5e-13},
+                                            "samples": np.array([0.0, 1.0, -1.0])}},
+                    "src2": {"excitation": {"samples": np.array([2.0, 3.0])}}})
+    t, w = read_gprmax_waveform(p)
+    np.testing.assert_allclose(t, [5e-13, 1.5e-12, 2.5e-12])
+    np.testing.assert_array_equal(w, [0.0, 1.0, -1.0])
+    t, w = read_gprmax_waveform(p, source="src2")  # no interval of its own: the file's dt, no offset
+    np.testing.assert_allclose(t, [0.0, 2e-12])
+    assert read_gprmax_waveform(p, source="src3") is None

@@ -99,3 +99,116 @@ def test_failed_write_keeps_the_old_file(tmp_path, monkeypatch):
     monkeypatch.undo()
     assert read_surveys(tmp_path / "s.h5")[0].equals(good)
     assert [p.name for p in tmp_path.iterdir()] == ["s.h5"]  # no temporary left behind
+
+
+# ---------------------------------------------------------------- the file as written, and every refusal
+
+from gpr3d.io.hdf5 import SCHEMA, SCHEMA_VERSION, is_gpr3d_h5, read_survey  # noqa: E402
+
+
+def test_the_layout_on_disk(tmp_path):
+    s = full_survey()
+    s.metadata["nested"].pop("nan")
+    write_survey(s, tmp_path / "s.h5")
+    with h5py.File(tmp_path / "s.h5") as f:
+        assert (f.attrs["schema"], int(f.attrs["schema_version"]), f.attrs["gpr3d_version"]) == \
+            ("gpr3d.survey", 1, gpr3d.__version__)
+        g = f["surveys/0"]
+        d = g["data"]
+        assert d.dtype == np.float32 and d.compression == "gzip" and d.compression_opts == 4 and d.shuffle
+        np.testing.assert_array_equal(d[()], s.data)
+        for name in ("timestamps_s", "positions_xyz", "orientations_quat_wxyz"):
+            np.testing.assert_array_equal(g[name][()], getattr(s, name))
+            assert g[name].dtype == np.float64
+        assert {k: float(g.attrs[k]) for k in ("dt_s", "t0_s", "offset_m", "frequency_hz", "eps_r")} == \
+            {"dt_s": s.dt_s, "t0_s": s.t0_s, "offset_m": 0.05, "frequency_hz": 1.6e9, "eps_r": 7.25}
+        import json
+
+        assert json.loads(g.attrs["metadata_json"]) == s.metadata
+        assert json.loads(g.attrs["history_json"]) == s.history
+    assert (SCHEMA, SCHEMA_VERSION) == ("gpr3d.survey", 1)
+
+
+def test_a_bare_survey_stores_no_optional_fields(tmp_path):
+    bare = Survey(data=np.ones((2, 3), np.float32), dt_s=1e-10)
+    write_survey(bare, tmp_path / "b.h5")
+    with h5py.File(tmp_path / "b.h5") as f:
+        g = f["surveys/0"]
+        assert set(g) == {"data"} and set(g.attrs) == {"dt_s", "t0_s", "offset_m", "metadata_json", "history_json"}
+    back = read_surveys(tmp_path / "b.h5")[0]
+    assert back.frequency_hz is None and back.eps_r is None and back.positions_xyz is None
+    assert back.t0_s == 0.0 and back.offset_m == 0.0
+
+
+def test_missing_t0_and_offset_read_as_zero(tmp_path):
+    write_survey(Survey(data=np.ones((2, 3), np.float32), dt_s=1e-10, t0_s=1e-9, offset_m=0.1), tmp_path / "s.h5")
+    with h5py.File(tmp_path / "s.h5", "a") as f:
+        del f["surveys/0"].attrs["t0_s"], f["surveys/0"].attrs["offset_m"]
+    back = read_surveys(tmp_path / "s.h5")[0]
+    assert back.t0_s == 0.0 and back.offset_m == 0.0
+
+
+def test_surveys_come_back_in_number_order(tmp_path):
+    surveys = [Survey(data=np.full((2, 3), k, np.float32), dt_s=1e-10) for k in range(12)]
+    write_surveys(surveys, tmp_path / "m.h5")
+    assert [float(s.data[0, 0]) for s in read_surveys(tmp_path / "m.h5")] == list(range(12))  # 10 after 9
+    assert float(read_survey(tmp_path / "m.h5", channel=11).data[0, 0]) == 11.0
+    assert float(read_survey(tmp_path / "m.h5").data[0, 0]) == 0.0
+    with pytest.raises(FormatError, match=r"^m.h5: has 12 survey\(s\); channel -1 does not exist$"):
+        read_survey(tmp_path / "m.h5", channel=-1)
+
+
+def _edit(path, fn):
+    with h5py.File(path, "a") as f:
+        fn(f)
+    return path
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda f: f.attrs.__setitem__("schema", "other.thing"),
+     "s.h5: not a gpr3d survey file (schema attribute 'other.thing')"),
+    (lambda f: f.attrs.__delitem__("schema"), "s.h5: not a gpr3d survey file (schema attribute None)"),
+    (lambda f: f.attrs.__setitem__("schema_version", 2),
+     "s.h5: written with schema version 2; this gpr3d reads up to 1: upgrade gpr3d"),
+    (lambda f: f.__delitem__("surveys"), "s.h5: holds no surveys"),
+    (lambda f: f.__delitem__("surveys/0"), "s.h5: holds no surveys"),
+    (lambda f: f["surveys/0"].__delitem__("data"), "s.h5: survey 0 is incomplete or corrupt"),
+    (lambda f: f["surveys/0"].attrs.__delitem__("metadata_json"), "s.h5: survey 0 is incomplete or corrupt"),
+    (lambda f: f["surveys/0"].attrs.__setitem__("history_json", "{not json"), "s.h5: survey 0 is incomplete"),
+    (lambda f: f["surveys/0"].attrs.__setitem__("dt_s", -1.0), "s.h5: survey 0: "),
+])
+def test_damaged_files_are_named(tmp_path, edit, message):
+    write_survey(Survey(data=np.ones((2, 3), np.float32), dt_s=1e-10), tmp_path / "s.h5")
+    _edit(tmp_path / "s.h5", edit)
+    with pytest.raises(FormatError) as e:
+        read_surveys(tmp_path / "s.h5")
+    assert str(e.value).startswith(message)
+
+
+def test_an_older_or_missing_version_is_read(tmp_path):
+    p = tmp_path / "s.h5"
+    write_survey(Survey(data=np.ones((2, 3), np.float32), dt_s=1e-10), p)
+    _edit(p, lambda f: f.attrs.__delitem__("schema_version"))
+    assert read_surveys(p)[0].n_traces == 2
+    _edit(p, lambda f: f.attrs.__setitem__("schema_version", 1))
+    assert read_surveys(p)[0].n_traces == 2
+
+
+def test_is_gpr3d_h5(tmp_path):
+    p = tmp_path / "s.h5"
+    write_survey(Survey(data=np.ones((2, 3), np.float32), dt_s=1e-10), p)
+    assert is_gpr3d_h5(p)
+    other = tmp_path / "o.h5"
+    with h5py.File(other, "w") as f:
+        f.attrs["schema"] = "gpr3d.volume"
+    assert not is_gpr3d_h5(other)
+    text = tmp_path / "t.h5"
+    text.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\0" * 100)  # the signature, then nothing HDF5 can open
+    assert not is_gpr3d_h5(text)
+    assert not is_gpr3d_h5(tmp_path / "missing.h5")
+
+
+def test_writing_nothing_is_refused(tmp_path):
+    with pytest.raises(ValueError, match="nothing to write: empty list of surveys"):
+        write_surveys([], tmp_path / "e.h5")
+    assert not list(tmp_path.iterdir())

@@ -28,3 +28,84 @@ def test_bad_boxes_get_a_one_line_error_naming_the_box(box, words):
     with pytest.raises(InvalidDataError, match=words) as e:
         check_boxes([[0, 0.0, 1, 1e-9], box], 50, 200 * DT)
     assert "box 1" in str(e.value) and "\n" not in str(e.value)
+
+
+# ---------------------------------------------------------------- the taper and the boxes by hand
+
+from gpr3d.migration.masking import image_envelope, masked_migration, signal_to_clutter  # noqa: E402
+
+
+def test_the_taper_is_a_half_cosine_by_hand():
+    """A box over traces 10..20 with a 4-trace taper: trace 8 (2 out) is 0.5 (1 + cos(pi/2)) = 0.5, trace 9 is
+    0.5 (1 + cos(pi/4)) = 0.854, trace 6 (4 out) and beyond 0; in time the default taper is 3 samples."""
+    m = box_mask(40, 100, DT, [[10, 3e-9, 20, 5e-9]], taper_traces=4)
+    col = m[:, 40].astype(float)
+    assert col[8] == pytest.approx(0.5, abs=1e-6) and col[9] == pytest.approx(0.5 * (1 + np.cos(np.pi / 4)), abs=1e-6)
+    assert col[7] == pytest.approx(0.5 * (1 + np.cos(3 * np.pi / 4)), abs=1e-6)
+    assert col[6] == 0 and col[5] == 0 and col[22] == pytest.approx(0.5, abs=1e-6) and col[24] == 0
+    row = m[15].astype(float)  # samples 30..50 inside; 3-sample taper
+    assert row[30] == 1 and row[50] == 1 and row[29] == pytest.approx(0.5 * (1 + np.cos(np.pi / 3)), abs=1e-6)
+    assert row[28] == pytest.approx(0.5 * (1 + np.cos(2 * np.pi / 3)), abs=1e-6) and row[27] == 0
+    assert row[51] == pytest.approx(0.5 * (1 + np.cos(np.pi / 3)), abs=1e-6) and row[53] == 0
+    assert m.dtype == np.float32
+
+
+def test_a_taper_in_seconds_and_no_taper():
+    m = box_mask(10, 100, DT, [[2, 3e-9, 4, 5e-9]], taper_traces=0, taper_s=0.5e-9)  # 5 samples
+    assert m[1, 40] == 0 and m[2, 40] == 1 and m[4, 40] == 1 and m[5, 40] == 0
+    assert m[3, 25] == 0 and m[3, 26] == pytest.approx(0.5 * (1 + np.cos(4 * np.pi / 5)), abs=1e-6)
+    # fractional box edges: the taper counts from the edge itself
+    m = box_mask(10, 100, DT, [[2.5, 3e-9, 4, 5e-9]], taper_traces=1)
+    assert m[2, 40] == pytest.approx(0.5 * (1 + np.cos(np.pi / 2)), abs=1e-6) and m[3, 40] == 1
+
+
+def test_overlapping_boxes_take_the_larger_weight():
+    m = box_mask(30, 100, DT, [[5, 2e-9, 10, 4e-9], [9, 3e-9, 15, 6e-9]], taper_traces=2)
+    assert m.max() == 1.0
+    assert m[12, 35] == 1 and m[7, 25] == 1 and m[11, 25] == pytest.approx(0.5, abs=1e-6)  # box 1, a trace out
+
+
+def test_box_edges_on_the_data_edges_are_accepted():
+    assert check_boxes([[0, 0.0, 49, 20e-9], [49, 20e-9, 49, 21e-9], [-5, -1e-9, 0, 0.0 + 1e-12]], 50, 20e-9) == [
+        (0.0, 0.0, 49.0, 20e-9), (49.0, 20e-9, 49.0, 21e-9), (-5.0, -1e-9, 0.0, 1e-12)]
+    with pytest.raises(InvalidDataError, match="box 0 .* lies outside the data \\(50 traces, 20 ns\\)"):
+        check_boxes([[50, 1e-9, 60, 2e-9]], 50, 20e-9)
+    with pytest.raises(InvalidDataError, match="lies outside"):
+        check_boxes([[1, 1e-9, 3, 2e-9], [1, 21e-9, 3, 22e-9]], 50, 20e-9)
+    with pytest.raises(InvalidDataError, match="lies outside"):
+        check_boxes([[-9, 1e-9, -1, 2e-9]], 50, 20e-9)
+    with pytest.raises(InvalidDataError, match="lies outside"):
+        check_boxes([[1, -3e-9, 3, -1e-9]], 50, 20e-9)
+
+
+def test_masked_migration_is_the_adjoint_of_each_part():
+    class Double:  # an 'operator' whose adjoint doubles its input: the parts are exactly twice the masked data
+        def adjoint(self, d):
+            return 2 * d
+
+    data = np.arange(12, dtype=np.float64).reshape(3, 4)
+    mask = np.array([[1, 0, 0.5, 1]] * 3, np.float32)
+    sig, noise = masked_migration(Double(), data, mask)
+    np.testing.assert_array_equal(sig, 2 * data * mask)
+    np.testing.assert_array_equal(noise, 2 * data * (1 - mask))
+    assert sig.dtype == np.float32
+
+
+def test_the_envelope_of_a_modulated_column_is_its_gaussian():
+    z = np.arange(256)
+    g = np.exp(-0.5 * ((z - 128) / 12.0) ** 2)
+    col = g * np.cos(2 * np.pi * z / 8.0)
+    img = np.broadcast_to(col, (3, 2, 256)).astype(np.float32)
+    env = image_envelope(img, chunk_voxels=600)  # one column of x per slab
+    np.testing.assert_allclose(env[:, :, 64:192], np.broadcast_to(g[64:192], (3, 2, 128)), atol=2e-3)
+    assert env.dtype == np.float32
+
+
+def test_signal_to_clutter_by_hand():
+    env = np.array([4.0, 4.0, 1.0, 1.0, 1.0, 1.0])
+    tm = np.array([True, True, False, False, False, False])
+    assert signal_to_clutter(env, tm) == pytest.approx(20 * np.log10(4.0))
+    env2 = np.array([6.0, 2.0, 3.0, 4.0])  # mean 4 on targets, RMS 3.5355 elsewhere
+    assert signal_to_clutter(env2, np.array([True, True, False, False])) == pytest.approx(
+        20 * np.log10(4.0 / np.sqrt(12.5)))
+    assert signal_to_clutter(np.array([1.0, 0.0]), np.array([True, False])) == float("inf")

@@ -36,3 +36,64 @@ def test_entropy_is_lower_for_a_focused_image_and_inputs_are_checked():
     assert image_entropy(sharp) == pytest.approx(0.0) and image_entropy(blurred) > 2.0
     with pytest.raises(InvalidDataError, match="three increasing"):
         focus_eps(None, eps_grid=[4.0, 9.0])
+
+
+def test_entropy_by_hand():
+    assert image_entropy([1.0, -1.0, 0.0]) == pytest.approx(np.log(2))  # energy, not amplitude: two equal voxels
+    assert image_entropy(np.ones((2, 2, 2))) == pytest.approx(np.log(8))
+    assert image_entropy([2.0, 1.0]) == pytest.approx(-(0.8 * np.log(0.8) + 0.2 * np.log(0.2)))
+    assert np.isnan(image_entropy(np.zeros(5)))
+
+
+def _stub(monkeypatch, entropy_of_eps):
+    """reconstruct() and image_entropy() replaced: each eps_r tried gives the entropy ``entropy_of_eps(eps)``."""
+    import types
+
+    import gpr3d.migration.reconstruct as rec
+    import gpr3d.migration.velocity as vel
+
+    tried = []
+
+    def fake(survey, cfg, boxes=None):
+        tried.append((cfg.eps_r, cfg.spacing_m, cfg.max_depth_m, cfg.aperture_deg, boxes))
+        return types.SimpleNamespace(envelope=cfg.eps_r)
+
+    monkeypatch.setattr(rec, "reconstruct", fake)
+    monkeypatch.setattr(vel, "image_entropy", entropy_of_eps)
+    return tried
+
+
+def test_the_best_eps_is_the_parabola_vertex_in_slowness(monkeypatch):
+    """Entropy (sqrt(eps) - 2.9)^2 + 1 over the default grid: the vertex in sqrt(eps_r) is exact, 2.9^2 = 8.41."""
+    tried = _stub(monkeypatch, lambda eps: (np.sqrt(eps) - 2.9) ** 2 + 1.0)
+    r = focus_eps("survey", boxes=[[1, 2, 3, 4]], spacing_m=0.05, max_depth_m=0.8, aperture_deg=40.0)
+    assert r["eps_r"] == pytest.approx(8.41, rel=1e-9) and not r["at_edge"]
+    np.testing.assert_allclose(r["eps_grid"], np.linspace(np.sqrt(3.0), np.sqrt(25.0), 12) ** 2)
+    np.testing.assert_allclose(r["entropy"], (np.sqrt(r["eps_grid"]) - 2.9) ** 2 + 1.0)
+    assert [t[1:] for t in tried] == [(0.05, 0.8, 40.0, [[1, 2, 3, 4]])] * 12
+
+
+def test_a_best_eps_at_the_grid_edge_is_flagged(monkeypatch):
+    _stub(monkeypatch, lambda eps: eps)  # lower is always better: the first value
+    r = focus_eps("survey", eps_grid=[4.0, 9.0, 16.0])
+    assert r["eps_r"] == 4.0 and r["at_edge"]
+    _stub(monkeypatch, lambda eps: -eps)
+    r = focus_eps("survey", eps_grid=[4.0, 9.0, 16.0])
+    assert r["eps_r"] == 16.0 and r["at_edge"]
+
+
+def test_a_flat_or_empty_focus(monkeypatch):
+    # entropies 1, 0.5, 0.5, 2 at sqrt(eps_r) 2, 3, 4, 5: the parabola through the best three (2, 3, 4) has its
+    # vertex half-way between the equal two, sqrt(eps_r) = 3.5
+    _stub(monkeypatch, lambda eps: {4.0: 1.0, 9.0: 0.5, 16.0: 0.5, 25.0: 2.0}[eps])
+    r = focus_eps("survey", eps_grid=[4.0, 9.0, 16.0, 25.0])
+    assert r["eps_r"] == pytest.approx(12.25, rel=1e-9) and not r["at_edge"]
+    # a neighbour whose image was empty (NaN): no parabola, the best grid value stands
+    _stub(monkeypatch, lambda eps: {4.0: float("nan"), 9.0: 0.5, 16.0: 1.0}[eps])
+    assert focus_eps("survey", eps_grid=[4.0, 9.0, 16.0])["eps_r"] == 9.0
+    _stub(monkeypatch, lambda eps: float("nan"))
+    with pytest.raises(InvalidDataError, match="the migrated image is empty for every eps_r"):
+        focus_eps("survey", eps_grid=[4.0, 9.0, 16.0])
+    for bad in ([4.0, 4.0, 9.0], [0.5, 4.0, 9.0], [4.0, float("inf"), 9.0]):
+        with pytest.raises(InvalidDataError, match="at least three increasing values >= 1"):
+            focus_eps("survey", eps_grid=bad)

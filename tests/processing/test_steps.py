@@ -9,6 +9,9 @@ from gpr3d.simulation.synthetic import point_targets_bscan
 
 def test_every_step_records_provenance_and_leaves_the_input_alone():
     s = point_targets_bscan([[0.4, 0.3]], n_traces=60)
+    pos = s.positions_xyz.copy()
+    pos[:, 2] = np.linspace(0.0, 0.05, 60)  # a slope, for the static correction to correct
+    s = s.replace(positions_xyz=pos)
     before = s.data.copy()
     args = {"gain_sec": {"alpha_per_s": 1e8}, "resample_spacing": {"spacing_m": 0.02}}
     for name in STEPS:
@@ -17,6 +20,13 @@ def test_every_step_records_provenance_and_leaves_the_input_alone():
         assert out.history[-1]["args"] == args.get(name, {})
         assert out.history[-1]["gpr3d"] == gpr3d.__version__
         assert out is not s
+        # the survey carries what the step made: its data (changed: every step changes this record), its time zero
+        # and its result, as the step itself gives them
+        changes, result = STEPS[name](s, **args.get(name, {}))
+        np.testing.assert_array_equal(out.data, np.asarray(changes.get("data", s.data), np.float32))
+        assert out.data.shape != s.data.shape or not np.array_equal(out.data, s.data), name
+        assert out.t0_s == changes.get("t0_s", s.t0_s)
+        assert out.history[-1].get("result") == result
     np.testing.assert_array_equal(s.data, before)
     assert s.history == []
 

@@ -46,9 +46,42 @@ def test_object_grazing_the_model_floor_is_left_out(tmp_path):
     build_only(s, tmp_path)  # raised "does not occupy any Yee cells" before
 
 
-def test_sampled_scenes_build(tmp_path):
-    for i in (1, 3, 16, 26):  # soil with stones, rough surfaces, water-filled pipes, tanks
-        build_only(sample_scene(0, i), tmp_path)
+def _cylinders(built):
+    return [o.kwargs for o in built.geometry_objects if type(o).__name__ == "Cylinder"]
+
+
+@pytest.mark.parametrize("i", [1, 3, 16, 26])  # soil with stones, rough surfaces, water-filled pipes, rebar mats
+def test_sampled_scenes_build_with_every_target_where_the_scene_puts_it(tmp_path, i):
+    """Each sampled target and stone becomes a cylinder across the model (along z) at its x, with its top at its
+    depth below the surface (the host's top, y = depth_m): centre y = depth_m - depth - r; metal as PEC, a void as
+    air, a hollow pipe as its wall's material with its fill inside (radius less the wall); and gprMax builds it."""
+    pytest.importorskip("gprMax")
+    scene = sample_scene(0, i)
+    built = build_gprmax_scene(scene)
+    cyl = _cylinders(built)
+    host = next(o.kwargs for o in built.geometry_objects if o.kwargs.get("material_id") == "host")
+    surface = host["p2"][1]
+    assert surface == pytest.approx(scene.depth_m)
+
+    def find(x, y, r, material):
+        hits = [c for c in cyl if c["p1"][0] == pytest.approx(x, abs=1e-9) and c["p1"][1] == pytest.approx(y, abs=1e-9)
+                and c["r"] == pytest.approx(r, abs=1e-9) and c["material_id"] == material]
+        return len(hits)
+
+    want = 0
+    for t in scene.targets:
+        y = surface - t.depth_m - t.radius_m
+        outer = "pec" if t.material == "pec" else f"m_{t.material}"
+        assert find(t.x_m, y, t.radius_m, outer) == 1, (i, t)
+        want += 1
+        if t.wall_m > 0:
+            assert find(t.x_m, y, t.radius_m - t.wall_m, f"m_{t.fill}") == 1, (i, t)
+            want += 1
+    for k, st in enumerate(scene.stones):
+        assert find(st.x_m, surface - st.depth_m - st.radius_m, st.radius_m, f"stone{k}") == 1, (i, st)
+        want += 1
+    assert len(cyl) == want  # nothing else
+    build_only(scene, tmp_path)
 
 
 def test_targets_must_cross_the_line():

@@ -91,7 +91,8 @@ def read_all(path, *, format: str | None = None, **kwargs) -> list:
         return FORMATS[name].read(Path(path), **kwargs)
     except TypeError as exc:
         if "unexpected keyword" in str(exc):
-            raise FormatError(path, f"the {name} reader does not take {exc}".split(" got ")[0]) from None
+            option = str(exc).rsplit(" ", 1)[-1]  # "read_dzt() got an unexpected keyword argument 'component'"
+            raise FormatError(path, f"the {name} reader takes no option {option}") from None
         raise
 
 

@@ -88,10 +88,7 @@ def read_csv_trajectory(path) -> Trajectory:
     reader = csv.reader(_io.StringIO(text))
     from gpr3d.io.inertial import csv_header
 
-    try:
-        header, t_scale = csv_header(next(reader))
-    except StopIteration:
-        raise FormatError(p, "empty CSV") from None
+    header, t_scale = csv_header(next(reader))  # (check_file refuses an empty file: a first row exists)
     cols = {}
     for key, names in _CSV_NAMES.items():
         for n in names:
@@ -208,10 +205,7 @@ def read_track(path):
     text = p.read_text(encoding="utf-8", errors="replace")
     if ext == ".csv":
         reader = csv.reader(_io.StringIO(text))
-        try:
-            header = [h.strip().lower() for h in next(reader)]
-        except StopIteration:
-            raise FormatError(p, "empty CSV") from None
+        header = [h.strip().lower() for h in next(reader)]  # (check_file refuses an empty file)
         cols = {}
         for key in ("x", "y", "z"):
             found = [header.index(n) for n in _CSV_NAMES[key] if n in header]
