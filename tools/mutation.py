@@ -17,6 +17,8 @@ mutant's diff. The exit code is 1 when a module run now scores below ``--fail-un
 The guard (``--guard``, run by ``tests/tools/test_mutation_guard.py``) reads the stored results, each with the
 commit it was measured at, and re-runs the modules that have changed since theirs: a scored module cannot land
 with a score below ``--fail-under``. Its report goes to ``build/mutation/guard.md``; the stored results stay.
+It is bounded (``--budget-s``, 300 s by the stored run times): beyond that it fails and names the command whose
+results, committed, make the guard cheap again.
 """
 
 from __future__ import annotations
@@ -53,7 +55,8 @@ MODULES = {
     "migration.targets": None, "migration.metrics": None,
     "migration.profile": None, "migration.traditional": None, "migration.reconstruct": None,
     "migration.sitetiles": None,
-    "simulation.forward": ["tests/simulation"], "simulation.labels": ["tests/simulation"],
+    "simulation.forward": ["tests/simulation/test_forward.py"],
+    "simulation.labels": ["tests/simulation/test_labels.py", "tests/simulation/test_forward.py"],
 }
 
 
@@ -247,6 +250,9 @@ def main(argv=None) -> int:
     ap.add_argument("--guard", action="store_true",
                     help="re-run the scored modules that changed since their commits; report to build/")
     ap.add_argument("--store", default=str(STORE), help="folder of the per-module results")
+    ap.add_argument("--budget-s", type=float, default=300.0,
+                    help="--guard: the most seconds of re-runs (by the stored times) it does; over it, it fails and "
+                         "names the command that refreshes the stored results")
     args = ap.parse_args(argv)
     if args.max_children < 1:
         ap.error(f"--max-children must be >= 1, got {args.max_children}")
@@ -265,6 +271,12 @@ def main(argv=None) -> int:
                 print(f"{module}: commit {commit[:10]} is not in this checkout: not compared")
         args.out = str(ROOT / "build" / "mutation" / "guard.md")
         print(f"guard: {len(listed)} modules scored; changed since their commits: {', '.join(mods) or 'none'}")
+        wall = {r["module"]: r.get("wall_s", 0.0) for r in load_results(store)}
+        need = sum(wall.get(m, 0.0) for m in mods)
+        if need > args.budget_s:
+            print(f"guard: re-running {', '.join(mods)} takes about {need:.0f} s, over the {args.budget_s:g} s budget: "
+                  f"run python tools/mutation.py {' '.join(mods)} and commit benchmarks/results/mutation/")
+            return 1
     else:
         mods = changed_modules(args.changed) if args.changed else (args.modules or list(MODULES))
     unknown = [m for m in mods if not (ROOT / source_of(m)).exists()]

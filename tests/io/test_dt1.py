@@ -221,3 +221,163 @@ def test_is_dt1_needs_both_files(tmp_path):
     assert not is_dt1(tmp_path / "PAIR.txt")
     p.with_suffix(".HD").unlink()
     assert not is_dt1(p)
+
+
+# ---------------------------------------------------------------- every message names its file; the edges
+
+import struct  # noqa: E402
+
+from gpr3d.core.errors import TruncatedRecordingWarning  # noqa: E402
+from gpr3d.io.dt1 import read_dt1, read_sns_gps  # noqa: E402
+
+
+@pytest.mark.parametrize("old, new, message", [
+    ("NUMBER OF TRACES   = 6\n", "", "E.HD: HD header lacks 'NUMBER OF TRACES'"),
+    ("NUMBER OF TRACES   = 6", "NUMBER OF TRACES   = six", "E.HD: HD field 'NUMBER OF TRACES' = 'six' is not a number"),
+    ("NUMBER OF PTS/TRC  = 50", "NUMBER OF PTS/TRC  = x", "E.HD: HD field 'NUMBER OF PTS/TRC' = 'x' is not a number"),
+    ("NUMBER OF PTS/TRC  = 50", "NUMBER OF PTS/TRC  = 1000001", "E.HD: NUMBER OF PTS/TRC = 1000001 is implausible"),
+    ("NUMBER OF TRACES   = 6", "NUMBER OF TRACES   = -1", "E.HD: NUMBER OF TRACES = -1: no traces"),
+    ("TOTAL TIME WINDOW  = 100.0", "TOTAL TIME WINDOW  = -5",
+     "E.HD: header field TOTAL TIME WINDOW = -5.0 is not a positive number"),
+    ("TOTAL TIME WINDOW  = 100.0\n", "", "E.HD: HD header lacks 'TOTAL TIME WINDOW'"),
+    ("NOMINAL FREQUENCY  = 250.0", "NOMINAL FREQUENCY  = high", "E.HD: HD field 'NOMINAL FREQUENCY' = 'high'"),
+    ("ANTENNA SEPARATION = 0.4", "ANTENNA SEPARATION = wide", "E.HD: HD field 'ANTENNA SEPARATION' = 'wide'"),
+    ("TIMEZERO AT POINT  = 3.5", "TIMEZERO AT POINT  = early", "E.HD: HD field 'TIMEZERO AT POINT' = 'early'"),
+    ("STEP SIZE USED     = 0.25", "STEP SIZE USED     = ?", "E.HD: HD field 'STEP SIZE USED' = '?'"),
+    ("NUMBER OF STACKS   = 4", "NUMBER OF STACKS   = many", "E.HD: HD field 'NUMBER OF STACKS' = 'many'"),
+    ("POSITION UNITS     = m", "POSITION UNITS     = Furlongs", "E.HD: unknown POSITION UNITS 'furlongs'"),
+])
+def test_every_header_error_names_the_header_file(tmp_path, old, new, message):
+    p = write_dt1(tmp_path / "E")
+    hd = p.with_suffix(".HD")
+    assert old in hd.read_text()
+    hd.write_text(hd.read_text().replace(old, new))
+    with pytest.raises(FormatError) as e:
+        read_dt1(p)
+    assert str(e.value).startswith(message)
+
+
+def test_optional_fields_left_out(tmp_path):
+    """No time-zero point, stacks or position units: none, none, metres."""
+    p = write_dt1(tmp_path / "O", step=0.5)
+    hd = p.with_suffix(".HD")
+    hd.write_text("\n".join(ln for ln in hd.read_text().splitlines()
+                            if not ln.startswith(("TIMEZERO", "NUMBER OF STACKS", "POSITION UNITS"))))
+    s = read_dt1(p)[0]
+    assert s.metadata["header_timezero_point"] is None and s.metadata["stacks"] is None
+    assert s.metadata["position_units"] == "m"
+    np.testing.assert_allclose(s.positions_xyz[:, 0], 0.5 * np.arange(6))
+
+
+def test_the_nul_look_ahead_ends_at_4096_bytes(tmp_path):
+    from gpr3d.io.dt1 import read_hd
+
+    hd = tmp_path / "N.HD"
+    hd.write_bytes(b"1234\n" + b" " * 4090 + b"\x00")  # the NUL is byte 4095, the last one looked at
+    with pytest.raises(FormatError, match="binary bytes"):
+        read_hd(hd)
+    hd.write_bytes(b"1234\n" + b" " * 4091 + b"\x00")  # byte 4096: not looked at
+    assert read_hd(hd) == {}
+
+
+def test_file_and_pair_errors_are_named(tmp_path):
+    p = write_dt1(tmp_path / "S")
+    p.write_bytes(p.read_bytes()[:100])
+    with pytest.raises(FormatError, match="^S.DT1: file is 100 bytes, shorter than one 128-byte trace header$"):
+        read_dt1(p)
+    p.unlink()
+    with pytest.raises(FormatError, match=r"^S.HD: no \.dt1 data file beside the header$"):
+        read_dt1(p.with_suffix(".HD"))
+    q = write_dt1(tmp_path / "Q")
+    q.with_suffix(".HD").unlink()
+    with pytest.raises(FormatError, match=r"^Q.DT1: no \.hd header beside the data \(pulseEKKO needs both\)$"):
+        read_dt1(q)
+    r = write_dt1(tmp_path / "R", n_traces=3, hd_traces=2)
+    with pytest.raises(FormatError, match="^R.DT1: file holds 3 traces but the HD header says 2: header and data"):
+        read_dt1(r)
+    b = write_dt1(tmp_path / "B", n_traces=3, bad_trace=1)
+    with pytest.raises(FormatError, match="^B.DT1: trace 1 header says 51 points, HD says 50"):
+        read_dt1(b)
+
+
+def _set_first_header(p, index, value):
+    raw = bytearray(p.read_bytes())
+    raw[4 * index : 4 * index + 4] = struct.pack("<f", value)
+    p.write_bytes(bytes(raw))
+
+
+def test_bytes_per_point_from_the_first_trace_header(tmp_path):
+    """The first header's bytes-per-point word says 2 or 4; anything else (3, NaN) means the usual 2, and the word
+    beside it does not matter."""
+    p = write_dt1(tmp_path / "W", n_traces=2, n_points=8, bits=32)
+    _set_first_header(p, 6, float("nan"))  # the time window word: not the one read
+    s = read_dt1(p)[0]
+    assert s.metadata["bytes_per_point"] == 4
+    np.testing.assert_array_equal(s.data, expected_values(2, 8, 1, 32)[0].astype(np.float32))
+    for junk in (3.0, float("nan"), float("inf"), 0.0):
+        q = write_dt1(tmp_path / "J", n_traces=2, n_points=8, bits=16)
+        _set_first_header(q, 5, junk)
+        s = read_dt1(q)[0]
+        assert s.metadata["bytes_per_point"] == 2, junk
+        np.testing.assert_array_equal(s.data, expected_values(2, 8)[0].astype(np.float32))
+
+
+def test_the_points_boundary(tmp_path):
+    p = write_dt1(tmp_path / "L", n_traces=1, n_points=1_000_000)
+    assert read_dt1(p)[0].n_samples == 1_000_000
+
+
+def test_a_partial_last_trace_warns_once_unless_traces_are_missing_too(tmp_path):
+    import warnings
+
+    p = write_dt1(tmp_path / "P", n_traces=4, n_points=10, hd_traces=4)
+    p.write_bytes(p.read_bytes()[:-10])  # the 4th trace cut: 3 whole traces and a part of the 4th the HD counts
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        s = read_dt1(p)[0]
+    assert s.n_traces == 3
+    assert [str(x.message) for x in w if issubclass(x.category, TruncatedRecordingWarning)] == [
+        "P.DT1: recording ends mid-trace; dropped 1 partial trace (138 bytes), kept 3"]
+    q = write_dt1(tmp_path / "Q", n_traces=4, n_points=10, hd_traces=5)
+    q.write_bytes(q.read_bytes()[:-10])  # one trace missing besides the partial one: both said
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        read_dt1(q)
+    msgs = [str(x.message) for x in w if issubclass(x.category, TruncatedRecordingWarning)]
+    assert len(msgs) == 2 and msgs[1] == "Q.DT1: HD header says 5 traces, file holds 3; reading 3"
+    r = write_dt1(tmp_path / "R", n_traces=3, n_points=10, hd_traces=4)  # whole traces, one fewer than the HD
+    with pytest.warns(TruncatedRecordingWarning, match="HD header says 4 traces, file holds 3"):
+        read_dt1(r)
+
+
+def test_times_of_day_equal_or_small_are_kept(tmp_path):
+    p = write_dt1(tmp_path / "T", n_traces=3, n_points=10)
+    raw = bytearray(p.read_bytes())
+    rec = 128 + 20
+    for i, t in enumerate((0.25, 0.25, 0.5)):  # a repeat, and a last time under one second
+        raw[i * rec + 92 : i * rec + 96] = struct.pack("<f", t)
+    p.write_bytes(bytes(raw))
+    s = read_dt1(p)[0]
+    np.testing.assert_array_equal(s.timestamps_s, [0.25, 0.25, 0.5])
+
+
+def test_no_positions_means_no_source(tmp_path):
+    p = write_dt1(tmp_path / "Z", n_traces=3, n_points=10, step=0.0)
+    s = read_dt1(p)[0]
+    assert s.positions_xyz is None and s.metadata["positions_source"] is None and "gps" not in s.metadata
+
+
+def test_a_gps_file_places_the_traces_and_is_described(tmp_path):
+    p = write_dt1(tmp_path / "G", n_traces=3, n_points=10)
+    p.with_suffix(".GPS").write_text(
+        "Trace #1 at position 0.0\n$GPGGA,120000,6000.0000,N,01000.0000,E,1,08,1.0,10.0*47\n"
+        "$GPGGA,120000,6100.0000,N,01000.0000,E,1,08,1.0,10.0,M,,M,,*00\n"  # a second GGA of trace 1: ignored
+        "Trace #3 at position 0.5\n$GPGGA,120001,6000.0600,N,01000.0000,E,1,08,1.0,12.0,M,,M,,*00\n")
+    g = read_sns_gps(p.with_suffix(".GPS"))
+    assert g["trace"].dtype == np.float64 and g["trace"].tolist() == [1.0, 3.0]
+    assert g["alt"].tolist() == [10.0, 12.0]  # the first sentence ends at the altitude, with its checksum
+    s = read_dt1(p)[0]
+    assert s.metadata["positions_source"] == "pulseEKKO .GPS (local ENU metres about origin)"
+    assert s.metadata["gps"] == {"file": "G.GPS", "fixes": 2, "origin_lat_lon_alt": [60.0, 10.0, 10.0]}
+    north = s.positions_xyz[:, 1]
+    assert north[0] == 0.0 and north[2] == pytest.approx(111.4, abs=0.5) and north[1] == pytest.approx(north[2] / 2)

@@ -365,3 +365,69 @@ def test_the_dzg_is_read_only_when_asked_and_needs_two_fixes(tmp_path):
     one = read_dzt(p)[0]  # one fix: the wheel places the traces; the DZG is still described
     assert one.metadata["positions_source"].startswith("survey wheel")
     assert one.metadata["gps"] == {"file": "g.DZG", "records": 1, "fixes": 1, "malformed": 0}
+
+
+def test_more_header_edges(tmp_path):
+    # a range just over 1e6 ns is refused
+    p = _patched(write_dzt(tmp_path / "r.DZT"), (26, struct.pack("<f", 1000000.5)))
+    with pytest.raises(FormatError, match="header range 1e\\+06 ns is implausible"):
+        read_dzt_header(p)
+    # two channels whose data would start inside the second channel's header
+    p = write_dzt(tmp_path / "two.DZT", n_channels=2, rh_data=1)
+    with pytest.raises(FormatError, match="^two.DZT: data offset 1024 lies inside the 2 channel header\\(s\\)$"):
+        read_dzt_header(p)
+    # a 14-character antenna name, and a 12-character file name, each filling its field up to the next byte
+    p = _patched(write_dzt(tmp_path / "n.DZT"), (98, b"ABCDEFGHIJKLMN"), (112, b"Z"), (114, b"FILE0001.DZT"),
+                 (126, b"Q"), (36, _packed(2022, 3, 4, 5, 6, 8)), (40, b"\x7f"))
+    h = read_dzt_header(p)
+    assert h["antennas"] == ["ABCDEFGHIJKLMN"] and h["file_name"] == "FILE0001.DZT"
+    assert h["modified"] == "2022-03-04T05:06:08"  # four bytes only
+    # rates below one per second or metre are still rates
+    p = _patched(write_dzt(tmp_path / "s.DZT"), (10, struct.pack("<f", 0.5)), (14, struct.pack("<f", 0.25)))
+    h = read_dzt_header(p)
+    assert (h["scans_per_s"], h["scans_per_m"]) == (0.5, 0.25)
+
+
+def test_three_samples_still_carry_a_counter_and_a_mark_word(tmp_path):
+    p = write_dzt(tmp_path / "t.DZT", n_traces=4, n_samples=3)
+    raw = bytearray(p.read_bytes())
+    for tr in range(4):  # the mark word (sample 1, 16 bits) clear but on scan 2
+        raw[1024 + tr * 6 + 2 : 1024 + tr * 6 + 4] = (5 if tr == 2 else 0).to_bytes(2, "little")
+    p.write_bytes(bytes(raw))
+    s = read_dzt(p)[0]
+    assert s.metadata["marks"] == [2] and s.metadata["header_samples_replaced"] == 2
+    np.testing.assert_array_equal(s.data[:, 0], s.data[:, 2])
+    np.testing.assert_array_equal(s.data[:, 1], s.data[:, 2])
+
+
+def test_is_dzt_counts_every_channel_of_a_trace(tmp_path):
+    p = write_dzt(tmp_path / "a.DZT", n_traces=1, n_samples=16, n_channels=2, rh_data=2)
+    other = tmp_path / "a.bin"
+    other.write_bytes(p.read_bytes())  # exactly one scan: 2 channels x 16 samples x 2 bytes
+    assert is_dzt(other)
+    other.write_bytes(p.read_bytes()[:-1])
+    assert not is_dzt(other)
+
+
+def test_dzg_counts_every_broken_sentence_and_reads_a_short_one(tmp_path):
+    g = tmp_path / "b.DZG"
+    g.write_text("$GSSIS,1,-1\n$GPGGA,1,4739.0\n$GSSIS,2,-1\n$GPGGA,1,4739.0,N\n"
+                 "$GSSIS,3,-1\n$GPGGA,120000,4739.0000,N,12218.0000,W,1,08,1.0,10.5*47\n")
+    d = read_dzg(g)
+    assert d["malformed"] == 2 and d["scan"].tolist() == [3.0] and d["alt"].tolist() == [10.5]
+
+
+def test_an_unreadable_dzg_is_left_out(tmp_path):
+    p = write_dzt(tmp_path / "g.DZT", spm=50.0)
+    (tmp_path / "g.DZG").write_bytes(b"")  # empty: the reader refuses it, the DZT is read without it
+    s = read_dzt(p)[0]
+    assert "gps" not in s.metadata and s.metadata["positions_source"].startswith("survey wheel")
+
+
+def test_a_file_that_shrinks_while_read(tmp_path, monkeypatch):
+    p = write_dzt(tmp_path / "k.DZT")
+    real = np.fromfile
+    monkeypatch.setattr(np, "fromfile", lambda *a, **k: real(*a, **k)[:-1])
+    with pytest.raises(FormatError) as e:
+        read_dzt(p)
+    assert str(e.value) == "k.DZT: file shrank while being read"

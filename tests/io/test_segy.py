@@ -302,3 +302,78 @@ def test_is_segy_takes_one_sample_and_unsigned_counts(tmp_path):
     raw[3220:3222] = (40000).to_bytes(2, "big")  # above 32767: a count, not a negative number
     p.write_bytes(bytes(raw))
     assert is_segy(p)
+
+
+# ---------------------------------------------------------------- exact intervals, messages and the text header
+
+import struct  # noqa: E402
+
+
+def test_the_interval_fields_gpr3d_writes(tmp_path):
+    """2.5 ps: the 16-bit fields hold round(2.5) = 2 (Python rounds half to even), the rev 2 extended interval the
+    exact 2.5; an interval whose picoseconds do not survive a * 1e12 * 1e-12 round trip comes back exact (from the
+    text header's DT S, not from the extended field)."""
+    s = gpr3d.Survey(data=np.ones((2, 8), np.float32), dt_s=2.5e-12)
+    write_segy(s, tmp_path / "a.sgy")
+    raw = (tmp_path / "a.sgy").read_bytes()
+    assert struct.unpack(">H", raw[3216:3218])[0] == 2
+    assert struct.unpack(">d", raw[3280:3288])[0] == 2.5
+    dt = 1.6452134544805177e-10
+    assert dt * 1e12 * 1e-12 != dt
+    write_segy(s.replace(dt_s=dt), tmp_path / "b.sgy")
+    assert struct.unpack(">d", (tmp_path / "b.sgy").read_bytes()[3280:3288])[0] == dt * 1e12
+    assert gpr3d.read(tmp_path / "b.sgy").dt_s == dt
+
+
+def test_a_foreign_rev2_file_reads_the_extended_interval(tmp_path):
+    p = tmp_path / "f.sgy"
+    _foreign(p, rev=2, ext=93.75, bin_interval=94)
+    assert gpr3d.read(p).dt_s == pytest.approx(93.75e-12, rel=1e-12)  # not the rounded 94 ps
+    _foreign(p, rev=2, ext=0.75, bin_interval=1)  # under one picosecond, still positive
+    assert gpr3d.read(p).dt_s == pytest.approx(0.75e-12, rel=1e-12)
+    _foreign(p, rev=3, ext=93.75, bin_interval=94)  # a later revision: still the extended field
+    assert gpr3d.read(p).dt_s == pytest.approx(93.75e-12, rel=1e-12)
+
+
+def test_the_source_line_without_format_or_path(tmp_path):
+    write_segy(gpr3d.Survey(data=np.ones((2, 8), np.float32), dt_s=1e-10), tmp_path / "n.sgy")
+    with segyio.open(tmp_path / "n.sgy", ignore_geometry=True) as f:
+        line9 = bytes(f.text[0]).decode("ascii")[80 * 8 : 80 * 9]  # 80-character card images
+    assert line9.split() == ["C", "9", "SOURCE"]
+    back = gpr3d.read(tmp_path / "n.sgy")
+    assert back.metadata == {"format": "segy", "path": str(tmp_path / "n.sgy"), "segy_revision": 2,
+                             "dt_unit": "ps", "written_by_gpr3d": True}
+
+
+def test_messages_of_the_reader(tmp_path):
+    p = tmp_path / "x.sgy"
+    write_segy(gpr3d.Survey(data=np.ones((2, 8), np.float32), dt_s=1e-10), p)
+    raw = bytearray(p.read_bytes())
+    raw[3600 + 240 : 3600 + 244] = struct.pack(">f", float("nan"))  # the first sample of the first trace
+    p.write_bytes(bytes(raw))
+    with pytest.raises(gpr3d.GPR3DError) as e:
+        gpr3d.read(p)
+    assert str(e.value) == "x.sgy: holds NaN/inf samples"
+    _foreign(p, bin_interval=2000, trace_interval=2000)  # 2000 read as nanoseconds: 2 us
+    with pytest.raises(gpr3d.GPR3DError) as e:
+        gpr3d.read(p, dt_unit="ns")
+    assert str(e.value) == ("x.sgy: sample interval 2e-06 s (the field read as ns) is no GPR interval: a seismic file, "
+                            "or its interval unit is not the default (gpr3d.read(..., dt_unit=...))")
+    (tmp_path / "h.sgy").write_bytes(p.read_bytes()[:3600])  # headers, no traces
+    with pytest.raises(gpr3d.GPR3DError) as e:
+        gpr3d.read(tmp_path / "h.sgy")
+    assert str(e.value) == "h.sgy: not a readable SEG-Y file (trace index out of range)"
+
+
+def test_is_segy_reads_little_endian_counts_unsigned(tmp_path):
+    from gpr3d.io.segy import is_segy
+
+    p = tmp_path / "le.sgy"
+    _foreign(p, endian="little")
+    raw = bytearray(p.read_bytes())
+    raw[3220:3222] = (40000).to_bytes(2, "little")
+    raw[3224:3226] = (5).to_bytes(2, "little")
+    p.write_bytes(bytes(raw))
+    # the big-endian reading of these fields gives no known format: only the little-endian one can pass
+    assert struct.unpack(">H", bytes(raw[3224:3226]))[0] not in (1, 2, 3, 5, 8, 10, 11, 12, 16)
+    assert is_segy(p)

@@ -104,3 +104,90 @@ def test_vti_holds_the_volume_depth_up(tmp_path):
             break
     else:
         pytest.fail("the .vti's point data is not the envelope with depth reversed")
+
+
+# ---------------------------------------------------------------- the layout on disk, C-scans and profiles
+
+from types import SimpleNamespace  # noqa: E402
+
+from gpr3d import __version__  # noqa: E402
+from gpr3d.io.volume import AXES, SCHEMA_VERSION, read_cscan, write_cscan, write_profile  # noqa: E402
+
+
+def test_the_volume_layout_on_disk(tmp_path):
+    p = write_volume(tmp_path / "v.h5", GRID, volumes(), eps_r=7.5, skipped=None)
+    assert p == tmp_path / "v.h5"
+    with h5py.File(p) as f:
+        assert (f.attrs["schema"], int(f.attrs["schema_version"]), f.attrs["gpr3d_version"]) == \
+            ("gpr3d.volume", 1, __version__)
+        assert json.loads(f.attrs["grid_json"]) == GRID.to_dict() and f.attrs["axes"] == AXES
+        assert "skipped" not in f.attrs  # None attributes left out
+        d = f["image"]
+        assert d.dtype == np.float32 and d.compression == "gzip" and d.compression_opts == 4 and d.shuffle
+    assert (SCHEMA, SCHEMA_VERSION, AXES) == ("gpr3d.volume", 1, "x, y, depth (positive down), metres")
+
+
+def test_an_older_volume_and_bytes_attributes_are_read(tmp_path):
+    p = tmp_path / "v.h5"
+    write_volume(p, GRID, volumes())
+    _edit(p, lambda f: (f.attrs.__delitem__("schema_version"), f.attrs.__setitem__("source", np.bytes_(b"x.DZT"))))
+    v = read_volume(p)
+    assert v.attrs["source"] == "x.DZT" and "grid_json" not in v.attrs
+    _edit(p, lambda f: f.attrs.__setitem__("schema", np.bytes_(b"gpr3d.volume")))  # schema as bytes
+    assert read_volume(p).grid == GRID
+
+
+def _cscan(depth=True, eps=True):
+    rng = np.random.default_rng(2)
+    return SimpleNamespace(values=rng.uniform(0, 1, (3, 4, 5)).astype(np.float32), x0=1.25, y0=-0.5, cell_m=0.1,
+                           window_s=2e-9, t_start_s=np.array([0.0, 2e-9, 4e-9]),
+                           depth_m=np.array([0.0, 0.1, 0.2]) if depth else None, eps_r=9.0 if eps else None)
+
+
+def test_a_cscan_round_trip_and_its_file(tmp_path):
+    cs = _cscan()
+    p = write_cscan(tmp_path / "c.h5", cs)
+    with h5py.File(p) as f:
+        assert f.attrs["schema"] == "gpr3d.cscan" and int(f.attrs["schema_version"]) == 1
+        assert (f.attrs["x0"], f.attrs["y0"], f.attrs["cell_m"], f.attrs["window_s"], f.attrs["eps_r"]) == \
+            (1.25, -0.5, 0.1, 2e-9, 9.0)
+        assert f["values"].dtype == np.float32 and f["values"].compression == "gzip"
+    back = read_cscan(p)
+    np.testing.assert_array_equal(back.values, cs.values)
+    np.testing.assert_array_equal(back.t_start_s, cs.t_start_s)
+    np.testing.assert_array_equal(back.depth_m, cs.depth_m)
+    assert (back.x0, back.y0, back.cell_m, back.window_s, back.eps_r) == (1.25, -0.5, 0.1, 2e-9, 9.0)
+    plain = read_cscan(write_cscan(tmp_path / "d.h5", _cscan(depth=False, eps=False)))
+    assert plain.depth_m is None and plain.eps_r is None
+    with h5py.File(tmp_path / "d.h5") as f:
+        assert "eps_r" not in f.attrs and "depth_m" not in f
+
+
+def test_bad_cscan_files_are_named(tmp_path):
+    p = tmp_path / "v.h5"
+    write_volume(p, GRID, volumes())
+    with pytest.raises(FormatError, match="^v.h5: is not a gpr3d C-scan file$"):
+        read_cscan(p)
+    c = write_cscan(tmp_path / "c.h5", _cscan())
+    _edit(c, lambda f: f.__delitem__("values"))
+    with pytest.raises(FormatError, match=r"^c.h5: unreadable C-scan \("):
+        read_cscan(c)
+    c = write_cscan(tmp_path / "c.h5", _cscan())
+    _edit(c, lambda f: f.attrs.__delitem__("cell_m"))
+    with pytest.raises(FormatError, match=r"^c.h5: unreadable C-scan \("):
+        read_cscan(c)
+
+
+def test_a_profile_file(tmp_path):
+    prof = SimpleNamespace(image=np.arange(12.0).reshape(4, 3), along_m=np.array([0, 0.1, 0.2, 0.3]),
+                           depth_m=np.array([0.0, 0.05, 0.1]), method="kirchhoff", eps_r=6.0)
+    p = write_profile(tmp_path / "p.h5", prof)
+    with h5py.File(p) as f:
+        assert (f.attrs["schema"], int(f.attrs["schema_version"]), f.attrs["gpr3d_version"]) == \
+            ("gpr3d.profile", 1, __version__)
+        assert (f.attrs["method"], f.attrs["eps_r"], f.attrs["axes"]) == ("kirchhoff", 6.0, "along (m), depth (m, down)")
+        np.testing.assert_array_equal(f["image"][()], prof.image)
+        assert f["image"].dtype == np.float32 and f["image"].compression == "gzip"
+        np.testing.assert_array_equal(f["along_m"][()], prof.along_m)
+        np.testing.assert_array_equal(f["depth_m"][()], prof.depth_m)
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["p.h5"]

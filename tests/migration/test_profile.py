@@ -41,3 +41,50 @@ def test_trace_spacing_stands_in_for_positions_and_bad_settings_are_refused(bsca
         migrate_profile(bscan, eps_r=6.0, method="phase-shift")
     with pytest.raises(InvalidDataError, match="eps_r must be"):
         migrate_profile(bscan, eps_r=0.5)
+
+
+def test_an_air_gap_profile_focuses_with_its_gap():
+    """A profile over two pipes with the antenna held 0.2 m up (the forward model's refracted rays): Kirchhoff with
+    the gap finds them where they are; the default depth range leaves the air's two-way time out of the record."""
+    from gpr3d.core.survey import Survey
+    from gpr3d.simulation.forward import ForwardScene, Pipe, forward_model
+
+    x = np.arange(121) * 0.01
+    pos = np.c_[x, np.zeros_like(x), np.zeros_like(x)]
+    r = 0.01
+    scene = ForwardScene(eps_r=6.0, pipes=[Pipe((x0, -5, -z - r), (x0, 5, -z - r), r) for x0, z in TARGETS])
+    dt, ns = 0.025e-9, 480
+    data = forward_model(scene, pos, offset_m=0.0, frequency_hz=1e9, n_samples=ns, dt_s=dt, air_gap_m=0.2,
+                         source_delay_s=0.0, footprint="none")
+    s = Survey(data=data, dt_s=dt, positions_xyz=pos, frequency_hz=1e9)
+    prof = migrate_profile(s, eps_r=6.0, air_gap_m=0.2)
+    record = ns * dt
+    assert prof.depth_m[-1] == pytest.approx(0.5 * 0.299792458 / np.sqrt(6.0) * 1e9 * (record - 0.4 / 299792458.0)
+                                              * 0.95, abs=prof.depth_m[1])
+    env = np.abs(prof.image)
+    for x0, z in TARGETS:
+        near = (np.abs(prof.along_m - x0) < 0.1)[:, None] & (np.abs(prof.depth_m - z) < 0.1)[None, :]
+        i, k = np.unravel_index(int(np.argmax(np.where(near, env, 0))), env.shape)
+        assert abs(prof.along_m[i] - x0) <= 0.02 and abs(prof.depth_m[k] - z) <= 0.02, (x0, z)
+
+
+@pytest.mark.parametrize("kw, words", [
+    ({"air_gap_m": -0.1}, "air gap must be a height >= 0 in metres, got -0.1"),
+    ({"air_gap_m": float("nan")}, "air gap must be a height >= 0 in metres, got nan"),
+    ({"air_gap_m": 0.2, "method": "stolt"}, "an air gap needs method kirchhoff or backprojection, not 'stolt'"),
+    ({"air_gap_m": 0.2, "method": "rtm"}, "not 'rtm'"),
+    ({"max_depth_m": -1.0}, "max depth must be positive, got -1.0"),
+    ({"spacing_m": 0.0}, "spacings must be positive"),
+    ({"trace_spacing_m": 0.0}, "trace spacing must be a positive number of metres, got 0.0"),
+])
+def test_bad_profile_settings_are_named(bscan, kw, words):
+    with pytest.raises(InvalidDataError, match=words.replace("(", r"\(").replace(")", r"\)")):
+        migrate_profile(bscan, eps_r=6.0, **kw)
+
+
+def test_rtm_needs_the_frequency_and_one_place_is_no_profile(bscan):
+    with pytest.raises(InvalidDataError, match="reverse-time migration needs the antenna's centre frequency"):
+        migrate_profile(bscan.replace(frequency_hz=None), eps_r=6.0, method="rtm")
+    still = bscan.replace(positions_xyz=np.zeros((bscan.n_traces, 3)))
+    with pytest.raises(InvalidDataError, match="the profile's traces all lie at one place"):
+        migrate_profile(still, eps_r=6.0)

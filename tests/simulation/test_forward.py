@@ -119,3 +119,38 @@ def test_forward_engine_bscan_matches_its_labels():
         t, _ = pick_peak(env, s.dt_s, int(round(lab["apex_trace"])), lab["apex_time_s"], 0.3 / scene.antenna.frequency_hz)
         # the nearest trace is within half a step of the apex: allow that much moveout
         assert abs(t - lab["apex_time_s"]) < 0.05e-9
+
+
+def _peak_time(tr):
+    """The time of a trace's largest |value| (s), refined by a parabola through the three samples around it."""
+    k = int(np.argmax(np.abs(tr)))
+    a, b, c = np.abs(tr[k - 1 : k + 2])
+    return (k + 0.5 * (a - c) / (a - 2 * b + c)) * DT
+
+
+def test_an_antenna_held_above_the_ground_and_one_bouncing():
+    """A layer 0.6 m down (eps_r 4): with the antenna held 0.2 m up the echo comes 2 x 0.2 / c later than on the
+    ground (straight down, the legs need no refraction); a sphere 0.3 m off to the side is reached along the
+    refracted ray, its time the least over where each leg crosses the surface (brute force here), not the straight
+    line; an antenna at z = 0.05 (a bounce) adds its height twice at c."""
+    scene = ForwardScene(eps_r=4.0, layers=[Layer(0.6, 16.0)])
+    kw = dict(offset_m=0.0, frequency_hz=F, n_samples=NS, dt_s=DT, footprint="none")
+    t_ground = _peak_time(forward_model(scene, [[0, 0, 0]], **kw)[0])
+    t_air = _peak_time(forward_model(scene, [[0, 0, 0]], air_gap_m=0.2, **kw)[0])
+    assert t_air - t_ground == pytest.approx(0.4 / C0, abs=0.02 * DT)
+    t_bounce = _peak_time(forward_model(scene, [[0, 0, 0.05]], **kw)[0])
+    assert t_bounce - t_ground == pytest.approx(0.1 / C0, abs=0.02 * DT)
+    r = 0.02
+    sphere = ForwardScene(eps_r=9.0, spheres=[Sphere((0.3, 0.0, -0.4 - r), r)])
+    tr = forward_model(sphere, [[0, 0, 0]], air_gap_m=0.25, source_delay_s=0.0, **kw)[0]
+    # the nearest point of the sphere to the antenna's ground point (0, 0, 0), and the least-time leg to it
+    centre = np.array([0.3, 0.0, -0.4 - r])
+    p = centre - r * centre / np.linalg.norm(centre)
+    rho, depth = math.hypot(p[0], p[1]), -p[2]
+    s = np.linspace(0.0, rho, 200001)  # horizontal distance run in the air
+    leg = np.min(np.hypot(0.25, s) / C0 + np.hypot(depth, rho - s) * 3.0 / C0)
+    assert _peak_time(tr) == pytest.approx(2 * leg, abs=0.05 * DT)
+    straight = 2 * math.hypot(rho, depth + 0.25) * (0.25 / (depth + 0.25) / C0 + depth / (depth + 0.25) * 3 / C0)
+    assert abs(2 * leg - straight) > 5 * DT  # the straight line would be a different time
+    with pytest.raises(ValueError, match="air_gap_m must be a height >= 0 in metres, got -0.1"):
+        forward_model(scene, [[0, 0, 0]], air_gap_m=-0.1, **kw)

@@ -62,3 +62,26 @@ def test_the_guard_passes_on_this_checkout():
                        cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     assert re.search(r"^guard: \d+ modules scored", r.stdout, flags=re.M) or "no stored results" in r.stdout
+
+
+def test_the_guard_refuses_runs_over_its_budget(tmp_path):
+    """A stored result measured at the repository's first commit: its module has changed since, and re-running it
+    (100 s by its stored time) is over a 50 s budget: the guard fails and names the command to run."""
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout")
+    first = subprocess.run(["git", "rev-list", "--max-parents=0", "HEAD"], cwd=ROOT, capture_output=True,
+                           text=True).stdout.split()
+    if not first:
+        pytest.skip("no git history")
+    tool = _tool()
+    row = {"module": "processing.steps", "total": 1, "killed": 1, "survived": 0, "equivalent": 0, "score": 1.0,
+           "wall_s": 100.0, "survivors": [], "equivalents": []}
+    path = tool.save_result(row, tmp_path, "x")
+    rec = __import__("json").loads(path.read_text())
+    rec["commit"] = first[0]
+    path.write_text(__import__("json").dumps(rec))
+    r = subprocess.run([sys.executable, str(ROOT / "tools" / "mutation.py"), "--guard", "--store", str(tmp_path),
+                        "--budget-s", "50"], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "processing.steps takes about 100 s, over the 50 s budget: run python tools/mutation.py " \
+           "processing.steps" in r.stdout

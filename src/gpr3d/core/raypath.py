@@ -56,7 +56,7 @@ def air_ground_time(h, d, rho, s_air, s_ground):
         a = math.sqrt(h * h + s * s)
         b = math.sqrt(d * d + q * q)
         grad = s_ground * q / b - s_air * s / a
-        curv = s_air * h * h / (a * a * a) + s_ground * d * d / (b * b * b)
+        curv = s_air * (h / a) * (h / a) / a + s_ground * (d / b) * (d / b) / b  # (no cube to underflow)
         q = min(max(q - grad / curv, 0.0 * q), qmax)
     s = rho - q
     return s_air * math.sqrt(h * h + s * s) + s_ground * math.sqrt(d * d + q * q)
@@ -80,7 +80,7 @@ def air_ground_times(h, d, rho, s_air, s_ground) -> np.ndarray:
         a = np.sqrt(h * h + s * s)
         b = np.sqrt(d * d + q * q)
         grad = sg * q / b - sa * s / a
-        curv = sa * h * h / a**3 + sg * d * d / b**3
+        curv = sa * (h / a) ** 2 / a + sg * (d / b) ** 2 / b
         q = np.clip(q - grad / curv, 0.0, qmax)
     s = rho - q
     out[live] = sa * np.sqrt(h * h + s * s) + sg * np.sqrt(d * d + q * q)

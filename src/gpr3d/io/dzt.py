@@ -47,9 +47,7 @@ _MAIN = struct.Struct("<HHHHH5fH")  # bytes 0..31
 def _decode_date(raw: bytes) -> str | None:
     """GSSI packed date: sec/2 (5 bits), min (6), hour (5), day (5), month (4), year-1980 (7)."""
     v = int.from_bytes(raw, "little")
-    if v == 0:
-        return None
-    try:
+    try:  # (an unset date, all zeros, has month 0: no date)
         d = _dt.datetime(
             1980 + (v >> 25), (v >> 21) & 0xF, (v >> 16) & 0x1F, (v >> 11) & 0x1F, (v >> 5) & 0x3F, 2 * (v & 0x1F)
         )
@@ -236,7 +234,7 @@ def read_dzt(path, *, gps: bool = True) -> list[Survey]:
             data -= np.float32(binary_zero)
         if nsamp > 2:
             data[:, :2] = data[:, 2:3]
-        ant = hdr["antennas"][ch] if ch < len(hdr["antennas"]) else ""
+        ant = hdr["antennas"][ch]  # (one name per channel header)
         mhz = _antenna_mhz(ant)
         meta = {
             "format": "dzt",
@@ -264,7 +262,6 @@ def read_dzt(path, *, gps: bool = True) -> list[Survey]:
                 dt_s=dt,
                 timestamps_s=timestamps,
                 positions_xyz=positions,
-                orientations_quat_wxyz=None,
                 frequency_hz=None if mhz is None else mhz * 1e6,
                 eps_r=hdr["eps_r"],
                 metadata=meta,

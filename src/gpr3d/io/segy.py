@@ -136,18 +136,16 @@ def read_segy(path, *, dt_unit: str = "auto") -> list:
     for endian in ("big", "little"):
         try:
             with segyio.open(str(p), "r", ignore_geometry=True, strict=False, endian=endian) as f:
-                if not 0 < len(f.samples) <= 65535 * 16 or f.tracecount < 1:
-                    raise ValueError(f"{len(f.samples)} samples x {f.tracecount} traces")
                 data = np.asarray(f.trace.raw[:], dtype=np.float32).reshape(f.tracecount, -1)
                 text = bytes(f.text[0]).decode("ascii", errors="replace")
                 interval = int(f.bin[segyio.BinField.Interval])
                 heads = [f.header[i] for i in range(f.tracecount)]
-                if interval <= 0 and heads:
+                if interval <= 0:  # (segyio opens no file without traces: heads[0] exists)
                     interval = int(heads[0][TF.TRACE_SAMPLE_INTERVAL])
             big_endian = endian == "big"
             break
         except (RuntimeError, OSError, ValueError, IndexError) as exc:  # (segyio: IndexError on 0 traces)
-            failure = exc
+            failure = failure or exc  # the standard (big-endian) reading's reason, not the fallback's
     else:
         raise FormatError(p, f"not a readable SEG-Y file ({failure})")
     with open(p, "rb") as raw:

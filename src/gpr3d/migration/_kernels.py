@@ -101,10 +101,11 @@ def refracted_leg(h, d, rho, s1, tanc):
     for _ in range(STEPS):
         s = rho - q
         a = math.sqrt(h * h + s * s)
-        b = max(math.sqrt(d * d + q * q), f32(1e-30))
+        b = max(math.sqrt(d * d + q * q), f32(1e-30))  # (d = 0: the point on the surface, q = 0 and b = 0)
         grad = s1 * q / b - S_AIR32 * s / a
-        curv = S_AIR32 * h * h / (a * a * a) + s1 * d * d / (b * b * b)
-        q = min(max(q - grad / max(curv, f32(1e-30)), f32(0.0)), qmax)
+        # the curvature as (h/a)^2/a + (d/b)^2/b: no cube of a small b to underflow into 0/0 in float32
+        curv = S_AIR32 * (h / a) * (h / a) / a + s1 * (d / b) * (d / b) / b
+        q = min(max(q - grad / curv, f32(0.0)), qmax)
     s = rho - q
     return S_AIR32 * math.sqrt(h * h + s * s) + s1 * math.sqrt(d * d + q * q)
 
