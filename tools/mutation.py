@@ -60,10 +60,18 @@ MODULES = {
 }
 
 
+#: the io modules' tests, less the slow ones that only pass through the readers (ROS bags, IMU logs, user labels):
+#: a mutant of a helper every reader calls would otherwise run them all
+IO_TESTS = ["tests/io", "--ignore=tests/io/test_rosbag.py", "--ignore=tests/io/test_inertial.py",
+            "--ignore=tests/io/test_userlabels.py"]
+
+
 def tests_for(module: str) -> list[str]:
     given = MODULES.get(module)
     if given:
         return given
+    if module.startswith("io."):
+        return IO_TESTS
     return [f"tests/{module.split('.')[0]}"]
 
 

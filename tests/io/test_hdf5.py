@@ -78,8 +78,16 @@ def test_truncated_h5(tmp_path):
     write_survey(full_survey(), tmp_path / "s.h5")
     raw = (tmp_path / "s.h5").read_bytes()
     (tmp_path / "cut.h5").write_bytes(raw[: len(raw) // 2])
-    with pytest.raises(FormatError):
+    with pytest.raises(FormatError, match="^cut.h5: HDF5 content is corrupt or truncated"):
         gpr3d.read(tmp_path / "cut.h5", format="gpr3d")
+
+
+def test_nan_in_metadata_and_history_is_stored(tmp_path):
+    s = Survey(data=np.ones((2, 3), np.float32), dt_s=1e-10, metadata={"gain": float("nan")},
+               history=[{"step": "x", "result": {"t0_s": float("inf")}}])
+    write_survey(s, tmp_path / "n.h5")
+    back = read_surveys(tmp_path / "n.h5")[0]
+    assert np.isnan(back.metadata["gain"]) and back.history[0]["result"]["t0_s"] == float("inf")
 
 
 def test_failed_write_keeps_the_old_file(tmp_path, monkeypatch):
@@ -156,6 +164,8 @@ def test_surveys_come_back_in_number_order(tmp_path):
     assert float(read_survey(tmp_path / "m.h5").data[0, 0]) == 0.0
     with pytest.raises(FormatError, match=r"^m.h5: has 12 survey\(s\); channel -1 does not exist$"):
         read_survey(tmp_path / "m.h5", channel=-1)
+    with pytest.raises(FormatError, match=r"^m.h5: has 12 survey\(s\); channel 12 does not exist$"):
+        read_survey(tmp_path / "m.h5", channel=12)
 
 
 def _edit(path, fn):
@@ -209,6 +219,6 @@ def test_is_gpr3d_h5(tmp_path):
 
 
 def test_writing_nothing_is_refused(tmp_path):
-    with pytest.raises(ValueError, match="nothing to write: empty list of surveys"):
+    with pytest.raises(ValueError, match="^nothing to write: empty list of surveys$"):
         write_surveys([], tmp_path / "e.h5")
     assert not list(tmp_path.iterdir())

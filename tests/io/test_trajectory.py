@@ -195,9 +195,9 @@ def test_attach_by_time_with_latency():
     out = attach_poses(s, tr, by="time", latency_s=0.25)  # the radar's clock 0.25 s behind
     np.testing.assert_allclose(out.positions_xyz[:, 0], [1.5, 2.5])
     assert out.metadata["positions_source"] == "trajectory (time)"
-    with pytest.raises(InvalidDataError, match="by must be 'index' or 'time', got 'distance'"):
+    with pytest.raises(InvalidDataError, match="^by must be 'index' or 'time', got 'distance'$"):
         attach_poses(s, tr, by="distance")
-    with pytest.raises(InvalidDataError, match="survey has no timestamps to interpolate poses at"):
+    with pytest.raises(InvalidDataError, match="^survey has no timestamps to interpolate poses at$"):
         attach_poses(s.replace(timestamps_s=None), tr, by="time")
 
 
@@ -217,11 +217,11 @@ def test_attach_track_by_distance_heading_and_warning():
         "survey line 2.12 m is longer than the track 2.00 m"
     fits = s.replace(positions_xyz=np.c_[np.arange(5) * 0.52, np.zeros(5), np.zeros(5)])  # 2.08 m: within 5 %
     assert "track_warning" not in attach_track(fits, track).metadata
-    with pytest.raises(InvalidDataError, match="track must be \\(n >= 2, 3\\) points"):
+    with pytest.raises(InvalidDataError, match="^track must be \\(n >= 2, 3\\) points$"):
         attach_track(s, track[:1])
     with pytest.raises(InvalidDataError, match="track must be"):
         attach_track(s, track[:, :2])
-    with pytest.raises(InvalidDataError, match="survey has no along-line positions"):
+    with pytest.raises(InvalidDataError, match="^survey has no along-line positions to place on the track$"):
         attach_track(s.replace(positions_xyz=None), track)
 
 
@@ -278,3 +278,57 @@ def test_a_dzg_whose_fixes_do_not_advance_is_refused(tmp_path):
     (tmp_path / "h.dzg").write_text("\n".join(lines[:2]) + "\n")
     with pytest.raises(FormatError, match=r"^h.dzg: holds 1 GPS fix\(es\) with a fix quality > 0: two at least"):
         read_track(tmp_path / "h.dzg")
+
+
+def test_more_trajectory_edges(tmp_path):
+    p = tmp_path / "q.txt"
+    p.write_text("0 1 2 3 0 0 0 1\n1 1 2 3 0 0 0 0\n")  # the second pose's quaternion is zero, the first is not
+    with pytest.raises(FormatError, match="^q.txt: holds a zero quaternion$"):
+        read_tum(p)
+    p.write_text("0 1 2 3 0 0 0 1e-9\n")  # exactly the limit: kept
+    np.testing.assert_allclose(read_tum(p).orientations_quat_wxyz, [[1, 0, 0, 0]])
+    p.write_bytes(b"# caf\xe9 (latin-1 in a comment)\n0 1 2 3 0 0 0 1\n")  # not UTF-8: replaced, read
+    assert read_tum(p).positions_xyz.tolist() == [[1, 2, 3]]
+    c = tmp_path / "c.csv"
+    c.write_bytes(b"t,x,y,z\n# \xff\n0,1,2,3\n".replace(b"# \xff\n", b""))
+    c.write_bytes(b"t,x,y,z,note\n0,1,2,3,\xff\n")
+    assert read_csv_trajectory(c).positions_xyz.tolist() == [[1, 2, 3]]
+    x = tmp_path / "t.xyz"
+    x.write_bytes(b"# \xff\n0 0 0\n1 1 1\n")
+    assert read_xyz_track(x).tolist() == [[0, 0, 0], [1, 1, 1]]
+    t = tmp_path / "t.csv"
+    t.write_bytes(b"x,y,z,\xff\n0,0,0,a\n , , , \n1,1,1,b\n")  # a row of blanks between
+    assert read_track(t)[1].tolist() == [[0, 0, 0], [1, 1, 1]]
+    t.write_bytes(b"0 0 0\n1 1\n")
+    tt = tmp_path / "u.txt"
+    tt.write_bytes(b"0 0 0\n1 1\n")
+    with pytest.raises(FormatError, match=r"^u.txt: line 2: expected 3 numbers \(x y z\), got 2$"):
+        read_track(tt)
+
+
+def test_attach_track_backwards_and_climbing():
+    """A survey whose along-line positions run backwards from its first trace (a reversed line): distances before
+    the track's start take its first segment's heading; the heading is the plan direction, not the climb."""
+    track = np.array([[0, 0, 0], [2, 0, 1.0], [2, 2, 3.0]])  # climbs 1 m over the first 2 m, 2 m over the next
+    s = Survey(data=np.zeros((3, 8), np.float32), dt_s=1e-10,
+               positions_xyz=np.c_[[0.0, -0.5, 1.0], np.zeros(3), np.zeros(3)])
+    out = attach_track(s, track)
+    np.testing.assert_allclose(out.headings_rad, [0.0, 0.0, 0.0])
+    np.testing.assert_allclose(out.positions_xyz[:, 2], [0.0, 0.0, 0.5])
+    up = s.replace(positions_xyz=np.c_[[0.0, 2.5, 3.0], np.zeros(3), np.zeros(3)])
+    np.testing.assert_allclose(attach_track(up, track).headings_rad, [0.0, np.pi / 2, np.pi / 2])
+    exact = s.replace(positions_xyz=np.c_[[0.0, 1.0, 4.2], np.zeros(3), np.zeros(3)])  # 4.2 m on 4 m: 1.05 exactly
+    assert "track_warning" not in attach_track(exact, track).metadata
+
+
+def test_gps_fixes_three_and_north_east(tmp_path):
+    """Three fixes at scans 1, 3, 5 running north-east: traces 0 and 6 outside their span; headings 45 deg."""
+    lines = []
+    for scan, minutes in ((1, 0.0), (3, 0.001), (5, 0.002)):
+        lines += [f"$GSSIS,{scan},-1",
+                  f"$GPGGA,000320,00{minutes:07.4f},N,000{minutes:07.4f},E,1,08,1.0,0.0,M,,M,,*00"]
+    (tmp_path / "g.dzg").write_text("\n".join(lines) + "\n")
+    track = read_track(tmp_path / "g.dzg")
+    placed = apply_track(Survey(data=np.zeros((7, 8), np.float32), dt_s=1e-10), track)
+    assert placed.metadata["track_warning"] == "2 traces lie outside the GPS fixes' span"
+    np.testing.assert_allclose(placed.headings_rad[1:6], np.pi / 4, atol=0.01)

@@ -137,3 +137,63 @@ def test_antennas_above_the_ground_refract_at_the_surface(engine):
         assert _spike_time(op, 0, 0, 0) == pytest.approx(want, abs=5e-14), gap
         # a straight ray through the air gap at ground speed (the old way) is 0.4 ns and more off
         assert abs(want - (math.hypot(0.35, 0.3 + gap) + math.hypot(0.15, 0.3 + gap)) * 3 / C) > 3e-10
+
+
+# ---------------------------------------------------------------- the operator's inputs, refused or used, by hand
+
+from gpr3d.core.errors import InvalidDataError  # noqa: E402
+from gpr3d.migration.operator import effective_slowness  # noqa: E402
+
+
+def test_layered_slowness_by_hand():
+    """Layers eps 4 from 0 and 16 from 0.2 m: at 0.1 m the slowness of eps 4 (2/c); at 0.5 m the vertical time
+    (0.2 * 2 + 0.3 * 4) / c over 0.5 m; at depth 0 the top layer's; a constant eps_r 9 gives 3/c everywhere."""
+    s = effective_slowness(np.array([0.0, 0.1, 0.2, 0.5]), layers=[(0.0, 4.0), (0.2, 16.0)])
+    np.testing.assert_allclose(s, np.array([2.0, 2.0, 2.0, (0.4 + 1.2) / 0.5]) / C, rtol=1e-12)
+    np.testing.assert_allclose(effective_slowness(np.array([0.0, 1.0]), eps_r=9.0), [3 / C, 3 / C])
+    three = effective_slowness(np.array([1.0]), layers=[(0.0, 1.0), (0.5, 4.0), (0.75, 9.0)])
+    assert three[0] == pytest.approx((0.5 * 1 + 0.25 * 2 + 0.25 * 3) / C, rel=1e-12)
+    with pytest.raises(InvalidDataError, match="^give eps_r or layers for the migration velocity$"):
+        effective_slowness(np.array([0.1]))
+    for bad in ([(0.1, 4.0)], [(0.0, 4.0), (0.0, 9.0)], [(0.0, 4.0), (0.3, 9.0), (0.2, 16.0)]):
+        with pytest.raises(InvalidDataError, match="^layers must start at depth 0 and deepen$"):
+            effective_slowness(np.array([0.1]), layers=bad)
+
+
+def test_the_operator_refuses_what_it_cannot_use():
+    g = Grid3D(0.0, 0.0, 0.1, 0.1, 0.1, 0.1, 2, 2, 2)
+    one = np.zeros((1, 3))
+    kw = dict(dt_s=1e-10, n_samples=10, eps_r=4.0)
+    with pytest.raises(InvalidDataError, match=r"^tx and rx must both be \(n_traces, 3\)$"):
+        BackProjection(g, one, np.zeros((2, 3)), **kw)
+    with pytest.raises(InvalidDataError, match=r"^tx and rx must both be \(n_traces, 3\)$"):
+        BackProjection(g, np.zeros((1, 2)), np.zeros((1, 2)), **kw)
+    with pytest.raises(InvalidDataError, match="^engine must be one of 'numba', 'numpy', got 'cuda'$"):
+        BackProjection(g, one, one, engine="cuda", **kw)
+    with pytest.raises(InvalidDataError, match=r"^air_gap_m must be one number or one per trace \(1\), got shape \(2,\)$"):
+        BackProjection(g, one, one, air_gap_m=[0.1, 0.2], **kw)
+    for bad in (-0.1, float("nan"), float("inf")):
+        with pytest.raises(InvalidDataError, match="^air_gap_m must be finite and >= 0"):
+            BackProjection(g, one, one, air_gap_m=bad, **kw)
+    op = BackProjection(g, one, one, **kw)
+    with pytest.raises(InvalidDataError, match=r"^data must be \(1, 10\), got \(1, 9\)$"):
+        op.adjoint(np.zeros((1, 9), np.float32))
+    with pytest.raises(InvalidDataError, match=r"^image must be \(2, 2, 2\), got \(2, 2, 3\)$"):
+        op.forward(np.zeros((2, 2, 3), np.float32))
+    for window in ((0, 3, 0, 2), (1, 1, 0, 2), (-1, 1, 0, 2), (0, 2, 1, 0)):
+        with pytest.raises(InvalidDataError, match="does not lie inside the 2 x 2 columns of the grid"):
+            op.adjoint(np.zeros((1, 10), np.float32), window=window)
+
+
+def test_reach_traces_and_shape():
+    g = Grid3D(0.0, 0.0, 0.1, 0.1, 0.1, 0.1, 2, 3, 4)  # deepest voxel 0.4 m
+    tx = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    op = BackProjection(g, tx, tx + [0.1, 0, 0], dt_s=1e-10, n_samples=10, eps_r=4.0, aperture_deg=45.0,
+                        air_gap_m=[0.0, 0.1, 0.2])
+    assert op.reach_m == pytest.approx(0.4 + 1e-6) and op.shape == (30, 24) and op.n_traces == 3
+    sub = op.with_traces([2, 0])
+    np.testing.assert_array_equal(sub.tx[:, 0], [2.0, 0.0])
+    np.testing.assert_array_equal(sub.rx[:, 0], [2.1, 0.1])
+    np.testing.assert_array_equal(sub.air_gap, [0.2, 0.0])
+    assert sub.tan_ap == op.tan_ap and sub.n_traces == 2 and op.n_traces == 3
+    assert BackProjection(g, tx, tx, dt_s=1e-10, n_samples=10, eps_r=4.0).reach_m == math.inf

@@ -61,3 +61,70 @@ def test_coco_json_loads_in_pycocotools(tmp_path):
     assert x == labs[0]["box"][0] and w == labs[0]["box"][2] - labs[0]["box"][0]
     assert ann["depth_m"] == 0.2 and coco.imgs[1]["eps_r"] == 9.0
     assert coco.loadCats(ann["category_id"])[0]["name"] == "rebar"
+
+
+# ---------------------------------------------------------------- every label field, and traces that stop or miss
+
+from gpr3d.simulation.labels import label_traces  # noqa: E402
+
+
+def test_every_field_of_a_label_by_hand():
+    s = scene()
+    s.targets.append(Target("steel_pipe", x_m=0.3, depth_m=0.1, radius_m=0.05))
+    n, dt = 400, 0.02e-9
+    labs = label_scene(s, n, dt)
+    f, v = 1e9, s.medium.velocity_m_s
+    b = labs[1]
+    assert (b["kind"], b["category"], b["depth_m"], b["x_m"], b["radius_m"]) == ("steel_pipe", 2, 0.1, 0.3, 0.05)
+    assert labs[0]["category"] == 1  # rebar
+    assert b["apex_twt_s"] == pytest.approx(2 * 0.1 / v, rel=1e-6)
+    assert b["apex_time_s"] == pytest.approx(math.sqrt(2) / f + 2 * 0.1 / v, rel=1e-6)
+    assert b["apex_trace"] == pytest.approx(15.0)
+    reach = 0.15  # depth to the centre times tan 45
+    i0, t0, i1, t1 = b["box"]
+    assert (i0, i1) == (8, 22)  # x within 0.15 m of 0.3: 0.16 .. 0.44
+    far = 2 * (math.hypot(0.14, 0.15) - 0.05) / v  # the latest arrival: the box's outermost traces
+    assert t1 == pytest.approx(math.sqrt(2) / f + far + 0.7 / f, rel=1e-5)
+    assert t0 == pytest.approx(b["apex_time_s"] - 0.7 / f)
+    assert b["visible"] and reach > 0
+
+
+def test_a_short_record_clips_the_box_and_hides_the_apex():
+    s = scene()
+    n, dt = 100, 0.02e-9  # 1.98 ns: the apex (1.41 + 2.6 ns) lies past the end
+    lab = label_scene(s, n, dt)[0]
+    assert lab["box"][3] == pytest.approx((n - 1) * dt) and not lab["visible"]
+    s.targets[0].depth_m = 0.01  # shallow, and no source delay: the box would start before the record
+    lab = label_traces(s, s.trace_midpoints_x(), 400, 0.02e-9, source_delay_s=0.0)[0]
+    assert lab["apex_time_s"] == pytest.approx(lab["apex_twt_s"]) and lab["box"][1] == 0.0  # clipped at 0
+
+
+def test_stops_gaps_and_a_target_beside_the_line():
+    s = scene()
+    x = np.array([0.0, 0.1, 0.2, 0.2, 0.2, 0.45, 0.55, 0.8])  # a stop at 0.2 m, a gap, uneven steps
+    lab = label_traces(s, x, 400, 0.02e-9)[0]
+    assert lab["apex_trace"] == pytest.approx(5.5)  # half-way between the traces at 0.45 and 0.55
+    assert (lab["box"][0], lab["box"][2]) == (5, 6)  # within 0.5 +- 0.21 m: the traces at 0.45 and 0.55
+    s.targets[0].x_m = 1.5  # past the end of the line: extrapolated with the mean step (0.8 / 7)
+    lab = label_traces(s, x, 400, 0.02e-9)[0]
+    assert lab["apex_trace"] == pytest.approx(1.5 / (0.8 / 7)) and not lab["visible"]
+    assert lab["box"][0] == lab["box"][2] == 7  # no trace within reach: the nearest
+    s.targets[0].x_m = -0.3  # before the start
+    lab = label_traces(s, x, 400, 0.02e-9)[0]
+    assert lab["apex_trace"] == pytest.approx(-0.3 / (0.8 / 7)) and not lab["visible"]
+    one = label_traces(scene(), np.array([0.5]), 400, 0.02e-9)[0]  # one trace: it is the apex
+    assert one["apex_trace"] == 0.0 and one["visible"]
+
+
+def test_the_circle_path_with_offset_off_the_apex():
+    """A trace 0.3 m from a 5 cm pipe's axis, tx and rx 0.2 m apart: the shortest path over the upper half circle,
+    against a dense search of the circle."""
+    s = Scene(medium=Medium(eps_r=4.0), antenna=Antenna(frequency_hz=1e9, offset_m=0.2),
+              targets=[Target("steel_pipe", x_m=0.0, depth_m=0.3, radius_m=0.05)],
+              width_m=1.0, depth_m=0.6, n_traces=3, trace_step_m=0.3, x_start_m=-0.3)
+    t = s.targets[0]
+    a = np.linspace(0, np.pi, 2_000_001)
+    px, pz = 0.05 * np.cos(a), -0.35 + 0.05 * np.sin(a)
+    for x in (-0.3, 0.0, 0.3):
+        want = np.min(np.hypot(px - (x - 0.1), pz) + np.hypot(px - (x + 0.1), pz)) / s.medium.velocity_m_s
+        assert hyperbola_times(s, t, [x])[0] == pytest.approx(want, rel=1e-8), x

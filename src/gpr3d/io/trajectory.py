@@ -169,9 +169,8 @@ def attach_track(survey, track_xyz: np.ndarray):
     if track.ndim != 2 or track.shape[1] != 3 or track.shape[0] < 2:
         raise InvalidDataError("track must be (n >= 2, 3) points")
     s_track = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(track[:, :2], axis=0), axis=1))])
-    if np.any(np.diff(s_track) <= 0):
-        keep = np.concatenate([[True], np.diff(s_track) > 0])
-        track, s_track = track[keep], s_track[keep]
+    keep = np.concatenate([[True], np.diff(s_track) > 0])  # a point repeated in plan (a vertical step) adds no way
+    track, s_track = track[keep], s_track[keep]
     s = survey.positions_xyz[:, 0] - survey.positions_xyz[0, 0]
     pos = np.stack([np.interp(s, s_track, track[:, k]) for k in range(3)], axis=1)
     seg = np.clip(np.searchsorted(s_track, s, side="right") - 1, 0, track.shape[0] - 2)
