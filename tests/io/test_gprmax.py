@@ -27,14 +27,36 @@ N_TRACES = 5
 
 @pytest.fixture(scope="module")
 def gprmax_run(tmp_path_factory):
+    """gprMax 4 run on MODEL (5 traces) and its merge tool. The outputs are kept in the system's temporary folder,
+    keyed by the model and gprMax's version, so that later sessions (and the mutation runs, one session per
+    mutant) read what gprMax made instead of running it again."""
+    import hashlib
+    import importlib.metadata
+    import os
+    import shutil
+    import tempfile
+    from pathlib import Path
+
     gprMax = pytest.importorskip("gprMax")
     merge = pytest.importorskip("gprMax.toolboxes.Utilities.outputfiles_merge")
+    key = hashlib.sha256((MODEL + importlib.metadata.version("gprMax")).encode()).hexdigest()[:16]
+    cache = Path(tempfile.gettempdir()) / "gpr3d-test-gprmax" / key
+    if (cache / "cyl_merged.h5").exists():
+        return cache
     d = tmp_path_factory.mktemp("gprmax")
     inp = d / "cyl.in"
     inp.write_text(MODEL)
     gprMax.run(inputfile=str(inp), n=N_TRACES, hide_progress_bars=True, log_level=40)
     merge.merge_files([d / f"cyl{i}.h5" for i in range(1, N_TRACES + 1)], d / "cyl_merged.h5")
-    return d
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    part = Path(tempfile.mkdtemp(dir=cache.parent))
+    for name in ["cyl_merged.h5", *(f"cyl{i}.h5" for i in range(1, N_TRACES + 1))]:
+        shutil.copy(d / name, part / name)
+    try:
+        os.replace(part, cache)  # whole, in one step (another process may have put it there first)
+    except OSError:
+        shutil.rmtree(part, ignore_errors=True)
+    return cache if (cache / "cyl_merged.h5").exists() else d
 
 
 def test_merged_bscan(gprmax_run):

@@ -229,3 +229,44 @@ def test_the_ringing_tail_below_the_depth_cut_is_no_target():
     (x0, y0, d0), (x1, y1, d1) = sorted(t[0].points_xyz)
     assert (x0, x1) == (pytest.approx(0.3, abs=0.04), pytest.approx(1.3, abs=0.04))
     assert d0 == pytest.approx(0.4, abs=0.01) and y0 == pytest.approx(0.6, abs=0.01)
+
+
+# ---------------------------------------------------------------- the traditional pieces by hand
+
+from gpr3d.migration.traditional import _fill_between, split_lines, survey_lines  # noqa: E402
+
+
+def test_planes_are_interpolated_between_lines_by_hand():
+    planes = {0.5: np.full((2, 3), 1.0), 0.1: np.full((2, 3), 5.0)}  # given out of order
+    out = _fill_between(planes, 6, 0.0, 0.1, (2, 3))
+    # positions 0.0 .. 0.5: 0.0 before the first plane is empty; 0.1 is 5; 0.3 half-way 3; 0.5 is 1
+    np.testing.assert_allclose(out[:, 0, 0], [0.0, 5.0, 4.0, 3.0, 2.0, 1.0], atol=1e-6)
+    assert out.dtype == np.float32 and out.shape == (6, 2, 3)
+    one = _fill_between({0.2: np.ones((1, 1))}, 5, 0.0, 0.1, (1, 1))  # one plane: its own position only
+    np.testing.assert_allclose(one[:, 0, 0], [0.0, 0.0, 1.0, 0.0, 0.0])
+    one = _fill_between({0.25: np.ones((1, 1))}, 5, 0.0, 0.1, (1, 1))  # between grid positions: the nearest two
+    np.testing.assert_allclose(one[:, 0, 0], [0.0, 0.0, 0.0, 0.0, 0.0])  # 0.2 and 0.3 lie outside [0.25, 0.25]
+
+
+def test_split_lines_by_jumps_turns_and_length():
+    a = np.c_[np.arange(12) * 0.1, np.zeros(12)]  # 12 traces east
+    b = np.c_[np.full(12, 1.1), 0.1 + np.arange(12) * 0.1]  # a right turn: 12 traces north
+    c = np.c_[5 + np.arange(5) * 0.1, np.zeros(5)]  # a jump, then 5 traces: too short
+    d = np.c_[10 + np.arange(15) * 0.1, np.zeros(15)]  # another jump, 15 traces
+    lines = split_lines(np.r_[a, b, c, d])
+    assert [ln.tolist() for ln in lines] == [list(range(12)), list(range(12, 24)), list(range(29, 44))]
+    # a stop (repeated positions) does not split; a gentle bend (0.2 rad per step) does not either
+    stop = np.r_[a[:6], a[5:6], a[5:6], a[6:]]
+    assert [len(ln) for ln in split_lines(stop)] == [14]
+    ang = np.cumsum(np.full(20, 0.05))
+    bend = np.c_[np.cumsum(np.cos(ang)) * 0.1, np.cumsum(np.sin(ang)) * 0.1]
+    assert [len(ln) for ln in split_lines(bend)] == [20]
+    assert [len(ln) for ln in split_lines(bend, max_turn_rad=0.04)] == []  # every step a new line, each too short
+    assert [len(ln) for ln in split_lines(np.r_[a, d], max_gap_m=100.0)] == [27]  # no jump is too long
+
+
+def test_survey_lines_from_the_grid_files():
+    from gpr3d.core.survey import Survey
+
+    s = Survey(data=np.zeros((35, 4), np.float32), dt_s=1e-10, metadata={"grid": {"first_trace": [0, 12, 17]}})
+    assert [ln.tolist() for ln in survey_lines(s)] == [list(range(12)), list(range(17, 35))]  # 5 traces: left out
