@@ -125,3 +125,13 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
         with atomic_path(p) as tmp:
             tmp.unlink()
             raise RuntimeError("gone")
+
+
+def test_a_bare_list_of_box_objects_and_its_errors(tmp_path):
+    p = tmp_path / "b.json"
+    p.write_text('[{"box": [1, 2e-9, 3, 4e-9]}, {"box": [5, 1e-9, 6, 2e-9], "score": 0.5}]')
+    assert read_boxes(p) == [[1, 2e-9, 3, 4e-9], [5, 1e-9, 6, 2e-9]]
+    p.write_text('[[1, 2e-9, 3, 4e-9], {"box": [5, 1e-9, 6, 2e-9], "score": "x"}]')
+    with pytest.raises(FormatError) as e:
+        read_detections(p)
+    assert str(e.value) == "b.json: target 1 has a bad score 'x'"  # one channel: no channel named

@@ -124,18 +124,6 @@ def test_source_and_receiver_step_on_their_own(tmp_path):
     assert s.offset_m == pytest.approx(np.median(rx - tx))
 
 
-def test_missing_component_and_nan(tmp_path):
-    import h5py
-
-    p = write_gprmax3_out(tmp_path / "x.out")
-    with pytest.raises(FormatError, match="no Iz output"):
-        read_gprmax(p, component="Iz")
-    with h5py.File(p, "a") as f:
-        f["rxs/rx1/Ez"][3, 1] = np.nan
-    with pytest.raises(FormatError, match="1 NaN/inf samples"):
-        gpr3d.read(p)
-
-
 def test_world_frame_is_right_handed():
     axes = gprmax_to_world(np.eye(3))
     assert np.linalg.det(axes) == pytest.approx(1.0)
@@ -339,3 +327,81 @@ def test_the_waveform_reader(tmp_path):
     t, w = read_gprmax_waveform(p, source="src2")  # no interval of its own: the file's dt, no offset
     np.testing.assert_allclose(t, [0.0, 2e-12])
     assert read_gprmax_waveform(p, source="src3") is None
+
+
+def test_metadata_fields_and_their_defaults(tmp_path):
+    ex = {"attrs": {"WaveformType": np.bytes_(b"gaussian"), "WaveformFrequency": np.float64(9e8),
+                    "WaveformAmplitude": np.float64(2.0)}}  # no SourceType
+    p = _file(tmp_path / "m.h5", attrs={"gprMax": np.bytes_(b"4.0.1"), "Iterations": 6, "dt": 1e-12},
+              rxs={"rx1": {"Ez": np.ones((6, 2)), "@Position": (0.1, 0.2, 0.0)}},
+              srcs={"src1": {"@Position": (0.0, 0.2, 0.0), "excitation": ex}})
+    s = read_gprmax(p)[0]
+    m = s.metadata
+    assert m["gprmax_version"] == "4.0.1" and m["title"] == "" and m["path"] == str(p)
+    assert m["waveform"] == {"WaveformType": "gaussian", "WaveformFrequency": 9e8, "WaveformAmplitude": 2.0}
+    assert type(m["waveform"]["WaveformFrequency"]) is float and type(m["waveform"]["WaveformType"]) is str
+    assert m["antenna"] == "gprMax source" and m["merged"]  # two traces: merged
+    assert m["tx_positions_gprmax"] == [[0.0, 0.2, 0.0], [0.0, 0.2, 0.0]]
+
+
+def test_merged_by_attribute_and_the_tx_list_limit(tmp_path):
+    one = _file(tmp_path / "one.h5", attrs={**BASE, "ntraces": 1}, rxs={"rx1": {"Ez": np.ones(6)}})
+    assert read_gprmax(one)[0].metadata["merged"]  # one trace, but the merge tool's attribute
+    for n, listed in ((4096, True), (4097, False)):
+        p = _file(tmp_path / f"n{n}.h5", attrs={**BASE, "rxsteps": (1, 0, 0)},
+                  rxs={"rx1": {"Ez": np.zeros((6, n)), "@Position": (0.0, 0.1, 0.0)}},
+                  srcs={"src1": {"@Position": (0.0, 0.1, 0.0)}})
+        assert (read_gprmax(p)[0].metadata["tx_positions_gprmax"] is not None) == listed
+
+
+def test_steps_without_a_cell_size_and_a_source_without_position(tmp_path):
+    # no dx_dy_dz: the steps count in metres (a cell of 1); a source group without Position: the receiver's place
+    p = _file(tmp_path / "s.h5", attrs={**BASE, "rxsteps": (2, 0, 0)},
+              rxs={"rx1": {"Ez": np.ones((6, 2)), "@Position": (0.5, 0.1, 0.0)}}, srcs={"src1": {}})
+    s = read_gprmax(p)[0]
+    np.testing.assert_allclose(s.positions_xyz[:, 0], [0.5, 2.5])
+    assert s.offset_m == 0.0
+
+
+def test_receivers_without_a_number_come_first_and_components_are_listed(tmp_path):
+    p = _file(tmp_path / "r.h5", attrs=BASE, rxs={"rx1": {"Ez": np.full(6, 1.0)}, "rxa": {"Ez": np.full(6, 2.0)}})
+    assert [s.metadata["receiver"] for s in read_gprmax(p)] == ["rxa", "rx1"]
+    q = _file(tmp_path / "c.h5", attrs=BASE, rxs={"rx1": {"Hx": np.ones(6), "Hy": np.ones(6)}})
+    with pytest.raises(FormatError) as e:
+        read_gprmax(q)
+    assert str(e.value) == "c.h5: receiver rx1 has no Ez output (has Hx, Hy)"
+
+
+def test_messages_name_the_file(tmp_path):
+    p = write_gprmax3_out(tmp_path / "x.out")
+    with pytest.raises(FormatError, match="^x.out: unknown field component 'Ew'"):
+        read_gprmax(p, component="Ew")
+    with pytest.raises(FormatError, match=r"^x.out: receiver rx1 has no Iz output \(has Ex, Ey, Ez, Hx, Hy, Hz\)$"):
+        read_gprmax(p, component="Iz")
+    import h5py
+
+    with h5py.File(p, "a") as f:
+        f["rxs/rx1/Ez"][0, 0] = np.inf
+    with pytest.raises(FormatError, match=r"^x.out: rx1/Ez holds 1 NaN/inf samples \(the simulation went unstable\?\)$"):
+        read_gprmax(p)
+    bad = tmp_path / "bad.out"
+    bad.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\x01" * 200)
+    with pytest.raises(FormatError, match="^bad.out: HDF5 content is corrupt or truncated"):
+        read_gprmax(bad)
+    assert not is_gprmax(bad)
+    n = _file(tmp_path / "n.h5", attrs={"Iterations": 6, "dt": 1e-12})
+    with pytest.raises(FormatError) as e:
+        read_gprmax(n)
+    assert str(e.value) == ("n.h5: HDF5 file has neither a 'gprMax' attribute nor gprMax's layout (Iterations, dt and "
+                            "rxs/rxN/<component>): not a gprMax output")
+    lay = _file(tmp_path / "l.h5", attrs={"Iterations": 6, "dt": 1e-12}, rxs={"rx1": {"Ez": np.ones(6)}})
+    assert read_gprmax(lay)[0].metadata["gprmax_version"] == "unknown (merged file without a gprMax attribute)"
+
+
+def test_gprmax_to_world_on_any_leading_shape():
+    p = np.arange(12.0).reshape(2, 2, 3)
+    w = gprmax_to_world(p)
+    assert w.shape == (2, 2, 3)
+    np.testing.assert_array_equal(w[1, 0], [6.0, -8.0, 7.0])
+    z = gprmax_to_world([[-0.0, 0.0, 0.0]])
+    assert not np.any(np.signbit(z))  # no negative zeros in the output

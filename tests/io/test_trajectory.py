@@ -76,22 +76,31 @@ def test_tum_lines_comments_separators_and_quaternion_order(tmp_path):
     np.testing.assert_allclose(q[1], [1, 0, 0, 0])
 
 
-@pytest.mark.parametrize("text, msg", [
-    ("0 1 2 3 0 0 0 1\n1 1 2 3 0 0 0\n", "bad.txt: line 2: expected 8 numbers (t tx ty tz qx qy qz qw), got 7"),
-    ("# c\n\n0 1 2 3 0 0 0 1 9\n", "bad.txt: line 3: expected 8 numbers (t tx ty tz qx qy qz qw), got 9"),
-    ("0 1 2 3 0 0 0 1\n0 1 2 x 0 0 0 1\n", "bad.txt: line 2: not a number in '0 1 2 x 0 0 0 1'"),
-    ("0 inf 2 3 0 0 0 1\n", "bad.txt: holds NaN/inf values"),
-    ("0 1 2 3 0 0 0 1e-10\n", "bad.txt: holds a zero quaternion"),
-    ("0 1 2 3 0 0 0 1\n2 1 2 3 0 0 0 1\n1.5 1 2 3 0 0 0 1\n",
+@pytest.mark.parametrize("name, text, msg", [
+    ("bad.txt", "0 1 2 3 0 0 0 1\n1 1 2 3 0 0 0\n", "bad.txt: line 2: expected 8 numbers (t tx ty tz qx qy qz qw), got 7"),
+    ("bad.txt", "# c\n\n0 1 2 3 0 0 0 1 9\n", "bad.txt: line 3: expected 8 numbers (t tx ty tz qx qy qz qw), got 9"),
+    ("bad.txt", "0 1 2 3 0 0 0 1\n0 1 2 x 0 0 0 1\n", "bad.txt: line 2: not a number in '0 1 2 x 0 0 0 1'"),
+    ("bad.txt", "0 inf 2 3 0 0 0 1\n", "bad.txt: holds NaN/inf values"),
+    ("bad.txt", "0 1 2 3 0 0 0 1e-10\n", "bad.txt: holds a zero quaternion"),
+    ("bad.txt", "0 1 2 3 0 0 0 1\n2 1 2 3 0 0 0 1\n1.5 1 2 3 0 0 0 1\n",
      "bad.txt: timestamps run backwards at pose 2 (1.5 s after 2.0 s)"),
-    ("", "bad.txt: file is empty"),
-    ("# nothing but a comment\n\n", "bad.txt: holds no poses"),
+    ("bad.txt", "", "bad.txt: file is empty"),
+    ("bad.txt", "# nothing but a comment\n\n", "bad.txt: holds no poses"),
+    ("c.csv", "", "c.csv: file is empty"),
+    ("c.csv", "\n", "c.csv: CSV header lacks column(s) ['t', 'x', 'y', 'z'] (has [])"),
+    ("c.csv", "t,x,y\n0,1,2\n", "c.csv: CSV header lacks column(s) ['z'] (has ['t', 'x', 'y'])"),
+    ("c.csv", "t,x,y,z\n", "c.csv: holds no poses"),
+    ("c.csv", "t,x,y,z\n0,1,2,3\n1,1,two,3\n", "c.csv: line 3: bad or missing number"),
+    ("c.csv", "t,x,y,z\n0,1,2,3\n1,1,2\n", "c.csv: line 3: bad or missing number"),
+    ("c.csv", "t,x,y,z\n0,1,2,nan\n", "c.csv: holds NaN/inf values"),
+    ("c.csv", "t,x,y,z\n1,1,2,3\n0,1,2,3\n", "c.csv: timestamps run backwards at pose 1 (0.0 s after 1.0 s)"),
 ])
-def test_bad_tum_lines_are_named(tmp_path, text, msg):
-    p = tmp_path / "bad.txt"
+def test_bad_trajectory_files_are_named(tmp_path, name, text, msg):
+    """TUM (.txt) and CSV (.csv) files alike: one line naming the file and what is wrong."""
+    p = tmp_path / name
     p.write_text(text)
     with pytest.raises(FormatError) as e:
-        read_tum(p)
+        read_trajectory(p)
     assert str(e.value) == msg
 
 
@@ -143,24 +152,6 @@ def test_euroc_ground_truth(tmp_path):
     tr = read_trajectory(p)
     assert tr.timestamps_s[1] - tr.timestamps_s[0] == pytest.approx(0.005, abs=1e-6)  # nanoseconds to seconds
     np.testing.assert_allclose(tr.positions_xyz[0], [4.68, -1.79, 0.79])
-
-
-@pytest.mark.parametrize("text, msg", [
-    ("", "c.csv: file is empty"),
-    ("\n", "c.csv: CSV header lacks column(s) ['t', 'x', 'y', 'z'] (has [])"),
-    ("t,x,y\n0,1,2\n", "c.csv: CSV header lacks column(s) ['z'] (has ['t', 'x', 'y'])"),
-    ("t,x,y,z\n", "c.csv: holds no poses"),
-    ("t,x,y,z\n0,1,2,3\n1,1,two,3\n", "c.csv: line 3: bad or missing number"),
-    ("t,x,y,z\n0,1,2,3\n1,1,2\n", "c.csv: line 3: bad or missing number"),
-    ("t,x,y,z\n0,1,2,nan\n", "c.csv: holds NaN/inf values"),
-    ("t,x,y,z\n1,1,2,3\n0,1,2,3\n", "c.csv: timestamps run backwards at pose 1 (0.0 s after 1.0 s)"),
-])
-def test_bad_csv_trajectories_are_named(tmp_path, text, msg):
-    p = tmp_path / "c.csv"
-    p.write_text(text)
-    with pytest.raises(FormatError) as e:
-        read_csv_trajectory(p)
-    assert str(e.value) == msg
 
 
 def test_read_trajectory_chooses_by_suffix(tmp_path):
