@@ -16,7 +16,7 @@ from gpr3d.io._common import (
 def test_check_file(tmp_path):
     with pytest.raises(FormatError, match="^nope.bin: no such file$"):
         check_file(tmp_path / "nope.bin")
-    with pytest.raises(FormatError, match=r"is a folder, not a file$"):
+    with pytest.raises(FormatError, match=f"^{tmp_path.name}: is a folder, not a file$"):
         check_file(tmp_path)
     (tmp_path / "e.bin").write_bytes(b"")
     with pytest.raises(FormatError, match="^e.bin: file is empty$"):
@@ -151,3 +151,149 @@ def test_hdf5_errors_let_ours_and_others_through():
         with pytest.raises(FormatError, match=r"\(" + "x" * 160 + r"\)$"):  # the detail cut to 160 characters
             with hdf5_errors("f.h5"):
                 raise OSError("x" * 400)
+
+
+# ---------------------------------------------------------------- the forked walk of HDF5 files
+
+import os  # noqa: E402
+import signal  # noqa: E402
+import time  # noqa: E402
+
+from gpr3d.io import _common  # noqa: E402
+
+needs_fork = pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork on this system")
+
+
+def _h5(path, n=10):
+    import h5py
+
+    with h5py.File(path, "w") as f:
+        f.attrs["a"] = 1
+        f.create_group("g").attrs["b"] = 2
+        f["g/d"] = np.arange(n, dtype=np.float64)
+    return path
+
+
+def _crash(*_a, **_k):
+    os.kill(os.getpid(), signal.SIGSEGV)
+
+
+@needs_fork
+@pytest.mark.parametrize("where", ["dataset", "root_attrs", "group_attrs"])
+def test_the_walk_reads_what_readers_will_read(tmp_path, monkeypatch, where):
+    """The child walk reads every attribute and every dataset: a crash in any of those reads, made here on purpose
+    (the child inherits the patched h5py), is reported by the parent as one FormatError naming the file."""
+    import h5py
+
+    p = _h5(tmp_path / "w.h5")
+    monkeypatch.setattr(_common, "_HDF5_SURVIVED", {})
+    if where == "dataset":
+        monkeypatch.setattr(h5py.Dataset, "__getitem__", _crash)
+    else:
+        real = h5py.AttributeManager.__getitem__
+        name = {"root_attrs": "a", "group_attrs": "b"}[where]  # the root's attribute, or the group's
+
+        def crash_on(self, key):
+            if key == name:
+                _crash()
+            return real(self, key)
+
+        monkeypatch.setattr(h5py.AttributeManager, "__getitem__", crash_on)
+    with pytest.raises(FormatError) as e:
+        _common.check_hdf5_survives(p)
+    assert str(e.value) == "w.h5: HDF5 content is corrupt: the HDF5 library crashed reading it (SIGSEGV)"
+    assert not _common._HDF5_SURVIVED
+
+
+@needs_fork
+def test_datasets_over_the_limit_are_not_read(tmp_path, monkeypatch):
+    import h5py
+
+    p = _h5(tmp_path / "w.h5", n=10)  # 80 bytes
+    monkeypatch.setattr(h5py.Dataset, "__getitem__", _crash)
+    monkeypatch.setattr(_common, "_HDF5_SURVIVED", {})
+    _common.check_hdf5_survives(p, max_bytes=79)  # not read: no crash
+    monkeypatch.setattr(_common, "_HDF5_SURVIVED", {})
+    with pytest.raises(FormatError, match="crashed"):
+        _common.check_hdf5_survives(p, max_bytes=80)  # exactly the limit: read
+
+
+@needs_fork
+def test_a_walk_that_hangs_is_ended_and_the_file_read_as_usual(tmp_path, monkeypatch):
+    p = _h5(tmp_path / "w.h5")
+    monkeypatch.setattr(_common, "_HDF5_SURVIVED", {})
+    monkeypatch.setattr(_common, "_walk_hdf5", lambda *_a: time.sleep(30))
+    t = time.monotonic()
+    _common.check_hdf5_survives(p, timeout_s=0.3)
+    assert time.monotonic() - t < 5 and not _common._HDF5_SURVIVED  # not remembered as walked
+    # and the child is gone: no zombie left for this process
+    with pytest.raises(ChildProcessError):
+        os.waitpid(-1, os.WNOHANG)
+
+
+@needs_fork
+def test_the_precheck_can_be_switched_off_and_skips_other_files(tmp_path, monkeypatch):
+    p = _h5(tmp_path / "w.h5")
+    monkeypatch.setattr(_common, "_walk_hdf5", _crash)
+    monkeypatch.setattr(_common, "_HDF5_SURVIVED", {})
+    monkeypatch.setenv("GPR3D_HDF5_PRECHECK", "0")
+    _common.check_hdf5_survives(p)  # switched off: no walk, no error
+    monkeypatch.setenv("GPR3D_HDF5_PRECHECK", "1")
+    with pytest.raises(FormatError):
+        _common.check_hdf5_survives(p)
+    monkeypatch.delenv("GPR3D_HDF5_PRECHECK")
+    with pytest.raises(FormatError):  # on by default
+        _common.check_hdf5_survives(p)
+    t = tmp_path / "t.h5"
+    t.write_bytes(b"not an HDF5 file at all")
+    _common.check_hdf5_survives(t)  # no HDF5 signature: not walked
+    _common.check_hdf5_survives(tmp_path / "missing.h5")  # not there: left to the reader
+
+
+@needs_fork
+def test_a_surviving_walk_is_remembered_by_path_size_and_time(tmp_path, monkeypatch):
+    p = _h5(tmp_path / "w.h5")
+    monkeypatch.setattr(_common, "_HDF5_SURVIVED", {})
+    _common.check_hdf5_survives(p)
+    st = p.stat()
+    assert _common._HDF5_SURVIVED == {(str(p.resolve()), st.st_size, st.st_mtime_ns): True}
+    # the child leaves with status 0 and no output; the parent is still here to say so
+    monkeypatch.setattr(_common, "_HDF5_SURVIVED", {})
+    monkeypatch.setattr(_common, "_walk_hdf5", lambda *_a: (_ for _ in ()).throw(ValueError("the reader's to say")))
+    _common.check_hdf5_survives(p)  # an error in the child is not a crash
+    assert len(_common._HDF5_SURVIVED) == 1
+
+
+def test_the_pair_given_by_an_upper_case_name(tmp_path):
+    (tmp_path / "A.DT1").write_bytes(b"x")
+    (tmp_path / "A.HD").write_bytes(b"x")
+    (tmp_path / "B.dt1").write_bytes(b"x")
+    (tmp_path / "B.hd").write_bytes(b"x")
+    assert data_and_header(tmp_path / "A.DT1", (".dt1",), ".hd", "v") == (tmp_path / "A.DT1", tmp_path / "A.HD")
+    assert data_and_header(tmp_path / "B.hd", (".dt1",), ".hd", "v") == (tmp_path / "B.dt1", tmp_path / "B.hd")
+    assert sidecar(tmp_path / "B.hd", ".DT1") == tmp_path / "B.dt1"  # the lower-case candidate
+    assert sidecar(tmp_path / "A.DT1", ".hd") == tmp_path / "A.HD"  # the upper-case candidate
+
+
+def test_small_boundaries():
+    assert whole_traces("f.bin", 3, 1) == 3  # one-byte traces are possible
+    pos, _ = gps_positions([0, 0.5], [60.0, 60.001], [10.0, 10.0], [0.0, 0.0], np.array([0.0, 0.25, 0.5]))
+    assert pos is not None and pos[1, 1] == pytest.approx(pos[2, 1] / 2)  # fixes half a trace apart
+
+
+def test_warnings_point_at_the_reader_s_caller():
+    import gpr3d
+
+    def reader():  # stacklevel 3: the warning is reported at the line that called the reader
+        whole_traces("f.bin", 320, 100)
+
+    with pytest.warns(TruncatedRecordingWarning) as w:
+        reader()
+    assert w[0].filename == __file__
+
+    def reader2():
+        warn_fewer_traces("f.bin", 9, 4, "X")
+
+    with pytest.warns(TruncatedRecordingWarning) as w:
+        reader2()
+    assert w[0].filename == __file__ and gpr3d

@@ -191,3 +191,68 @@ def test_a_profile_file(tmp_path):
         np.testing.assert_array_equal(f["along_m"][()], prof.along_m)
         np.testing.assert_array_equal(f["depth_m"][()], prof.depth_m)
     assert sorted(x.name for x in tmp_path.iterdir()) == ["p.h5"]
+
+
+def _stored(d, dtype):
+    return d.dtype == dtype and d.compression == "gzip" and d.compression_opts == 4 and d.shuffle
+
+
+def test_every_dataset_is_stored_alike(tmp_path):
+    """Volumes, C-scan values and profile images as float32, their axes as float64, all gzip 4 with shuffle (the
+    one helper every writer here uses)."""
+    from gpr3d.io.volume import _store
+
+    with h5py.File(tmp_path / "s.h5", "w") as f:
+        _store(f, "a", [1, 2, 3])
+        _store(f, "b", [1, 2, 3], np.float64)
+        assert _stored(f["a"], np.float32) and _stored(f["b"], np.float64)
+        np.testing.assert_array_equal(f["b"][()], [1.0, 2.0, 3.0])
+    c = write_cscan(tmp_path / "c.h5", _cscan())
+    with h5py.File(c) as f:
+        assert _stored(f["values"], np.float32) and _stored(f["t_start_s"], np.float64)
+        assert _stored(f["depth_m"], np.float64)
+        assert f.attrs["gpr3d_version"] == __version__
+        assert f.attrs["axes"] == "slice, x (east), y (north); cell centres x0 + i * cell_m"
+    prof = SimpleNamespace(image=np.ones((2, 3)), along_m=[0, 1], depth_m=[0, 1, 2], method="stolt", eps_r=4.0)
+    with h5py.File(write_profile(tmp_path / "p.h5", prof)) as f:
+        assert _stored(f["image"], np.float32) and _stored(f["along_m"], np.float64)
+        assert _stored(f["depth_m"], np.float64)
+
+
+def test_read_volume_messages_and_values(tmp_path):
+    p = tmp_path / "v.h5"
+    write_volume(p, GRID, volumes(), note=np.float64(2.5))
+    v = read_volume(p)
+    assert v.arrays["image"].dtype == np.float32 and type(v.attrs["note"]) is float
+    with pytest.raises(FormatError) as e:
+        read_volume(p, names=["fold"])
+    assert str(e.value) == "v.h5: holds no volume 'fold' (it has envelope, image)"
+    for damage, start in ((lambda f: f.attrs.__setitem__("schema", "x"), "v.h5: not a gpr3d volume"),
+                          (lambda f: f.attrs.__setitem__("schema_version", 9), "v.h5: gpr3d.volume schema version 9"),
+                          (lambda f: f.attrs.__setitem__("grid_json", "{"), "v.h5: its grid_json attribute is not a grid "
+                                                                           "(Expecting property name"),
+                          (lambda f: f["image"].__setitem__((0, 0, 0), np.inf), "v.h5: volume 'image' holds NaN"),
+                          (lambda f: (f.__delitem__("image"), f.create_dataset("image", data=np.zeros((1, 1, 1)))),
+                           "v.h5: volume 'image' is (1, 1, 1)")):
+        write_volume(p, GRID, volumes())
+        _edit(p, damage)
+        with pytest.raises(FormatError) as e:
+            read_volume(p)
+        assert str(e.value).startswith(start), str(e.value)
+    import h5py as _h
+
+    with _h.File(tmp_path / "empty.h5", "w") as f:
+        f.attrs.update({"schema": SCHEMA, "schema_version": 1, "grid_json": json.dumps(GRID.to_dict())})
+    with pytest.raises(FormatError, match=r"holds no volume 'image' \(it has none\)$"):
+        read_volume(tmp_path / "empty.h5", names=["image"])
+
+
+def test_the_vti_spacing_is_the_grid_s(tmp_path):
+    pytest.importorskip("pyevtk")
+    write_vti(tmp_path / "v.vti", GRID, {"envelope": volumes()["envelope"], "none": None})
+    head = (tmp_path / "v.vti").read_bytes()
+    head = head[: head.index(b"<AppendedData")].decode()
+    spacing = [float(v) for v in head.split('Spacing="')[1].split('"')[0].split()]
+    np.testing.assert_allclose(spacing, [GRID.dx, GRID.dy, GRID.dd])
+    assert 'Name="none"' not in head and 'Name="envelope"' in head
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["v.vti"]

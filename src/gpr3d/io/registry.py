@@ -56,16 +56,13 @@ def detect_format(path) -> str:
     if ext in sidecars:
         raise UnknownFormatError(p, f"is a sidecar (GPS/metadata) file: read the {sidecars[ext]} data file beside it")
     # data files whose header lives in a file of its own beside them: name the missing one
-    pairs = {".dt1": ((".hd",), "pulseEKKO"), ".hd": ((".dt1",), "pulseEKKO"), ".rd3": ((".rad",), "MALA"),
-             ".rd7": ((".rad",), "MALA"), ".rad": ((".rd3", ".rd7"), "MALA")}
-    if ext in pairs:
-        from gpr3d.io._common import sidecar
-
+    pairs = {".dt1": ((".HD",), "pulseEKKO"), ".hd": ((".DT1",), "pulseEKKO"), ".rd3": ((".RAD",), "MALA"),
+             ".rd7": ((".RAD",), "MALA"), ".rad": ((".RD3", ".RD7"), "MALA")}
+    if ext in pairs:  # (with its partner beside it, the format's detector would have answered already)
         need, vendor = pairs[ext]
-        if all(sidecar(p, s) is None for s in need):
-            wanted = " or ".join(p.with_suffix(s.upper()).name for s in need)
-            raise UnknownFormatError(p, f"its partner file {wanted} is missing ({vendor} keeps data and header in "
-                                        "two files with one name): copy it beside this one")
+        wanted = " or ".join(p.with_suffix(s).name for s in need)
+        raise UnknownFormatError(p, f"its partner file {wanted} is missing ({vendor} keeps data and header in "
+                                    "two files with one name): copy it beside this one")
     claimed = [f.name for f in FORMATS.values() if ext in f.extensions]
     if claimed:
         raise UnknownFormatError(p, f"has a {ext} extension but is not a valid {'/'.join(claimed)} file "
@@ -91,7 +88,7 @@ def read_all(path, *, format: str | None = None, **kwargs) -> list:
         return FORMATS[name].read(Path(path), **kwargs)
     except TypeError as exc:
         if "unexpected keyword" in str(exc):
-            option = str(exc).rsplit(" ", 1)[-1]  # "read_dzt() got an unexpected keyword argument 'component'"
+            option = str(exc).split()[-1]  # "read_dzt() got an unexpected keyword argument 'component'"
             raise FormatError(path, f"the {name} reader takes no option {option}") from None
         raise
 

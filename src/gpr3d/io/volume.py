@@ -29,6 +29,17 @@ SCHEMA_VERSION = 1
 AXES = "x, y, depth (positive down), metres"
 
 
+def _store(f, name: str, a, dtype=np.float32) -> None:
+    """One dataset of an output file: ``a`` as ``dtype``, gzip level 4 with the shuffle filter (every array gpr3d
+    writes here, volumes and axes alike)."""
+    f.create_dataset(name, data=np.asarray(a, dtype), compression="gzip", compression_opts=4, shuffle=True)
+
+
+def _h5_output(path):
+    """The atomic temporary beside ``path`` that an HDF5 output is written into."""
+    return atomic_path(path, suffix=".h5.part")
+
+
 @dataclass
 class Volume:
     """A ``volume.h5`` read back: its grid, its volumes by name and its other attributes."""
@@ -47,15 +58,14 @@ def write_volume(path, grid: Grid3D, arrays: dict, **attrs) -> Path:
         if a is not None and np.shape(a) != grid.shape:
             raise ValueError(f"volume {name!r} is {np.shape(a)}, the grid is {grid.shape}")
     path = Path(path)
-    with atomic_path(path, suffix=".h5.part") as tmp:
+    with _h5_output(path) as tmp:
         with h5py.File(tmp, "w") as f:
             f.attrs.update({"schema": SCHEMA, "schema_version": SCHEMA_VERSION, "gpr3d_version": __version__,
                             "grid_json": json.dumps(grid.to_dict()), "axes": AXES,
                             **{k: v for k, v in attrs.items() if v is not None}})
             for name, a in arrays.items():
                 if a is not None:
-                    f.create_dataset(name, data=np.asarray(a, np.float32), compression="gzip", compression_opts=4,
-                                     shuffle=True)
+                    _store(f, name, a)
     return path
 
 
@@ -121,17 +131,16 @@ def write_cscan(path, cs) -> Path:
     import h5py
 
     path = Path(path)
-    with atomic_path(path, suffix=".h5.part") as tmp:
+    with _h5_output(path) as tmp:
         with h5py.File(tmp, "w") as f:
             f.attrs.update({"schema": "gpr3d.cscan", "schema_version": 1, "gpr3d_version": __version__,
                             "x0": cs.x0, "y0": cs.y0, "cell_m": cs.cell_m, "window_s": cs.window_s,
                             "axes": "slice, x (east), y (north); cell centres x0 + i * cell_m",
                             **({"eps_r": cs.eps_r} if cs.eps_r is not None else {})})
-            f.create_dataset("values", data=np.asarray(cs.values, np.float32), compression="gzip",
-                             compression_opts=4, shuffle=True)
-            f.create_dataset("t_start_s", data=np.asarray(cs.t_start_s, float))
+            _store(f, "values", cs.values)
+            _store(f, "t_start_s", cs.t_start_s, np.float64)
             if cs.depth_m is not None:
-                f.create_dataset("depth_m", data=np.asarray(cs.depth_m, float))
+                _store(f, "depth_m", cs.depth_m, np.float64)
     return path
 
 
@@ -160,12 +169,11 @@ def write_profile(path, prof) -> Path:
     import h5py
 
     path = Path(path)
-    with atomic_path(path, suffix=".h5.part") as tmp:
+    with _h5_output(path) as tmp:
         with h5py.File(tmp, "w") as f:
             f.attrs.update({"schema": "gpr3d.profile", "schema_version": 1, "gpr3d_version": __version__,
                             "method": prof.method, "eps_r": prof.eps_r, "axes": "along (m), depth (m, down)"})
-            f.create_dataset("image", data=np.asarray(prof.image, np.float32), compression="gzip",
-                             compression_opts=4, shuffle=True)
-            f.create_dataset("along_m", data=np.asarray(prof.along_m, float))
-            f.create_dataset("depth_m", data=np.asarray(prof.depth_m, float))
+            _store(f, "image", prof.image)
+            _store(f, "along_m", prof.along_m, np.float64)
+            _store(f, "depth_m", prof.depth_m, np.float64)
     return path
