@@ -109,3 +109,31 @@ def test_signal_to_clutter_by_hand():
     assert signal_to_clutter(env2, np.array([True, True, False, False])) == pytest.approx(
         20 * np.log10(4.0 / np.sqrt(12.5)))
     assert signal_to_clutter(np.array([1.0, 0.0]), np.array([True, False])) == float("inf")
+
+
+def test_defaults_and_edges_of_the_boxes():
+    m = box_mask(20, 100, DT, [[5, 3e-9, 10, 5e-9]])  # the default taper: 3 traces, 3 samples
+    assert m[4, 40] == pytest.approx(0.5 * (1 + np.cos(np.pi / 3)), abs=1e-6) and m[2, 40] == 0
+    assert m[7, 29] == pytest.approx(0.5 * (1 + np.cos(np.pi / 3)), abs=1e-6)
+    with pytest.raises(InvalidDataError, match="lies outside the data"):
+        box_mask(20, 100, DT, [[1, 11e-9, 3, 12e-9]])  # past the 10 ns record
+    with pytest.raises(InvalidDataError, match="is empty or not finite"):
+        check_boxes([[1, 2e-9, 3, 2e-9]], 20, 10e-9)  # no time span
+    assert check_boxes([[1, -2e-9, 3, 0.0]], 20, 10e-9) == [(1.0, -2e-9, 3.0, 0.0)]  # ends at the first sample
+    with pytest.raises(InvalidDataError) as e:
+        check_boxes([[30, 1e-9, 40, 2e-9]], 20, 10e-9)
+    assert str(e.value) == ("box 0 [30, 1e-09, 40, 2e-09] lies outside the data (20 traces, 10 ns): are its times in "
+                            "seconds?")
+
+
+def test_the_envelope_of_float64_input_is_float32():
+    z = np.arange(64)
+    img = np.broadcast_to(np.cos(2 * np.pi * z / 8.0), (2, 3, 64)).astype(np.float64)
+    env = image_envelope(img)
+    assert env.dtype == np.float32
+    np.testing.assert_allclose(env[:, :, 16:48], 1.0, atol=1e-3)
+    np.testing.assert_allclose(image_envelope(img, chunk_voxels=1), env)  # one x column per slab
+
+
+def test_no_clutter_is_an_infinite_ratio():
+    assert signal_to_clutter(np.array([2.0, 0.0, 0.0]), np.array([True, False, False])) == float("inf")

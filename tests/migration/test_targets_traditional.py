@@ -270,3 +270,46 @@ def test_survey_lines_from_the_grid_files():
 
     s = Survey(data=np.zeros((35, 4), np.float32), dt_s=1e-10, metadata={"grid": {"first_trace": [0, 12, 17]}})
     assert [ln.tolist() for ln in survey_lines(s)] == [list(range(12)), list(range(17, 35))]  # 5 traces: left out
+
+
+def test_every_metric_of_a_scene_by_hand():
+    """A 2 m truth line (top of a pipe from x = 1 to 3 m at y = 2 m, 0.5 m deep) found as two lines, a point on it,
+    a false point and a false line; every number of the evaluation worked out by hand (samples every centimetre)."""
+    truth = truth_lines_from_pipes([Pipe((1.0, 2.0, -0.52), (3.0, 2.0, -0.52), 0.02)])
+    assert truth == [{"p0": [1.0, 2.0, 0.5], "p1": [3.0, 2.0, 0.5], "radius_m": 0.02}]
+    t = [Target3D("line", [[1.2, 2.03, 0.52], [2.0, 2.03, 0.52]], 0.52, 1.0),  # 0.8 m, 3 cm aside, 2 cm deeper
+         Target3D("line", [[2.3, 1.98, 0.49], [2.8, 1.98, 0.49]], 0.49, 1.0),  # 0.5 m, 2 cm the other side, 1 cm up
+         Target3D("point", [[2.1, 2.0, 0.5]], 0.5, 1.0),  # on the line
+         Target3D("point", [[0.0, 0.0, 0.5]], 0.5, 1.0),  # far from it: false
+         Target3D("line", [[0.0, 5.0, 0.5], [1.0, 5.0, 0.5]], 0.5, 1.0)]  # parallel, 3 m away: false
+    ev = evaluate_targets(t, truth)
+    row = ev["truth"][0]
+    assert row["truth"] == 0 and row["length_m"] == pytest.approx(2.0) and row["n_segments"] == 2
+    assert row["found_as"] == [0, 1, 2]
+    w0, w1 = 81, 51  # each line's samples, every cm, all within the truth's span
+    assert row["position_error_m"] == pytest.approx((w0 * 0.03 + w1 * 0.02) / (w0 + w1), abs=1e-9)
+    assert row["depth_error_m"] == pytest.approx((w0 * 0.02 + w1 * 0.01) / (w0 + w1), abs=1e-9)
+    assert row["orientation_error_deg"] == pytest.approx(0.0, abs=1e-6)
+    # the found ends along the line: 0.2 and 1.8 m of the 2 m: 0.2 short at each end, nothing beyond
+    assert row["endpoint_error_m"] == pytest.approx(0.2, abs=1e-9) and row["overshoot_m"] == 0.0
+    # uncovered truth samples: x = 1.00..1.10 (11), 2.20 (between the point's 10 cm and the second line), and
+    # 2.90..3.00 (11): 178 of 201
+    assert row["completeness"] == pytest.approx(178 / 201)
+    assert (ev["false_targets"], ev["false_lines"], ev["false_points"], ev["false"]) == (2, 1, 1, [3, 4])
+    assert ev["n_extracted"] == 5 and ev["true_length_m"] == pytest.approx(2.0)
+    assert ev["excess_m"] == pytest.approx(101 * 0.01)  # the false line's 101 samples, 1 cm each
+    assert ev["excess_fraction"] == pytest.approx(1.01 / 2.0)
+
+
+def test_an_oblique_line_and_a_steep_one():
+    """A line 10 deg off the truth's direction is matched and its angle reported; one 20 deg off (over the 15 deg
+    limit) is not; with no truth at all, every target is false and nothing divides by zero."""
+    truth = truth_lines_from_pipes([Pipe((0.0, 0.0, -0.32), (2.0, 0.0, -0.32), 0.02)])
+    a10, a20 = np.radians(10), np.radians(20)
+    t = [Target3D("line", [[0.5, 0.0, 0.3], [0.5 + 0.5 * np.cos(a10), 0.5 * np.sin(a10), 0.3]], 0.3, 1.0),
+         Target3D("line", [[1.2, 0.0, 0.3], [1.2 + 0.5 * np.cos(a20), 0.5 * np.sin(a20), 0.3]], 0.3, 1.0)]
+    ev = evaluate_targets(t, truth)
+    assert ev["truth"][0]["found_as"] == [0] and ev["false"] == [1]
+    assert ev["truth"][0]["orientation_error_deg"] == pytest.approx(10.0, abs=1e-6)
+    none = evaluate_targets([Target3D("point", [[0, 0, 0.3]], 0.3, 1.0)], [])
+    assert none["false_points"] == 1 and none["excess_fraction"] == 0.0 and none["true_length_m"] == 0.0

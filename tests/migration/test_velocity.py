@@ -97,3 +97,39 @@ def test_a_flat_or_empty_focus(monkeypatch):
     for bad in ([4.0, 4.0, 9.0], [0.5, 4.0, 9.0], [4.0, float("inf"), 9.0]):
         with pytest.raises(InvalidDataError, match="at least three increasing values >= 1"):
             focus_eps("survey", eps_grid=bad)
+
+
+def test_entropy_in_float64_and_the_defaults_passed_on(monkeypatch):
+    big = np.array([1e20, 1e20], np.float32)  # squares overflow float32
+    assert image_entropy(big) == pytest.approx(np.log(2))
+    tried = _stub(monkeypatch, lambda eps: (np.sqrt(eps) - 3.0) ** 2)
+    seen = []
+    import gpr3d.migration.reconstruct as rec
+
+    inner = rec.reconstruct
+
+    def spy(survey, cfg, boxes=None):
+        seen.append(survey)
+        return inner(survey, cfg, boxes=boxes)
+
+    monkeypatch.setattr(rec, "reconstruct", spy)
+    r = focus_eps("the survey", eps_grid=[[4.0], [9.0], [16.0]])  # any shape: flattened
+    assert set(seen) == {"the survey"} and r["eps_grid"] == [4.0, 9.0, 16.0]
+    assert [t[1:4] for t in tried] == [(0.04, None, 50.0)] * 3
+    assert focus_eps("s", eps_grid=[1.0, 4.0, 9.0])["eps_grid"][0] == 1.0  # eps_r 1 is allowed
+    assert focus_eps("s", eps_grid=[4.0, 4.5, 5.0])["eps_grid"] == [4.0, 4.5, 5.0]  # steps under one
+
+
+def test_velocity_messages_exactly(monkeypatch):
+    with pytest.raises(InvalidDataError, match="^eps_grid must hold at least three increasing values >= 1$"):
+        focus_eps("s", eps_grid=[4.0, 9.0])
+    _stub(monkeypatch, lambda eps: float("nan"))
+    with pytest.raises(InvalidDataError, match="^the migrated image is empty for every eps_r: no data to focus$"):
+        focus_eps("s", eps_grid=[4.0, 9.0, 16.0])
+    # best at the last value: no parabola (it would need a value beyond the grid)
+    _stub(monkeypatch, lambda eps: {4.0: 3.0, 9.0: 2.0, 16.0: 1.0}[eps])
+    assert focus_eps("s", eps_grid=[4.0, 9.0, 16.0]) ["eps_r"] == 16.0
+    # a vertex outside the best three is held to them
+    _stub(monkeypatch, lambda eps: {4.0: 1.0, 9.0: 0.0, 16.0: 10.0, 25.0: 20.0}[eps])
+    r = focus_eps("s", eps_grid=[4.0, 9.0, 16.0, 25.0])
+    assert 4.0 <= r["eps_r"] <= 16.0

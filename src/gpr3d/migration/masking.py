@@ -22,7 +22,7 @@ def _taper_1d(n: int, lo: float, hi: float, width: float) -> np.ndarray:
     d = np.maximum(lo - i, 0) + np.maximum(i - hi, 0)
     if width <= 0:
         return (d == 0).astype(float)
-    return np.where(d >= width, 0.0, 0.5 * (1 + np.cos(np.pi * np.minimum(d / width, 1.0))))
+    return 0.5 * (1 + np.cos(np.pi * np.minimum(d / width, 1.0)))  # (cos(pi) = -1: zero from d = width on)
 
 
 def box_mask(n_traces: int, n_samples: int, dt_s: float, boxes, *, taper_traces: float = 3.0,

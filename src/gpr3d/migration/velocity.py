@@ -55,7 +55,9 @@ def focus_eps(survey, *, boxes=None, eps_grid=None, spacing_m: float = 0.04, max
     if 0 < i < grid.size - 1:  # parabola in sqrt(eps_r) through the best three
         x = np.sqrt(grid[i - 1 : i + 2])
         a, b, _ = np.polyfit(x, ent[i - 1 : i + 2], 2)
-        if a > 0:
-            best = float(np.clip(-b / (2 * a), x[0], x[2]) ** 2)
+        # the middle value is the least (nanargmin takes the first of equals), so the parabola opens upwards and
+        # its vertex lies between the neighbours; a neighbour whose image was empty (NaN) leaves the grid value
+        if np.isfinite(a):
+            best = float((-b / (2 * a)) ** 2)
     return {"eps_r": best, "eps_grid": grid.tolist(), "entropy": ent.tolist(),
             "at_edge": bool(i in (0, grid.size - 1))}
