@@ -213,22 +213,25 @@ def write_report(rows: list[dict], path: Path, command: str) -> None:
     """The table (score per module, with the host CPU and commit each was measured on) and every survivor's and
     listed equivalent's diff."""
     lines = ["mutmut, one module at a time with the tests of its package; score = killed / (mutants - equivalent)", "",
-             "| module | mutants | killed | survived | equivalent | score | time (s) | host CPU | commit |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| module | mutants | killed | survived | equivalent | unclassified | score | time (s) | host CPU | commit |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         where = f"{r.get('cpu', cpu_label())} | {(r.get('commit') or head_commit() or '?')[:10]}"
         if "error" in r:
-            lines.append(f"| {r['module']} | error: {r['error'][:80]} | | | | | {r['wall_s']:.0f} | {where} |")
+            lines.append(f"| {r['module']} | error: {r['error'][:80]} | | | | | | {r['wall_s']:.0f} | {where} |")
             continue
         lines.append(f"| {r['module']} | {r['total']} | {r['killed']} | {r['survived']} | {r['equivalent']} | "
-                     f"{100 * r['score']:.1f} % | {r['wall_s']:.0f} | {where} |")
+                     f"{r.get('suspicious', 0)} | {100 * r['score']:.1f} % | {r['wall_s']:.0f} | {where} |")
     done = [r for r in rows if "error" not in r]
     if done:
         tot = sum(r["total"] - r["equivalent"] for r in done)
         lines.append(f"| **all {len(done)}** | {sum(r['total'] for r in done)} | {sum(r['killed'] for r in done)} | "
                      f"{sum(r['survived'] for r in done)} | {sum(r['equivalent'] for r in done)} | "
+                     f"{sum(r.get('suspicious', 0) for r in done)} | "
                      f"{100 * sum(r['killed'] for r in done) / max(tot, 1):.1f} % | "
                      f"{sum(r['wall_s'] for r in done):.0f} | | |")
+        lines += ["", "unclassified: mutants whose test run ended with an exit status mutmut does not classify "
+                      "('suspicious'): neither killed nor survived, and counted against the score"]
         lines += ["", "Not yet scored: " + (", ".join(m for m in MODULES if m not in {r['module'] for r in rows})
                                            or "none")]
     for r in rows:

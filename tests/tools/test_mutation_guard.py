@@ -49,9 +49,9 @@ def test_stored_results_keep_their_commit_and_make_the_report(tmp_path):
     tool.write_report(rows, report, "python tools/mutation.py")
     text = report.read_text()
     assert "- `a` -> `b`" in text
-    assert "| io.dt1 | 20 | 15 | 2 | 3 | 88.2 % |" in text and "| processing.dewow | 10 | 9 | 1 | 0 | 90.0 % |" in text
+    assert "| io.dt1 | 20 | 15 | 2 | 3 | 0 | 88.2 % |" in text and "| processing.dewow | 10 | 9 | 1 | 0 | 0 | 90.0 % |" in text
     # the total: 24 killed of 30 - 3 equivalent
-    assert "| **all 2** | 30 | 24 | 3 | 3 | 88.9 % |" in text
+    assert "| **all 2** | 30 | 24 | 3 | 3 | 0 | 88.9 % |" in text
 
 
 def test_the_guard_passes_on_this_checkout():
