@@ -56,7 +56,7 @@ MODULES = {
     "migration.profile": None, "migration.traditional": None, "migration.reconstruct": None,
     "migration.sitetiles": None,
     "simulation.forward": ["tests/simulation/test_forward.py"],
-    "simulation.labels": ["tests/simulation/test_labels.py", "tests/simulation/test_forward.py"],
+    "simulation.labels": ["tests/simulation/test_labels.py"],
 }
 
 

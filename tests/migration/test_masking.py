@@ -137,3 +137,11 @@ def test_the_envelope_of_float64_input_is_float32():
 
 def test_no_clutter_is_an_infinite_ratio():
     assert signal_to_clutter(np.array([2.0, 0.0, 0.0]), np.array([True, False, False])) == float("inf")
+
+
+def test_the_envelope_in_slabs_of_a_wide_image():
+    rng = np.random.default_rng(3)
+    img = rng.standard_normal((5, 70, 16)).astype(np.float32)  # more y columns than depths
+    from scipy.signal import hilbert
+
+    np.testing.assert_allclose(image_envelope(img, chunk_voxels=2000), np.abs(hilbert(img, axis=2)), atol=1e-5)

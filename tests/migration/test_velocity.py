@@ -133,3 +133,11 @@ def test_velocity_messages_exactly(monkeypatch):
     _stub(monkeypatch, lambda eps: {4.0: 1.0, 9.0: 0.0, 16.0: 10.0, 25.0: 20.0}[eps])
     r = focus_eps("s", eps_grid=[4.0, 9.0, 16.0, 25.0])
     assert 4.0 <= r["eps_r"] <= 16.0
+
+
+def test_the_parabola_next_to_the_last_value(monkeypatch):
+    """Best at the second-to-last value: still a parabola through it and its neighbours (the vertex, not the grid
+    value)."""
+    _stub(monkeypatch, lambda eps: (np.sqrt(eps) - 3.8) ** 2)
+    r = focus_eps("s", eps_grid=[4.0, 9.0, 16.0, 25.0])
+    assert r["eps_r"] == pytest.approx(3.8**2, rel=1e-9) and not r["at_edge"]

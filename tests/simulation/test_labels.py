@@ -128,3 +128,9 @@ def test_the_circle_path_with_offset_off_the_apex():
     for x in (-0.3, 0.0, 0.3):
         want = np.min(np.hypot(px - (x - 0.1), pz) + np.hypot(px - (x + 0.1), pz)) / s.medium.velocity_m_s
         assert hyperbola_times(s, t, [x])[0] == pytest.approx(want, rel=1e-8), x
+
+
+def test_labels_as_json_text():
+    from gpr3d.simulation.labels import to_json
+
+    assert to_json({"a": [1, 2], "b": "x"}) == '{\n "a": [\n  1,\n  2\n ],\n "b": "x"\n}'
