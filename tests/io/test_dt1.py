@@ -370,6 +370,7 @@ def test_no_positions_means_no_source(tmp_path):
 def test_a_gps_file_places_the_traces_and_is_described(tmp_path):
     p = write_dt1(tmp_path / "G", n_traces=3, n_points=10)
     p.with_suffix(".GPS").write_text(
+        "$GPGGA,115959,5900.0000,N,01000.0000,E,1,08,1.0,10.0,M,,M,,*00\n"  # before any trace line: ignored
         "Trace #1 at position 0.0\n$GPGGA,120000,6000.0000,N,01000.0000,E,1,08,1.0,10.0*47\n"
         "$GPGGA,120000,6100.0000,N,01000.0000,E,1,08,1.0,10.0,M,,M,,*00\n"  # a second GGA of trace 1: ignored
         "Trace #3 at position 0.5\n$GPGGA,120001,6000.0600,N,01000.0000,E,1,08,1.0,12.0,M,,M,,*00\n")

@@ -361,6 +361,9 @@ def test_steps_without_a_cell_size_and_a_source_without_position(tmp_path):
     s = read_gprmax(p)[0]
     np.testing.assert_allclose(s.positions_xyz[:, 0], [0.5, 2.5])
     assert s.offset_m == 0.0
+    q = _file(tmp_path / "t.h5", attrs={**BASE, "rxsteps": (0, 1, 1)},  # steps up and along gprMax z, cells of 1 m
+              rxs={"rx1": {"Ez": np.ones((6, 2)), "@Position": (0.5, 0.1, 0.0)}})
+    np.testing.assert_allclose(read_gprmax(q)[0].positions_xyz, [[0.5, 0.0, 0.1], [0.5, -1.0, 1.1]])
 
 
 def test_receivers_without_a_number_come_first_and_components_are_listed(tmp_path):

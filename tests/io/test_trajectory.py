@@ -313,13 +313,14 @@ def test_attach_track_backwards_and_climbing():
 
 
 def test_gps_fixes_three_and_north_east(tmp_path):
-    """Three fixes at scans 1, 3, 5 running north-east: traces 0 and 6 outside their span; headings 45 deg."""
+    """Three fixes at scans 1, 3, 5 running north twice as fast as east: traces 0 and 6 outside their span;
+    headings atan2(2, 1) = 63.4 deg."""
     lines = []
     for scan, minutes in ((1, 0.0), (3, 0.001), (5, 0.002)):
         lines += [f"$GSSIS,{scan},-1",
-                  f"$GPGGA,000320,00{minutes:07.4f},N,000{minutes:07.4f},E,1,08,1.0,0.0,M,,M,,*00"]
+                  f"$GPGGA,000320,00{2 * minutes:07.4f},N,000{minutes:07.4f},E,1,08,1.0,0.0,M,,M,,*00"]
     (tmp_path / "g.dzg").write_text("\n".join(lines) + "\n")
     track = read_track(tmp_path / "g.dzg")
     placed = apply_track(Survey(data=np.zeros((7, 8), np.float32), dt_s=1e-10), track)
     assert placed.metadata["track_warning"] == "2 traces lie outside the GPS fixes' span"
-    np.testing.assert_allclose(placed.headings_rad[1:6], np.pi / 4, atol=0.01)
+    np.testing.assert_allclose(placed.headings_rad[1:6], np.arctan2(2.0, 1.0), atol=0.01)
