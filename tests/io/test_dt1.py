@@ -14,7 +14,7 @@ from tests.io.makers import expected_values, write_dt1
 def test_pulseekko_50mhz_facts():
     s = gpr3d.read(real_file("gprpy_sns_50MHz/XLINE00.DT1"))
     assert s.shape == (531, 1500)  # README: 531 traces x 1500 points
-    assert s.time_window_s == pytest.approx(1200e-9)
+    assert s.time_window_s == pytest.approx(1200e-9, rel=1e-9, abs=0)
     assert s.frequency_hz == 50e6
     assert s.offset_m == pytest.approx(3 * 0.3048)  # 3 ft
     # 2 ft steps, stored in feet and converted to metres
@@ -41,7 +41,7 @@ def test_grid_lines_all_read():
         s = gpr3d.read(p)
         hd = read_hd(p.with_suffix(".HD"))
         assert s.n_traces == int(hd["NUMBER OF TRACES"])
-        assert s.n_samples == 250 and s.time_window_s == pytest.approx(200e-9)
+        assert s.n_samples == 250 and s.time_window_s == pytest.approx(200e-9, rel=1e-9, abs=0)
         assert s.frequency_hz == 100e6
         assert np.allclose(np.diff(s.positions_xyz[:, 0]), 0.05, atol=1e-4)
 
@@ -62,7 +62,7 @@ def test_synthetic_dt1_exact(tmp_path):
     p = write_dt1(tmp_path / "LINE", n_traces=6, n_points=50, units="ft", step=0.5)
     s = read_dt1(p.with_suffix(".HD"))  # either file of the pair
     np.testing.assert_array_equal(s[0].data, expected_values(6, 50)[0])
-    assert s[0].dt_s == pytest.approx(100e-9 / 50)
+    assert s[0].dt_s == pytest.approx(100e-9 / 50, rel=1e-9, abs=0)
     assert s[0].positions_xyz[-1, 0] == pytest.approx(5 * 0.5 * 0.3048)
     assert s[0].timestamps_s[1] - s[0].timestamps_s[0] == pytest.approx(0.5)
 
@@ -145,7 +145,7 @@ def test_hd_fields_the_reader_needs_and_uses(tmp_path):
     assert s.frequency_hz == 250e6 and s.offset_m == pytest.approx(0.40)
     m = s.metadata
     assert (m["format"], m["channel"], m["n_channels"], m["bytes_per_point"]) == ("dt1", 0, 1, 2)
-    assert m["antenna"] == "250 MHz pulseEKKO" and m["range_s"] == pytest.approx(100e-9)
+    assert m["antenna"] == "250 MHz pulseEKKO" and m["range_s"] == pytest.approx(100e-9, rel=1e-9, abs=0)
     assert m["step_m"] == pytest.approx(0.02) and m["stacks"] == 4 and m["header_timezero_point"] == 3.5
     assert m["system"] == "Data Collected with test maker" and m["date"] == "2020-01-02"
     assert m["path"].endswith("F.DT1") and m["header_path"].endswith("F.HD") and m["position_units"] == "cm"

@@ -16,7 +16,7 @@ def test_gssi_400mhz_header_facts():
     s = gpr3d.read(real_file("gprpy_gssi_400MHz/FILE____032.DZT"))
     # facts from ../shared/data/real/README.md
     assert s.shape == (1040, 512)
-    assert s.time_window_s == pytest.approx(48e-9)
+    assert s.time_window_s == pytest.approx(48e-9, rel=1e-9, abs=0)
     assert s.frequency_hz == 400e6
     assert s.eps_r == 6.0
     assert s.metadata["bits"] == 16
@@ -47,7 +47,7 @@ def test_sir4000_32bit_large_header():
     assert hdr["bits"] == 32
     s = gpr3d.read(p)
     assert s.shape == (345, 2048)
-    assert s.time_window_s == pytest.approx(2300e-9)
+    assert s.time_window_s == pytest.approx(2300e-9, rel=1e-9, abs=0)
     assert s.frequency_hz == 200e6  # antenna model 5106
     assert s.metadata["antenna"] == "5106"
     # DZG present but holds no GPS fix: no invented positions
@@ -93,7 +93,7 @@ def test_bits_and_channels(tmp_path, bits, nchan):
         np.testing.assert_array_equal(s.data[:, 2:], want[ch][:, 2:].astype(np.float32))
     assert [s.frequency_hz for s in surveys] == [400e6, 900e6, 400e6][:nchan]
     assert surveys[0].metadata["created"] == "2021-06-15T10:20:30"
-    assert surveys[0].dt_s == pytest.approx(20e-9 / 32)
+    assert surveys[0].dt_s == pytest.approx(20e-9 / 32, rel=1e-9, abs=0)
     assert surveys[0].timestamps_s[3] == pytest.approx(3 / 50.0)
 
 
@@ -215,13 +215,13 @@ def test_every_header_field(tmp_path):
     s = read_dzt(p)[0]
     m = s.metadata
     assert (m["format"], m["channel"], m["n_channels"], m["bits"], m["antenna"]) == ("dzt", 0, 1, 16, "3101")
-    assert m["range_s"] == pytest.approx(20e-9) and m["position_s"] == pytest.approx(7.25e-9)
+    assert m["range_s"] == pytest.approx(20e-9, rel=1e-9, abs=0) and m["position_s"] == pytest.approx(7.25e-9, rel=1e-9, abs=0)
     assert (m["scans_per_s"], m["scans_per_m"], m["system_code"], m["data_offset"]) == (32.0, 40.0, 23, 1024)
     assert m["header_samples_replaced"] == 2 and m["path"].endswith("h.DZT") and "gps" not in m
     assert m["positions_source"] == "survey wheel (header scans per metre), along world x"
     np.testing.assert_allclose(s.positions_xyz[:, 0], [0.0, 0.025, 0.05])
     np.testing.assert_allclose(s.timestamps_s, [0.0, 1 / 32, 2 / 32])
-    assert s.eps_r == 4.5 and s.frequency_hz == 900e6 and s.dt_s == pytest.approx(20e-9 / 16)
+    assert s.eps_r == 4.5 and s.frequency_hz == 900e6 and s.dt_s == pytest.approx(20e-9 / 16, rel=1e-9, abs=0)
 
 
 @pytest.mark.parametrize("eps, kept", [(1.0, True), (100.0, True), (0.99, False), (100.5, False),

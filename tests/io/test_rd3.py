@@ -12,7 +12,7 @@ def test_mala_facts_and_gps():
     assert s.shape == (10, 512)
     assert s.frequency_hz == 500e6
     assert s.offset_m == pytest.approx(0.18)
-    assert s.metadata["header_timewindow_s"] == pytest.approx(422.061312e-9)
+    assert s.metadata["header_timewindow_s"] == pytest.approx(422.061312e-9, rel=1e-9, abs=0)
     assert s.metadata["gps"]["fixes"] == 3
     assert s.metadata["gps"]["origin_lat_lon_alt"][0] == pytest.approx(75.63203)
     nogps = gpr3d.read(real_file("impdar_mala_500MHz/ten_col_nogps.rd3"))
@@ -40,7 +40,7 @@ def test_synthetic_rd3(tmp_path):
     p = write_rd3(tmp_path / "line", n_traces=5, n_samples=40, fs_mhz=2000.0)
     s = gpr3d.read(p.with_suffix(".rad"))
     np.testing.assert_array_equal(s.data, expected_values(5, 40)[0])
-    assert s.dt_s == pytest.approx(0.5e-9)
+    assert s.dt_s == pytest.approx(0.5e-9, rel=1e-9, abs=0)
     assert s.positions_xyz[-1, 0] == pytest.approx(0.2)
     assert s.frequency_hz == 800e6
 
@@ -132,7 +132,7 @@ def test_every_header_field_the_reader_uses(tmp_path):
     s = read_rd3(_pair(tmp_path, rad, vals))[0]
     np.testing.assert_array_equal(s.data, vals.astype(np.float32))
     assert s.data.dtype == np.float32
-    assert s.dt_s == pytest.approx(0.25e-9)  # 1 / 4000 MHz, not TIMEWINDOW / SAMPLES
+    assert s.dt_s == pytest.approx(0.25e-9, rel=1e-9, abs=0)  # 1 / 4000 MHz, not TIMEWINDOW / SAMPLES
     assert s.frequency_hz == pytest.approx(1.2e6)  # the first number of ANTENNAS, in MHz
     assert s.offset_m == pytest.approx(0.06)
     np.testing.assert_allclose(s.positions_xyz, [[0, 0, 0], [0.025, 0, 0], [0.05, 0, 0]])
@@ -140,7 +140,7 @@ def test_every_header_field_the_reader_uses(tmp_path):
     m = s.metadata
     assert (m["format"], m["channel"], m["n_channels"], m["antenna"]) == ("rd3", 0, 1, "1.2 GHz custom")
     assert m["range_s"] == pytest.approx(8 * 0.25e-9)
-    assert m["header_timewindow_s"] == pytest.approx(3.5e-9)
+    assert m["header_timewindow_s"] == pytest.approx(3.5e-9, rel=1e-9, abs=0)
     assert m["sampling_frequency_hz"] == 4e9
     assert m["stacks"] == 16.0
     assert m["positions_source"] == "header DISTANCE INTERVAL, along world x"
@@ -150,7 +150,7 @@ def test_every_header_field_the_reader_uses(tmp_path):
 def test_the_optional_fields_left_out(tmp_path):
     # no FREQUENCY: the interval is TIMEWINDOW / SAMPLES; no ANTENNAS, separation, intervals, stacks, last trace
     s = read_rd3(_pair(tmp_path, "SAMPLES:8\nTIMEWINDOW:4\n", np.ones((2, 8))))[0]
-    assert s.dt_s == pytest.approx(0.5e-9)
+    assert s.dt_s == pytest.approx(0.5e-9, rel=1e-9, abs=0)
     assert s.frequency_hz is None and s.offset_m == 0.0
     assert s.positions_xyz is None and s.timestamps_s is None
     assert s.metadata["sampling_frequency_hz"] is None and s.metadata["stacks"] is None

@@ -52,12 +52,12 @@ def test_other_rev2_readers_get_the_exact_interval(tmp_path):
     s = gpr3d.Survey(data=np.arange(24, dtype=np.float32).reshape(3, 8), dt_s=93.75e-12)
     write_segy(s, tmp_path / "x.sgy")
     raw = (tmp_path / "x.sgy").read_bytes()
-    assert struct.unpack(">d", raw[3280:3288])[0] == pytest.approx(93.75, rel=1e-12)
+    assert struct.unpack(">d", raw[3280:3288])[0] == pytest.approx(93.75, rel=1e-12, abs=0)
     assert struct.unpack(">h", raw[3216:3218])[0] == 94 and raw[3500] == 2
     with segyio.open(tmp_path / "x.sgy", "r+", ignore_geometry=True) as f:
         f.text[0] = segyio.tools.create_text_header({1: "SOME OTHER PROGRAM, SAMPLE INTERVAL IN PICOSECONDS"})
     r = gpr3d.read(tmp_path / "x.sgy")
-    assert r.metadata["written_by_gpr3d"] is False and r.dt_s == pytest.approx(93.75e-12, rel=1e-12)
+    assert r.metadata["written_by_gpr3d"] is False and r.dt_s == pytest.approx(93.75e-12, rel=1e-12, abs=0)
     np.testing.assert_array_equal(r.data, s.data)
 
 
@@ -73,7 +73,7 @@ def test_a_foreign_segy_reads_its_interval_in_picoseconds_unless_told(tmp_path):
             f.header[i] = {segyio.TraceField.TRACE_SAMPLE_COUNT: 50, segyio.TraceField.TRACE_SAMPLE_INTERVAL: 100}
         f.trace = data
     r = gpr3d.read(tmp_path / "other.segy")
-    assert r.dt_s == pytest.approx(1e-10) and r.positions_xyz is None and r.metadata["dt_unit"] == "ps"
+    assert r.dt_s == pytest.approx(1e-10, rel=1e-9, abs=0) and r.positions_xyz is None and r.metadata["dt_unit"] == "ps"
     np.testing.assert_allclose(r.data, data, rtol=1e-6)  # IBM floats hold float32 to about 1e-7
     assert gpr3d.read(tmp_path / "other.segy", dt_unit="ns").dt_s == pytest.approx(1e-7)
     with pytest.raises(gpr3d.GPR3DError, match="no GPR interval"):
@@ -125,22 +125,22 @@ def test_foreign_files_by_byte_order_revision_and_unit(tmp_path):
     p = tmp_path / "le.sgy"
     data = _foreign(p, endian="little", rev=2, ext=93.75, bin_interval=94)
     r = gpr3d.read(p)
-    assert r.dt_s == pytest.approx(93.75e-12, rel=1e-12) and r.metadata["segy_revision"] == 2
+    assert r.dt_s == pytest.approx(93.75e-12, rel=1e-12, abs=0) and r.metadata["segy_revision"] == 2
     assert r.data.dtype == np.float32
     np.testing.assert_array_equal(r.data, data)
     p1 = tmp_path / "rev1.sgy"
     _foreign(p1, rev=1, ext=55.0, bin_interval=94)
-    assert gpr3d.read(p1).dt_s == pytest.approx(94e-12) and gpr3d.read(p1).metadata["segy_revision"] == 1
+    assert gpr3d.read(p1).dt_s == pytest.approx(94e-12, rel=1e-9, abs=0) and gpr3d.read(p1).metadata["segy_revision"] == 1
     p0 = tmp_path / "rev2zero.sgy"
     _foreign(p0, rev=2, ext=0.0, bin_interval=94)
-    assert gpr3d.read(p0).dt_s == pytest.approx(94e-12)  # an empty extended field: the 16-bit one
+    assert gpr3d.read(p0).dt_s == pytest.approx(94e-12, rel=1e-9, abs=0)  # an empty extended field: the 16-bit one
     pn = tmp_path / "ns.sgy"
     _foreign(pn, text="SAMPLE INTERVAL IN NANOSECONDS", bin_interval=2)
     r = gpr3d.read(pn)
-    assert r.dt_s == pytest.approx(2e-9) and r.metadata["dt_unit"] == "ns"
+    assert r.dt_s == pytest.approx(2e-9, rel=1e-9, abs=0) and r.metadata["dt_unit"] == "ns"
     pb = tmp_path / "both.sgy"
     _foreign(pb, text="NANOSECONDS OR PICOSECONDS", bin_interval=200)
-    assert gpr3d.read(pb).dt_s == pytest.approx(200e-12)  # both named: the GPR default
+    assert gpr3d.read(pb).dt_s == pytest.approx(200e-12, rel=1e-9, abs=0)  # both named: the GPR default
     pu = tmp_path / "us.sgy"
     _foreign(pu, bin_interval=1)
     assert gpr3d.read(pu, dt_unit="us").dt_s == pytest.approx(1e-6)  # one microsecond: still allowed
@@ -154,7 +154,7 @@ def test_foreign_files_by_byte_order_revision_and_unit(tmp_path):
 def test_the_interval_from_the_trace_headers_and_none_at_all(tmp_path):
     p = tmp_path / "th.sgy"
     _foreign(p, bin_interval=0, trace_interval=250)
-    assert gpr3d.read(p).dt_s == pytest.approx(250e-12)
+    assert gpr3d.read(p).dt_s == pytest.approx(250e-12, rel=1e-9, abs=0)
     _foreign(p, bin_interval=0, trace_interval=0)
     with pytest.raises(gpr3d.GPR3DError, match=r"th.sgy: gives no sample interval \(binary and trace headers hold 0\)$"):
         gpr3d.read(p)
@@ -186,7 +186,7 @@ def test_only_gpr3d_files_are_read_for_time_zero_offset_and_frequency(tmp_path):
     p = tmp_path / "theirs.sgy"
     _foreign(p, text="T0 S 5e-10 OFFSET M 0.3 FREQUENCY HZ 1e8 DT S 3e-10")  # the words, not the mark
     r = gpr3d.read(p)
-    assert (r.t0_s, r.offset_m, r.frequency_hz) == (0.0, 0.0, None) and r.dt_s == pytest.approx(1e-10)
+    assert (r.t0_s, r.offset_m, r.frequency_hz) == (0.0, 0.0, None) and r.dt_s == pytest.approx(1e-10, rel=1e-9, abs=0)
 
 
 def test_what_gpr3d_writes_in_the_headers(tmp_path):
@@ -272,7 +272,7 @@ def test_header_details_and_edges(tmp_path):
     p = tmp_path / "th.sgy"
     TF = segyio.TraceField
     _foreign(p, bin_interval=0, trace_interval=250, heads={1: {TF.TRACE_SAMPLE_INTERVAL: 300}})
-    assert gpr3d.read(p).dt_s == pytest.approx(250e-12)
+    assert gpr3d.read(p).dt_s == pytest.approx(250e-12, rel=1e-9, abs=0)
     (tmp_path / "empty.sgy").write_bytes(p.read_bytes()[:3600])
     with pytest.raises(gpr3d.GPR3DError, match=r"empty.sgy: not a readable SEG-Y file"):
         gpr3d.read(tmp_path / "empty.sgy")
@@ -328,11 +328,11 @@ def test_the_interval_fields_gpr3d_writes(tmp_path):
 def test_a_foreign_rev2_file_reads_the_extended_interval(tmp_path):
     p = tmp_path / "f.sgy"
     _foreign(p, rev=2, ext=93.75, bin_interval=94)
-    assert gpr3d.read(p).dt_s == pytest.approx(93.75e-12, rel=1e-12)  # not the rounded 94 ps
+    assert gpr3d.read(p).dt_s == pytest.approx(93.75e-12, rel=1e-12, abs=0)  # not the rounded 94 ps
     _foreign(p, rev=2, ext=0.75, bin_interval=1)  # under one picosecond, still positive
-    assert gpr3d.read(p).dt_s == pytest.approx(0.75e-12, rel=1e-12)
+    assert gpr3d.read(p).dt_s == pytest.approx(0.75e-12, rel=1e-12, abs=0)
     _foreign(p, rev=3, ext=93.75, bin_interval=94)  # a later revision: still the extended field
-    assert gpr3d.read(p).dt_s == pytest.approx(93.75e-12, rel=1e-12)
+    assert gpr3d.read(p).dt_s == pytest.approx(93.75e-12, rel=1e-12, abs=0)
 
 
 def test_the_source_line_without_format_or_path(tmp_path):
