@@ -281,19 +281,22 @@ def test_small_boundaries():
     assert pos is not None and pos[1, 1] == pytest.approx(pos[2, 1] / 2)  # fixes half a trace apart
 
 
-def test_warnings_point_at_the_reader_s_caller():
-    import gpr3d
+def _callers_file(name):
+    """A warning's file is this test file (or, under mutmut, the trampoline that stands in one call frame)."""
+    return name == __file__ or name.endswith("trampoline.py")
 
+
+def test_warnings_point_at_the_reader_s_caller():
     def reader():  # stacklevel 3: the warning is reported at the line that called the reader
         whole_traces("f.bin", 320, 100)
 
     with pytest.warns(TruncatedRecordingWarning) as w:
         reader()
-    assert w[0].filename == __file__
+    assert _callers_file(w[0].filename), w[0].filename
 
     def reader2():
         warn_fewer_traces("f.bin", 9, 4, "X")
 
     with pytest.warns(TruncatedRecordingWarning) as w:
         reader2()
-    assert w[0].filename == __file__ and gpr3d
+    assert _callers_file(w[0].filename), w[0].filename
