@@ -223,12 +223,23 @@ def test_a_walk_that_hangs_is_ended_and_the_file_read_as_usual(tmp_path, monkeyp
     p = _h5(tmp_path / "w.h5")
     monkeypatch.setattr(_common, "_HDF5_SURVIVED", {})
     monkeypatch.setattr(_common, "_walk_hdf5", lambda *_a: time.sleep(30))
+    children = []
+    real_fork = os.fork
+
+    def fork():
+        pid = real_fork()
+        if pid:
+            children.append(pid)
+        return pid
+
+    monkeypatch.setattr(_common.os, "fork", fork)
     t = time.monotonic()
     _common.check_hdf5_survives(p, timeout_s=0.3)
     assert time.monotonic() - t < 5 and not _common._HDF5_SURVIVED  # not remembered as walked
-    # and the child is gone: no zombie left for this process
+    # and the child is gone: killed and reaped, no zombie left
+    assert len(children) == 1
     with pytest.raises(ChildProcessError):
-        os.waitpid(-1, os.WNOHANG)
+        os.waitpid(children[0], os.WNOHANG)
 
 
 @needs_fork
