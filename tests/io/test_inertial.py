@@ -72,7 +72,7 @@ def test_euroc_imu_and_ground_truth_files(tmp_path):
     np.testing.assert_array_equal(back.accel, imu.accel)
     np.testing.assert_array_equal(back.gyro, imu.gyro)
     np.testing.assert_allclose(back.t_s - back.t_s[0], imu.t_s - imu.t_s[0], atol=1e-6)
-    assert back.t_s[0] == pytest.approx(1403636579.758555392)
+    assert back.t_s[0] == pytest.approx(1403636579.758555392, abs=1e-6)
     tr = run.truth_trajectory(imu.t_s[::20])
     rows = ["#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z [], "
             "v_RS_R_x [m s^-1], v_RS_R_y [m s^-1], v_RS_R_z [m s^-1]"]

@@ -88,3 +88,181 @@ def test_rtm_needs_the_frequency_and_one_place_is_no_profile(bscan):
     still = bscan.replace(positions_xyz=np.zeros((bscan.n_traces, 3)))
     with pytest.raises(InvalidDataError, match="the profile's traces all lie at one place"):
         migrate_profile(still, eps_r=6.0)
+
+
+# --- the profile's geometry and sums, by hand -----------------------------------------------------------------------
+
+C = 299792458.0
+
+
+def _wandering_profile(n_samples=96, dt=0.1e-9, t0=0.6e-9, offset=0.06, seed=3, stops=True):
+    """A short profile as a cart records it: uneven steps, the wheel stopped twice (repeated places) at the start
+    and in the middle, the ground rising and falling (z, which the distance along the profile ignores) and a
+    sideways drift; random data."""
+    from gpr3d.core.survey import Survey
+
+    rng = np.random.default_rng(seed)
+    steps = rng.uniform(0.01, 0.03, 22)
+    if stops:
+        steps[[0, 9]] = 0.0
+    xy = np.cumsum(np.c_[steps * 0.8, steps * 0.6], axis=0)
+    xy = np.vstack([[0.0, 0.0], xy]) + [1.5, -2.0]
+    z = 0.04 * np.sin(np.arange(len(xy)))
+    pos = np.c_[xy, z]
+    data = rng.standard_normal((len(pos), n_samples)).astype(np.float32)
+    return Survey(data=data, dt_s=dt, t0_s=t0, offset_m=offset, positions_xyz=pos, frequency_hz=1e9), steps
+
+
+def _stack_by_hand(data, s, dt, t0, offset, eps_r, along, depths, kirchhoff, aperture_deg=50.0):
+    """The 2D diffraction stack written out: every cell gathers each trace at t0 + (|tx - p| + |p - rx|) / v,
+    linearly interpolated (zero past the last sample); Kirchhoff weighs by the mean cosine of the two legs and
+    keeps the cells at or below the aperture's cone from the antennas' midpoint."""
+    v = C / np.sqrt(eps_r)
+    n, ns = data.shape
+    img = np.zeros((len(along), len(depths)))
+    for j in range(n):
+        row = np.r_[data[j].astype(float), 0.0, 0.0]
+        for i, a in enumerate(along):
+            for k, d in enumerate(depths):
+                ra = np.hypot(a - (s[j] - offset / 2), d)
+                rb = np.hypot(a - (s[j] + offset / 2), d)
+                u = min(max((t0 + (ra + rb) / v) / dt, 0.0), ns)
+                i0 = int(np.floor(u))
+                val = row[i0] + (u - i0) * (row[i0 + 1] - row[i0])
+                if kirchhoff:
+                    first = np.ceil((abs(a - s[j]) / np.tan(np.radians(aperture_deg))) / depths[1] - 1e-12)
+                    if k < first:
+                        continue
+                    val *= 0.5 * (d / max(ra, 1e-12) + d / max(rb, 1e-12))
+                img[i, k] += val
+    return img
+
+
+@pytest.mark.parametrize("method", ["kirchhoff", "backprojection"])
+def test_a_wandering_profile_is_stacked_as_written_out_by_hand(method):
+    """Distance along the profile from the horizontal steps only (z is the ground's relief, a stopped wheel adds
+    nothing), the grid from the median of the real steps, the depth range from the record after time zero, the
+    tx-rx offset along the profile, the documented 50 deg aperture and obliquity for Kirchhoff only: each against a
+    diffraction stack written out in the test."""
+    s_, steps = _wandering_profile()
+    prof = migrate_profile(s_, eps_r=4.0, method=method)
+    s = np.r_[0.0, np.cumsum(steps)]
+    v = C / 2.0
+    step = np.median(steps[steps > 0])
+    dd = 0.5 * v * s_.dt_s
+    depth = 0.5 * v * (s_.n_samples * s_.dt_s - s_.t0_s) * 0.95
+    np.testing.assert_allclose(prof.along_m, np.arange(int(np.floor(s[-1] / step)) + 1) * step, rtol=1e-12)
+    np.testing.assert_allclose(prof.depth_m, np.arange(int(np.floor(depth / dd)) + 1) * dd, rtol=1e-12)
+    assert (prof.method, prof.eps_r, prof.image.dtype) == (method, 4.0, np.float32)
+    assert 0.0 <= prof.wall_s < 60.0
+    ref = _stack_by_hand(s_.data, s, s_.dt_s, s_.t0_s, s_.offset_m, 4.0, prof.along_m, prof.depth_m,
+                         kirchhoff=method == "kirchhoff")
+    np.testing.assert_allclose(prof.image, ref, atol=2e-4 * np.abs(ref).max())
+
+
+def test_given_spacings_and_an_aperture_are_used():
+    s_, steps = _wandering_profile()
+    s = np.r_[0.0, np.cumsum(steps)]
+    prof = migrate_profile(s_, eps_r=9.0, spacing_m=0.05, depth_spacing_m=0.02, max_depth_m=0.3, aperture_deg=30.0)
+    np.testing.assert_allclose(prof.along_m, np.arange(int(np.floor(s[-1] / 0.05)) + 1) * 0.05, rtol=1e-12)
+    np.testing.assert_allclose(prof.depth_m, np.arange(16) * 0.02, rtol=1e-12)
+    ref = _stack_by_hand(s_.data, s, s_.dt_s, s_.t0_s, s_.offset_m, 9.0, prof.along_m, prof.depth_m,
+                         kirchhoff=True, aperture_deg=30.0)
+    np.testing.assert_allclose(prof.image, ref, atol=2e-4 * np.abs(ref).max())
+
+
+def test_stolt_resamples_uneven_traces_onto_the_grid_after_time_zero():
+    """Stolt's input, written out: time zero moved to the first sample (a whole number of samples here), each grid
+    column interpolated between the two traces around it along the profile; below the f-k image's last depth the
+    profile is zero."""
+    from gpr3d.migration.traditional import stolt_migrate
+
+    s_, steps = _wandering_profile()
+    s = np.r_[0.0, np.cumsum(steps)]
+    deep = 2.0  # deeper than the record reaches: the f-k image ends above it
+    prof = migrate_profile(s_, eps_r=4.0, method="stolt", max_depth_m=deep)
+    assert prof.image.dtype == np.float32 and prof.method == "stolt"
+    shifted = s_.data[:, 6:]  # t0 = 0.6 ns = 6 samples
+    regular = np.stack([np.interp(prof.along_m, s, shifted[:, k]) for k in range(shifted.shape[1])], axis=1)
+    mig, dz = stolt_migrate(regular, prof.along_m[1], s_.dt_s, 4.0)
+    z = np.arange(mig.shape[1]) * dz
+    inside = prof.depth_m <= z[-1]
+    assert inside.sum() < len(prof.depth_m) - 5
+    ref = np.stack([np.interp(prof.depth_m[inside], z, tr) for tr in mig])
+    np.testing.assert_allclose(prof.image[:, inside], ref, atol=1e-4 * np.abs(ref).max())
+    assert np.all(prof.image[:, ~inside] == 0.0)
+
+
+def test_the_profile_settings_edges():
+    """eps_r 1 (air) and 1.5 are permittivities; a zero depth or depth spacing is not; a profile that only moves at
+    its last trace, or is shorter than a metre, still migrates."""
+    s_, _ = _wandering_profile()
+    for eps in (1.0, 1.5):
+        assert migrate_profile(s_, eps_r=eps, max_depth_m=0.2).eps_r == eps
+    with pytest.raises(InvalidDataError, match=r"^max depth must be positive, got 0\.0$"):
+        migrate_profile(s_, eps_r=4.0, max_depth_m=0.0)
+    with pytest.raises(InvalidDataError, match=r"^spacings must be positive, got 0\.05 along and 0\.0 in depth$"):
+        migrate_profile(s_, eps_r=4.0, spacing_m=0.05, depth_spacing_m=0.0)
+    with pytest.raises(InvalidDataError, match=r"^the image of \d{7} x 33 cells is too large: use larger spacings$"):
+        migrate_profile(s_, eps_r=4.0, spacing_m=1e-7, max_depth_m=2.0, depth_spacing_m=0.0625)
+    last = s_.replace(positions_xyz=np.r_[np.zeros((s_.n_traces - 1, 3)), [[0.3, 0.0, 0.0]]])
+    prof = migrate_profile(last, eps_r=4.0, max_depth_m=0.2)
+    np.testing.assert_allclose(prof.along_m, [0.0, 0.3])
+
+
+@pytest.mark.parametrize("kw, words", [
+    ({"method": "phase-shift"}, "method must be one of kirchhoff, backprojection, stolt, rtm, got 'phase-shift'"),
+    ({"eps_r": 0.5}, "eps_r must be a relative permittivity >= 1, got 0.5"),
+    ({"eps_r": float("nan")}, "eps_r must be a relative permittivity >= 1, got nan"),
+    ({"air_gap_m": 0.1, "method": "backprojection", "max_depth_m": 0.2}, None),
+])
+def test_profile_messages_in_full(kw, words):
+    s_, _ = _wandering_profile()
+    args = {"eps_r": 4.0, **kw}
+    if words is None:
+        assert migrate_profile(s_, **args).depth_m[-1] == pytest.approx(26 * 0.5 * C / 2 * 0.1e-9, rel=1e-12)
+        return
+    with pytest.raises(InvalidDataError, match="^" + words.replace("(", r"\(").replace(")", r"\)") + "$"):
+        migrate_profile(s_, **args)
+
+
+def test_profile_place_messages_in_full():
+    s_, _ = _wandering_profile()
+    with pytest.raises(InvalidDataError, match="^the profile has no trace positions: give the trace spacing$"):
+        migrate_profile(s_.replace(positions_xyz=None), eps_r=4.0)
+    with pytest.raises(InvalidDataError,
+                       match="^the profile's traces all lie at one place: nothing to migrate along$"):
+        migrate_profile(s_.replace(positions_xyz=np.ones((s_.n_traces, 3))), eps_r=4.0)
+    with pytest.raises(InvalidDataError, match="^reverse-time migration needs the antenna's centre frequency$"):
+        migrate_profile(s_.replace(frequency_hz=None), eps_r=4.0, method="rtm")
+
+
+def test_rtm_section_is_resampled_onto_the_profile_grid():
+    """The RTM section (on its own cells) read onto the profile's grid: linear in depth and along the line, and
+    zero below its deepest row (just above 0.2 m here) rather than that row repeated."""
+    from gpr3d.migration.rtm import rtm_bscan
+
+    s_, steps = _wandering_profile(stops=False)  # (RTM takes strictly increasing places)
+    s = np.r_[0.0, np.cumsum(steps)]
+    prof = migrate_profile(s_, eps_r=4.0, method="rtm", max_depth_m=0.2, depth_spacing_m=0.004)
+    res = rtm_bscan(s_.data, s, s_.dt_s, frequency_hz=1e9, depth_m=0.2, eps_r=4.0, t0_s=s_.t0_s)
+    inside = prof.depth_m <= res.depth_m[-1]
+    assert (~inside).sum() >= 1
+    ref = np.empty((len(prof.along_m), int(inside.sum())))
+    for k, d in enumerate(prof.depth_m[inside]):
+        col = [np.interp(d, res.depth_m, row) for row in res.image]
+        ref[:, k] = np.interp(prof.along_m, res.x_m, col)
+    np.testing.assert_allclose(prof.image[:, inside], ref, atol=1e-5 * np.abs(ref).max())
+    assert np.all(prof.image[:, ~inside] == 0.0) and np.abs(prof.image).max() > 0
+
+
+def test_rtm_takes_the_first_trace_where_the_wheel_stopped():
+    """A stopped wheel repeats a place along the profile; RTM (which needs places in order) takes the first trace
+    recorded there: the same section as the profile without the repeats."""
+    s_, _ = _wandering_profile(n_samples=64)
+    moved = np.r_[True, np.diff(np.r_[0.0, np.cumsum(np.hypot(*np.diff(s_.positions_xyz[:, :2], axis=0).T))]) > 0]
+    assert (~moved).sum() == 2
+    a = migrate_profile(s_, eps_r=4.0, method="rtm", max_depth_m=0.15, spacing_m=0.02)
+    b = migrate_profile(s_.replace(data=s_.data[moved], positions_xyz=s_.positions_xyz[moved]), eps_r=4.0,
+                        method="rtm", max_depth_m=0.15, spacing_m=0.02)
+    np.testing.assert_array_equal(a.image, b.image)

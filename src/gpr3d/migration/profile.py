@@ -112,8 +112,9 @@ def migrate_profile(survey, *, eps_r: float, method: str = "kirchhoff", max_dept
 
         if survey.frequency_hz is None:
             raise InvalidDataError("reverse-time migration needs the antenna's centre frequency")
-        res = rtm_bscan(survey.data, s_along, survey.dt_s, frequency_hz=survey.frequency_hz, depth_m=depth,
-                        eps_r=eps_r, t0_s=survey.t0_s)
+        moved = np.r_[True, np.diff(s_along) > 0]  # a stopped wheel repeats a place: its first trace stands for it
+        res = rtm_bscan(survey.data[moved], s_along[moved], survey.dt_s, frequency_hz=survey.frequency_hz,
+                        depth_m=depth, eps_r=eps_r, t0_s=survey.t0_s)
         down = np.stack([np.interp(depths, res.depth_m, row, right=0.0) for row in res.image])  # (x_rtm, nd)
         img = np.stack([np.interp(along, res.x_m, down[:, k]) for k in range(nd)], axis=1)
     return ProfileImage(np.asarray(img, np.float32), along, depths, method, float(eps_r), time.perf_counter() - t_start)
