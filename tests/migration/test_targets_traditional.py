@@ -244,8 +244,14 @@ def test_planes_are_interpolated_between_lines_by_hand():
     assert out.dtype == np.float32 and out.shape == (6, 2, 3)
     one = _fill_between({0.2: np.ones((1, 1))}, 5, 0.0, 0.1, (1, 1))  # one plane: its own position only
     np.testing.assert_allclose(one[:, 0, 0], [0.0, 0.0, 1.0, 0.0, 0.0])
-    one = _fill_between({0.25: np.ones((1, 1))}, 5, 0.0, 0.1, (1, 1))  # between grid positions: the nearest two
-    np.testing.assert_allclose(one[:, 0, 0], [0.0, 0.0, 0.0, 0.0, 0.0])  # 0.2 and 0.3 lie outside [0.25, 0.25]
+    one = _fill_between({0.25: np.ones((1, 1))}, 5, 0.0, 0.1, (1, 1))  # half-way between positions: the nearest two
+    np.testing.assert_allclose(one[:, 0, 0], [0.0, 0.0, 1.0, 1.0, 0.0])
+    one = _fill_between({0.27: np.ones((1, 1))}, 5, 0.0, 0.1, (1, 1))  # nearer 0.3
+    np.testing.assert_allclose(one[:, 0, 0], [0.0, 0.0, 0.0, 1.0, 0.0])
+    # on the planes' own positions (the searchsorted edges): their values exactly, the last one included
+    three = _fill_between({0.1: np.full((1, 1), 2.0), 0.2: np.full((1, 1), 4.0), 0.4: np.full((1, 1), 8.0)}, 6, 0.0,
+                          0.1, (1, 1))
+    np.testing.assert_allclose(three[:, 0, 0], [0.0, 2.0, 4.0, 6.0, 8.0, 0.0], atol=1e-6)
 
 
 def test_split_lines_by_jumps_turns_and_length():

@@ -106,18 +106,20 @@ def kirchhoff_line(data, positions_xyz, orientations, offset_m, *, dt_s, t0_s, e
 
 
 def _fill_between(planes: dict, n: int, origin: float, step: float, shape):
-    """Linear interpolation of 2D images at sorted coordinates onto ``n`` regular positions."""
+    """Linear interpolation of 2D images at sorted coordinates onto ``n`` regular positions (zero outside them);
+    a single image fills the positions within half a step of it."""
     coords = np.array(sorted(planes))
     stack = np.stack([planes[c] for c in coords])
     grid_c = origin + step * np.arange(n)
     out = np.zeros((n,) + shape, dtype=np.float32)
     for i, c in enumerate(grid_c):
+        if len(coords) == 1:
+            if abs(c - coords[0]) <= 0.5 * step * (1 + 1e-9):
+                out[i] = stack[0]
+            continue
         if c < coords[0] or c > coords[-1]:
             continue
-        j = int(np.clip(np.searchsorted(coords, c) - 1, 0, len(coords) - 2)) if len(coords) > 1 else 0
-        if len(coords) == 1:
-            out[i] = stack[0] if abs(c - coords[0]) < step else 0
-            continue
+        j = min(int(np.searchsorted(coords, c, side="right")) - 1, len(coords) - 2)
         w = (c - coords[j]) / (coords[j + 1] - coords[j])
         out[i] = (1 - w) * stack[j] + w * stack[j + 1]
     return out
@@ -160,7 +162,7 @@ def pseudo3d(survey, grid: Grid3D, *, eps_r: float, method: str = "kirchhoff", a
             tmp = np.stack([np.interp(grid.depth, z_mig, tr) for tr in mig])
             img = np.stack([np.interp(target_a, a, tmp[:, k], left=0, right=0) for k in range(grid.nd)], axis=1)
         else:
-            raise ValueError(f"method must be 'kirchhoff' or 'stolt', got {method!r}")
+            raise InvalidDataError(f"method must be 'kirchhoff' or 'stolt', got {method!r}")
         env = np.abs(hilbert(img, axis=1)).astype(np.float32)
         (planes_x if axis == "x" else planes_y)[coord] = env
     vols = []
@@ -170,5 +172,5 @@ def pseudo3d(survey, grid: Grid3D, *, eps_r: float, method: str = "kirchhoff", a
     if planes_y:
         vols.append(_fill_between(planes_y, grid.nx, grid.x0, grid.dx, (grid.ny, grid.nd)))  # (nx, ny, nd)
     if not vols:
-        raise ValueError("no straight lines found in the survey")
+        raise InvalidDataError("no straight lines of 10 traces or more found in the survey")
     return np.mean(vols, axis=0).astype(np.float32), {"n_lines_x": len(planes_x), "n_lines_y": len(planes_y)}

@@ -1,0 +1,191 @@
+"""The grid method (2D migration of each line, then pseudo-3D) against its steps written out in the test: lines in
+both directions, one driven backwards, the antennas turned with the line, the planes at the lines' median
+cross-coordinate, envelopes along depth, linear filling between lines and the mean of the two directions."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.signal import hilbert
+
+from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.grid import Grid3D
+from gpr3d.core.poses import quat_from_yaw
+from gpr3d.core.survey import Survey
+from gpr3d.migration.traditional import kirchhoff_line, pseudo3d, split_lines, stolt_migrate, survey_lines
+
+C = 299792458.0
+GRID = Grid3D(0.0, 0.0, 0.01, 0.04, 0.03, 0.02, 9, 9, 10)
+
+
+def _grid_survey(t0=0.3e-9, offset=0.04, seed=1):
+    """Two lines along x (the second driven back west), two along y, 12 traces each, a little sideways wobble;
+    headings with the travel; random data."""
+    rng = np.random.default_rng(seed)
+    xs = np.arange(12) * 0.03
+    ys = np.arange(12) * 0.02
+    parts, yaw = [], []
+    for y0, back in ((0.05, False), (0.17, True)):
+        x = xs[::-1] if back else xs
+        parts.append(np.c_[x, y0 + rng.uniform(-0.002, 0.002, 12), np.zeros(12)])
+        yaw.append(np.full(12, math.pi if back else 0.0))
+    for x0 in (0.08, 0.2):
+        parts.append(np.c_[x0 + rng.uniform(-0.002, 0.002, 12), ys, np.zeros(12)])
+        yaw.append(np.full(12, math.pi / 2))
+    pos, yaw = np.vstack(parts), np.concatenate(yaw)
+    data = rng.standard_normal((len(pos), 90)).astype(np.float32)
+    return Survey(data=data, dt_s=0.05e-9, t0_s=t0, offset_m=offset, positions_xyz=pos,
+                  orientations_quat_wxyz=quat_from_yaw(yaw), frequency_hz=1e9)
+
+
+def _kirchhoff_plane(data, pos, yaw, offset, t0, dt, eps_r, axis, coord, aperture_deg=50.0):
+    """One line's vertical plane: obliquity-weighted diffraction stack, aperture cone from the antennas' midpoint,
+    tx and rx -/+ offset/2 along the heading."""
+    v = C / math.sqrt(eps_r)
+    along = GRID.x if axis == "x" else GRID.y
+    img = np.zeros((len(along), GRID.nd))
+    tan = math.tan(math.radians(aperture_deg))
+    for m in range(len(pos)):
+        h = np.array([math.cos(yaw[m]), math.sin(yaw[m])]) * offset / 2
+        a, b = pos[m, :2] - h, pos[m, :2] + h
+        row = np.r_[data[m].astype(float), 0.0, 0.0]
+        for i, s in enumerate(along):
+            p = np.array([s, coord]) if axis == "x" else np.array([coord, s])
+            first = math.ceil((np.hypot(*(p - pos[m, :2])) / tan - GRID.d0) / GRID.dd - 1e-12)
+            for k, d in enumerate(GRID.depth):
+                if k < first:
+                    continue
+                ra, rb = math.hypot(*(p - a), d), math.hypot(*(p - b), d)
+                u = min((t0 + (ra + rb) / v) / dt, data.shape[1])
+                i0 = int(u)
+                img[i, k] += (row[i0] + (u - i0) * (row[i0 + 1] - row[i0])) * 0.5 * (d / ra + d / rb)
+    return img
+
+
+def _fill(planes, n, origin, step):
+    """Between the lines, linear in the cross coordinate; zero outside them."""
+    coords = sorted(planes)
+    stack = np.stack([planes[c] for c in coords])
+    out = np.zeros((n,) + stack.shape[1:])
+    for i in range(n):
+        c = origin + i * step
+        if coords[0] <= c <= coords[-1]:
+            out[i] = np.apply_along_axis(lambda col: np.interp(c, coords, col), 0, stack)
+    return out
+
+
+def _by_hand(s, method, eps_r):
+    yaw = 2 * np.arctan2(s.orientations_quat_wxyz[:, 3], s.orientations_quat_wxyz[:, 0])
+    planes = {"x": {}, "y": {}}
+    for k in range(4):
+        idx = np.arange(12 * k, 12 * k + 12)
+        axis = "x" if k < 2 else "y"
+        p = s.positions_xyz[idx]
+        coord = float(np.median(p[:, 1] if axis == "x" else p[:, 0]))
+        if method == "kirchhoff":
+            img = _kirchhoff_plane(s.data[idx], p, yaw[idx], s.offset_m, s.t0_s, s.dt_s, eps_r, axis, coord)
+        else:
+            a = p[:, 0] if axis == "x" else p[:, 1]
+            order = np.argsort(a)
+            mig, dz = stolt_migrate(s.data[idx][order], float(np.median(np.diff(a[order]))), s.dt_s, eps_r)
+            z = np.arange(mig.shape[1]) * dz
+            tmp = np.stack([np.interp(GRID.depth, z, tr) for tr in mig])
+            target = GRID.x if axis == "x" else GRID.y
+            img = np.stack([np.interp(target, a[order], tmp[:, j], left=0, right=0) for j in range(GRID.nd)], 1)
+        planes[axis][coord] = np.abs(hilbert(img, axis=1))
+    vx = np.transpose(_fill(planes["x"], GRID.ny, GRID.y0, GRID.dy), (1, 0, 2))
+    vy = _fill(planes["y"], GRID.nx, GRID.x0, GRID.dx)
+    return 0.5 * (vx + vy)
+
+
+@pytest.mark.parametrize("method, t0", [("kirchhoff", 0.3e-9), ("stolt", 0.0)])
+def test_pseudo3d_is_the_grid_method_written_out(method, t0):
+    s = _grid_survey(t0=t0)
+    vol, info = pseudo3d(s, GRID, eps_r=5.0, method=method)
+    assert info == {"n_lines_x": 2, "n_lines_y": 2}
+    assert vol.dtype == np.float32 and vol.shape == GRID.shape
+    ref = _by_hand(s, method, 5.0)
+    np.testing.assert_allclose(vol, ref, atol=2e-3 * ref.max())
+    assert np.count_nonzero(vol) > 0.5 * vol.size
+
+
+def test_one_line_by_itself_with_its_defaults():
+    """kirchhoff_line's defaults: a 50 deg aperture, no air gap, the numba engine; the antennas from the headings
+    and the offset it is given; a line along y images onto the y axis of the grid."""
+    s = _grid_survey()
+    idx = np.arange(36, 48)
+    p = s.positions_xyz[idx]
+    coord = float(np.median(p[:, 0]))
+    img = kirchhoff_line(s.data[idx], p, s.orientations_quat_wxyz[idx], s.offset_m, dt_s=s.dt_s, t0_s=s.t0_s,
+                         eps_r=5.0, grid=GRID, axis="y", coord=coord)
+    ref = _kirchhoff_plane(s.data[idx], p, np.full(12, math.pi / 2), s.offset_m, s.t0_s, s.dt_s, 5.0, "y", coord)
+    assert img.shape == (GRID.ny, GRID.nd)
+    np.testing.assert_allclose(img, ref, atol=2e-3 * np.abs(ref).max())
+
+
+def test_pseudo3d_refusals_in_full():
+    s = _grid_survey()
+    with pytest.raises(InvalidDataError, match=r"^method must be 'kirchhoff' or 'stolt', got 'phase'$"):
+        pseudo3d(s, GRID, eps_r=5.0, method="phase")
+    with pytest.raises(InvalidDataError, match=r"^an air gap needs method 'kirchhoff' \(refraction at the surface\), "
+                                               r"not 'stolt'$"):
+        pseudo3d(s, GRID, eps_r=5.0, method="stolt", air_gap_m=0.1)
+    short = s.replace(data=s.data[:9], positions_xyz=s.positions_xyz[:9], orientations_quat_wxyz=None)
+    with pytest.raises(InvalidDataError, match=r"^no straight lines of 10 traces or more found in the survey$"):
+        pseudo3d(short, GRID, eps_r=5.0)
+
+
+def test_survey_lines_from_positions_and_grid_files_of_ten():
+    s = _grid_survey()
+    assert [ln.tolist() for ln in survey_lines(s)] == [list(range(12 * k, 12 * k + 12)) for k in range(4)]
+    g = s.replace(metadata={"grid": {"first_trace": [0, 10, 19, 20, 30]}})  # files of 10, 9, 1, 10 and 18 traces
+    assert [(int(ln[0]), len(ln)) for ln in survey_lines(g)] == [(0, 10), (20, 10), (30, 18)]
+
+
+def test_split_lines_edges():
+    """The defaults (lines of 10 traces or more, a jump of 3 median steps, a turn of 0.3 rad) at their edges, on
+    steps that are exact in binary; a stop does not lose the heading that a later turn is measured from."""
+    east = np.c_[np.arange(10) * 0.25, np.zeros(10)]
+    assert [len(ln) for ln in split_lines(east)] == [10]
+    assert split_lines(east[:9]) == []
+    gap3 = np.r_[east, east[-1] + [[0.75, 0.0]] + east]  # a jump of exactly 3 median steps: same line
+    assert [len(ln) for ln in split_lines(gap3)] == [20]
+    gap35 = np.r_[east, east[-1] + [[0.875, 0.0]] + east]  # 3.5 steps: a new line
+    assert [len(ln) for ln in split_lines(gap35)] == [10, 10]
+    for turn, parts in ((0.28, [20]), (0.32, [10, 10])):
+        d = np.array([math.cos(turn), math.sin(turn)]) * 0.25
+        bent = np.r_[east, east[-1] + d + np.arange(10)[:, None] * d]
+        assert [len(ln) for ln in split_lines(bent)] == parts, turn
+    # stops: repeated places do not pull the median step (and the gap) to zero, nor hide a later turn
+    stops = np.r_[east[:5], np.repeat(east[5:6], 8, axis=0), east[6:]]
+    assert [len(ln) for ln in split_lines(stops)] == [17]
+    north = east[-1] + np.c_[np.zeros(10), 0.25 + np.arange(10) * 0.25]
+    assert [len(ln) for ln in split_lines(np.r_[stops, north])] == [17, 10]
+
+
+def test_stolt_leaves_a_flat_reflector_in_place_and_drops_the_mean():
+    """At kx = 0 the Stolt map is the identity (omega = v kz / 2, Jacobian 1) except at zero frequency, whose
+    Jacobian is 0: identical traces (no padding, which would make the line a boxcar in x) come back unchanged on
+    depth = v dt / 2 per sample, less their mean; all zeros stay zeros."""
+    rng = np.random.default_rng(4)
+    tr = rng.standard_normal(64) + 0.7
+    data = np.tile(tr, (16, 1)).astype(np.float32)
+    img, dz = stolt_migrate(data, 0.02, 0.1e-9, 9.0, pad=1)
+    assert img.dtype == np.float32
+    assert dz == pytest.approx(0.5 * C / 3.0 * 0.1e-9, rel=1e-12)
+    np.testing.assert_allclose(img, np.tile(tr - tr.mean(), (16, 1)), atol=1e-5)
+    np.testing.assert_array_equal(stolt_migrate(np.zeros((8, 32), np.float32), 0.02, 0.1e-9, 9.0)[0], 0.0)
+    noise = rng.standard_normal((16, 64)).astype(np.float32)
+    np.testing.assert_array_equal(stolt_migrate(noise, 0.02, 0.1e-9, 9.0)[0],
+                                  stolt_migrate(noise, 0.02, 0.1e-9, 9.0, pad=2)[0])  # the default pad
+
+
+def test_a_line_driven_back_on_itself_splits():
+    """A reversal: the dot product of the two headings rounds to just below -1 here; it is still a turn of pi."""
+    a = 0.026948982994331447
+    step = np.array([math.cos(a), math.sin(a)]) * 0.25
+    d = step / np.hypot(*step)
+    assert d @ (-step / np.hypot(*-step)) < -1.0
+    out = np.arange(12)[:, None] * step
+    back = out[-1] - (1 + np.arange(12))[:, None] * step
+    assert [len(ln) for ln in split_lines(np.r_[out, back])] == [12, 12]
