@@ -60,3 +60,128 @@ def test_the_smallest_compact_target_has_six_columns():
     env6 = env5.copy()
     _column(env6, 51, 56, 12, 0.8)
     assert [(t.kind, t.n_voxels) for t in extract_targets(env6, GRID)] == [("line", 51), ("point", 6)]
+
+
+# --- the pieces, each on inputs worked out by hand ------------------------------------------------------------------
+
+from gpr3d.migration.targets import Target3D, _chain_runs, _depth_fit, _extent, join_collinear  # noqa: E402
+
+
+def _line(a, b, score=1.0, n=10, **extra):
+    return Target3D("line", [list(a), list(b)], min(a[2], b[2]), score, n, dict(extra))
+
+
+def test_join_collinear_joins_pieces_across_a_gap_and_weighs_their_scores():
+    a = _line((0.0, 0.0, 0.10), (1.0, 0.0, 0.12), score=2.0, n=30)
+    b = _line((1.5, 0.01, 0.13), (2.0, 0.0, 0.14), score=1.0, n=10)  # 0.5 m on, 1 cm aside, on a's depth line
+    (j,) = join_collinear([a, b], tol_m=0.02, join_gap_m=0.6)
+    np.testing.assert_allclose(j.points_xyz, [[0.0, 0.0, 0.10], [2.0, 0.0, 0.14]])
+    assert j.depth_m == pytest.approx(0.10) and j.n_voxels == 40
+    assert j.score == pytest.approx((2.0 * 30 + 1.0 * 10) / 40) and j.extra == {"joined": 2}
+    # b given first, reversed: the same line, from a's first end (the least along b's axis) to the farthest
+    (j2,) = join_collinear([_line((2.0, 0.0, 0.14), (1.5, 0.0, 0.13), 1.0, 10), a], tol_m=0.02, join_gap_m=0.6)
+    np.testing.assert_allclose(sorted(j2.points_xyz), [[0.0, 0.0, 0.10], [2.0, 0.0, 0.14]])
+    # three pieces: the counts of joined pieces add up
+    c = _line((2.3, 0.0, 0.145), (2.8, 0.0, 0.155), score=1.0, n=10, joined=2)
+    (j3,) = join_collinear([a, b, c], tol_m=0.02, join_gap_m=0.6)
+    assert j3.extra == {"joined": 4} and j3.n_voxels == 50
+    # a piece behind a's start joins too (the gap measured back from it)
+    back = _line((-0.9, 0.0, 0.082), (-0.4, 0.0, 0.092), n=5)
+    (jb,) = join_collinear([a, back], tol_m=0.02, join_gap_m=0.6)
+    np.testing.assert_allclose(sorted(jb.points_xyz)[0], [-0.9, 0.0, 0.082])
+
+
+@pytest.mark.parametrize("change, joined", [
+    ({"gap": 0.59}, True), ({"gap": 0.61}, False),  # the gap, against join_gap_m 0.6
+    ({"aside": 0.019}, True), ({"aside": 0.021}, False),  # horizontal offset from a's axis, tol 0.02
+    ({"deeper": 0.019}, True), ({"deeper": 0.021}, False),  # off a's depth line
+    ({"turn_deg": 2.9}, True), ({"turn_deg": 3.1}, False),  # the angle between them, 3 deg at most
+])
+def test_join_collinear_limits(change, joined):
+    a = _line((0.0, 0.0, 0.1), (1.0, 0.0, 0.1))
+    g, dy, dz = change.get("gap", 0.3), change.get("aside", 0.0), change.get("deeper", 0.0)
+    t = change.get("turn_deg", 0.0)
+    d = np.array([np.cos(np.radians(t)), np.sin(np.radians(t))])
+    p0 = np.array([1.0 + g, dy])
+    p1 = p0 + 0.05 * d  # short, so that a turn moves its far end little
+    b = _line((*p0, 0.1 + dz), (*p1, 0.1 + dz))
+    out = join_collinear([a, b], tol_m=0.02, join_gap_m=0.6)
+    assert (len(out) == 1) == joined
+
+
+def test_chain_runs_take_in_the_short_pieces_beyond_a_line_on_both_sides():
+    """Runs split at gaps over run_gap; the long run (a line) takes in the short ones beyond each end that are
+    close enough, strong enough and at its depth, one after the other, and stops at the first that is not."""
+    cell = 0.01
+    pieces = [(-0.20, 4, 1.0, 0.10),  # far left: reached through the next one (0.09 m before it)
+              (-0.08, 4, 1.0, 0.10),  # left, 0.05 m before the line
+              (0.0, 40, 1.0, 0.10),  # the line: 0.40 m
+              (0.47, 4, 1.0, 0.10),  # right, 0.08 m after it
+              (0.58, 4, 0.2, 0.10),  # weak: stops the chain on the right
+              (0.69, 4, 1.0, 0.10)]  # beyond the weak one: not reached
+    s = np.concatenate([a + cell * np.arange(n) for a, n, _, _ in pieces])
+    w = np.concatenate([np.full(n, v) for _, n, v, _ in pieces])
+    z = np.concatenate([np.full(n, d) for _, n, _, d in pieces])
+    kw = dict(run_gap=0.04, join_gap=0.1, min_columns=3, min_line=0.3, min_density=0.5, cell=cell, level=0.5,
+              depth_tol=0.02)
+    (line,) = _chain_runs(s, w, z, **kw)
+    np.testing.assert_array_equal(line, np.arange(4 + 4 + 40 + 4))
+    # the same on the far side when the weak piece is strong; a piece off the line's depth stops it instead
+    w2 = w.copy()
+    w2[52:56] = 1.0
+    (line2,) = _chain_runs(s, w2, z, **kw)
+    np.testing.assert_array_equal(line2, np.arange(len(s)))
+    z2 = z.copy()
+    z2[52:56] = 0.13
+    (line3,) = _chain_runs(s, w2, z2, **kw)
+    np.testing.assert_array_equal(line3, np.arange(52))
+    # a gap past join_gap stops it; pieces under min_columns are dropped before anything
+    (line4,) = _chain_runs(s, w, z, **{**kw, "join_gap": 0.07})
+    np.testing.assert_array_equal(line4, np.arange(4, 48))
+    assert _chain_runs(s, w, z, **{**kw, "min_line": 0.5}) == []
+
+
+def test_extent_depth_fit_by_hand():
+    s = np.array([0.0, 0.1, 0.2, 0.3, 0.4])
+    # weighted quantiles: cumulative weights 0.1 0.2 0.3 0.9 1.0 -> 0.25 falls on the 3rd, 0.75 on the 4th
+    assert _extent(s, np.array([1.0, 1.0, 1.0, 6.0, 1.0]), 0.25) == (0.2, 0.3)
+    assert _extent(s[::-1], np.array([1.0, 6.0, 1.0, 1.0, 1.0]), 0.25) == (0.2, 0.3)  # any order
+    # q = 0: the plain 1st and 99th percentiles
+    lo, hi = _extent(s, np.ones(5), 0.0)
+    assert (lo, hi) == (pytest.approx(0.004), pytest.approx(0.396))
+    # depth fit: a dipping line with one column far off (a crossing target) left out of the weighted fit
+    x = np.linspace(0.0, 1.0, 11)
+    d = 0.1 + 0.05 * x
+    d[4] = 0.02
+    np.testing.assert_allclose(_depth_fit(x, d, np.ones(11), 0.005), [0.05, 0.1], atol=1e-9)
+    # two columns, or all at one place: the weighted mean depth, flat
+    np.testing.assert_allclose(_depth_fit(x[:2], np.array([0.1, 0.2]), np.array([3.0, 1.0]), 0.005), [0.0, 0.125])
+    np.testing.assert_allclose(_depth_fit(np.full(4, 0.3), np.array([0.1, 0.2, 0.1, 0.2]), np.ones(4), 0.005),
+                               [0.0, 0.15])
+    # three columns make a fit
+    np.testing.assert_allclose(_depth_fit(x[:3], 0.1 + 0.05 * x[:3], np.ones(3), 0.005), [0.05, 0.1], atol=1e-9)
+
+
+def test_ridge_map_refines_depth_by_the_parabola_and_keeps_the_ends():
+    g = Grid3D(0.0, 0.0, 0.2, 0.01, 0.01, 0.01, 1, 4, 6)
+    env = np.zeros(g.shape, np.float32)
+    env[0, 0, 2:5] = [0.5, 1.0, 0.75]  # vertex at 3 + 0.5 (0.5 - 0.75) / (0.5 - 2 + 0.75) = 3 + 1/6
+    env[0, 1, 0:2] = [1.0, 0.5]  # the top cell: no parabola
+    env[0, 2, 4:6] = [0.5, 1.0]  # the bottom cell: none either
+    env[0, 3, 1:4] = [0.9, 1.0, 0.2]  # a lopsided peak: 2 + 0.5 (0.9 - 0.2) / (0.9 - 2 + 0.2) = 2 - 7/18
+    val, dep = ridge_map(env, g)
+    np.testing.assert_allclose(val[0], [1.0, 1.0, 1.0, 1.0])
+    np.testing.assert_allclose(dep[0], [0.2 + 0.01 * (3 + 1 / 6), 0.2, 0.25, 0.2 + 0.01 * (2 - 7 / 18)], atol=1e-8)
+
+
+def test_the_ringing_tail_below_the_cut_is_cleared_column_by_column():
+    from gpr3d.migration.targets import _cut_tails
+
+    env = np.array([[[3.0, 2.0, 1.5, 1.0, 2.0, 0.5]], [[1.0, 2.0, 3.0, 1.0, 0.5, 0.25]]], np.float32)
+    # cut at 1: the first column still falls from the cell above for three cells (zeroed), then rises again; the
+    # second rises at once (kept whole)
+    np.testing.assert_array_equal(_cut_tails(env, 1), [[[0, 0, 0, 2.0, 0.5]], [[2.0, 3.0, 1.0, 0.5, 0.25]]])
+    np.testing.assert_array_equal(_cut_tails(env, 2), [[[0, 0, 2.0, 0.5]], [[3.0, 1.0, 0.5, 0.25]]])
+    flat = np.array([[[3.0, 3.0, 1.0, 2.0]]], np.float32)  # level with the cell above: not falling, kept
+    np.testing.assert_array_equal(_cut_tails(flat, 1), [[[3.0, 1.0, 2.0]]])
+    np.testing.assert_array_equal(_cut_tails(env, 5), [[[0.0]], [[0.0]]])  # one cell left, falling
