@@ -185,3 +185,53 @@ def test_the_ringing_tail_below_the_cut_is_cleared_column_by_column():
     flat = np.array([[[3.0, 3.0, 1.0, 2.0]]], np.float32)  # level with the cell above: not falling, kept
     np.testing.assert_array_equal(_cut_tails(flat, 1), [[[3.0, 1.0, 2.0]]])
     np.testing.assert_array_equal(_cut_tails(env, 5), [[[0.0]], [[0.0]]])  # one cell left, falling
+
+
+def test_segment_distances_and_line_checks_by_hand():
+    from gpr3d.migration.targets import _is_line, _seg_dists
+
+    a, b = np.array([1.0, 1.0]), np.array([3.0, 1.0])
+    q = np.array([[0.0, 1.0], [2.0, 1.5], [4.0, 2.0], [3.0, 1.0]])  # before a, beside, beyond b, on b
+    np.testing.assert_allclose(_seg_dists(q, a, b), [1.0, 0.5, np.sqrt(2.0), 0.0])
+    s = np.array([0.1, 0.2, 0.3, 0.5])
+    L = s[-1] - s[0]
+    assert _is_line(s, 4, L, 4 * 0.1 / L, 0.1)  # exactly long enough and dense enough
+    assert not _is_line(s, 4, L + 1e-9, 0.5, 0.1)
+    assert not _is_line(s, 4, L, 4 * 0.1 / L + 1e-9, 0.1)
+    assert not _is_line(s, 2, L, 1.0, 0.1)  # two columns over 0.4 m: half a column per cell
+
+
+def test_side_level_takes_the_brighter_side_s_dimmer_parallel():
+    """val is banded by signed distance from the line a-b (a diagonal, on a grid that does not start at 0): on the
+    left at 0.1 m 1.0 and at 0.2 m 0.5, on the right 0.8 and 0.9; the level is max(min(1.0, 0.5), min(0.8, 0.9))."""
+    from gpr3d.migration.targets import _side_level
+
+    g = Grid3D(1.0, 2.0, 0.0, 0.01, 0.01, 0.01, 100, 100, 1)
+    a, b = np.array([1.3, 2.3]), np.array([1.6, 2.7])  # direction (0.6, 0.8), left normal (-0.8, 0.6)
+    X, Y = np.meshgrid(g.x, g.y, indexing="ij")
+    sd = (X - a[0]) * -0.8 + (Y - a[1]) * 0.6
+    val = np.select([(sd > 0.05) & (sd < 0.15), (sd > 0.15) & (sd < 0.25), (sd < -0.05) & (sd > -0.15),
+                     (sd < -0.15) & (sd > -0.25)], [1.0, 0.5, 0.8, 0.9], 0.0)
+    assert _side_level(val, g, a, b, 0.1) == pytest.approx(0.8)
+    assert _side_level(val, g, b, a, 0.1) == pytest.approx(0.8)  # either way round
+    assert _side_level(val, g, a, b, 5.0) == 0.0  # every parallel outside the map
+
+
+def test_fringe_is_a_near_parallel_segment_mostly_within_the_band():
+    from gpr3d.migration.targets import _fringe
+
+    found = [_line((1.0, 1.0, 0.1), (3.0, 1.0, 0.1))]
+
+    def seg(x0, y0, length, deg):
+        d = np.array([np.cos(np.radians(deg)), np.sin(np.radians(deg))])
+        p = np.array([x0, y0])
+        return p, p + length * d
+
+    assert _fringe(*seg(1.5, 1.05, 1.0, 0.0), found, 0.1)  # 5 cm beside it
+    assert not _fringe(*seg(1.5, 1.15, 1.0, 0.0), found, 0.1)  # 15 cm: outside the band
+    assert _fringe(*seg(1.5, 1.02, 0.5, 9.0), found, 0.2)  # 9 deg: near-parallel
+    assert not _fringe(*seg(1.5, 1.02, 0.5, 11.0), found, 0.2)  # 11 deg: not
+    assert not _fringe(*seg(1.0, 1.0, 2.0, 20.0), found, 1.0)  # long, inside a wide band, but 20 deg off
+    # 0.705 of it within reach of the found segment's end (x <= 3.05 with band 0.05): 8 of the 11 samples
+    assert _fringe(*seg(3.05 - 0.705, 1.0, 1.0, 0.0), found, 0.05 + 1e-9)
+    assert not _fringe(*seg(3.05 - 0.6, 1.0, 1.0, 0.0), found, 0.05 + 1e-9)  # 7 of 11
