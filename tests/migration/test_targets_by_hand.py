@@ -235,3 +235,62 @@ def test_fringe_is_a_near_parallel_segment_mostly_within_the_band():
     # 0.705 of it within reach of the found segment's end (x <= 3.05 with band 0.05): 8 of the 11 samples
     assert _fringe(*seg(3.05 - 0.705, 1.0, 1.0, 0.0), found, 0.05 + 1e-9)
     assert not _fringe(*seg(3.05 - 0.6, 1.0, 1.0, 0.0), found, 0.05 + 1e-9)  # 7 of 11
+
+
+def _trim_case(cross_deg=90.0, xb=0.62, both_ends=False):
+    """Line A along x (0.00-0.50 m, 51 columns, then after a gap an end piece 0.60-0.64 m) and line B crossing the
+    end piece at x = xb (0.62 m) at ``cross_deg``; with ``both_ends`` line C crosses a start piece (-0.14 .. -0.10 m)."""
+    xs = [np.round(np.arange(51) * 0.01, 6), 0.60 + 0.01 * np.arange(5)]
+    if both_ends:
+        xs.insert(0, -0.14 + 0.01 * np.arange(5))
+    xa = np.concatenate(xs)
+    P = [np.c_[xa, np.zeros_like(xa)]]
+    W = [np.ones(len(xa))]
+    t = np.radians(cross_deg)
+    dB = np.array([np.cos(t), np.sin(t)])
+    centre_b = np.array([xb, 0.0])
+    yb = np.linspace(-0.3, 0.3, 61)
+    P.append(centre_b + yb[:, None] * dB)
+    W.append(np.ones(61))
+    lines = [_line((xa[0], 0.0, 0.1), (xa[-1], 0.0, 0.1), n=len(xa)),
+             _line((*(centre_b - 0.3 * dB), 0.2), (*(centre_b + 0.3 * dB), 0.2), n=61)]
+    info = [(np.arange(len(xa)), np.zeros(2), np.array([1.0, 0.0]), np.array([0.0, 0.1])),
+            (len(xa) + np.arange(61), centre_b, dB, np.array([0.0, 0.2]))]
+    if both_ends:
+        yc = np.linspace(-0.3, 0.3, 61)
+        P.append(np.c_[np.full(61, -0.12), yc])
+        W.append(np.ones(61))
+        lines.append(_line((-0.12, -0.3, 0.3), (-0.12, 0.3, 0.3), n=61))
+        info.append((len(xa) + 61 + np.arange(61), np.array([-0.12, 0.0]), np.array([0.0, 1.0]), np.array([0.0, 0.3])))
+    return lines, info, np.vstack(P), np.concatenate(W)
+
+
+def test_an_end_piece_on_a_crossing_line_is_cut_off():
+    from gpr3d.migration.targets import _trim_crossings
+
+    lines, info, P, W = _trim_case()
+    _trim_crossings(lines, info, P, W, 0.05, 0.02, 0.5)
+    a, b = lines
+    # what is left: 0.00-0.50 m, ends at the 2 % and 98 % weighted quantiles of its 51 columns
+    np.testing.assert_allclose(a.points_xyz, [[0.01, 0.0, 0.1], [0.49, 0.0, 0.1]], atol=1e-9)
+    assert a.depth_m == pytest.approx(0.1) and a.extra == {"trimmed": True}
+    assert b.extra == {} and b.points_xyz[0][1] == pytest.approx(-0.3)  # the crossing line is one piece: kept
+    # both ends: the start piece on line C goes too
+    lines, info, P, W = _trim_case(both_ends=True)
+    _trim_crossings(lines, info, P, W, 0.05, 0.02, 0.5)
+    np.testing.assert_allclose(lines[0].points_xyz, [[0.01, 0.0, 0.1], [0.49, 0.0, 0.1]], atol=1e-9)
+
+
+@pytest.mark.parametrize("kw, trimmed", [
+    ({"cross_deg": 70.0}, True), ({"cross_deg": 15.0}, False),  # crossing at 20 deg or more
+    ({"xb": 0.665}, True), ({"xb": 0.675}, False),  # 3 or 2 of the piece's 5 columns within the band: half or more
+])
+def test_trimming_needs_a_real_crossing_over_half_the_piece(kw, trimmed):
+    from gpr3d.migration.targets import _trim_crossings
+
+    lines, info, P, W = _trim_case(**kw)
+    before = [list(p) for p in lines[0].points_xyz]
+    _trim_crossings(lines, info, P, W, 0.05, 0.02, 0.5)
+    assert ("trimmed" in lines[0].extra) == trimmed
+    if not trimmed:
+        assert lines[0].points_xyz == before
