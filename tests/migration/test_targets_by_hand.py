@@ -239,7 +239,7 @@ def test_fringe_is_a_near_parallel_segment_mostly_within_the_band():
 
 def _trim_case(cross_deg=90.0, xb=0.62, both_ends=False):
     """Line A along x (0.00-0.50 m, 51 columns, then after a gap an end piece 0.60-0.64 m) and line B crossing the
-    end piece at x = xb (0.62 m) at ``cross_deg``; with ``both_ends`` line C crosses a start piece (-0.14 .. -0.10 m)."""
+    end piece at x = xb at ``cross_deg``; with ``both_ends`` line C crosses a start piece (-0.14 .. -0.10 m)."""
     xs = [np.round(np.arange(51) * 0.01, 6), 0.60 + 0.01 * np.arange(5)]
     if both_ends:
         xs.insert(0, -0.14 + 0.01 * np.arange(5))
@@ -294,3 +294,51 @@ def test_trimming_needs_a_real_crossing_over_half_the_piece(kw, trimmed):
     assert ("trimmed" in lines[0].extra) == trimmed
     if not trimmed:
         assert lines[0].points_xyz == before
+
+
+BIG = Grid3D(0.0, 0.0, 0.0, 0.01, 0.01, 0.005, 150, 60, 160)
+
+
+def _pipe(env, x0, x1, y, depth, amp=1.0, grid=BIG):
+    """A pipe along x from x0 to x1 at y; ``depth(x)`` of its top, drawn as a symmetric peak on the nearest cell."""
+    j = int(round((y - grid.y0) / grid.dy))
+    for i in range(int(round(x0 / grid.dx)), int(round(x1 / grid.dx)) + 1):
+        k = int(round((depth(i * grid.dx) - grid.d0) / grid.dd))
+        _column(env, i, j, k, amp)
+
+
+@pytest.mark.parametrize("gap, n_lines", [(0.45, 1), (0.55, 2)])
+def test_collinear_pieces_join_across_gaps_under_half_a_metre(gap, n_lines):
+    env = np.zeros(BIG.shape, np.float32)
+    _pipe(env, 0.05, 0.5, 0.45, lambda x: 0.2)
+    _pipe(env, 0.5 + gap, 0.5 + gap + 0.4, 0.45, lambda x: 0.2)
+    lines = [t for t in extract_targets(env, BIG) if t.kind == "line"]
+    assert len(lines) == n_lines
+    if n_lines == 1:
+        assert lines[0].extra.get("joined") == 2
+
+
+@pytest.mark.parametrize("dip_deg, is_line", [(44.0, True), (45.5, False)])
+def test_lines_dip_less_than_45_degrees(dip_deg, is_line):
+    env = np.zeros(BIG.shape, np.float32)
+    slope = np.tan(np.radians(dip_deg))
+    _pipe(env, 0.2, 0.8, 0.45, lambda x: 0.1 + slope * (x - 0.2))
+    lines = [t for t in extract_targets(env, BIG) if t.kind == "line"]
+    assert bool(lines) == is_line
+    if is_line:
+        (ln,) = lines
+        (x0, _, z0), (x1, _, z1) = sorted(ln.points_xyz)
+        assert (z1 - z0) / (x1 - x0) == pytest.approx(slope, rel=0.02)
+
+
+@pytest.mark.parametrize("layer, kept", [(0.6, True), (0.7, False)])
+def test_a_pipe_must_stand_out_from_its_sides(layer, kept):
+    """A bright layer on one side (both parallels 2.5 and 5 bands away lie on it): the pipe (1.0) stays while
+    1.5 x the layer's level is under its own, and goes when it is over."""
+    env = np.zeros(BIG.shape, np.float32)
+    for j in range(0, 40):  # y 0 .. 0.39 m: the layer, 0.35 m deep (the pipe's parallels at y 0.25 and 0.0 m)
+        for i in range(10, 141):
+            _column(env, i, j, 70, layer)
+    _pipe(env, 0.2, 1.2, 0.5, lambda x: 0.2)
+    pipes = [t for t in extract_targets(env, BIG) if t.kind == "line" and abs(t.depth_m - 0.2) < 0.01]
+    assert bool(pipes) == kept
