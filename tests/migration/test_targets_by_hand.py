@@ -342,3 +342,42 @@ def test_a_pipe_must_stand_out_from_its_sides(layer, kept):
     _pipe(env, 0.2, 1.2, 0.5, lambda x: 0.2)
     pipes = [t for t in extract_targets(env, BIG) if t.kind == "line" and abs(t.depth_m - 0.2) < 0.01]
     assert bool(pipes) == kept
+
+
+def test_the_hough_accumulator_finds_weighs_and_forgets_lines():
+    from gpr3d.migration.targets import _Hough, _line_dist
+
+    rng = np.random.default_rng(7)
+    for trial in range(5):
+        ang = rng.uniform(0, np.pi)
+        d = np.array([np.cos(ang), np.sin(ang)])
+        c0 = rng.uniform(0.2, 0.8, 2)
+        line = c0 + np.linspace(-0.5, 0.5, 51)[:, None] * d
+        noise = rng.uniform(0, 1, (20, 2))
+        p = np.vstack([line, noise])
+        w = np.r_[np.ones(51), np.full(20, 0.01)]
+        h = _Hough(p, w, 0.02, 0.5)
+        votes, c, dirn, key = h.peak()
+        assert 51 <= votes <= 51.2 + 1e-9  # every point of the line, in the two bins it straddles
+        # (within the two bins' angular reach: 0.04 m over a 1 m line, about 2.3 deg)
+        assert abs(float(dirn @ d)) > np.cos(np.radians(2.5)) and np.hypot(*dirn) == pytest.approx(1.0)
+        assert float(_line_dist(c0[None], c, dirn)[0]) < 0.02 + 0.005  # the bins' boundary, by the line's middle
+        # suppressed: 5 angle bins x 3 distance bins around it (angles wrap round), and the next peak elsewhere
+        h.suppress(key)
+        ti, ri = key
+        nth = h.acc.shape[0]
+        around = np.zeros_like(h.suppressed)
+        around[np.arange(ti - 2, ti + 3) % nth, max(ri - 1, 0):ri + 2] = True
+        np.testing.assert_array_equal(h.suppressed, around)
+        nxt = h.peak()
+        assert not h.suppressed[nxt[3]] and nxt[0] <= votes
+        # removing the line's points leaves the distractors' votes only
+        h.remove(np.arange(51))
+        np.testing.assert_allclose(h.acc, _Hough(p, np.r_[np.zeros(51), w[51:]], 0.02, 0.5).acc, atol=1e-9)
+    # every angle from 0 to 179.5 deg, and the bins cover every point's distance
+    h = _Hough(p, w, 0.02, 0.5)
+    np.testing.assert_allclose(np.degrees(np.arctan2(h.normals[:, 1], h.normals[:, 0])), np.arange(0, 180, 0.5),
+                               atol=1e-9)
+    r = (p - p.mean(axis=0)) @ h.normals.T
+    assert np.all(np.abs(r) < h.rmax) and h.nr * 0.02 >= 2 * h.rmax
+    np.testing.assert_allclose(h.acc.sum(axis=1), w.sum())
