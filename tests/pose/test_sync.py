@@ -67,3 +67,31 @@ def test_time_offset_needs_overlapping_frames():
         estimate_time_offset(run.imu, run.vo, max_offset_s=10.5)
     with pytest.raises(InvalidDataError, match="positive"):
         estimate_time_offset(run.imu, run.vo, step_s=0.0)
+
+
+def test_wheel_trigger_edges_and_messages_in_full():
+    t = np.array([0.0, 1.0, 2.0, 3.0, 4.0])
+    d = np.array([0.0, 0.25, 0.25, 0.25, 0.75])  # still from 1 s to 3 s, then 0.5 m in a second
+    # marks at 0.2, 0.4, 0.6 m: the two after the stop are timed from when the wheel moves on (3 s), not from
+    # when it stopped
+    np.testing.assert_allclose(wheel_trigger_times(t, d, 0.2), [0.8, 3.3, 3.7])
+    np.testing.assert_allclose(wheel_trigger_times(t, d, 0.25), [1.0, 3.5, 4.0])
+    # the stop: a mark at the stop's distance fires when the wheel gets there (1 s), not when it leaves (3 s)
+    np.testing.assert_allclose(wheel_trigger_times(t, d, 0.125, start_m=0.0)[:2], [0.5, 1.0])
+    np.testing.assert_allclose(wheel_trigger_times(t, d, 0.2, start_m=0.1), [3.1, 3.5, 3.9])  # 0.3, 0.5, 0.7 m
+    # a record that begins 0.3 m along: the marks at 0.2 m and before were passed already; 0.4 m fires
+    np.testing.assert_allclose(wheel_trigger_times(t, d + 0.3, 0.2), [0.4, 3.1, 3.5, 3.9])
+    # a wheel count that jitters back by less than a nanometre is still forward
+    assert wheel_trigger_times(t, d - np.r_[0, 0, 5e-10, 0, 0], 0.25).size == 3
+    for args, words in [
+        ((t, d[:4], 0.2), "times and distances must be two arrays of one length >= 2, got 5 and 4"),
+        ((t[:1], d[:1], 0.2), "times and distances must be two arrays of one length >= 2, got 1 and 1"),
+        ((t, np.r_[d[:4], np.nan], 0.2), "times or distances hold NaN/inf"),
+        ((np.r_[t[:4], np.inf], d, 0.2), "times or distances hold NaN/inf"),
+        ((np.r_[0.0, 1.0, 1.0, 3.0, 4.0], d, 0.2), "times must increase"),
+        ((t, np.r_[d[:4], 0.2], 0.2), "distance decreases: pass the wheel's forward count (it must not go down)"),
+        ((t, d, -0.1), "trace spacing must be a positive distance in metres, got -0.1"),
+        ((t, d, float("nan")), "trace spacing must be a positive distance in metres, got nan"),
+    ]:
+        with pytest.raises(InvalidDataError, match="^" + words.replace("(", r"\(").replace(")", r"\)") + "$"):
+            wheel_trigger_times(*args)

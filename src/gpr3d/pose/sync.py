@@ -20,7 +20,8 @@ def wheel_trigger_times(t_s, distance_m, spacing_m: float, *, start_m: float = 0
     """Times at which the travelled distance crosses ``start_m + k * spacing_m`` (k = 1, 2, ...).
 
     ``distance_m`` must not decrease (a wheel that rolls back does not fire again until it has made
-    up the distance; pass its forward count). Stops give no traces.
+    up the distance; pass its forward count). Stops give no traces: a mark at a stop's distance fires when the
+    wheel gets there, the next one after it moves on. Marks the wheel had passed before the first sample give none.
     """
     t = np.asarray(t_s, dtype=float).reshape(-1)
     d = np.asarray(distance_m, dtype=float).reshape(-1)
@@ -35,8 +36,12 @@ def wheel_trigger_times(t_s, distance_m, spacing_m: float, *, start_m: float = 0
     if not (np.isfinite(spacing_m) and spacing_m > 0):
         raise InvalidDataError(f"trace spacing must be a positive distance in metres, got {spacing_m!r}")
     marks = np.arange(start_m + spacing_m, d[-1] + 1e-12, spacing_m)
-    keep = np.concatenate([[True], np.diff(d) > 0])  # the first sample of every stop
-    return np.interp(marks, d[keep], t[keep])
+    marks = marks[marks > d[0]]  # the wheel had passed those before the record began
+    # each mark between the last sample short of it and the first that reaches it: a mark at a stop's distance
+    # fires on arrival, one past it after the wheel moves on (however long the stop)
+    i = np.clip(np.searchsorted(d, marks, side="left"), 1, d.size - 1)
+    frac = (marks - d[i - 1]) / (d[i] - d[i - 1])
+    return t[i - 1] + np.clip(frac, 0.0, 1.0) * (t[i] - t[i - 1])
 
 
 def trajectory_triggers(traj: Trajectory, spacing_m: float) -> np.ndarray:
