@@ -189,3 +189,70 @@ def test_a_line_driven_back_on_itself_splits():
     out = np.arange(12)[:, None] * step
     back = out[-1] - (1 + np.arange(12))[:, None] * step
     assert [len(ln) for ln in split_lines(np.r_[out, back])] == [12, 12]
+
+
+# --- reconstruct(method="pseudo3d"): the grid method composed from its parts ----------------------------------------
+
+from gpr3d.migration.masking import box_mask  # noqa: E402
+from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct  # noqa: E402
+from gpr3d.migration.targets import extract_targets  # noqa: E402
+
+
+def _composed(s, cfg, boxes=None):
+    """What reconstruct(method="pseudo3d") must give, from the parts: the grid over the positions, the pseudo-3D
+    envelope of the data inside the boxes (noise map: outside them), targets from the envelope with the band of
+    half a wavelength."""
+    v = C / math.sqrt(cfg.eps_r)
+    depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s - s.t0_s - 2 * cfg.air_gap_m / C) * 0.95
+    grid = Grid3D.covering(s.positions_xyz, depth_m=depth, spacing_m=cfg.spacing_m,
+                           depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m)
+    ap = cfg.aperture_deg if cfg.aperture_deg is not None else 89.0
+    noise = None
+    data = s.data
+    if boxes is not None:
+        mask = box_mask(s.n_traces, s.n_samples, s.dt_s, boxes, taper_traces=cfg.taper_traces)
+        noise, _ = pseudo3d(s.replace(data=s.data * (1 - mask)), grid, eps_r=cfg.eps_r, aperture_deg=ap)
+        data = s.data * mask
+    env, _ = pseudo3d(s.replace(data=data), grid, eps_r=cfg.eps_r, aperture_deg=ap)
+    band = max(2 * 2.0 * max(grid.dx, grid.dy), 0.5 * v / s.frequency_hz)
+    targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band,
+                              min_depth_m=cfg.min_target_depth_m)
+    return grid, env, noise, targets
+
+
+@pytest.mark.parametrize("kw, boxes", [
+    ({"aperture_deg": 40.0, "max_depth_m": 0.15, "min_target_depth_m": 0.05}, None),
+    ({"aperture_deg": None, "threshold": 0.5, "min_line_m": 0.1}, [[0, 1e-9, 20, 3e-9], [30, 0.5e-9, 47, 2e-9]]),
+])
+def test_reconstruct_pseudo3d_is_composed_of_its_parts(kw, boxes):
+    s = _grid_survey(t0=0.0)
+    cfg = ReconstructConfig(method="pseudo3d", eps_r=5.0, spacing_m=0.03, time_zero="none", remove_background=False,
+                            **kw)
+    rec = reconstruct(s, cfg, boxes=boxes)
+    grid, env, noise, targets = _composed(s, cfg, boxes)
+    assert rec.grid == grid and rec.fold is None and rec.eps_r == 5.0 and rec.n_traces == 48
+    np.testing.assert_allclose(rec.envelope, env, rtol=1e-6, atol=1e-6 * env.max())
+    np.testing.assert_array_equal(rec.image, rec.envelope)
+    if boxes is None:
+        assert rec.noise_map is None
+    else:
+        np.testing.assert_allclose(rec.noise_map, noise, rtol=1e-6, atol=1e-6 * noise.max())
+    assert [(t.kind, t.n_voxels) for t in rec.targets] == [(t.kind, t.n_voxels) for t in targets]
+    assert rec.config["method"] == "pseudo3d" and rec.config["aperture_deg"] == kw["aperture_deg"]
+    assert set(rec.timings_s) == {"prepare", "migrate"} and 0 <= rec.timings_s["migrate"] < 60
+
+
+def test_reconstruct_pseudo3d_refuses_diagonal_lines_and_single_lines():
+    s = _grid_survey()
+    p = s.positions_xyz.copy()
+    p[12:24, 1] = 0.17 + 0.12 * (p[12:24, 0] - p[12:24, 0].min())  # the second line runs 7 deg off x
+    cfg = ReconstructConfig(method="pseudo3d", eps_r=5.0, spacing_m=0.03, time_zero="none", remove_background=False)
+    with pytest.raises(InvalidDataError, match=r"^pseudo-3D needs lines along x or y; line 1 \(traces 12\.\.23\) runs "
+                                               r"7 deg off both: use method 'backprojection'$"):
+        reconstruct(s.replace(positions_xyz=p), cfg)
+    p[12:24, 1] = 0.17 + 0.07 * (p[12:24, 0] - p[12:24, 0].min())  # 4 deg: along x still
+    reconstruct(s.replace(positions_xyz=p), cfg)
+    one = s.replace(data=s.data[:12], positions_xyz=s.positions_xyz[:12], orientations_quat_wxyz=None)
+    with pytest.raises(InvalidDataError, match=r"^pseudo-3D needs two lines at least, the survey has 1: migrate one "
+                                               r"profile with 'gpr3d migrate', or use method 'backprojection'$"):
+        reconstruct(one, cfg)
