@@ -26,7 +26,8 @@ def _result(frame=None, noise=True):
     if frame is not None:  # a profile's targets keep their places along it
         t = [Target3D("point", [[1.1, 2.15, 0.1]], 0.1, 0.4, 3, {"along_m": [0.1], "across_m": [0.0]})]
     return Reconstruction(image=img, envelope=env, noise_map=nm, fold=None, grid=g, targets=t, eps_r=6.5,
-                          config=asdict(ReconstructConfig(spacing_m=0.05)), n_traces=40, timings_s={"migrate": 1.5}, updates_per_s=None,
+                          config=asdict(ReconstructConfig(spacing_m=0.05)), n_traces=40, timings_s={"migrate": 1.5},
+                          updates_per_s=None,
                           eps_r_source="DepthNet", frame=frame)
 
 
