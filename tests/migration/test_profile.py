@@ -266,3 +266,20 @@ def test_rtm_takes_the_first_trace_where_the_wheel_stopped():
     b = migrate_profile(s_.replace(data=s_.data[moved], positions_xyz=s_.positions_xyz[moved]), eps_r=4.0,
                         method="rtm", max_depth_m=0.15, spacing_m=0.02)
     np.testing.assert_array_equal(a.image, b.image)
+
+
+def test_stolt_on_exactly_even_steps_reads_the_first_and_last_traces():
+    """Steps of exactly 0.25 m: the grid's columns fall on the traces, the first on trace 0 and the last on the
+    last trace, and Stolt's input is the traces themselves."""
+    from gpr3d.core.survey import Survey
+    from gpr3d.migration.traditional import stolt_migrate
+
+    rng = np.random.default_rng(5)
+    n = 9
+    data = rng.standard_normal((n, 64)).astype(np.float32)
+    s = Survey(data=data, dt_s=0.1e-9, positions_xyz=np.c_[np.arange(n) * 0.25, np.zeros((n, 2))])
+    prof = migrate_profile(s, eps_r=4.0, method="stolt", max_depth_m=0.3)
+    np.testing.assert_allclose(prof.along_m, np.arange(n) * 0.25)
+    mig, dz = stolt_migrate(data, 0.25, 0.1e-9, 4.0)
+    ref = np.stack([np.interp(prof.depth_m, np.arange(mig.shape[1]) * dz, tr, right=0.0) for tr in mig])
+    np.testing.assert_allclose(prof.image, ref, atol=1e-5 * np.abs(ref).max())
