@@ -38,12 +38,12 @@ def _grid_survey(t0=0.3e-9, offset=0.04, seed=1):
                   orientations_quat_wxyz=quat_from_yaw(yaw), frequency_hz=1e9)
 
 
-def _kirchhoff_plane(data, pos, yaw, offset, t0, dt, eps_r, axis, coord, aperture_deg=50.0):
+def _kirchhoff_plane(data, pos, yaw, offset, t0, dt, eps_r, axis, coord, aperture_deg=50.0, grid=GRID):
     """One line's vertical plane: obliquity-weighted diffraction stack, aperture cone from the antennas' midpoint,
     tx and rx -/+ offset/2 along the heading."""
     v = C / math.sqrt(eps_r)
-    along = GRID.x if axis == "x" else GRID.y
-    img = np.zeros((len(along), GRID.nd))
+    along = grid.x if axis == "x" else grid.y
+    img = np.zeros((len(along), grid.nd))
     tan = math.tan(math.radians(aperture_deg))
     for m in range(len(pos)):
         h = np.array([math.cos(yaw[m]), math.sin(yaw[m])]) * offset / 2
@@ -51,8 +51,8 @@ def _kirchhoff_plane(data, pos, yaw, offset, t0, dt, eps_r, axis, coord, apertur
         row = np.r_[data[m].astype(float), 0.0, 0.0]
         for i, s in enumerate(along):
             p = np.array([s, coord]) if axis == "x" else np.array([coord, s])
-            first = math.ceil((np.hypot(*(p - pos[m, :2])) / tan - GRID.d0) / GRID.dd - 1e-12)
-            for k, d in enumerate(GRID.depth):
+            first = math.ceil((np.hypot(*(p - pos[m, :2])) / tan - grid.d0) / grid.dd - 1e-12)
+            for k, d in enumerate(grid.depth):
                 if k < first:
                     continue
                 ra, rb = math.hypot(*(p - a), d), math.hypot(*(p - b), d)
@@ -74,8 +74,9 @@ def _fill(planes, n, origin, step):
     return out
 
 
-def _by_hand(s, method, eps_r):
-    yaw = 2 * np.arctan2(s.orientations_quat_wxyz[:, 3], s.orientations_quat_wxyz[:, 0])
+def _by_hand(s, method, eps_r, aperture_deg=50.0, grid=GRID):
+    yaw = (np.zeros(s.n_traces) if s.orientations_quat_wxyz is None
+           else 2 * np.arctan2(s.orientations_quat_wxyz[:, 3], s.orientations_quat_wxyz[:, 0]))
     planes = {"x": {}, "y": {}}
     for k in range(4):
         idx = np.arange(12 * k, 12 * k + 12)
@@ -83,18 +84,19 @@ def _by_hand(s, method, eps_r):
         p = s.positions_xyz[idx]
         coord = float(np.median(p[:, 1] if axis == "x" else p[:, 0]))
         if method == "kirchhoff":
-            img = _kirchhoff_plane(s.data[idx], p, yaw[idx], s.offset_m, s.t0_s, s.dt_s, eps_r, axis, coord)
+            img = _kirchhoff_plane(s.data[idx], p, yaw[idx], s.offset_m, s.t0_s, s.dt_s, eps_r, axis, coord,
+                                   aperture_deg, grid)
         else:
             a = p[:, 0] if axis == "x" else p[:, 1]
             order = np.argsort(a)
             mig, dz = stolt_migrate(s.data[idx][order], float(np.median(np.diff(a[order]))), s.dt_s, eps_r)
             z = np.arange(mig.shape[1]) * dz
-            tmp = np.stack([np.interp(GRID.depth, z, tr) for tr in mig])
-            target = GRID.x if axis == "x" else GRID.y
-            img = np.stack([np.interp(target, a[order], tmp[:, j], left=0, right=0) for j in range(GRID.nd)], 1)
+            tmp = np.stack([np.interp(grid.depth, z, tr) for tr in mig])
+            target = grid.x if axis == "x" else grid.y
+            img = np.stack([np.interp(target, a[order], tmp[:, j], left=0, right=0) for j in range(grid.nd)], 1)
         planes[axis][coord] = np.abs(hilbert(img, axis=1))
-    vx = np.transpose(_fill(planes["x"], GRID.ny, GRID.y0, GRID.dy), (1, 0, 2))
-    vy = _fill(planes["y"], GRID.nx, GRID.x0, GRID.dx)
+    vx = np.transpose(_fill(planes["x"], grid.ny, grid.y0, grid.dy), (1, 0, 2))
+    vy = _fill(planes["y"], grid.nx, grid.x0, grid.dx)
     return 0.5 * (vx + vy)
 
 
@@ -157,10 +159,13 @@ def test_split_lines_edges():
         bent = np.r_[east, east[-1] + d + np.arange(10)[:, None] * d]
         assert [len(ln) for ln in split_lines(bent)] == parts, turn
     # stops: repeated places do not pull the median step (and the gap) to zero, nor hide a later turn
-    stops = np.r_[east[:5], np.repeat(east[5:6], 8, axis=0), east[6:]]
-    assert [len(ln) for ln in split_lines(stops)] == [17]
+    stops = np.r_[east[:5], np.repeat(east[5:6], 12, axis=0), east[6:]]  # more stopped steps than moving ones
+    assert [len(ln) for ln in split_lines(stops)] == [21]
     north = east[-1] + np.c_[np.zeros(10), 0.25 + np.arange(10) * 0.25]
-    assert [len(ln) for ln in split_lines(np.r_[stops, north])] == [17, 10]
+    assert [len(ln) for ln in split_lines(np.r_[stops, north])] == [21, 10]
+    # stopped at the corner, then north: the heading from before the stop still tells the turn
+    corner = np.r_[east, np.repeat(east[-1:], 3, axis=0), north]
+    assert [len(ln) for ln in split_lines(corner)] == [13, 10]
 
 
 def test_stolt_leaves_a_flat_reflector_in_place_and_drops_the_mean():
@@ -256,3 +261,45 @@ def test_reconstruct_pseudo3d_refuses_diagonal_lines_and_single_lines():
     with pytest.raises(InvalidDataError, match=r"^pseudo-3D needs two lines at least, the survey has 1: migrate one "
                                                r"profile with 'gpr3d migrate', or use method 'backprojection'$"):
         reconstruct(one, cfg)
+
+
+def test_stolt_leaves_nothing_where_the_map_reaches_past_the_record_s_frequencies():
+    """Each output (kx, kz) takes the data at omega = sign(kz) v/2 sqrt(kx^2 + kz^2); where that lies beyond the
+    record's highest frequency (either sign) there is nothing to take, and the image's spectrum is zero there
+    (no padding, so the image's FFT is the mapped spectrum itself, made real)."""
+    rng = np.random.default_rng(6)
+    data = rng.standard_normal((32, 64)).astype(np.float32)
+    dx, dt, eps = 0.02, 0.1e-9, 4.0
+    img, _ = stolt_migrate(data, dx, dt, eps, pad=1)
+    v2 = 0.5 * C / math.sqrt(eps)
+    kx = 2 * np.pi * np.fft.fftfreq(32, dx)
+    w = 2 * np.pi * np.fft.fftfreq(64, dt)
+    kz = w / v2
+    wk = np.sign(kz)[None, :] * v2 * np.sqrt(kx[:, None] ** 2 + kz[None, :] ** 2)
+    beyond = (wk > w.max()) | (wk < w.min())
+    # the image is real: its spectrum at k also holds the mapped spectrum at -k, so both must lie beyond
+    mirror = beyond[(-np.arange(32)) % 32][:, (-np.arange(64)) % 64]
+    beyond &= mirror
+    assert beyond.sum() > 50
+    spec = np.abs(np.fft.fft2(img.astype(np.float64)))
+    assert spec[beyond].max() < 1e-4 * spec.max()
+
+
+@pytest.mark.parametrize("method", ["kirchhoff", "stolt"])
+def test_pseudo3d_on_a_grid_reaching_past_the_lines_with_its_own_aperture(method):
+    """A grid that starts before the lines (its first columns see no trace: zero), a 30 deg aperture, and no
+    orientations (every antenna heading along +x)."""
+    s = _grid_survey(t0=0.0).replace(orientations_quat_wxyz=None)
+    g = Grid3D(-0.06, -0.05, 0.01, 0.04, 0.03, 0.02, 11, 10, 10)
+    vol, _ = pseudo3d(s, g, eps_r=5.0, method=method, aperture_deg=30.0)
+    ref = _by_hand(s, method, 5.0, aperture_deg=30.0, grid=g)
+    np.testing.assert_allclose(vol, ref, atol=2e-3 * ref.max())
+    if method == "stolt":
+        assert not vol[0].any()  # x = -0.06 m: before every line's first trace, and outside the y lines
+
+
+def test_pseudo3d_kirchhoff_with_an_air_gap_refracts():
+    s = _grid_survey()
+    a, _ = pseudo3d(s, GRID, eps_r=5.0, air_gap_m=0.05)
+    b, _ = pseudo3d(s, GRID, eps_r=5.0)
+    assert not np.allclose(a, b, rtol=0.05)

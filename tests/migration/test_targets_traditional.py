@@ -249,9 +249,9 @@ def test_planes_are_interpolated_between_lines_by_hand():
     one = _fill_between({0.27: np.ones((1, 1))}, 5, 0.0, 0.1, (1, 1))  # nearer 0.3
     np.testing.assert_allclose(one[:, 0, 0], [0.0, 0.0, 0.0, 1.0, 0.0])
     # on the planes' own positions (the searchsorted edges): their values exactly, the last one included
-    three = _fill_between({0.1: np.full((1, 1), 2.0), 0.2: np.full((1, 1), 4.0), 0.4: np.full((1, 1), 8.0)}, 6, 0.0,
-                          0.1, (1, 1))
-    np.testing.assert_allclose(three[:, 0, 0], [0.0, 2.0, 4.0, 6.0, 8.0, 0.0], atol=1e-6)
+    three = _fill_between({0.1: np.full((1, 1), 2.0), 0.2: np.full((1, 1), 6.0), 0.4: np.full((1, 1), 8.0)}, 6, 0.0,
+                          0.1, (1, 1))  # (not on one straight line: each gap its own slope)
+    np.testing.assert_allclose(three[:, 0, 0], [0.0, 2.0, 6.0, 7.0, 8.0, 0.0], atol=1e-6)
 
 
 def test_split_lines_by_jumps_turns_and_length():
