@@ -143,7 +143,8 @@ def test_a_straight_profile_is_migrated_in_its_vertical_plane():
     (w,) = [c for c in caught if issubclass(c.category, GeometryWarning)]
     assert re.match(r"the antenna positions span only \d\.\d cm across their main direction \(one straight profile, "
                     r"0\.60 m long\)", str(w.message))
-    assert w.filename == __file__  # reported at the caller's line
+    # reported at the caller's line (under mutmut, the trampoline that stands in one call frame)
+    assert w.filename == __file__ or w.filename.endswith("trampoline.py")
     fr = ProfileFrame.fit(s.positions_xyz)
     assert rec.frame == fr and rec.grid.ny == 1 and rec.grid.y0 == 0.0
     line = fr.to_line(s.positions_xyz)
