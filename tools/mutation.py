@@ -229,6 +229,27 @@ def load_results(store: Path) -> list[dict]:
     return sorted(rows, key=lambda r: (order.get(r["module"], len(order)), r["module"]))
 
 
+def reclassify(row: dict, equivalents: dict) -> dict:
+    """A stored result with the survivors that the equivalents file lists now counted as equivalent (the list
+    matches mutants by their diff, so no re-run is needed); the stored file itself stays as measured."""
+    if "error" in row or not row.get("survivors"):
+        return row
+    listed = equivalents.get(row["module"], [])
+    still, moved = [], []
+    for s in row["survivors"]:
+        why = next((w for a, b, w in listed if a == s["removed"] and b == s["added"]), None)
+        if why:
+            moved.append({**s, "why": why})
+        else:
+            still.append(s)
+    if not moved:
+        return row
+    equiv = [*row.get("equivalents", []), *moved]
+    judged = row["total"] - len(equiv)
+    return {**row, "survivors": still, "survived": len(still), "equivalents": equiv, "equivalent": len(equiv),
+            "score": row["killed"] / judged if judged else 1.0}
+
+
 def guarded(store: Path) -> dict:
     """``{module: commit}`` of the stored results."""
     return {r["module"]: r.get("commit") for r in load_results(store)}
@@ -286,6 +307,8 @@ def main(argv=None) -> int:
     ap.add_argument("--guard", action="store_true",
                     help="re-run the scored modules that changed since their commits; report to build/")
     ap.add_argument("--store", default=str(STORE), help="folder of the per-module results")
+    ap.add_argument("--report", action="store_true",
+                    help="only remake the report from the stored results (with the equivalents listed now)")
     ap.add_argument("--budget-s", type=float, default=300.0,
                     help="--guard: the most seconds of re-runs (by the stored times) it does; over it, it fails and "
                          "names the command that refreshes the stored results")
@@ -293,6 +316,12 @@ def main(argv=None) -> int:
     if args.max_children < 1:
         ap.error(f"--max-children must be >= 1, got {args.max_children}")
     store = Path(args.store)
+    if args.report:
+        eq = load_equivalents(Path(args.equivalents))
+        rows = [reclassify(r, eq) for r in load_results(store)]
+        write_report(rows, Path(args.out), "python tools/mutation.py --report")
+        print(f"report: {args.out}")
+        return 0
     if args.guard:
         listed = guarded(store)
         if not listed:
@@ -333,7 +362,7 @@ def main(argv=None) -> int:
                f"{row['total']} mutants, {row['killed']} killed, {row['survived']} survived, {row['equivalent']} "
                f"equivalent: {100 * row['score']:.1f} %")
         print(f"{m:28s} {msg} ({row['wall_s']:.0f} s)", flush=True)
-    write_report(rows if args.guard else load_results(store), Path(args.out), command)
+    write_report(rows if args.guard else [reclassify(r, eq) for r in load_results(store)], Path(args.out), command)
     low = [r["module"] for r in rows if "error" in r or 100 * r["score"] < args.fail_under]
     if low:
         print(f"below {args.fail_under:g} %: {', '.join(low)}")

@@ -85,3 +85,18 @@ def test_the_guard_refuses_runs_over_its_budget(tmp_path):
     assert r.returncode == 1, r.stdout + r.stderr
     assert "processing.steps takes about 100 s, over the 50 s budget: run python tools/mutation.py " \
            "processing.steps" in r.stdout
+
+
+def test_survivors_listed_later_as_equivalent_leave_the_score():
+    tool = _tool()
+    row = {"module": "processing.dewow", "total": 10, "killed": 7, "survived": 2, "equivalent": 1, "score": 7 / 9,
+           "equivalents": [{"name": "a", "removed": "x = 1", "added": "x = 2", "why": "old"}],
+           "survivors": [{"name": "b", "removed": "y = 1", "added": "y = 2"},
+                         {"name": "c", "removed": "z = 1", "added": "z = 0"}]}
+    eq = {"processing.dewow": [("y = 1", "y = 2", "the same"), ("z = 1", "z = 3", "another mutant")]}
+    out = tool.reclassify(row, eq)
+    assert (out["survived"], out["equivalent"], out["score"]) == (1, 2, 7 / 8)
+    assert [s["name"] for s in out["survivors"]] == ["c"] and out["equivalents"][-1]["why"] == "the same"
+    assert row["survived"] == 2  # the stored result itself is left as measured
+    assert tool.reclassify(row, {}) is row and tool.reclassify({"module": "m", "error": "x"}, eq) == {"module": "m",
+                                                                                                      "error": "x"}
