@@ -55,7 +55,7 @@ MODULES = {
     "migration.targets": None, "migration.metrics": None,
     "migration.profile": None, "migration.traditional": None, "migration.reconstruct": None,
     "migration.sitetiles": ["tests/migration/test_sitetiles.py"],
-    "simulation.forward": ["tests/simulation/test_forward.py"],
+    "simulation.forward": ["tests/simulation/test_forward.py", "tests/simulation/test_forward_by_hand.py"],
     "simulation.labels": ["tests/simulation/test_labels.py"],
     # the packages beside the pipeline: each module with the test files that import it (less the slow training,
     # ROS-bag and CLI ones that only pass through)
