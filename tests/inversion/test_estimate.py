@@ -43,10 +43,10 @@ def test_hybrid_refines_the_network_with_the_bias_corrected_fit_only_where_they_
     p = r["permittivity"]
     assert p["fit_agrees"] is True  # |10.3 - 11| < 2 sigma
     w1, w2 = 1.0, 1 / math.hypot(fit["sigma_eps_r"] / (1 + FIT_BIAS), FIT_MODEL_ERROR * fc) ** 2
-    assert p["eps_r"] == pytest.approx((w1 * 11.0 + w2 * fc) / (w1 + w2), rel=1e-9)
-    assert p["sigma_eps_r"] == pytest.approx(1 / math.sqrt(w1 + w2), rel=1e-9)
+    assert p["eps_r"] == pytest.approx((w1 * 11.0 + w2 * fc) / (w1 + w2), rel=1e-9, abs=0)
+    assert p["sigma_eps_r"] == pytest.approx(1 / math.sqrt(w1 + w2), rel=1e-9, abs=0)
     # the network's depth rescaled to the refined eps_r (same travel time)
-    assert r["targets"][0]["depth_m"] == pytest.approx(0.9 * math.sqrt(11.0 / p["eps_r"]), rel=1e-9)
+    assert r["targets"][0]["depth_m"] == pytest.approx(0.9 * math.sqrt(11.0 / p["eps_r"]), rel=1e-9, abs=0)
     assert r["targets"][0]["depth_m_net"] == 0.9
     # a fit far from the network (more than two of its sigmas) is left out
     far = estimate_depths(s, targets, method="hybrid", estimator=FixedNet(eps=20.0, sigma=1.0, depth=0.5))

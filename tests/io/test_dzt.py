@@ -73,7 +73,7 @@ def test_samples_match_readgssi(rel, tmp_path):
     crop = s.n_samples - ref.shape[1]
     assert crop == (hdr["rh_zero"] if hdr["rh_bits"] == 32 else 0)
     assert s.n_traces == ref.shape[0]
-    assert hdr["rhf_range"] * 1e-9 == pytest.approx(s.time_window_s, rel=1e-9)
+    assert hdr["rhf_range"] * 1e-9 == pytest.approx(s.time_window_s, rel=1e-9, abs=0)
     # samples 0 and 1 of each GSSI trace are a scan counter and a mark word; gpr3d replaces them
     np.testing.assert_array_equal(s.data[:, crop + 2 :], (ref[:, 2:] - zero).astype(np.float32))
     np.testing.assert_array_equal(s.data[:, 0], s.data[:, 2])
@@ -94,7 +94,7 @@ def test_bits_and_channels(tmp_path, bits, nchan):
     assert [s.frequency_hz for s in surveys] == [400e6, 900e6, 400e6][:nchan]
     assert surveys[0].metadata["created"] == "2021-06-15T10:20:30"
     assert surveys[0].dt_s == pytest.approx(20e-9 / 32, rel=1e-9, abs=0)
-    assert surveys[0].timestamps_s[3] == pytest.approx(3 / 50.0, rel=1e-9)
+    assert surveys[0].timestamps_s[3] == pytest.approx(3 / 50.0, rel=1e-9, abs=0)
 
 
 def test_big_header_offset(tmp_path):
@@ -271,7 +271,7 @@ def test_more_corrupt_headers(tmp_path, patch, message):
 def test_the_boundaries_of_the_header(tmp_path):
     p = write_dzt(tmp_path / "b.DZT", n_samples=2, range_ns=1e6)  # 2 samples, a 1 ms range: allowed
     s = read_dzt(p)[0]
-    assert s.n_samples == 2 and s.time_window_s == pytest.approx(1e-3, rel=1e-9)
+    assert s.n_samples == 2 and s.time_window_s == pytest.approx(1e-3, rel=1e-9, abs=0)
     # two samples: nothing replaced, no mark word read
     assert s.metadata["header_samples_replaced"] == 0 and s.metadata["marks"] == []
     np.testing.assert_array_equal(s.data, expected_values(7, 2)[0].astype(np.float32))

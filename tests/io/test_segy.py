@@ -75,7 +75,7 @@ def test_a_foreign_segy_reads_its_interval_in_picoseconds_unless_told(tmp_path):
     r = gpr3d.read(tmp_path / "other.segy")
     assert r.dt_s == pytest.approx(1e-10, rel=1e-9, abs=0) and r.positions_xyz is None and r.metadata["dt_unit"] == "ps"
     np.testing.assert_allclose(r.data, data, rtol=1e-6)  # IBM floats hold float32 to about 1e-7
-    assert gpr3d.read(tmp_path / "other.segy", dt_unit="ns").dt_s == pytest.approx(1e-7, rel=1e-9)
+    assert gpr3d.read(tmp_path / "other.segy", dt_unit="ns").dt_s == pytest.approx(1e-7, rel=1e-9, abs=0)
     with pytest.raises(gpr3d.GPR3DError, match="no GPR interval"):
         gpr3d.read(tmp_path / "other.segy", dt_unit="us")
 
@@ -143,7 +143,7 @@ def test_foreign_files_by_byte_order_revision_and_unit(tmp_path):
     assert gpr3d.read(pb).dt_s == pytest.approx(200e-12, rel=1e-9, abs=0)  # both named: the GPR default
     pu = tmp_path / "us.sgy"
     _foreign(pu, bin_interval=1)
-    assert gpr3d.read(pu, dt_unit="us").dt_s == pytest.approx(1e-6, rel=1e-9)  # one microsecond: still allowed
+    assert gpr3d.read(pu, dt_unit="us").dt_s == pytest.approx(1e-6, rel=1e-9, abs=0)  # one microsecond: still allowed
     with pytest.raises(gpr3d.GPR3DError, match=r"us.sgy: sample interval 2e-06 s \(the field read as us\) is no GPR "):
         _foreign(pu, bin_interval=2)
         gpr3d.read(pu, dt_unit="us")

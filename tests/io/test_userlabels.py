@@ -52,7 +52,7 @@ def test_coco_over_radar_files_gives_the_boxes_back(tmp_path, records):
         assert {x["kind"] for x in glab["labels"]} == {"steel_pipe"}
         for x in glab["labels"]:  # the apex: centre trace, 0.7 periods below the top
             assert x["apex_trace"] == pytest.approx(0.5 * (x["box"][0] + x["box"][2]))
-            assert x["apex_time_s"] == pytest.approx(min(x["box"][1] + 0.7 / s.frequency_hz, x["box"][3]), rel=1e-9)
+            assert x["apex_time_s"] == pytest.approx(min(x["box"][1] + 0.7 / s.frequency_hz, x["box"][3]), rel=1e-9, abs=0)
 
 
 def test_voc_files_and_folder_agree_with_coco(tmp_path, records):
@@ -93,7 +93,7 @@ def test_a_screenshot_with_a_pixel_map_becomes_a_record(tmp_path, records):
     with pytest.raises(GPR3DError, match="picture; give its time axis"):
         read_user_labels(tmp_path / "c.json")
     (g, glab), = read_user_labels(tmp_path / "c.json", pixel_map=f"s_per_px={s.dt_s!r},t0_s=0")
-    assert g.shape == s.shape and g.dt_s == pytest.approx(s.dt_s, rel=1e-9)
+    assert g.shape == s.shape and g.dt_s == pytest.approx(s.dt_s, rel=1e-9, abs=0)
     assert np.corrcoef(g.data.ravel(), d.ravel())[0, 1] > 0.99  # the grey levels are the amplitudes
     have = np.array([x["box"] for x in glab["labels"]])
     want = np.array([x["box"] for x in _visible(lab)])

@@ -100,6 +100,6 @@ def test_cross_line_extent_by_hand():
     ext = cross_line_extent(three)
     c = three[:, :2] - three[:, :2].mean(axis=0)
     u = np.linalg.eigh(c.T @ c)[1][:, 0]  # the minor axis
-    assert ext == pytest.approx(float((c @ u).max() - (c @ u).min()), rel=1e-9) and 0.14 < ext < 0.3
+    assert ext == pytest.approx(float((c @ u).max() - (c @ u).min()), rel=1e-9, abs=0) and 0.14 < ext < 0.3
     grid = np.array([[x, y, 0.0] for x in range(4) for y in (0.0, 0.5)])
     assert cross_line_extent(grid) == pytest.approx(0.5)

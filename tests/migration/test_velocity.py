@@ -67,7 +67,7 @@ def test_the_best_eps_is_the_parabola_vertex_in_slowness(monkeypatch):
     """Entropy (sqrt(eps) - 2.9)^2 + 1 over the default grid: the vertex in sqrt(eps_r) is exact, 2.9^2 = 8.41."""
     tried = _stub(monkeypatch, lambda eps: (np.sqrt(eps) - 2.9) ** 2 + 1.0)
     r = focus_eps("survey", boxes=[[1, 2, 3, 4]], spacing_m=0.05, max_depth_m=0.8, aperture_deg=40.0)
-    assert r["eps_r"] == pytest.approx(8.41, rel=1e-9) and not r["at_edge"]
+    assert r["eps_r"] == pytest.approx(8.41, rel=1e-9, abs=0) and not r["at_edge"]
     np.testing.assert_allclose(r["eps_grid"], np.linspace(np.sqrt(3.0), np.sqrt(25.0), 12) ** 2)
     np.testing.assert_allclose(r["entropy"], (np.sqrt(r["eps_grid"]) - 2.9) ** 2 + 1.0)
     assert [t[1:] for t in tried] == [(0.05, 0.8, 40.0, [[1, 2, 3, 4]])] * 12
@@ -87,7 +87,7 @@ def test_a_flat_or_empty_focus(monkeypatch):
     # vertex half-way between the equal two, sqrt(eps_r) = 3.5
     _stub(monkeypatch, lambda eps: {4.0: 1.0, 9.0: 0.5, 16.0: 0.5, 25.0: 2.0}[eps])
     r = focus_eps("survey", eps_grid=[4.0, 9.0, 16.0, 25.0])
-    assert r["eps_r"] == pytest.approx(12.25, rel=1e-9) and not r["at_edge"]
+    assert r["eps_r"] == pytest.approx(12.25, rel=1e-9, abs=0) and not r["at_edge"]
     # a neighbour whose image was empty (NaN): no parabola, the best grid value stands
     _stub(monkeypatch, lambda eps: {4.0: float("nan"), 9.0: 0.5, 16.0: 1.0}[eps])
     assert focus_eps("survey", eps_grid=[4.0, 9.0, 16.0])["eps_r"] == 9.0
@@ -140,4 +140,4 @@ def test_the_parabola_next_to_the_last_value(monkeypatch):
     value)."""
     _stub(monkeypatch, lambda eps: (np.sqrt(eps) - 3.8) ** 2)
     r = focus_eps("s", eps_grid=[4.0, 9.0, 16.0, 25.0])
-    assert r["eps_r"] == pytest.approx(3.8**2, rel=1e-9) and not r["at_edge"]
+    assert r["eps_r"] == pytest.approx(3.8**2, rel=1e-9, abs=0) and not r["at_edge"]

@@ -24,7 +24,7 @@ def test_only_the_window_counts_and_its_edges_are_included():
     row[[9, 11]] = [1.0, 3.0]
     tp, v = pick_peak(row[None], DT, 0, 10 * DT, 3 * DT)
     d = 0.5 * (1.0 - 3.0) / (1.0 - 10.0 + 3.0)
-    assert tp == pytest.approx((10 + d) * DT, rel=1e-9) and v == pytest.approx(5.0 - 0.25 * (1.0 - 3.0) * d, rel=1e-9)
+    assert tp == pytest.approx((10 + d) * DT, rel=1e-9, abs=0) and v == pytest.approx(5.0 - 0.25 * (1.0 - 3.0) * d, rel=1e-9, abs=0)
     # the window 27..33 samples reaches the 9 at 30
     assert pick_peak(row[None], DT, 0, 30 * DT, 3 * DT)[1] == pytest.approx(9.0)
     # a window ending exactly on sample 30 includes it
@@ -34,7 +34,7 @@ def test_only_the_window_counts_and_its_edges_are_included():
 def test_ends_and_flat_tops_are_not_refined():
     row = np.array([4.0, 1.0, 0.0, 0.0, 2.0, 2.0, 0.0, 0.0, 1.0, 6.0])
     assert pick_peak(row[None], DT, 0, 0.0, 1.5 * DT) == (0.0, 4.0)  # first sample
-    assert pick_peak(row[None], DT, 0, 9 * DT, 1.5 * DT) == (pytest.approx(9 * DT, rel=1e-9), 6.0)  # last sample
+    assert pick_peak(row[None], DT, 0, 9 * DT, 1.5 * DT) == (pytest.approx(9 * DT, rel=1e-9, abs=0), 6.0)  # last sample
     # a flat top: the window's first maximum is sample 2, between equal neighbours: no curvature, no refinement
     tp, v = pick_peak(np.array([[0.0, 3.0, 3.0, 3.0, 0.0]]), 1.0, 0, 2.5, 0.5)
     assert (tp, v) == (2.0, 3.0)
