@@ -11,7 +11,7 @@ import pytest
 from gpr3d.core.poses import quat_from_yaw
 from gpr3d.core.units import C0
 from gpr3d.simulation.forward import (
-    Box, ForwardScene, Layer, Pipe, _echo_table, _gamma, forward_model, scene_to_forward, simulate_scene_bscan,
+    Box, ForwardScene, Layer, Pipe, Sphere, _echo_table, _gamma, forward_model, scene_to_forward, simulate_scene_bscan,
     wavelet_table,
 )
 from gpr3d.simulation.synthetic import ricker
@@ -62,6 +62,8 @@ def test_wavelet_tables(kind):
         d = np.gradient(ricker(t, f), step)
         assert np.corrcoef(twice, d)[0, 1] > 0.999
     assert wavelet_table(f, kind, step_s=1e-12)[1] == 1e-12
+    if kind == "ricker":  # the default kind
+        np.testing.assert_array_equal(wavelet_table(f)[2], w)
     with pytest.raises(ValueError, match=re.escape("unknown wavelet 'sinc' (ricker, ricker_d1, ricker_half)")):
         wavelet_table(f, "sinc")
 
@@ -177,20 +179,24 @@ def test_scene_to_forward_and_the_scene_bscan():
 
     sc = Scene(medium=Medium(eps_r=7.0, conductivity_s_m=0.002),
                targets=[Target("rebar", 0.2, 0.05, 0.01),
+                        Target("pipe", 0.45, 0.1, 0.03, material="water", fill="air", wall_m=0.004),
+                        Target("pipe", 0.55, 0.1, 0.03, material="water", fill="air"),
                         Target("pipe", 0.4, 0.1, 0.03, y_m=0.1, axis_xyz=(1.0, 1.0, 0.0), length_m=0.4,
                                material="pvc", fill="water", wall_m=0.005),
                         Target("void", 0.5, 0.08, 0.02, material="air")],
                stones=[Stone(0.3, 0.12, 0.01, 5.0)], antenna=Antenna(frequency_hz=1.5e9, offset_m=0.05),
-               n_traces=20, trace_step_m=0.02)
+               n_traces=20, trace_step_m=0.02, seed=5)
     fs = scene_to_forward(sc)
     assert (fs.eps_r, fs.conductivity_s_m) == (7.0, 0.002)
-    rebar, pipe, void, stone = fs.pipes
+    rebar, walled, bare, pipe, void, stone = fs.pipes
+    assert (walled.material, walled.eps_r, walled.wall_m, walled.wall_eps_r) == ("dielectric", 1.0, 0.004, 80.0)
+    assert (bare.material, bare.eps_r, bare.wall_m, bare.wall_eps_r) == ("dielectric", 1.0, 0.0, 3.0)
     np.testing.assert_allclose([rebar.p0, rebar.p1], [[0.2, -50.0, -0.06], [0.2, 50.0, -0.06]])
     assert (rebar.radius_m, rebar.material) == (0.01, "pec")
     h = 0.2 / math.sqrt(2)  # half the length along the unit axis
     np.testing.assert_allclose([pipe.p0, pipe.p1], [[0.4 - h, 0.1 - h, -0.13], [0.4 + h, 0.1 + h, -0.13]])
     assert (pipe.material, pipe.eps_r, pipe.wall_m, pipe.wall_eps_r) == ("dielectric", 80.0, 0.005, 3.0)
-    assert (void.material, void.eps_r, void.wall_m) == ("dielectric", 1.0, 0.0)
+    assert (void.material, void.eps_r, void.wall_m, void.wall_eps_r) == ("dielectric", 1.0, 0.0, 3.0)
     np.testing.assert_allclose([stone.p0, stone.p1], [[0.3, -50.0, -0.13], [0.3, 50.0, -0.13]])
     assert (stone.radius_m, stone.material, stone.eps_r) == (0.01, "dielectric", 5.0)
     survey, info = simulate_scene_bscan(sc, n_samples=300, noise=0.01)
@@ -207,3 +213,22 @@ def test_scene_to_forward_and_the_scene_bscan():
         "engine": "forward", "wavelet": "ricker_half", "spreading": "2d", "time_window_s": sc.time_window,
         "n_samples": 300}
     assert survey.metadata["simulation"] == info and 0 <= info["wall_s"] < 60
+    assert survey.metadata["antenna"] == "forward model"
+    np.testing.assert_allclose(survey.orientations_quat_wxyz, np.tile([1.0, 0.0, 0.0, 0.0], (20, 1)))
+    assert simulate_scene_bscan(sc)[0].n_samples == 512  # by default
+
+
+def test_a_shielded_antenna_s_beam_tapers_off_axis_echoes():
+    """A sphere seen 30 deg off the vertical: a Gaussian beam of 20 deg half-angle takes exp(-(30/20)^2 / 2) off
+    each leg; straight below, nothing."""
+    def peak(centre, beam):
+        sc = ForwardScene(eps_r=4.0, spheres=[Sphere(centre, 0.01)])
+        return np.abs(forward_model(sc, [[0.0, 0.0, 0.0]], frequency_hz=F, n_samples=1500, dt_s=DT, footprint="none",
+                                    beam_half_angle_deg=beam)[0]).max()
+
+    d = 0.4
+    side = (d * math.tan(math.radians(30)) + 0.01 * math.sin(math.radians(30)), 0.0, -d - 0.01 * math.cos(
+        math.radians(30)))
+    assert peak(side, 20.0) / peak(side, None) == pytest.approx(math.exp(-(30 / 20) ** 2), rel=2e-3)
+    below = (0.0, 0.0, -0.41)
+    assert peak(below, 20.0) == pytest.approx(peak(below, None), rel=1e-6)
