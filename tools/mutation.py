@@ -69,7 +69,7 @@ MODULES = {
     "inversion.estimate": ["tests/inversion/test_estimate.py"],
     "inversion.evaluate": ["tests/inversion/test_estimate.py"],
     "detection.windows": ["tests/detection/test_windows.py"],
-    "detection.evaluate": ["tests/detection/test_evaluate.py"],
+    "detection.evaluate": ["tests/detection/test_evaluate.py", "tests/detection/test_evaluate_by_hand.py"],
     "detection.data": ["tests/detection/test_data.py"],
 }
 
