@@ -7,7 +7,7 @@ from scipy.stats import chi2
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.trajectory import Trajectory
 from gpr3d.pose.imu import so3_exp
-from gpr3d.pose.metrics import ape, nees, nees_bounds, rpe
+from gpr3d.pose.metrics import aligned_positions, ape, nees, nees_bounds, rpe
 
 pytest.importorskip("evo")
 
@@ -58,3 +58,40 @@ def test_nees_of_drawn_errors_follows_chi_square():
     lo, hi = nees_bounds(1)
     assert (lo, hi) == pytest.approx(tuple(chi2.ppf([0.025, 0.975], 6)))
     assert np.mean((vals >= lo) & (vals <= hi)) == pytest.approx(0.95, abs=0.015)
+
+
+def test_metrics_by_hand_on_gentle_runs():
+    """A run at about 1 m/s on a gentle bend: an estimate shifted by (0.3, 0.4, 0) has APE 0.5 m everywhere without alignment and
+    0 with it; one stretched by 1 % along the run drifts 1 cm per metre (RPE over 1 m, and 2 cm over 2 m), which
+    no rigid alignment changes; a stretched copy's APE needs the scale it is not allowed (SE(3), not Sim(3))."""
+    t = np.arange(0.0, 20.0, 0.1)
+    p = np.c_[t, 0.3 * np.sin(0.1 * t), np.zeros_like(t)]
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (t.size, 1))
+    ref = Trajectory(t, p, q)
+    shifted = Trajectory(t, p + [0.3, 0.4, 0.0], q)
+    res = ape(shifted, ref, align=False)
+    assert res == {"rmse": pytest.approx(0.5), "mean": pytest.approx(0.5), "max": pytest.approx(0.5), "n": t.size}
+    assert ape(shifted, ref)["max"] < 1e-9
+    np.testing.assert_allclose(aligned_positions(shifted, ref), p, atol=1e-9)
+    stretched = Trajectory(t, 1.01 * p, q)
+    r1 = rpe(stretched, ref)
+    assert r1["delta_m"] == 1.0 and r1["rmse"] == pytest.approx(0.01, rel=0.02)
+    assert r1["mean"] == pytest.approx(0.01, rel=0.02) and r1["max"] == pytest.approx(0.01, rel=0.02)
+    assert rpe(stretched, ref, delta_m=2.0)["mean"] == pytest.approx(0.02, rel=0.02)
+    assert ape(Trajectory(t, 2.0 * p, q), ref)["rmse"] > 1.0  # no scale correction
+    # timestamps match within 1 ms, not beyond
+    assert ape(Trajectory(t + 0.0005, p, q), ref)["n"] == t.size
+    with pytest.raises(InvalidDataError, match=r"^the two trajectories share no timestamps \(within 1 ms\): are they "
+                                               r"on one clock\?$"):
+        ape(Trajectory(t + 0.002, p, q), ref)
+
+
+def test_nees_by_hand_and_its_bounds_over_runs():
+    I3 = np.eye(3)
+    # position error only: e = p_true - p_est = (0, 0.1, 0) with a 0.01 m^2 variance: NEES 1
+    cov = np.diag([1e-4, 1e-4, 1e-4, 0.01, 0.01, 0.01])[None]
+    assert nees(I3[None], [[1.0, 2.0, 3.0]], cov, I3[None], [[1.0, 2.1, 3.0]])[0] == pytest.approx(1.0)
+    assert nees(I3[None], [[1.0, 2.0, 3.0]], cov, I3[None], [[1.0, 2.0, 3.0]])[0] == pytest.approx(0.0, abs=1e-12)
+    lo, hi = nees_bounds(5)
+    assert (lo, hi) == pytest.approx(tuple(chi2.ppf([0.025, 0.975], 30) / 5))
+    assert nees_bounds(4, dof=3, prob=0.9) == pytest.approx(tuple(chi2.ppf([0.05, 0.95], 12) / 4))
