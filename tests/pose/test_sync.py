@@ -81,6 +81,9 @@ def test_wheel_trigger_edges_and_messages_in_full():
     np.testing.assert_allclose(wheel_trigger_times(t, d, 0.2, start_m=0.1), [3.1, 3.5, 3.9])  # 0.3, 0.5, 0.7 m
     # a record that begins 0.3 m along: the marks at 0.2 m and before were passed already; 0.4 m fires
     np.testing.assert_allclose(wheel_trigger_times(t, d + 0.3, 0.2), [0.4, 3.1, 3.5, 3.9])
+    # a mark on the first sample's distance was passed already too; two samples make a record
+    np.testing.assert_allclose(wheel_trigger_times(t, d + 0.2, 0.2), [0.8, 3.3, 3.7])
+    np.testing.assert_allclose(wheel_trigger_times([0.0, 2.0], [0.0, 1.0], 0.25), [0.5, 1.0, 1.5, 2.0])
     # a wheel count that jitters back by less than a nanometre is still forward
     assert wheel_trigger_times(t, d - np.r_[0, 0, 5e-10, 0, 0], 0.25).size == 3
     for args, words in [
@@ -95,3 +98,42 @@ def test_wheel_trigger_edges_and_messages_in_full():
     ]:
         with pytest.raises(InvalidDataError, match="^" + words.replace("(", r"\(").replace(")", r"\)") + "$"):
             wheel_trigger_times(*args)
+
+
+def test_time_offset_to_a_fraction_of_its_grid_step_with_a_gyro_bias():
+    """Built by hand: the camera turns in bursts about z (sin^2 pulses, still in between), the gyro reads the rate
+    plus a bias of 0.02 rad/s, and the camera's clock runs 3.37 ms behind the IMU's (not on the 0.5 ms search grid).
+    The bias comes from the still frames, the offset to 0.1 ms from the parabola through the cost's three grid
+    points round its minimum; a clean run has no edge, its frames all kept, its turn in degrees."""
+    from types import SimpleNamespace
+
+    from gpr3d.pose.imu import so3_exp
+
+    t_imu = np.arange(0.0, 40.0, 0.002)
+
+    def rate(t):  # 1.5 s of turning (a sin^2 pulse of 1.2 rad/s peak), then 1.5 s still
+        ph = np.mod(t, 3.0)
+        return np.where(ph < 1.5, 1.2 * np.sin(np.pi * ph / 1.5) ** 2, 0.0)
+
+    def angle(t):  # its integral
+        ph = np.mod(t, 3.0)
+        full = 1.2 * 0.75
+        inside = np.where(ph < 1.5, 1.2 * (ph / 2 - 1.5 / (4 * np.pi) * np.sin(2 * np.pi * ph / 1.5)), full)
+        return np.floor(t / 3.0) * full + inside
+
+    offset = 0.00337
+    gyro = np.c_[np.zeros_like(t_imu), np.zeros_like(t_imu), rate(t_imu) + 0.02]
+    imu = SimpleNamespace(t_s=t_imu, gyro=gyro)
+    t_cam = np.arange(0.5, 39.5, 1 / 15)
+    # frame k's camera stamp is t_cam[k]; the IMU time of that frame is t_cam[k] + offset
+    R = np.stack([np.eye(3)] + [so3_exp([0.0, 0.0, angle(t_cam[k] + offset) - angle(t_cam[k - 1] + offset)])
+                                for k in range(1, t_cam.size)])
+    vo = SimpleNamespace(t_s=t_cam, R=R, valid=np.r_[False, np.ones(t_cam.size - 1, bool)])
+    est = estimate_time_offset(imu, vo)
+    assert est["offset_s"] == pytest.approx(offset, abs=1e-4)
+    assert not est["at_search_edge"] and est["frames"] == t_cam.size - 1
+    assert est["turn_deg"] == pytest.approx(np.degrees(angle(t_cam[-1] + offset) - angle(t_cam[0] + offset)), rel=1e-3)
+    assert est["sharpness"] > 1.0
+    # searched no further than asked: an offset beyond max_offset_s lands on the grid's edge
+    far = estimate_time_offset(imu, vo, max_offset_s=0.002, step_s=0.0005)
+    assert far["at_search_edge"] and far["offset_s"] == pytest.approx(0.002, abs=1e-9)

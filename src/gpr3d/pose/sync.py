@@ -71,7 +71,7 @@ def estimate_time_offset(imu, vo, *, max_offset_s: float = 0.2, step_s: float = 
     if k.size < 10:
         raise InvalidDataError(f"too few odometry frames ({k.size}) overlap the IMU record to estimate an offset")
     ang_vo = np.array([np.linalg.norm(so3_log(vo.R[i])) for i in k])
-    still = ang_vo < np.percentile(ang_vo, 20)
+    still = ang_vo <= np.percentile(ang_vo, 20)  # (<=: frames that did not turn at all tie at the percentile)
     t0, t1 = vo.t_s[k - 1], vo.t_s[k]
     # gyro bias from the quietest fifth of the frames (odometry sees no turn there)
     quiet = np.zeros(imu.t_s.size, bool)
@@ -93,7 +93,8 @@ def estimate_time_offset(imu, vo, *, max_offset_s: float = 0.2, step_s: float = 
         cost = np.mean((A[:, keep] - ang_vo[keep]) ** 2, axis=1)
         i = int(np.argmin(cost))
         r = A[i] - ang_vo
-        sigma = 1.4826 * np.median(np.abs(r - np.median(r))) + 1e-12
+        # (at least 1e-4 rad: odometry's angles are never better, and a run that agrees exactly keeps its frames)
+        sigma = max(1.4826 * np.median(np.abs(r - np.median(r))), 1e-4)
         keep = np.abs(r - np.median(r)) < 5 * sigma
     best = float(grid[i])
     curv = 0.0
