@@ -68,7 +68,7 @@ MODULES = {
     "inversion.hyperbola": ["tests/inversion/test_hyperbola.py"],
     "inversion.estimate": ["tests/inversion/test_estimate.py"],
     "inversion.evaluate": ["tests/inversion/test_estimate.py"],
-    "detection.windows": ["tests/detection/test_windows.py"],
+    "detection.windows": ["tests/detection/test_windows.py", "tests/detection/test_windows_by_hand.py"],
     "detection.evaluate": ["tests/detection/test_evaluate.py", "tests/detection/test_evaluate_by_hand.py"],
     "detection.data": ["tests/detection/test_data.py"],
 }
