@@ -61,8 +61,8 @@ def test_nees_of_drawn_errors_follows_chi_square():
 
 
 def test_metrics_by_hand_on_gentle_runs():
-    """A run at about 1 m/s on a gentle bend: an estimate shifted by (0.3, 0.4, 0) has APE 0.5 m everywhere without alignment and
-    0 with it; one stretched by 1 % along the run drifts 1 cm per metre (RPE over 1 m, and 2 cm over 2 m), which
+    """A run at about 1 m/s on a gentle bend: an estimate shifted by (0.3, 0.4, 0) has APE 0.5 m everywhere without
+    alignment and 0 with it; one stretched by 1 % along the run drifts 1 cm per metre (RPE over 1 m, and 2 cm over 2 m), which
     no rigid alignment changes; a stretched copy's APE needs the scale it is not allowed (SE(3), not Sim(3))."""
     t = np.arange(0.0, 20.0, 0.1)
     p = np.c_[t, 0.3 * np.sin(0.1 * t), np.zeros_like(t)]
