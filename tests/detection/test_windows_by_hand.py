@@ -80,3 +80,81 @@ def test_a_window_s_pixels_and_block():
                                   render_channels(other[:32], "hot", scale=record_scale(other)))
     # no settings: the defaults (256 traces, 256 rows)
     assert windows(_survey(300, ns=300))[0].image.shape == (3, 256, 256)
+
+
+def _win(start=10, n=32, real=None, rows=64, spr=0.1e-9):
+    from gpr3d.detection.windows import Window
+    from gpr3d.io.coco import PixelMap
+
+    return Window(np.zeros((3, rows, n), np.float32), PixelMap(start - 0.5, 1.0, -0.5 * spr, spr), start,
+                  n if real is None else real)
+
+
+def test_window_targets_by_hand():
+    from gpr3d.detection.windows import window_targets
+
+    spr = 0.1e-9
+    win = _win(start=10, n=32, real=28)  # traces 10..37 real, the rest padding; pixel x = trace - 10 + 0.5
+
+    def lab(t0, t1, apex, ta=1e-9, tb=3e-9, **kw):
+        return {"box": [t0, ta, t1, tb], "apex_trace": apex, "apex_time_s": 2e-9, **kw}
+
+    got = window_targets([lab(14, 20, 17), lab(14, 20, 17, visible=False), lab(50, 60, 55)], win)
+    np.testing.assert_allclose(got, [[4.5, 10.5, 10.5, 30.5]], atol=1e-5)  # one: visible, apex inside
+    assert got.dtype == np.float32
+    # cut by the window's left edge (pixel 0 = trace 9.5): kept, clipped, when 60 % or more of it is inside
+    np.testing.assert_allclose(window_targets([lab(5.5, 15.5, 10)], win), [[0.0, 10.5, 6.0, 30.5]], atol=1e-5)
+    assert window_targets([lab(6.5, 14.5, 10)], win).shape == (1, 4)  # 5 of 8 inside: 62.5 %
+    assert window_targets([lab(5.5, 13.5, 10)], win).shape == (0, 4)  # 4 of 8: 50 %
+    # the apex must lie in the window's real traces (its pixel 0 .. n_traces, ends included)
+    assert window_targets([lab(9.5, 14, 9.5)], win).shape == (1, 4)
+    assert window_targets([lab(9.0, 14, 9.4)], win).shape == (0, 4)
+    assert window_targets([lab(30, 37.5, 37.5)], win).shape == (1, 4)
+    assert window_targets([lab(30, 37.6, 37.6)], win).shape == (0, 4)
+    # less than a pixel tall or wide inside: left out
+    assert window_targets([lab(14, 20, 17, ta=1.0e-9, tb=1.05e-9)], win).shape == (0, 4)
+    np.testing.assert_allclose(window_targets([lab(14, 20, 17, ta=-1e-9, tb=1e-9)], win), [[4.5, 0.0, 10.5, 10.5]],
+                               atol=1e-5)  # clipped at the top
+    np.testing.assert_allclose(window_targets([lab(14, 20, 17, tb=9e-9)], win), [[4.5, 10.5, 10.5, 64.0]],
+                               atol=1e-5)  # and at the bottom
+
+
+def test_merge_by_hand():
+    """Boxes back to traces and seconds; a box cut by a window's inner edge loses to the whole one of the next
+    window (its rank halved); the record's own edges cut nothing; boxes are clipped to the record."""
+    from gpr3d.detection.windows import merge
+
+    spr, dt = 0.1e-9, 0.1e-9
+    a, b = _win(start=0, n=32), _win(start=16, n=32)
+    # the same hyperbola: cut at a's right edge (x1 = 31.5 >= 32 - 2) scored 0.9, whole in b scored 0.6
+    boxes, scores = merge([(a, np.array([[20.0, 10, 31.5, 30]]), np.array([0.9])),
+                           (b, np.array([[4.0, 10, 17, 30]]), np.array([0.6]))], n_traces=48, dt_s=dt,
+                          nms=lambda bx, r, iou: [int(np.argmax(r))])
+    np.testing.assert_allclose(boxes, [[16 - 0.5 + 4, 0.95e-9, 16 - 0.5 + 17, 2.95e-9]], rtol=1e-9)
+    assert scores.tolist() == [0.6]
+    # at the record's own left edge a box is not cut: its rank stays, and it wins
+    boxes, scores = merge([(a, np.array([[1.0, 10, 8, 30]]), np.array([0.9])),
+                           (b, np.array([[4.0, 10, 17, 30]]), np.array([0.6]))], n_traces=48, dt_s=dt,
+                          nms=lambda bx, r, iou: [int(np.argmax(r))])
+    assert scores.tolist() == [0.9]
+    np.testing.assert_allclose(boxes, [[0.5, 0.95e-9, 7.5, 2.95e-9]], rtol=1e-9)
+    # clipped to the record: traces 0 .. n - 1
+    boxes, _ = merge([(a, np.array([[-5.0, 10, 40, 30]]), np.array([0.5]))], n_traces=40, dt_s=dt,
+                     nms=lambda bx, r, iou: [0])
+    assert boxes[0, 0] == 0.0 and boxes[0, 2] == 39.0
+    # nms sees time in samples and the ranks; with torchvision's, overlapping duplicates go
+    seen = {}
+
+    def spy(bx, r, iou):
+        seen.update(bx=bx.copy(), r=r.copy(), iou=iou)
+        return [0]
+
+    merge([(a, np.array([[2.0, 10, 8, 30], [3.0, 10, 9, 30]]), np.array([0.8, 0.7]))], n_traces=48, dt_s=dt, iou=0.4,
+          nms=spy)
+    np.testing.assert_allclose(seen["bx"], [[1.5, 9.5, 7.5, 29.5], [2.5, 9.5, 8.5, 29.5]], rtol=1e-9)
+    assert seen["r"].tolist() == [0.8, 0.7] and seen["iou"] == 0.4
+    boxes, scores = merge([(a, np.array([[2.0, 10, 8, 30], [2.5, 10, 8.5, 30], [20, 40, 25, 50]]),
+                            np.array([0.8, 0.7, 0.5]))], n_traces=48, dt_s=dt)
+    assert scores.tolist() == [0.8, 0.5]
+    empty = merge([(a, np.zeros((0, 4)), np.zeros(0))], n_traces=48, dt_s=dt)
+    assert empty[0].shape == (0, 4) and empty[1].shape == (0,)
