@@ -158,3 +158,49 @@ def test_merge_by_hand():
     assert scores.tolist() == [0.8, 0.5]
     empty = merge([(a, np.zeros((0, 4)), np.zeros(0))], n_traces=48, dt_s=dt)
     assert empty[0].shape == (0, 4) and empty[1].shape == (0,)
+
+
+def test_apex_of_box_by_the_label_rule():
+    """Boxes are symmetric about the apex and start BOX_PAD_PERIODS / f above it: an uncut box's apex is its centre;
+    a box cut by the record's first (last) trace takes its full width from the record's width rate and its apex
+    lies half of it in from the uncut side; cut on both sides or by the record's end, the data decide."""
+    from gpr3d.detection.windows import apex_of_box
+    from gpr3d.io.coco import BOX_PAD_PERIODS
+
+    f, spr = 1e9, 0.1e-9
+    proc = np.zeros((60, 100), np.float32)
+    pad = BOX_PAD_PERIODS / f
+    assert apex_of_box(proc, [10, 1e-9, 30, 4e-9], spr, frequency_hz=f) == (20.0, pytest.approx(1e-9 + pad, abs=0))
+    rate = 4e9  # traces of width per second of height beyond the pads
+    h = 5e-9 - 1e-9 - 2 * pad
+    tr, t = apex_of_box(proc, [0, 1e-9, 25, 5e-9], spr, frequency_hz=f, width_per_s=rate)
+    assert tr == pytest.approx(25 - 0.5 * rate * h, abs=1e-9) and t == pytest.approx(1e-9 + pad, rel=1e-12, abs=0)
+    tr, _ = apex_of_box(proc, [40, 1e-9, 59, 5e-9], spr, frequency_hz=f, width_per_s=rate)
+    assert tr == pytest.approx(40 + 0.5 * rate * h, abs=1e-9)
+    tr, _ = apex_of_box(proc, [40, 1e-9, 59, 5e-9], spr, frequency_hz=f, width_per_s=rate, n_traces=80)
+    assert tr == 49.5  # not cut in an 80-trace record: the centre
+    # a very wide rate puts the apex beyond the record: it stays on the record's first trace
+    tr, _ = apex_of_box(proc, [0, 1e-9, 25, 5e-9], spr, frequency_hz=f, width_per_s=1e12)
+    assert tr == 0.0
+
+
+def test_apex_time_from_the_envelope_without_a_frequency():
+    """No frequency: the apex time is the envelope's peak on the apex trace, in the box's upper half, refined by
+    the parabola through its neighbours (a smooth Gaussian pulse here, centred between rows)."""
+    from scipy.signal import hilbert
+
+    from gpr3d.detection.windows import apex_of_box
+
+    spr = 0.1e-9
+    r = np.arange(100)
+    pulse = np.exp(-0.5 * ((r - 30.3) / 3.0) ** 2) * np.cos(2 * np.pi * (r - 30.3) / 6.0)
+    proc = np.tile(pulse, (40, 1)).astype(np.float32)
+    tr, t = apex_of_box(proc, [10, 2e-9, 20, 8e-9], spr)
+    env = np.abs(hilbert(proc[10:21].astype(np.float64), axis=1))[:, 20:81]
+    col = env[5, :31]
+    j = int(np.argmax(col))
+    y = j + 0.5 * (col[j - 1] - col[j + 1]) / (col[j - 1] - 2 * col[j] + col[j + 1])
+    assert tr == 15.0 and t == pytest.approx((20 + y) * spr, rel=1e-9, abs=0)
+    assert abs(t - 30.3 * spr) < 0.3 * spr  # near the pulse's true centre
+    # a box wholly outside the record's rows: no envelope, the box's top
+    assert apex_of_box(proc, [10, 20e-9, 20, 30e-9], spr) == (15.0, 20e-9)
