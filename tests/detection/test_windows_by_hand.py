@@ -61,6 +61,9 @@ def test_a_window_s_pixels_and_block():
     assert spr == pytest.approx(199 * 0.1e-9 / 63, rel=1e-12, abs=0)
     proc = prepare(s, cfg)
     np.testing.assert_array_equal(proc, network_view(s, 64))
+    bare = WindowConfig(traces=32, rows=64, dewow=False, background=False, equalise=False)
+    np.testing.assert_array_equal(prepare(s, bare), network_view(s, 64, dewow=False, background=False,
+                                                                  equalise=False))
     scale = record_scale(proc)
     wins = windows(s, cfg)
     last = wins[-1]
@@ -101,6 +104,12 @@ def test_window_targets_by_hand():
 
     got = window_targets([lab(14, 20, 17), lab(14, 20, 17, visible=False), lab(50, 60, 55)], win)
     np.testing.assert_allclose(got, [[4.5, 10.5, 10.5, 30.5]], atol=1e-5)  # one: visible, apex inside
+    # every kind of left-out label before a kept one: each is skipped, the list goes on
+    skipped = [lab(14, 20, 17, visible=False), lab(50, 60, 55), lab(5.5, 13.5, 10),
+               lab(14, 20, 17, ta=1.0e-9, tb=1.05e-9), lab(14, 20, 17)]
+    np.testing.assert_allclose(window_targets(skipped, win), [[4.5, 10.5, 10.5, 30.5]], atol=1e-5)
+    # a box exactly one pixel wide stays
+    assert window_targets([lab(14, 15, 14.5)], win).shape == (1, 4)
     assert got.dtype == np.float32
     # cut by the window's left edge (pixel 0 = trace 9.5): kept, clipped, when 60 % or more of it is inside
     np.testing.assert_allclose(window_targets([lab(5.5, 15.5, 10)], win), [[0.0, 10.5, 6.0, 30.5]], atol=1e-5)
@@ -126,12 +135,27 @@ def test_merge_by_hand():
 
     spr, dt = 0.1e-9, 0.1e-9
     a, b = _win(start=0, n=32), _win(start=16, n=32)
-    # the same hyperbola: cut at a's right edge (x1 = 31.5 >= 32 - 2) scored 0.9, whole in b scored 0.6
-    boxes, scores = merge([(a, np.array([[20.0, 10, 31.5, 30]]), np.array([0.9])),
+    # the same hyperbola: cut at a's right edge (x1 = 30 >= 32 - 2) scored 0.9, whole in b scored 0.6
+    boxes, scores = merge([(a, np.array([[20.0, 10, 30.0, 30]]), np.array([0.9])),
                            (b, np.array([[4.0, 10, 17, 30]]), np.array([0.6]))], n_traces=48, dt_s=dt,
                           nms=lambda bx, r, iou: [int(np.argmax(r))])
     np.testing.assert_allclose(boxes, [[16 - 0.5 + 4, 0.95e-9, 16 - 0.5 + 17, 2.95e-9]], rtol=1e-9)
     assert scores.tolist() == [0.6]
+    # cut at b's left edge (x0 = 2 <= 2): a's whole box wins
+    _, scores = merge([(b, np.array([[2.0, 10, 10, 30]]), np.array([0.9])),
+                       (a, np.array([[17.5, 10, 26, 30]]), np.array([0.6]))], n_traces=48, dt_s=dt,
+                      nms=lambda bx, r, iou: [int(np.argmax(r))])
+    assert scores.tolist() == [0.6]
+    # x0 = 2.5 is not within the default 2 pixels of the edge: b's box keeps its rank
+    _, scores = merge([(b, np.array([[2.5, 10, 10, 30]]), np.array([0.9])),
+                       (a, np.array([[17.5, 10, 26, 30]]), np.array([0.6]))], n_traces=48, dt_s=dt,
+                      nms=lambda bx, r, iou: [int(np.argmax(r))])
+    assert scores.tolist() == [0.9]
+    # b ends at the record's last trace: its right edge is the record's, nothing is cut there
+    _, scores = merge([(b, np.array([[20.0, 10, 31.5, 30]]), np.array([0.9])),
+                       (a, np.array([[20.0, 10, 26, 30]]), np.array([0.6]))], n_traces=48, dt_s=dt,
+                      nms=lambda bx, r, iou: [int(np.argmax(r))])
+    assert scores.tolist() == [0.9]
     # at the record's own left edge a box is not cut: its rank stays, and it wins
     boxes, scores = merge([(a, np.array([[1.0, 10, 8, 30]]), np.array([0.9])),
                            (b, np.array([[4.0, 10, 17, 30]]), np.array([0.6]))], n_traces=48, dt_s=dt,
