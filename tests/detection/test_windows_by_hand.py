@@ -135,33 +135,25 @@ def test_merge_by_hand():
 
     spr, dt = 0.1e-9, 0.1e-9
     a, b = _win(start=0, n=32), _win(start=16, n=32)
+
+    def duel(first, second):
+        """The record box and score of the better-ranked of two boxes (win, box, score) that see one target."""
+        parts = [(w, np.array([bx], float), np.array([sc])) for w, bx, sc in (first, second)]
+        boxes, scores = merge(parts, n_traces=48, dt_s=dt, nms=lambda bx, r, iou: [int(np.argmax(r))])
+        return boxes[0], float(scores[0])
+
     # the same hyperbola: cut at a's right edge (x1 = 30 >= 32 - 2) scored 0.9, whole in b scored 0.6
-    boxes, scores = merge([(a, np.array([[20.0, 10, 30.0, 30]]), np.array([0.9])),
-                           (b, np.array([[4.0, 10, 17, 30]]), np.array([0.6]))], n_traces=48, dt_s=dt,
-                          nms=lambda bx, r, iou: [int(np.argmax(r))])
-    np.testing.assert_allclose(boxes, [[16 - 0.5 + 4, 0.95e-9, 16 - 0.5 + 17, 2.95e-9]], rtol=1e-9)
-    assert scores.tolist() == [0.6]
-    # cut at b's left edge (x0 = 2 <= 2): a's whole box wins
-    _, scores = merge([(b, np.array([[2.0, 10, 10, 30]]), np.array([0.9])),
-                       (a, np.array([[17.5, 10, 26, 30]]), np.array([0.6]))], n_traces=48, dt_s=dt,
-                      nms=lambda bx, r, iou: [int(np.argmax(r))])
-    assert scores.tolist() == [0.6]
-    # x0 = 2.5 is not within the default 2 pixels of the edge: b's box keeps its rank
-    _, scores = merge([(b, np.array([[2.5, 10, 10, 30]]), np.array([0.9])),
-                       (a, np.array([[17.5, 10, 26, 30]]), np.array([0.6]))], n_traces=48, dt_s=dt,
-                      nms=lambda bx, r, iou: [int(np.argmax(r))])
-    assert scores.tolist() == [0.9]
+    box, score = duel((a, [20.0, 10, 30.0, 30], 0.9), (b, [4.0, 10, 17, 30], 0.6))
+    np.testing.assert_allclose(box, [16 - 0.5 + 4, 0.95e-9, 16 - 0.5 + 17, 2.95e-9], rtol=1e-9)
+    assert score == 0.6
+    assert duel((b, [2.0, 10, 10, 30], 0.9), (a, [17.5, 10, 26, 30], 0.6))[1] == 0.6  # cut at b's left edge
+    assert duel((b, [2.5, 10, 10, 30], 0.9), (a, [17.5, 10, 26, 30], 0.6))[1] == 0.9  # 2.5 px in: not cut
     # b ends at the record's last trace: its right edge is the record's, nothing is cut there
-    _, scores = merge([(b, np.array([[20.0, 10, 31.5, 30]]), np.array([0.9])),
-                       (a, np.array([[20.0, 10, 26, 30]]), np.array([0.6]))], n_traces=48, dt_s=dt,
-                      nms=lambda bx, r, iou: [int(np.argmax(r))])
-    assert scores.tolist() == [0.9]
+    assert duel((b, [20.0, 10, 31.5, 30], 0.9), (a, [20.0, 10, 26, 30], 0.6))[1] == 0.9
     # at the record's own left edge a box is not cut: its rank stays, and it wins
-    boxes, scores = merge([(a, np.array([[1.0, 10, 8, 30]]), np.array([0.9])),
-                           (b, np.array([[4.0, 10, 17, 30]]), np.array([0.6]))], n_traces=48, dt_s=dt,
-                          nms=lambda bx, r, iou: [int(np.argmax(r))])
-    assert scores.tolist() == [0.9]
-    np.testing.assert_allclose(boxes, [[0.5, 0.95e-9, 7.5, 2.95e-9]], rtol=1e-9)
+    box, score = duel((a, [1.0, 10, 8, 30], 0.9), (b, [4.0, 10, 17, 30], 0.6))
+    assert score == 0.9
+    np.testing.assert_allclose(box, [0.5, 0.95e-9, 7.5, 2.95e-9], rtol=1e-9)
     # clipped to the record: traces 0 .. n - 1
     boxes, _ = merge([(a, np.array([[-5.0, 10, 40, 30]]), np.array([0.5]))], n_traces=40, dt_s=dt,
                      nms=lambda bx, r, iou: [0])
