@@ -14,7 +14,7 @@ def test_stores_float32_and_axes():
     s = make(t0_s=0.5e-9, eps_r=4.0)
     assert s.data.dtype == np.float32 and s.data.flags.c_contiguous
     assert s.shape == (10, 20) and len(s) == 10
-    assert s.times_s[3] == pytest.approx(0.3e-9)
+    assert s.times_s[3] == pytest.approx(0.3e-9, rel=1e-9, abs=0)
     assert s.twt_s[5] == pytest.approx(0.0)
     # eps_r 4 -> v = c/2; 1 ns two-way -> 0.25 * c * 1e-9 m
     assert s.depths_m()[15] == pytest.approx(C0 / 2 * 1e-9 / 2)

@@ -17,8 +17,8 @@ def test_pixel_map_round_trip_and_hand_case():
     pm = PixelMap(trace0=99.5, traces_per_px=1.0, t0_s=-0.5e-10, s_per_px=1e-10)
     # trace 110 is column 10 (centre at pixel 10.5); 2 ns is row 20 (centre at 20.5)
     assert pm.box_to_px([110, 2e-9, 130, 3e-9]) == pytest.approx([10.5, 20.5, 30.5, 30.5])
-    assert pm.px_to_box(pm.box_to_px([110, 2e-9, 130, 3e-9])) == pytest.approx([110, 2e-9, 130, 3e-9])
-    assert pm.px_to_point(*pm.point_to_px(7.25, 1.5e-9)) == pytest.approx((7.25, 1.5e-9))
+    assert pm.px_to_box(pm.box_to_px([110, 2e-9, 130, 3e-9])) == pytest.approx([110, 2e-9, 130, 3e-9], rel=1e-9, abs=0)
+    assert pm.px_to_point(*pm.point_to_px(7.25, 1.5e-9)) == pytest.approx((7.25, 1.5e-9), rel=1e-9, abs=0)
 
 
 def _win(start=100, n=256, real=256):
@@ -48,7 +48,7 @@ def test_merge_prefers_the_whole_box_and_maps_back():
     boxes, scores = merge([(left, cut, np.array([0.9])), (right, whole, np.array([0.8]))], n_traces=600, dt_s=dt)
     assert len(boxes) == 1
     assert scores[0] == pytest.approx(0.8)
-    assert boxes[0] == pytest.approx([200, 2e-9, 280, 4e-9])
+    assert boxes[0] == pytest.approx([200, 2e-9, 280, 4e-9], rel=1e-9, abs=0)
 
 
 def test_merge_keeps_neighbours_apart():
@@ -81,7 +81,7 @@ def test_apex_from_box_rule_and_from_data_at_the_record_edge():
     f = s.frequency_hz
     box = [apex_tr - 20, apex_t - BOX_PAD_PERIODS / f, apex_tr + 20, arr.max() + BOX_PAD_PERIODS / f]
     tr, t = apex_of_box(proc, box, spr, frequency_hz=f)
-    assert tr == pytest.approx(apex_tr) and t == pytest.approx(apex_t)
+    assert tr == pytest.approx(apex_tr, rel=1e-9, abs=0) and t == pytest.approx(apex_t, rel=1e-9, abs=0)
     # without a frequency, the apex time comes from the envelope on the apex trace (of unequalised data)
     plain = prepare(s, WindowConfig(equalise=False))
     tr, t = apex_of_box(plain, box, spr)
@@ -121,7 +121,7 @@ def test_cut_boxes_take_their_width_from_the_record_s_whole_boxes():
     spr = t_end / 255
     for lab in cut:
         tr, t = apex_of_box(blank, lab["box"], spr, frequency_hz=f, n_traces=scene.n_traces, width_per_s=rate)
-        assert abs(tr - lab["apex_trace"]) <= 1.5 and t == pytest.approx(lab["apex_time_s"])
+        assert abs(tr - lab["apex_trace"]) <= 1.5 and t == pytest.approx(lab["apex_time_s"], rel=1e-9, abs=0)
     assert width_rate([b for b in boxes if b[0] == 0], scene.n_traces, t_end, f) is None  # no whole box: no rate
     assert width_rate(boxes, scene.n_traces, t_end, None) is None
 

@@ -204,8 +204,9 @@ def test_a_time_crop_shows_the_same_times_and_keeps_the_targets_inside():
     late = dict(lab["labels"][0], apex_time_s=15e-9, depth_m=0.6)
     rec = prepare_depth_record(s, {"eps_r": 9.0, "labels": [lab["labels"][0], late]}, size=224)
     c = crop_time(rec, 0.5)
-    assert c.window_s == pytest.approx(rec.window_s * 112 / 223)
-    assert c.direct_frac * c.window_s == pytest.approx(rec.direct_frac * rec.window_s)  # same direct-wave time
+    assert c.window_s == pytest.approx(rec.window_s * 112 / 223, rel=1e-9, abs=0)
+    # the same direct-wave time
+    assert c.direct_frac * c.window_s == pytest.approx(rec.direct_frac * rec.window_s, rel=1e-9, abs=0)
     assert [x["depth_m"] for x in c.labels] == [0.3]  # the apex at 15 ns lies past the cut (10 ns)
     # row k of the crop shows the time k * c.s_per_row of the original
     k = np.arange(224)

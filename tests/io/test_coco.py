@@ -9,9 +9,9 @@ def test_the_pixel_map_both_ways_by_hand():
     pm = PixelMap(trace0=10.0, traces_per_px=2.0, t0_s=1e-9, s_per_px=0.5e-9)
     # trace 14 at column 2, 3 ns at row 4; trace 30 at column 10, 6 ns at row 10
     assert pm.box_to_px([14, 3e-9, 30, 6e-9]) == pytest.approx([2.0, 4.0, 10.0, 10.0])
-    assert pm.px_to_box([2.0, 4.0, 10.0, 10.0]) == pytest.approx([14.0, 3e-9, 30.0, 6e-9])
+    assert pm.px_to_box([2.0, 4.0, 10.0, 10.0]) == pytest.approx([14.0, 3e-9, 30.0, 6e-9], rel=1e-9, abs=0)
     assert pm.point_to_px(12.0, 2e-9) == pytest.approx((1.0, 2.0))
-    assert pm.px_to_point(1.0, 2.0) == pytest.approx((12.0, 2e-9))
+    assert pm.px_to_point(1.0, 2.0) == pytest.approx((12.0, 2e-9), rel=1e-9, abs=0)
     ident = PixelMap()
     assert ident.box_to_px([1, 2, 3, 4]) == [1.0, 2.0, 3.0, 4.0] and ident.px_to_box([1, 2, 3, 4]) == [1, 2, 3, 4]
     assert ident.point_to_px(5, 6) == (5, 6) and ident.px_to_point(5, 6) == (5, 6)
@@ -33,8 +33,8 @@ def test_coco_dataset_by_hand():
                 "labels": [dict(lab, box=[2, 1e-9, 6, 3e-9])]}]
     c = coco_dataset(samples, 51)
     assert c["images"][0] == {"id": 7, "file_name": "a.png", "width": 30, "height": 51, "eps_r": 6.0,
-                              "row_s": pytest.approx(0.2e-9)}
-    assert c["images"][1]["row_s"] == pytest.approx(0.2e-9)
+                              "row_s": pytest.approx(0.2e-9, rel=1e-9, abs=0)}
+    assert c["images"][1]["row_s"] == pytest.approx(0.2e-9, rel=1e-9, abs=0)
     a = c["annotations"]
     assert [x["id"] for x in a] == [1, 2, 3] and [x["image_id"] for x in a] == [7, 7, 8]
     assert a[0]["bbox"] == pytest.approx([4.0, 10.0, 8.0, 15.0]) and a[0]["area"] == pytest.approx(120.0)

@@ -139,7 +139,7 @@ def test_every_header_field_the_reader_uses(tmp_path):
     np.testing.assert_allclose(s.timestamps_s, [0.0, 0.5, 1.0])
     m = s.metadata
     assert (m["format"], m["channel"], m["n_channels"], m["antenna"]) == ("rd3", 0, 1, "1.2 GHz custom")
-    assert m["range_s"] == pytest.approx(8 * 0.25e-9)
+    assert m["range_s"] == pytest.approx(8 * 0.25e-9, rel=1e-9, abs=0)
     assert m["header_timewindow_s"] == pytest.approx(3.5e-9, rel=1e-9, abs=0)
     assert m["sampling_frequency_hz"] == 4e9
     assert m["stacks"] == 16.0

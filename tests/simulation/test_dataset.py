@@ -111,7 +111,7 @@ def test_pack_and_export_round_trip(tmp_path):
         orig = gpr3d.read(tmp_path / "ds" / "samples" / f"{i:06d}" / "bscan.h5")
         # forward samples already have 512 samples: only float16 rounding separates them
         np.testing.assert_allclose(s.data, orig.data, atol=1e-3 * np.abs(orig.data).max())
-        assert s.dt_s == pytest.approx(orig.dt_s)
+        assert s.dt_s == pytest.approx(orig.dt_s, rel=1e-9, abs=0)
         assert lab == json.loads((tmp_path / "ds" / "samples" / f"{i:06d}" / "labels.json").read_text())
     coco = ds.export_coco(tmp_path / "coco", image_height=64)
     c = coco_mod.COCO(str(tmp_path / "coco" / "coco.json"))

@@ -26,7 +26,7 @@ def test_offset_apex_time():
     t = s.targets[0]
     # above the target the shortest path touches the top: two legs of hypot(0.05, depth)
     expect = 2 * math.hypot(0.05, t.depth_m) / s.medium.velocity_m_s
-    assert hyperbola_times(s, t)[25] == pytest.approx(expect, rel=1e-6)
+    assert hyperbola_times(s, t)[25] == pytest.approx(expect, rel=1e-6, abs=0)
 
 
 def test_labels_and_box_rule():
@@ -35,11 +35,11 @@ def test_labels_and_box_rule():
     lab = label_scene(s, n, dt)[0]
     f = s.antenna.frequency_hz
     assert lab["apex_trace"] == pytest.approx(25.0)
-    assert lab["apex_time_s"] == pytest.approx(math.sqrt(2) / f + 2 * 0.2 / s.medium.velocity_m_s)
+    assert lab["apex_time_s"] == pytest.approx(math.sqrt(2) / f + 2 * 0.2 / s.medium.velocity_m_s, rel=1e-9, abs=0)
     i0, t0, i1, t1 = lab["box"]
     reach = (0.21) * math.tan(math.radians(45))  # depth to centre * tan(45)
     assert (i0, i1) == (int(np.ceil((0.5 - reach) / 0.02 - 1e-9)), int((0.5 + reach) / 0.02 + 1e-9))
-    assert t0 == pytest.approx(lab["apex_time_s"] - 0.7 / f)
+    assert t0 == pytest.approx(lab["apex_time_s"] - 0.7 / f, rel=1e-9, abs=0)
     assert t0 < lab["apex_time_s"] < t1 <= (n - 1) * dt
     assert lab["visible"]
 
@@ -77,15 +77,15 @@ def test_every_field_of_a_label_by_hand():
     b = labs[1]
     assert (b["kind"], b["category"], b["depth_m"], b["x_m"], b["radius_m"]) == ("steel_pipe", 2, 0.1, 0.3, 0.05)
     assert labs[0]["category"] == 1  # rebar
-    assert b["apex_twt_s"] == pytest.approx(2 * 0.1 / v, rel=1e-6)
-    assert b["apex_time_s"] == pytest.approx(math.sqrt(2) / f + 2 * 0.1 / v, rel=1e-6)
+    assert b["apex_twt_s"] == pytest.approx(2 * 0.1 / v, rel=1e-6, abs=0)
+    assert b["apex_time_s"] == pytest.approx(math.sqrt(2) / f + 2 * 0.1 / v, rel=1e-6, abs=0)
     assert b["apex_trace"] == pytest.approx(15.0)
     reach = 0.15  # depth to the centre times tan 45
     i0, t0, i1, t1 = b["box"]
     assert (i0, i1) == (8, 22)  # x within 0.15 m of 0.3: 0.16 .. 0.44
     far = 2 * (math.hypot(0.14, 0.15) - 0.05) / v  # the latest arrival: the box's outermost traces
-    assert t1 == pytest.approx(math.sqrt(2) / f + far + 0.7 / f, rel=1e-5)
-    assert t0 == pytest.approx(b["apex_time_s"] - 0.7 / f)
+    assert t1 == pytest.approx(math.sqrt(2) / f + far + 0.7 / f, rel=1e-5, abs=0)
+    assert t0 == pytest.approx(b["apex_time_s"] - 0.7 / f, rel=1e-9, abs=0)
     assert b["visible"] and reach > 0
 
 
@@ -93,10 +93,11 @@ def test_a_short_record_clips_the_box_and_hides_the_apex():
     s = scene()
     n, dt = 100, 0.02e-9  # 1.98 ns: the apex (1.41 + 2.6 ns) lies past the end
     lab = label_scene(s, n, dt)[0]
-    assert lab["box"][3] == pytest.approx((n - 1) * dt) and not lab["visible"]
+    assert lab["box"][3] == pytest.approx((n - 1) * dt, rel=1e-9, abs=0) and not lab["visible"]
     s.targets[0].depth_m = 0.01  # shallow, and no source delay: the box would start before the record
     lab = label_traces(s, s.trace_midpoints_x(), 400, 0.02e-9, source_delay_s=0.0)[0]
-    assert lab["apex_time_s"] == pytest.approx(lab["apex_twt_s"]) and lab["box"][1] == 0.0  # clipped at 0
+    # clipped at 0
+    assert lab["apex_time_s"] == pytest.approx(lab["apex_twt_s"], rel=1e-9, abs=0) and lab["box"][1] == 0.0
 
 
 def test_stops_gaps_and_a_target_beside_the_line():
@@ -127,7 +128,7 @@ def test_the_circle_path_with_offset_off_the_apex():
     px, pz = 0.05 * np.cos(a), -0.35 + 0.05 * np.sin(a)
     for x in (-0.3, 0.0, 0.3):
         want = np.min(np.hypot(px - (x - 0.1), pz) + np.hypot(px - (x + 0.1), pz)) / s.medium.velocity_m_s
-        assert hyperbola_times(s, t, [x])[0] == pytest.approx(want, rel=1e-8), x
+        assert hyperbola_times(s, t, [x])[0] == pytest.approx(want, rel=1e-8, abs=0), x
 
 
 def test_labels_as_json_text():

@@ -50,7 +50,8 @@ def test_grid_and_time_rules():
     eps = min(s.max_eps_r(), max(1.5 * s.medium.eps_r, 20))
     lam_min = C0 / (2 * s.antenna.frequency_hz * math.sqrt(eps))
     assert lam_min / 10 - 1e-4 <= s.dx <= lam_min / 10
-    assert s.time_window == pytest.approx(2 * s.depth_m / s.medium.velocity_m_s + 2 * math.sqrt(2) / s.antenna.frequency_hz)
+    assert s.time_window == pytest.approx(2 * s.depth_m / s.medium.velocity_m_s
+                                          + 2 * math.sqrt(2) / s.antenna.frequency_hz, rel=1e-9, abs=0)
     x = s.trace_midpoints_x()
     assert x.size == s.n_traces and np.allclose(np.diff(x), s.trace_step_m)
 
