@@ -55,10 +55,13 @@ def example_rows(estimator, work: Path) -> list[str]:
     lines = ["| method | eps_r | sigma | error % | depth to top m | error mm |", "|---|---|---|---|---|---|"]
     if not found:
         return lines + ["| (the detector found no hyperbola) | | | | | |"]
-    for m in METHODS:
-        r = estimate_depths(s, found, method=m, estimator=estimator)
+    for m, radius in [(m, None) for m in METHODS] + [("fit", 0.010), ("hybrid", 0.010)]:
+        r = estimate_depths(s, found, method=m, estimator=estimator, radius_m=radius)
         e, d = r["permittivity"]["eps_r"], r["targets"][0]["depth_m"]
-        lines.append(f"| {m} | {e:.3f} | {r['permittivity']['sigma_eps_r']:.3f} | {100 * (e - 6) / 6:+.1f} | "
+        name = m if radius is None else f"{m}, radius 10 mm given"
+        if m == "hybrid":
+            name += " (fit agrees)" if r["permittivity"].get("fit_agrees") else " (fit left out: disagrees)"
+        lines.append(f"| {name} | {e:.3f} | {r['permittivity']['sigma_eps_r']:.3f} | {100 * (e - 6) / 6:+.1f} | "
                      f"{d:.4f} | {1000 * (d - 0.08):+.1f} |")
     return lines
 

@@ -124,3 +124,43 @@ def test_train_depthnet_bad_arguments_one_line(tmp_path, args, msg):
     r = run_cli("train", "depthnet", "--out", tmp_path / "run", *args)
     assert r.returncode == 1 and msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert not (tmp_path / "run" / "checkpoint.pt").exists()
+
+
+def test_depth_with_a_known_radius_reads_the_rod_where_the_point_reads_it_low(tmp_path):
+    from tests.inversion.test_hyperbola import _rods_record
+
+    s, boxes, apexes, targets, eps = _rods_record()
+    s.save(tmp_path / "rods.h5")
+    x0, top, r = targets[2]  # the rod of 5 cm radius, top 25 cm deep
+    (tmp_path / "b.json").write_text(json.dumps({"targets": [{"box": boxes[2], "apex_trace": apexes[2][0],
+                                                              "apex_time_s": apexes[2][1]}]}))
+    out = tmp_path / "d.json"
+    got = {}
+    for extra in ([], ["--radius", "0.05"]):
+        res = run_cli("depth", tmp_path / "rods.h5", "--boxes", tmp_path / "b.json", "--method", "fit", "--out", out,
+                      *extra)
+        assert res.returncode == 0, res.stderr
+        got[bool(extra)] = json.loads(out.read_text())
+    known, point = got[True], got[False]
+    assert known["permittivity"]["fit"]["model"] == "cylinder, radius given"
+    assert known["permittivity"]["eps_r"] == pytest.approx(eps, rel=0.02)
+    assert known["targets"][0]["depth_m"] == pytest.approx(top, abs=0.005)
+    assert point["permittivity"]["fit"]["model"] == "point"
+    assert point["permittivity"]["eps_r"] < eps * (1 - 0.5 * r / (top + r))
+
+
+@pytest.mark.parametrize("args, msg", [
+    (["depth", "{rec}", "--radius", "-0.01", "--method", "fit"], "--radius must be a radius in metres in 0..50, got -0.01"),
+    (["depth", "{rec}", "--radius", "nan", "--method", "fit"], "--radius must be a radius in metres in 0..50, got nan"),
+    (["depth", "{rec}", "--radius", "0.01", "--method", "net"],
+     "--radius is used by the hyperbola fit: give it with fit or hybrid, not net"),
+    (["detect", "{rec}", "--out", "{tmp}/d.json", "--radius", "0.01", "--depth", "none"],
+     "--radius is used by the hyperbola fit: give it with fit or hybrid, not none"),
+    (["reconstruct", "{rec}", "--out", "{tmp}/r", "--radius", "0.01", "--eps-r", "6"],
+     "--radius is used to estimate eps_r: leave --eps-r out, or leave --radius out"),
+])
+def test_a_wrong_radius_is_one_line_before_any_work(diffractor, tmp_path, args, msg):
+    d, _ = diffractor
+    r = run_cli(*[a.format(rec=d / "line.h5", tmp=tmp_path) for a in args])
+    assert r.returncode == 1 and r.stderr.strip() == f"gpr3d: error: {msg}", r.stderr
+    assert not (tmp_path / "d.json").exists() and not (tmp_path / "r").exists()

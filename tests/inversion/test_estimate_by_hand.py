@@ -11,7 +11,8 @@ import pytest
 import gpr3d.inversion.hyperbola as hyperbola
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.survey import Survey
-from gpr3d.inversion.estimate import FIT_BIAS, FIT_MODEL_ERROR, estimate_depths
+from gpr3d.inversion.estimate import (FIT_BIAS, FIT_BIAS_RADIUS, FIT_MODEL_ERROR, FIT_MODEL_ERROR_RADIUS,
+                                      estimate_depths)
 
 
 class _Net:
@@ -33,8 +34,8 @@ def stubs(monkeypatch):
     """fit_boxes and combine_permittivity replaced: the fit says eps (fit_eps, fit_sigma) from its two targets."""
     seen = {}
 
-    def fit_boxes(survey, boxes, apexes=None, trace_spacing_m=None, model="point"):
-        seen.update(boxes=boxes, apexes=apexes, spacing=trace_spacing_m, model=model)
+    def fit_boxes(survey, boxes, apexes=None, trace_spacing_m=None, model="point", radius_m=None):
+        seen.update(boxes=boxes, apexes=apexes, spacing=trace_spacing_m, model=model, radius_m=radius_m)
         return [_fit(True, 6.1, 0.21, 0.01), _fit(False, float("nan"), float("nan"), float("nan"))]
 
     monkeypatch.setattr(hyperbola, "fit_boxes", fit_boxes)
@@ -66,9 +67,10 @@ def test_the_network_alone(stubs):
 def test_the_fit_alone(stubs):
     out = estimate_depths(_record(), TARGETS, method="fit", trace_spacing_m=0.02)
     assert stubs["apexes"] == [(10.0, 2e-9), (25.5, 2.2e-9)] and stubs["model"] == "point"
+    assert stubs["radius_m"] is None
     p = out["permittivity"]
-    assert p == {"method": "fit", "fit": {"eps_r": 6.1, "sigma_eps_r": 0.3, "n_hyperbolas": 1}, "eps_r": 6.1,
-                 "sigma_eps_r": 0.3}
+    assert p == {"method": "fit", "fit": {"eps_r": 6.1, "sigma_eps_r": 0.3, "n_hyperbolas": 1, "model": "point"},
+                 "eps_r": 6.1, "sigma_eps_r": 0.3}
     t0, t1 = out["targets"]
     assert (t0["depth_m"], t0["sigma_depth_m"]) == (0.21, 0.01)
     assert math.isnan(t1["depth_m"]) and math.isnan(t1["sigma_depth_m"])  # its fit failed
@@ -103,3 +105,26 @@ def test_an_unknown_method_is_named():
     with pytest.raises(InvalidDataError, match=re.escape("unknown depth method 'both'; choose one of hybrid, net, "
                                                          "fit")):
         estimate_depths(_record(), TARGETS, method="both")
+
+
+@pytest.mark.parametrize("radius, radii", [(0.008, [0.008, 0.008]), ([0.006, 0.012], [0.006, 0.012])])
+def test_known_radii_go_to_a_cylinder_fit_and_the_hybrid_takes_its_own_bias_and_error(stubs, radius, radii):
+    net = _Net(6.4, 0.5, [0.2, 0.35])
+    out = estimate_depths(_record(), TARGETS, estimator=net, trace_spacing_m=0.02, radius_m=radius)
+    assert stubs["model"] == "cylinder" and stubs["radius_m"] == radii
+    p = out["permittivity"]
+    assert p["fit"]["model"] == "cylinder, radius given" and p["fit_agrees"] is True
+    fc = 6.1 / (1 + FIT_BIAS_RADIUS)  # 6.282: within 2 x 0.5 of 6.4
+    sf = math.hypot(0.3 / (1 + FIT_BIAS_RADIUS), FIT_MODEL_ERROR_RADIUS * fc)
+    w1, w2 = 1 / 0.5**2, 1 / sf**2
+    assert p["eps_r"] == pytest.approx((w1 * 6.4 + w2 * fc) / (w1 + w2), rel=1e-12)
+    assert p["sigma_eps_r"] == pytest.approx(1 / math.sqrt(w1 + w2), rel=1e-12)
+
+
+def test_a_wrong_radius_is_named_before_any_work(stubs):
+    net = _Net(6.4, 0.5, [0.2, 0.35])
+    with pytest.raises(InvalidDataError, match="radius_m has 3 values for 2 boxes: give one, or one per box"):
+        estimate_depths(_record(), TARGETS, estimator=net, trace_spacing_m=0.02, radius_m=[0.01, 0.01, 0.01])
+    with pytest.raises(InvalidDataError, match="radius_m must be a number of metres in 0..50, got -0.01"):
+        estimate_depths(_record(), TARGETS, estimator=net, trace_spacing_m=0.02, radius_m=-0.01)
+    assert net.calls == [] and "model" not in stubs

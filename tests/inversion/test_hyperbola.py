@@ -139,3 +139,119 @@ def test_joint_fit_of_a_synthetic_record_recovers_speed_radii_and_depths():
         assert fit.ok and fit.x0_m == pytest.approx(x0, abs=0.005)
         assert fit.depth_m == pytest.approx(top, abs=0.005)
         assert fit.radius_m == pytest.approx(r, abs=0.02)
+
+
+# a known radius: the gprMax example's geometry (antennas 40 mm apart, PEC rod of 10 mm radius, top 80 mm deep)
+EX = dict(h=0.04, x0=0.06, zc=0.09, r=0.01, eps=6.0)
+
+
+def test_a_known_radius_gives_the_parameters_back_where_a_free_radius_trades_it_for_speed():
+    x = np.arange(60) * 0.002
+    exact = _picks(x, t0=0.943e-9, **EX)
+    f = fit_hyperbola(x, exact, t0_s=0.943e-9, offset_m=0.04, frequency_hz=1.5e9, model="cylinder",
+                      radius_m=0.01, traces=np.arange(60))
+    assert f.ok and f.model == "cylinder" and f.radius_m == 0.01
+    assert f.eps_r == pytest.approx(6.0, rel=1e-5)
+    assert f.depth_m == pytest.approx(0.08, abs=1e-6) and f.x0_m == pytest.approx(0.06, abs=1e-6)
+    assert f.apex_trace == pytest.approx(30.0, abs=1e-3)
+    # at x0 the wave reflects at the rod's top, 80 mm under the antennas' midpoint, 20 mm from each
+    assert f.apex_time_s == pytest.approx(0.943e-9 + 2 * math.hypot(0.02, 0.08) / (C0 / math.sqrt(6)),
+                                          rel=1e-9, abs=0)
+    assert f.rms_s < 1e-15
+    # one picosecond of noise: the free radius wanders, the known one holds eps_r within 1 %
+    rng = np.random.default_rng(3)
+    free, known = [], []
+    for _ in range(6):
+        t = exact + rng.normal(0, 1e-12, x.size)
+        free.append(fit_hyperbola(x, t, t0_s=0.943e-9, offset_m=0.04, frequency_hz=1.5e9, model="cylinder").eps_r)
+        k = fit_hyperbola(x, t, t0_s=0.943e-9, offset_m=0.04, frequency_hz=1.5e9, radius_m=0.01)
+        known.append(k.eps_r)
+        assert abs(k.eps_r - 6.0) < 3 * k.sigma_eps_r + 1e-3  # its uncertainty covers the error
+    assert max(abs(e - 6.0) for e in known) < 0.06
+    assert max(abs(e - 6.0) for e in free) > 0.15
+
+
+def test_a_point_fit_of_a_rod_reads_eps_low_by_radius_over_centre_depth_and_a_zero_radius_is_the_point():
+    x = np.arange(60) * 0.002
+    t = _picks(x, t0=0.0, **EX)
+    point = fit_hyperbola(x, t, t0_s=0.0, offset_m=0.04, model="point")
+    # apex time and curvature matched: eps_point ~ eps (zc - R) / zc = 6 x 8/9 to first order in R / zc
+    assert point.eps_r == pytest.approx(6.0 * 8 / 9, rel=0.02)
+    zero = fit_hyperbola(x, t, t0_s=0.0, offset_m=0.04, radius_m=0.0)
+    assert zero.model == "point" and zero.radius_m == 0.0
+    assert zero.eps_r == pytest.approx(point.eps_r, rel=1e-6) and zero.depth_m == pytest.approx(point.depth_m, rel=1e-6)
+
+
+def test_a_known_radius_with_time_zero_from_the_direct_wave():
+    from gpr3d.inversion.hyperbola import time_zero
+
+    x = np.arange(60) * 0.002
+    v = C0 / math.sqrt(6.0)
+    dw = 1.2e-9
+    t = _picks(x, t0=time_zero(dw, 0.04, v), **EX)
+    f = fit_hyperbola(x, t, direct_wave_s=dw, offset_m=0.04, frequency_hz=1.5e9, radius_m=0.01)
+    assert f.eps_r == pytest.approx(6.0, rel=1e-5) and f.depth_m == pytest.approx(0.08, abs=1e-6)
+    assert f.t0_s == pytest.approx(time_zero(dw, 0.04, v), rel=1e-9, abs=0)
+
+
+@pytest.mark.parametrize("radius, model, message", [
+    (-0.01, "auto", "radius_m must be a number of metres in 0..50, got -0.01"),
+    (float("nan"), "auto", "radius_m must be a number of metres in 0..50, got nan"),
+    (51.0, "cylinder", "radius_m must be a number of metres in 0..50, got 51.0"),
+    ("1cm", "auto", "radius_m must be a number of metres >= 0, got '1cm'"),
+    (True, "auto", "radius_m must be a number of metres >= 0, got True"),
+    (0.01, "point", "a known radius_m makes the target a cylinder of that radius: model must be 'auto' or "
+                    "'cylinder', not 'point'"),
+])
+def test_a_wrong_radius_is_named(radius, model, message):
+    from gpr3d.core.errors import InvalidDataError
+
+    x = np.arange(60) * 0.002
+    with pytest.raises(InvalidDataError) as err:
+        fit_hyperbola(x, _picks(x, t0=0.0, **EX), t0_s=0.0, radius_m=radius, model=model)
+    assert str(err.value) == message
+
+
+def _rods_record():
+    """A synthetic record: the direct wave and three rods of different radii (eps 7, antennas 5 cm apart)."""
+    from gpr3d.core.survey import Survey
+    from gpr3d.inversion.hyperbola import time_zero
+
+    f, dt, ns, h, eps = 1.0e9, 2e-11, 1500, 0.05, 7.0
+    v = C0 / math.sqrt(eps)
+    x = np.arange(240) * 0.01
+    tt = np.arange(ns) * dt
+    t_dw = 3e-9
+    t0 = time_zero(t_dw, h, v)
+    targets = [(0.5, 0.30, 0.02), (1.2, 0.45, 0.10), (1.9, 0.25, 0.05)]  # x0, top depth, radius
+    data = 3 * _pulses(np.full(x.size, t_dw), tt, f)
+    boxes, apexes = [], []
+    for x0, top, r in targets:
+        t = t0 + _circle_path(x, h, x0, top + r, r) / v
+        data += _pulses(t, tt, f, amp=((top + r) / np.hypot(x - x0, top + r)) ** 4)
+        sel = np.nonzero(np.abs(x - x0) <= top + r)[0]
+        boxes.append([int(sel[0]), float(t.min() - 0.7 / f), int(sel[-1]), float(t[sel].max() + 0.7 / f)])
+        apexes.append((float(np.interp(x0, x, np.arange(x.size))), float(t.min())))
+    pos = np.stack([x, 0 * x, 0 * x], axis=1)
+    return Survey(data=data, dt_s=dt, positions_xyz=pos, offset_m=h, frequency_hz=f), boxes, apexes, targets, eps
+
+
+def test_fit_boxes_takes_one_radius_per_box_and_checks_their_number():
+    from gpr3d.core.errors import InvalidDataError
+    from gpr3d.inversion.hyperbola import fit_boxes
+
+    s, boxes, apexes, targets, eps = _rods_record()
+    known = fit_boxes(s, boxes, apexes=apexes, radius_m=[r for _, _, r in targets])
+    point = fit_boxes(s, boxes, apexes=apexes, model="point")
+    for (x0, top, r), k, p in zip(targets, known, point):
+        assert k.ok and k.radius_m == r
+        assert k.eps_r == pytest.approx(eps, rel=0.02) and k.depth_m == pytest.approx(top, abs=0.005)
+        assert p.eps_r < eps * (1 - 0.5 * r / (top + r))  # the point fit reads each rod low, more for wider ones
+    one = fit_boxes(s, boxes, apexes=apexes, radius_m=0.05)  # one number for every box
+    assert [f.radius_m for f in one] == [0.05] * 3
+    assert one[2].eps_r == pytest.approx(known[2].eps_r, rel=1e-9, abs=0)
+    assert one[0].eps_r > known[0].eps_r and one[1].eps_r < known[1].eps_r  # too wide and too narrow
+    with pytest.raises(InvalidDataError, match="radius_m has 2 values for 3 boxes: give one, or one per box"):
+        fit_boxes(s, boxes, radius_m=[0.01, 0.02])
+    with pytest.raises(InvalidDataError, match=r"radius_m must be a number of metres in 0..50, got -1"):
+        fit_boxes(s, boxes, radius_m=[0.01, -1, 0.02])

@@ -536,6 +536,9 @@ def cmd_reconstruct(args):
     check_config(ReconstructConfig(**settings, **site), names=_RECONSTRUCT_FLAGS)  # one line, before any work
     eps_given = _eps_argument(args.eps_r)
     estimate = eps_given is None
+    if args.radius is not None and not estimate:
+        raise GPR3DError("--radius is used to estimate eps_r: leave --eps-r out, or leave --radius out")
+    _check_radius(args, args.depth)
     # weights checked before the work starts
     detector = _detector(args) if args.mask == "detect" or (estimate and not args.boxes) else None
     depthnet = _depthnet(args) if estimate and args.depth in ("hybrid", "net") else None
@@ -566,7 +569,7 @@ def cmd_reconstruct(args):
     if detector is not None:
         found = detector.detect(survey, score_threshold=args.score, input_name=str(args.input))
     if estimate:
-        _add_depths(survey, found, args.depth, depthnet, args.trace_spacing)
+        _add_depths(survey, found, args.depth, depthnet, args.trace_spacing, args.radius)
         if "permittivity" not in found:
             raise GPR3DError(f"{args.input}: eps_r cannot be estimated without trace positions; give --eps-r "
                              "or --trace-spacing")
@@ -636,13 +639,14 @@ def cmd_detect(args):
 
     _check_suffix(args.out, (".json",), "--out")
     _check_suffix(args.overlay, (".png",), "--overlay")
+    _check_radius(args, args.depth)
     det = _detector(args)  # weights checked before the recording is read
     depthnet = _depthnet(args) if args.depth in ("hybrid", "net") else None
     surveys = read_all(args.input, format=args.format)
     results = [det.detect(s, score_threshold=args.score, input_name=str(args.input)) for s in surveys]
     if args.depth != "none":
         for s, r in zip(surveys, results):
-            _add_depths(s, r, args.depth, depthnet, args.trace_spacing)
+            _add_depths(s, r, args.depth, depthnet, args.trace_spacing, args.radius)
     write_detections(results, args.out)
     for r in results:
         ch = f" channel {r['channel']}" if len(results) > 1 else ""
@@ -673,7 +677,20 @@ def _depthnet(args):
     return DepthEstimator.load(args.depthnet, device=args.device)
 
 
-def _add_depths(survey, result: dict, method: str, depthnet, trace_spacing_m) -> None:
+def _check_radius(args, method: str) -> None:
+    """``--radius``: a number of metres in 0..50, for a method that fits hyperbolas."""
+    import math
+
+    r = getattr(args, "radius", None)
+    if r is None:
+        return
+    if not (math.isfinite(r) and 0.0 <= r <= 50.0):
+        raise GPR3DError(f"--radius must be a radius in metres in 0..50, got {r}")
+    if method not in ("fit", "hybrid"):
+        raise GPR3DError(f"--radius is used by the hyperbola fit: give it with fit or hybrid, not {method}")
+
+
+def _add_depths(survey, result: dict, method: str, depthnet, trace_spacing_m, radius_m=None) -> None:
     """Host eps_r and each target's depth (and position) into a ``detect`` result, in place."""
     import math
 
@@ -686,7 +703,7 @@ def _add_depths(survey, result: dict, method: str, depthnet, trace_spacing_m) ->
     if not result["targets"] and method == "fit":
         return
     est = estimate_depths(survey, result["targets"], method=method, estimator=depthnet,
-                          trace_spacing_m=trace_spacing_m)
+                          trace_spacing_m=trace_spacing_m, radius_m=radius_m)
     p = est["permittivity"]
     result["permittivity"] = {"eps_r": p["eps_r"], "sigma_eps_r": p["sigma_eps_r"], "method": method,
                               **{k: p[k] for k in ("net", "fit") if k in p}}
@@ -725,6 +742,7 @@ def cmd_depth(args):
 
     if args.trace_spacing is not None and not args.trace_spacing > 0:
         raise GPR3DError(f"--trace-spacing must be a positive number of metres, got {args.trace_spacing}")
+    _check_radius(args, args.method)
     det = _detector(args) if not args.boxes else None
     depthnet = _depthnet(args) if args.method in ("hybrid", "net") else None
     survey = read(args.input, format=args.format, channel=args.channel)
@@ -738,7 +756,7 @@ def cmd_depth(args):
         found = det.detect(survey, score_threshold=args.score, input_name=str(args.input))
     if survey.distances_m is None and args.trace_spacing is None:
         raise GPR3DError(f"{args.input}: the file has no trace positions; give --trace-spacing (m)")
-    _add_depths(survey, found, args.method, depthnet, args.trace_spacing)
+    _add_depths(survey, found, args.method, depthnet, args.trace_spacing, args.radius)
     p = found["permittivity"]
     print(f"{args.input}: host eps_r {p['eps_r']:.2f} +- {p['sigma_eps_r']:.2f} ({args.method}"
           + "".join(f"; {k} {p[k]['eps_r']:.2f}" for k in ("net", "fit") if k in p) + ")")
@@ -952,6 +970,10 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--depthnet", default=None, help="DepthNet weights (default: the shipped ones)")
         sp.add_argument("--trace-spacing", type=float, default=None,
                         help="trace spacing in metres (default: the file's positions)")
+        sp.add_argument("--radius", type=float, default=None, metavar="M",
+                        help="the targets' radius in metres when known (e.g. 0.008 for 16 mm rebar): the hyperbola "
+                             "fit then takes that cylinder instead of a point, which reads eps_r low by about "
+                             "radius / (depth + radius)")
 
     def add_marks(sp):
         sp.add_argument("--marks-every", type=float, default=None, metavar="M",

@@ -15,7 +15,11 @@ Three methods (``METHODS``), all from the data (time zero from the direct wave):
   network's standard errors, and left out otherwise (``"fit_agrees": false``); each target's depth is the
   network's, rescaled to that eps_r (at a fixed travel time depth goes as ``1 / sqrt(eps_r)``).
 
-Both constants were measured on the gprMax training twin (``datasets/gprmax_survey_train.h5``, 16 records),
+With the targets' radius known (``radius_m``: a rebar mesh of one size, a pipe from the drawings), the fit
+is a cylinder of that radius (:func:`gpr3d.inversion.hyperbola.fit_hyperbola`), nearly unbiased, and the
+hybrid uses ``FIT_BIAS_RADIUS`` and ``FIT_MODEL_ERROR_RADIUS`` instead.
+
+All four constants were measured on the gprMax training twin (``datasets/gprmax_survey_train.h5``, 16 records),
 never on the held-out set. On validation records (forward model, seed 2001) the picked apex times gave
 depths several times worse than the network's (time zero from the direct wave is the weak link), so the
 hybrid keeps the network's depths.
@@ -37,6 +41,10 @@ FIT_BIAS = -0.128
 #: relative uncertainty added to the fit's (bias-corrected) eps_r before it is combined: its RMS relative
 #: error on the same records
 FIT_MODEL_ERROR = 0.25
+#: the same two for fits with each target's radius given (``python benchmarks/eval_depth_fit.py --survey
+#: datasets/gprmax_survey_train.h5 --n 16 --no-example --models point "radius given"``: record eps_r bias, RMS)
+FIT_BIAS_RADIUS = -0.029
+FIT_MODEL_ERROR_RADIUS = 0.20
 
 
 def _combine(a, sa, b, sb):
@@ -45,17 +53,21 @@ def _combine(a, sa, b, sb):
 
 
 def estimate_depths(survey, targets: list[dict], *, method: str = "hybrid", estimator=None,
-                    trace_spacing_m: float | None = None) -> dict:
+                    trace_spacing_m: float | None = None, radius_m=None) -> dict:
     """Estimates for ``targets`` (``gpr3d detect`` targets: ``box``, optional ``apex_trace``/``apex_time_s``).
 
     Returns ``{"permittivity": {"eps_r", "sigma_eps_r", "method", "net": {...}, "fit": {...}},
     "targets": [{"depth_m", "sigma_depth_m", "x_m", "eps_r_fit", ...} per target]}``. ``estimator``: a
-    loaded :class:`~gpr3d.inversion.depthnet.DepthEstimator` (default: the shipped weights).
+    loaded :class:`~gpr3d.inversion.depthnet.DepthEstimator` (default: the shipped weights). ``radius_m``:
+    the targets' radius when known (m; one for all, or one per target), for the fit.
     """
-    from gpr3d.inversion.hyperbola import combine_permittivity, fit_boxes, trace_positions
+    from gpr3d.inversion.hyperbola import _radii, combine_permittivity, fit_boxes, trace_positions
 
     if method not in METHODS:
         raise InvalidDataError(f"unknown depth method {method!r}; choose one of {', '.join(METHODS)}")
+    radii = _radii(radius_m, len(targets))  # checked before any work
+    known = radius_m is not None
+    bias, model_error = (FIT_BIAS_RADIUS, FIT_MODEL_ERROR_RADIUS) if known else (FIT_BIAS, FIT_MODEL_ERROR)
     x = trace_positions(survey, trace_spacing_m)
     boxes = [[float(v) for v in t["box"]] for t in targets]
     apexes = [(t.get("apex_trace"), t.get("apex_time_s")) for t in targets]
@@ -71,9 +83,14 @@ def estimate_depths(survey, targets: list[dict], *, method: str = "hybrid", esti
         perm["net"] = {"eps_r": net["eps_r"], "sigma_eps_r": net["sigma_eps_r"], "n_windows": net["n_windows"]}
     fits = []
     if method in ("fit", "hybrid") and boxes:
-        fits = fit_boxes(survey, boxes, apexes=apexes, trace_spacing_m=trace_spacing_m, model="point")
+        if known:
+            fits = fit_boxes(survey, boxes, apexes=apexes, trace_spacing_m=trace_spacing_m, model="cylinder",
+                             radius_m=radii)
+        else:
+            fits = fit_boxes(survey, boxes, apexes=apexes, trace_spacing_m=trace_spacing_m, model="point")
         e, s, n = combine_permittivity(fits)
-        perm["fit"] = {"eps_r": e, "sigma_eps_r": s, "n_hyperbolas": n}
+        perm["fit"] = {"eps_r": e, "sigma_eps_r": s, "n_hyperbolas": n,
+                       "model": "cylinder, radius given" if known else "point"}
     fit_eps = perm.get("fit", {}).get("eps_r", float("nan"))
     if method == "net":
         eps, sig = net["eps_r"], net["sigma_eps_r"]
@@ -83,10 +100,10 @@ def estimate_depths(survey, targets: list[dict], *, method: str = "hybrid", esti
         eps, sig = net["eps_r"], net["sigma_eps_r"]
         perm["fit_agrees"] = False
         if math.isfinite(fit_eps):
-            fc = fit_eps / (1 + FIT_BIAS)
+            fc = fit_eps / (1 + bias)
             if abs(fc - eps) <= 2 * sig:
-                eps, sig = _combine(eps, sig, fc, math.hypot(perm["fit"]["sigma_eps_r"] / (1 + FIT_BIAS),
-                                                             FIT_MODEL_ERROR * fc))
+                eps, sig = _combine(eps, sig, fc, math.hypot(perm["fit"]["sigma_eps_r"] / (1 + bias),
+                                                             model_error * fc))
                 perm["fit_agrees"] = True
     perm.update(eps_r=eps, sigma_eps_r=sig)
     out = []

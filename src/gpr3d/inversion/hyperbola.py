@@ -26,7 +26,10 @@ by robust least squares (SciPy's ``least_squares``, Cauchy loss scaled to a
 twentieth of a period: picks further off, mostly on a neighbour's crossing tail,
 count little), with each estimate's standard error from the Jacobian:
 ``eps_r = (c / v)^2`` and depth to top ``zc - R``. ``model="auto"`` keeps the
-cylinder only where it explains the picks clearly better than the point.
+cylinder only where it explains the picks clearly better than the point. A known
+radius (``radius_m``) fixes ``R``: one hyperbola of limited aperture cannot tell
+the radius from the speed, and a point fit reads a rod's eps_r low by about
+``R / zc``.
 :func:`fit_boxes` runs it for every detection of a record and
 :func:`combine_permittivity` gives one eps_r per record from all its hyperbolas;
 :func:`fit_record` fits them all at once with one speed (the better estimate where a
@@ -236,8 +239,11 @@ def _circle_path(x, h, x0, zc, r):
     return np.hypot(px - tx, pz) + np.hypot(px - rx, pz)
 
 
-def _travel(p, x, h, with_radius):
+def _travel(p, x, h, with_radius, radius=None):
+    """Two-way time from the surface for parameters ``p = [x0, zc, v(, r)]``; ``radius`` fixes r (p holds 3)."""
     x0, zc, v = p[0], p[1], p[2]
+    if radius is not None:
+        return _circle_path(x, h, x0, zc, radius) / v
     if not with_radius:
         return (np.hypot(x - h / 2 - x0, zc) + np.hypot(x + h / 2 - x0, zc)) / v
     return _circle_path(x, h, x0, zc, p[3]) / v
@@ -256,20 +262,22 @@ def _t0(p, t0, dw, h):
     return t0 if dw is None else time_zero(dw, h, p[2])
 
 
-def _solve(x, t, t0, dw, h, with_radius, scale, x_guess, t_apex):
+def _solve(x, t, t0, dw, h, with_radius, scale, x_guess, t_apex, radius=None):
     v_lo, v_hi = velocity_from_eps_r(EPS_RANGE[1]), velocity_from_eps_r(EPS_RANGE[0])
     span = max(float(x.max() - x.min()), 1e-3)
+    r_known = 0.0 if radius is None else radius
     best = None
     for eps_guess in (4.0, 9.0, 20.0):  # a few starts: the misfit is not convex in v
         v = velocity_from_eps_r(eps_guess)
-        z = max(0.5 * v * max(t_apex - _t0([0, 0, v], t0, dw, h), 1e-12), 1e-3)
+        z = max(0.5 * v * max(t_apex - _t0([0, 0, v], t0, dw, h), 1e-12), 1e-3) + r_known
         p0 = [x_guess, z, v] + ([0.3 * z] if with_radius else [])
-        lo = [x.min() - span, 1e-4, v_lo] + ([0.0] if with_radius else [])
-        hi = [x.max() + span, 50.0, v_hi] + ([50.0] if with_radius else [])
+        # a known radius: the centre lies at least that deep (the top below the surface)
+        lo = [x.min() - span, 1e-4 + r_known, v_lo] + ([0.0] if with_radius else [])
+        hi = [x.max() + span, 50.0 + r_known, v_hi] + ([50.0] if with_radius else [])
         p0 = np.clip(p0, np.asarray(lo) + 1e-9, np.asarray(hi) - 1e-9)
 
         def res(p):
-            return (_t0(p, t0, dw, h) + _travel(p, x, h, with_radius) - t) / scale
+            return (_t0(p, t0, dw, h) + _travel(p, x, h, with_radius, radius) - t) / scale
 
         try:
             sol = _robust_solve(res, p0, lo, hi)
@@ -297,11 +305,18 @@ def _sigmas(sol, scale):
 
 def fit_hyperbola(x_m, t_s, *, t0_s: float | None = None, direct_wave_s: float | None = None,
                   offset_m: float = 0.0, frequency_hz: float | None = None, model: str = "auto",
-                  traces=None) -> HyperbolaFit:
+                  traces=None, radius_m: float | None = None) -> HyperbolaFit:
     """Fit the picks ``(x_m, t_s)`` of one hyperbola (see the module docstring).
 
     Time zero: ``t0_s`` when known, else from the direct wave's envelope peak
     ``direct_wave_s`` (:func:`time_zero`, solved with the speed); one of them is needed.
+
+    ``radius_m``: the target's radius when known (a rebar's size from the drawings):
+    the cylinder of that radius is fitted (``x0``, centre depth and speed free). One
+    hyperbola of limited aperture cannot tell the radius from the speed (a point fit
+    reads a cylinder's hyperbola flatter, ``eps_r`` low by about ``radius / (depth +
+    radius)``; the free cylinder trades radius for speed within picking error), so a
+    known radius is what makes ``eps_r`` accurate for a single target.
 
     ``frequency_hz`` sets the robust loss's scale (a quarter period; else a tenth of
     the picks' time spread). ``traces`` (the picks' trace indices) give ``apex_trace``.
@@ -310,6 +325,10 @@ def fit_hyperbola(x_m, t_s, *, t0_s: float | None = None, direct_wave_s: float |
         raise InvalidDataError(f"unknown hyperbola model {model!r}; choose one of {', '.join(MODELS)}")
     if (t0_s is None) == (direct_wave_s is None):
         raise InvalidDataError("give either the time zero t0_s or the direct wave's peak direct_wave_s")
+    radius_m = _check_radius(radius_m)
+    if radius_m is not None and model == "point":
+        raise InvalidDataError("a known radius_m makes the target a cylinder of that radius: "
+                               "model must be 'auto' or 'cylinder', not 'point'")
     x = np.asarray(x_m, dtype=float)
     t = np.asarray(t_s, dtype=float)
     good = np.isfinite(x) & np.isfinite(t)
@@ -319,6 +338,8 @@ def fit_hyperbola(x_m, t_s, *, t0_s: float | None = None, direct_wave_s: float |
         return HyperbolaFit(ok=False, reason=f"{x.size} usable picks (5 spread along the profile needed)")
     scale = 0.05 / frequency_hz if frequency_hz else max(0.1 * float(np.ptp(t)), 1e-12)
     k = int(np.argmin(t))
+    if radius_m is not None:
+        return _fit_known_radius(x, t, tr, t0_s, direct_wave_s, offset_m, scale, k, radius_m)
     fits = {}
     for m in (("point", "cylinder") if model == "auto" else (model,)):
         sol = _solve(x, t, t0_s, direct_wave_s, offset_m, m == "cylinder", scale, float(x[k]), float(t[k]))
@@ -354,6 +375,36 @@ def fit_hyperbola(x_m, t_s, *, t0_s: float | None = None, direct_wave_s: float |
                         rms_s=float(np.sqrt(np.mean(resid**2))), n_picks=int(x.size))
 
 
+def _check_radius(radius_m):
+    """A known target radius: None, or a finite number of metres >= 0 (one line naming a wrong one)."""
+    if radius_m is None:
+        return None
+    if isinstance(radius_m, bool) or not isinstance(radius_m, (int, float, np.floating, np.integer)):
+        raise InvalidDataError(f"radius_m must be a number of metres >= 0, got {radius_m!r}")
+    r = float(radius_m)
+    if not (math.isfinite(r) and 0.0 <= r <= 50.0):
+        raise InvalidDataError(f"radius_m must be a number of metres in 0..50, got {radius_m!r}")
+    return r
+
+
+def _fit_known_radius(x, t, tr, t0_s, dw, h, scale, k, radius) -> HyperbolaFit:
+    """:func:`fit_hyperbola` for a cylinder of known ``radius``: x0, centre depth and speed free."""
+    sol = _solve(x, t, t0_s, dw, h, False, scale, float(x[k]), float(t[k]), radius=radius)
+    if sol is None:
+        return HyperbolaFit(ok=False, reason="the fit did not converge", n_picks=int(x.size))
+    sig, _ = _sigmas(sol, scale)
+    x0, zc, v = (float(a) for a in sol.x[:3])
+    eps = (C0 / v) ** 2
+    t0 = _t0(sol.x, t0_s, dw, h)
+    resid = t0 + _travel(sol.x, x, h, False, radius) - t
+    apex_trace = float(np.interp(x0, x, tr)) if tr is not None and np.all(np.diff(x) >= 0) else float("nan")
+    apex_time = t0 + float(_travel(sol.x, np.array([x0]), h, False, radius)[0])
+    return HyperbolaFit(ok=True, model="cylinder" if radius > 0 else "point", x0_m=x0, depth_m=zc - radius,
+                        radius_m=radius, v_m_s=v, eps_r=eps, sigma_x0_m=float(sig[0]), sigma_depth_m=float(sig[1]),
+                        sigma_eps_r=float(2 * eps * sig[2] / v), t0_s=t0, apex_trace=apex_trace,
+                        apex_time_s=apex_time, rms_s=float(np.sqrt(np.mean(resid**2))), n_picks=int(x.size))
+
+
 def _record_picks(survey, boxes, apexes, trace_spacing_m, t0_s, remove_background=True):
     """Positions, the direct wave's peak (None when ``t0_s`` is given) and the picks ``(traces, times)`` per box."""
     x = trace_positions(survey, trace_spacing_m)
@@ -378,7 +429,7 @@ def _record_picks(survey, boxes, apexes, trace_spacing_m, t0_s, remove_backgroun
 
 
 def fit_boxes(survey, boxes, *, apexes=None, trace_spacing_m: float | None = None, t0_s: float | None = None,
-              model: str = "auto", remove_background: bool = True) -> list[HyperbolaFit]:
+              model: str = "auto", remove_background: bool = True, radius_m=None) -> list[HyperbolaFit]:
     """:func:`fit_hyperbola` for every box ``[trace_start, t_start_s, trace_end, t_end_s]`` of ``survey``.
 
     ``apexes``: ``(trace, time_s)`` per box where the tracking starts (the detector's
@@ -386,11 +437,24 @@ def fit_boxes(survey, boxes, *, apexes=None, trace_spacing_m: float | None = Non
     ``t0_s`` is given; positions from the file unless ``trace_spacing_m`` is given.
     Before picking, the median of the traces outside every box (the direct wave and
     flat layers, no hyperbola) is removed, when at least a tenth of the traces (8 or
-    more) lie outside the boxes.
+    more) lie outside the boxes. ``radius_m``: the targets' known radius (m), one for
+    all or one per box (None where unknown); see :func:`fit_hyperbola`.
     """
+    radii = _radii(radius_m, len(boxes))
     x, dw, picks = _record_picks(survey, boxes, apexes, trace_spacing_m, t0_s, remove_background)
     return [fit_hyperbola(x[tr], tt, t0_s=t0_s, direct_wave_s=dw, offset_m=survey.offset_m,
-                          frequency_hz=survey.frequency_hz, model=model, traces=tr) for tr, tt in picks]
+                          frequency_hz=survey.frequency_hz, model=model if r is None else "cylinder", traces=tr,
+                          radius_m=r) for (tr, tt), r in zip(picks, radii)]
+
+
+def _radii(radius_m, n: int) -> list:
+    """``radius_m`` (None, one number, or one per box) as a checked list of ``n``."""
+    if radius_m is None or isinstance(radius_m, (int, float, np.floating, np.integer)):
+        return [_check_radius(radius_m)] * n
+    radii = list(radius_m)
+    if len(radii) != n:
+        raise InvalidDataError(f"radius_m has {len(radii)} values for {n} boxes: give one, or one per box")
+    return [_check_radius(r) for r in radii]
 
 
 def fit_record(survey, boxes, *, apexes=None, trace_spacing_m: float | None = None, t0_s: float | None = None,
