@@ -20,6 +20,7 @@ class _Net:
         self.eps, self.sig, self.depths, self.calls = eps, sig, depths, []
 
     def estimate(self, survey, boxes, trace_spacing_m=None):
+        assert survey is RECORD
         self.calls.append((boxes, trace_spacing_m))
         return {"eps_r": self.eps, "sigma_eps_r": self.sig, "n_windows": 3, "depth_m": list(self.depths)}
 
@@ -34,7 +35,8 @@ def stubs(monkeypatch):
     """fit_boxes and combine_permittivity replaced: the fit says eps (fit_eps, fit_sigma) from its two targets."""
     seen = {}
 
-    def fit_boxes(survey, boxes, apexes=None, trace_spacing_m=None, model="point", radius_m=None):
+    def fit_boxes(survey, boxes, apexes=None, trace_spacing_m=None, model="auto", radius_m=None):  # the real defaults
+        assert survey is RECORD
         seen.update(boxes=boxes, apexes=apexes, spacing=trace_spacing_m, model=model, radius_m=radius_m)
         return [_fit(True, 6.1, 0.21, 0.01), _fit(False, float("nan"), float("nan"), float("nan"))]
 
@@ -43,18 +45,21 @@ def stubs(monkeypatch):
     return seen
 
 
+RECORD = Survey(data=np.zeros((41, 64), np.float32), dt_s=0.1e-9, frequency_hz=1e9)
+
+
 def _record():
-    return Survey(data=np.zeros((41, 64), np.float32), dt_s=0.1e-9, frequency_hz=1e9)
+    return RECORD
 
 
 TARGETS = [{"box": [5, 1e-9, 15, 3e-9], "apex_trace": 10.0, "apex_time_s": 2e-9},
-           {"box": [20, 1e-9, 31, 3e-9], "apex_trace": 25.5, "apex_time_s": 2.2e-9}]
+           {"box": [20, 1e-9, 33, 3e-9], "apex_trace": 25.5, "apex_time_s": 2.2e-9}]  # apex off the box's middle
 
 
 def test_the_network_alone(stubs):
     net = _Net(7.0, 0.7, [0.2, 0.35])
     out = estimate_depths(_record(), TARGETS, method="net", estimator=net, trace_spacing_m=0.02)
-    assert net.calls == [([[5.0, 1e-9, 15.0, 3e-9], [20.0, 1e-9, 31.0, 3e-9]], 0.02)]
+    assert net.calls == [([[5.0, 1e-9, 15.0, 3e-9], [20.0, 1e-9, 33.0, 3e-9]], 0.02)]
     p = out["permittivity"]
     assert p == {"method": "net", "net": {"eps_r": 7.0, "sigma_eps_r": 0.7, "n_windows": 3}, "eps_r": 7.0,
                  "sigma_eps_r": 0.7}
@@ -67,7 +72,8 @@ def test_the_network_alone(stubs):
 def test_the_fit_alone(stubs):
     out = estimate_depths(_record(), TARGETS, method="fit", trace_spacing_m=0.02)
     assert stubs["apexes"] == [(10.0, 2e-9), (25.5, 2.2e-9)] and stubs["model"] == "point"
-    assert stubs["radius_m"] is None
+    assert stubs["radius_m"] is None and stubs["spacing"] == 0.02
+    assert stubs["boxes"] == [[5.0, 1e-9, 15.0, 3e-9], [20.0, 1e-9, 33.0, 3e-9]]
     p = out["permittivity"]
     assert p == {"method": "fit", "fit": {"eps_r": 6.1, "sigma_eps_r": 0.3, "n_hyperbolas": 1, "model": "point"},
                  "eps_r": 6.1, "sigma_eps_r": 0.3}
@@ -111,7 +117,9 @@ def test_an_unknown_method_is_named():
 def test_known_radii_go_to_a_cylinder_fit_and_the_hybrid_takes_its_own_bias_and_error(stubs, radius, radii):
     net = _Net(6.4, 0.5, [0.2, 0.35])
     out = estimate_depths(_record(), TARGETS, estimator=net, trace_spacing_m=0.02, radius_m=radius)
-    assert stubs["model"] == "cylinder" and stubs["radius_m"] == radii
+    assert stubs["model"] == "cylinder" and stubs["radius_m"] == radii and stubs["spacing"] == 0.02
+    assert stubs["boxes"] == [[5.0, 1e-9, 15.0, 3e-9], [20.0, 1e-9, 33.0, 3e-9]]
+    assert stubs["apexes"] == [(10.0, 2e-9), (25.5, 2.2e-9)]
     p = out["permittivity"]
     assert p["fit"]["model"] == "cylinder, radius given" and p["fit_agrees"] is True
     fc = 6.1 / (1 + FIT_BIAS_RADIUS)  # 6.282: within 2 x 0.5 of 6.4
@@ -128,3 +136,43 @@ def test_a_wrong_radius_is_named_before_any_work(stubs):
     with pytest.raises(InvalidDataError, match="radius_m must be a number of metres in 0..50, got -0.01"):
         estimate_depths(_record(), TARGETS, estimator=net, trace_spacing_m=0.02, radius_m=-0.01)
     assert net.calls == [] and "model" not in stubs
+
+
+def test_an_apex_needs_both_its_trace_and_time_or_none_reach_the_fit(stubs):
+    half = [dict(TARGETS[0]), {"box": TARGETS[1]["box"], "apex_trace": 25.5, "apex_time_s": None}]
+    estimate_depths(_record(), half, method="fit", trace_spacing_m=0.02)
+    assert stubs["apexes"] is None
+    half[1] = {"box": TARGETS[1]["box"], "apex_trace": None, "apex_time_s": 2.2e-9}
+    estimate_depths(_record(), half, method="fit", trace_spacing_m=0.02)
+    assert stubs["apexes"] is None
+
+
+def test_the_shipped_network_is_loaded_when_none_is_given(stubs, monkeypatch):
+    from gpr3d.inversion import depthnet
+
+    net = _Net(7.0, 0.7, [0.2, 0.35])
+    monkeypatch.setattr(depthnet.DepthEstimator, "load", classmethod(lambda cls, *a, **k: net))
+    out = estimate_depths(_record(), TARGETS, method="net", trace_spacing_m=0.02)
+    assert len(net.calls) == 1 and out["permittivity"]["eps_r"] == 7.0
+
+
+@pytest.mark.parametrize("method", ["fit", "hybrid"])
+def test_no_targets_give_no_fit_and_the_hybrid_keeps_the_network(stubs, method):
+    net = _Net(7.0, 0.7, [])
+    out = estimate_depths(_record(), [], method=method, estimator=net, trace_spacing_m=0.02)
+    p = out["permittivity"]
+    assert "fit" not in p and "model" not in stubs and out["targets"] == []
+    if method == "fit":
+        assert math.isnan(p["eps_r"]) and math.isnan(p["sigma_eps_r"])
+    else:
+        assert (p["eps_r"], p["sigma_eps_r"], p["fit_agrees"]) == (7.0, 0.7, False)
+
+
+@pytest.mark.parametrize("net_eps, agrees", [(7.0, True), (5.0, True), (7.25, False), (4.75, False)])
+def test_the_fit_agrees_up_to_two_network_sigmas_inclusive(stubs, monkeypatch, net_eps, agrees):
+    import gpr3d.inversion.estimate as estimate
+
+    monkeypatch.setattr(estimate, "FIT_BIAS", 0.0)
+    stubs["fit_eps"] = 6.0  # |6 - 7| is exactly 2 x 0.5; 7.25 is 2.5 sigmas off
+    out = estimate_depths(_record(), TARGETS, estimator=_Net(net_eps, 0.5, [0.2, 0.35]), trace_spacing_m=0.02)
+    assert out["permittivity"]["fit_agrees"] is agrees
