@@ -31,3 +31,74 @@ def test_fp16_initializers_halve_the_weights_and_keep_the_answer():
     got = sess.run(None, {"x": x})[0]
     np.testing.assert_allclose(got, x @ w.astype(np.float16).astype(np.float32), rtol=1e-5, atol=1e-6)
     assert not np.allclose(got, x @ w, rtol=1e-7, atol=0)  # the rounding is really there
+
+
+def _graph(inits, nodes=None):
+    from onnx import TensorProto, helper
+
+    nodes = nodes or [helper.make_node("MatMul", ["x", "w"], ["y"])]
+    return helper.make_model(helper.make_graph(
+        nodes, "g", [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 4])],
+        [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, 4])], inits),
+        opset_imports=[helper.make_opsetid("", 17)])
+
+
+def test_only_float32_tensors_of_16_values_or_more_are_halved():
+    from onnx import TensorProto, numpy_helper
+
+    from gpr3d.io.onnxweights import fp16_initializers
+
+    w = np.arange(16, dtype=np.float32).reshape(4, 4) / 7  # 16 values: halved
+    inits = [numpy_helper.from_array(w, "w"),
+             numpy_helper.from_array(np.ones(15, np.float32), "fifteen"),  # one short: kept
+             numpy_helper.from_array(np.float32(2.5), "scalar"),  # no dims: one value, kept
+             numpy_helper.from_array(np.arange(20, dtype=np.int64), "ints"),  # not float32: kept
+             numpy_helper.from_array(np.ones(32, np.float64), "doubles")]
+    model = _graph(inits)
+    fp16_initializers(model)
+    kinds = {i.name: i.data_type for i in model.graph.initializer}
+    assert kinds == {"w__fp16": TensorProto.FLOAT16, "fifteen": TensorProto.FLOAT, "scalar": TensorProto.FLOAT,
+                     "ints": TensorProto.INT64, "doubles": TensorProto.DOUBLE}
+    assert [i.name for i in model.graph.initializer] == ["w__fp16", "fifteen", "scalar", "ints", "doubles"]
+    np.testing.assert_array_equal(numpy_helper.to_array(model.graph.initializer[0]), w.astype(np.float16))
+    cast, matmul = model.graph.node
+    assert (cast.op_type, list(cast.input), list(cast.output), cast.name) == ("Cast", ["w__fp16"], ["w"], "w__cast")
+    assert cast.attribute[0].name == "to" and cast.attribute[0].i == TensorProto.FLOAT
+    assert matmul.op_type == "MatMul"
+
+
+def test_finish_export_halves_the_weights_and_leaves_only_our_metadata(tmp_path):
+    import json
+
+    from onnx import numpy_helper
+
+    from gpr3d.io.onnxweights import finish_export
+
+    w = (np.arange(16, dtype=np.float32).reshape(4, 4) - 5) / 3
+    model = _graph([numpy_helper.from_array(w, "w")])
+    old = model.metadata_props.add()
+    old.key, old.value = "exporter", "something else"
+    path = tmp_path / "m.onnx"
+    onnx.save(model, str(path))
+    finish_export(path, "gpr3d_meta", {"arch": "tiny", "n": 2})
+    back = onnx.load(str(path))
+    assert [(m.key, json.loads(m.value)) for m in back.metadata_props] == [("gpr3d_meta", {"arch": "tiny", "n": 2})]
+    assert [i.name for i in back.graph.initializer] == ["w__fp16"]
+    x = np.array([[1.0, -2.0, 0.5, 3.0]], np.float32)
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    np.testing.assert_allclose(sess.run(None, {"x": x})[0], x @ w.astype(np.float16).astype(np.float32), rtol=1e-6)
+
+
+def test_finish_export_checks_the_model_before_it_writes(tmp_path):
+    from onnx import helper, numpy_helper
+
+    from gpr3d.io.onnxweights import finish_export
+
+    w = np.ones((4, 4), np.float32)
+    broken = _graph([numpy_helper.from_array(w, "w")], [helper.make_node("MatMul", ["x", "nowhere"], ["y"])])
+    path = tmp_path / "m.onnx"
+    onnx.save(broken, str(path))
+    before = path.read_bytes()
+    with pytest.raises(onnx.checker.ValidationError, match="nowhere"):
+        finish_export(path, "gpr3d_meta", {})
+    assert path.read_bytes() == before  # left as it was
