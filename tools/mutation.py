@@ -74,7 +74,7 @@ MODULES = {
     "pose.rig": ["tests/pose/test_eskf.py", "tests/pose/test_sync.py", "tests/pose/test_graph.py"],
     "inversion.hyperbola": ["tests/inversion/test_hyperbola.py"],
     "inversion.estimate": ["tests/inversion/test_estimate.py", "tests/inversion/test_estimate_by_hand.py"],
-    "inversion.evaluate": ["tests/inversion/test_estimate.py"],
+    "inversion.evaluate": ["tests/inversion/test_estimate.py", "tests/inversion/test_evaluate_by_hand.py"],
     "detection.windows": ["tests/detection/test_windows.py", "tests/detection/test_windows_by_hand.py"],
     "detection.evaluate": ["tests/detection/test_evaluate.py", "tests/detection/test_evaluate_by_hand.py"],
     "detection.data": ["tests/detection/test_data.py"],
