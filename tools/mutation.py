@@ -77,7 +77,7 @@ MODULES = {
     "inversion.evaluate": ["tests/inversion/test_estimate.py", "tests/inversion/test_evaluate_by_hand.py"],
     "detection.windows": ["tests/detection/test_windows.py", "tests/detection/test_windows_by_hand.py"],
     "detection.evaluate": ["tests/detection/test_evaluate.py", "tests/detection/test_evaluate_by_hand.py"],
-    "detection.data": ["tests/detection/test_data.py"],
+    "detection.data": ["tests/detection/test_data_by_hand.py"],
 }
 
 
