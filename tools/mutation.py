@@ -68,7 +68,7 @@ MODULES = {
     # ROS-bag and CLI ones that only pass through)
     "pose.eskf": ["tests/pose/test_eskf.py"], "pose.sync": ["tests/pose/test_sync.py"],
     "pose.metrics": ["tests/pose/test_metrics.py"],
-    "pose.imu": ["tests/pose/test_eskf.py", "tests/pose/test_metrics.py"],
+    "pose.imu": ["tests/pose/test_imu.py"],
     "pose.graph": ["tests/pose/test_graph.py"], "pose.vo": ["tests/pose/test_vo.py"],
     "pose.render": ["tests/pose/test_render.py"],
     "pose.rig": ["tests/pose/test_eskf.py", "tests/pose/test_sync.py", "tests/pose/test_graph.py"],
