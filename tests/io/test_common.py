@@ -311,3 +311,38 @@ def test_warnings_point_at_the_reader_s_caller():
     with pytest.warns(TruncatedRecordingWarning) as w:
         reader2()
     assert _callers_file(w[0].filename), w[0].filename
+
+
+def test_the_walk_itself_reads_every_attribute_and_the_datasets_up_to_the_limit(tmp_path, monkeypatch):
+    """_walk_hdf5 run in this process (the parent only sees a child's crash; and a tool that records which tests
+    reach a function sees nothing the child does)."""
+    import h5py
+
+    p = _h5(tmp_path / "w.h5", n=10)  # root attribute a, group g with attribute b, dataset g/d of 80 bytes
+    with h5py.File(p, "a") as f:
+        f["small"] = np.arange(3, dtype=np.int16)  # 6 bytes
+        f["small"].attrs["c"] = 3
+    attrs, reads = [], []
+    real_attr, real_get = h5py.AttributeManager.__getitem__, h5py.Dataset.__getitem__
+
+    def attr(self, key):
+        attrs.append(key)
+        return real_attr(self, key)
+
+    def get(self, key):
+        reads.append((self.name, key))
+        return real_get(self, key)
+
+    monkeypatch.setattr(h5py.AttributeManager, "__getitem__", attr)
+    monkeypatch.setattr(h5py.Dataset, "__getitem__", get)
+    _common._walk_hdf5(str(p), 80)
+    assert sorted(attrs) == ["a", "b", "c"]
+    assert sorted(reads) == [("/g/d", ()), ("/small", ())]  # both whole: 80 bytes is exactly the limit
+    attrs.clear(), reads.clear()
+    _common._walk_hdf5(str(p), 79)
+    assert reads == [("/small", ())] and sorted(attrs) == ["a", "b", "c"]
+    reads.clear()
+    _common._walk_hdf5(str(p), 5)  # 6 bytes of int16: over
+    assert reads == []
+    with pytest.raises(OSError):  # no file: the walk itself fails (the child would keep that for the reader)
+        _common._walk_hdf5(str(tmp_path / "none.h5"), 80)
