@@ -166,3 +166,82 @@ def test_labels_of_a_line_that_starts_away_from_zero():
     s.targets[0].x_m = 1.8  # exactly at the last trace: inside, its index
     lab = label_traces(s, x, 400, 0.02e-9)[0]
     assert lab["apex_trace"] == pytest.approx(7.0) and lab["visible"]
+
+
+def _via(tx, rx, cx, cz, r, ang):
+    px, pz = cx + r * math.cos(ang), cz + r * math.sin(ang)
+    return math.hypot(px - tx, pz) + math.hypot(px - rx, pz)
+
+
+def test_the_circle_path_keeps_the_end_angles_unrefined_and_refines_the_next_ones():
+    """Five angles (0, 45, 90, 135, 180 deg): a trace far to the right is nearest over angle 0, far to the left over
+    180 (no neighbour on one side: the plain value); nearer ones over 45 and 135, refined by the parabola."""
+    from gpr3d.simulation.labels import _circle_path
+
+    cx, cz, r = 0.0, -0.3, 0.1
+    tx = np.array([5.0, -5.0, 0.25, -0.25])
+    got = _circle_path(tx, tx, cx, cz, r, n_angles=5)
+    ang = np.linspace(0, np.pi, 5)
+    assert got[0] == _via(5.0, 5.0, cx, cz, r, 0.0) and got[1] == _via(-5.0, -5.0, cx, cz, r, math.pi)
+    for j, k in ((2, 1), (3, 3)):
+        y0, y1, y2 = (_via(tx[j], tx[j], cx, cz, r, ang[k + d]) for d in (-1, 0, 1))
+        assert y1 <= min(y0, y2)  # the best of the five
+        want = y1 - (y0 - y2) ** 2 / (8 * (y0 - 2 * y1 + y2))
+        assert got[j] == pytest.approx(want, rel=1e-14, abs=0) and got[j] < y1
+
+
+def test_a_point_target_has_the_same_path_at_every_angle_and_no_refinement():
+    from gpr3d.simulation.labels import _circle_path
+
+    tx = np.array([-0.2, 0.0, 0.3])
+    got = _circle_path(tx, tx + 0.1, 0.05, -0.4, 0.0)
+    want = np.hypot(0.05 - tx, 0.4) + np.hypot(0.05 - (tx + 0.1), 0.4)
+    np.testing.assert_allclose(got, want, rtol=1e-15, atol=0)
+    assert np.all(np.isfinite(got))
+
+
+def test_a_trace_exactly_at_the_box_reach_is_inside():
+    from gpr3d.io.coco import BOX_HALF_ANGLE_DEG
+
+    s = scene()
+    s.targets[0].x_m = 0.0
+    reach = (0.2 + 0.01) * math.tan(math.radians(BOX_HALF_ANGLE_DEG))
+    x = np.array([-2 * reach, -reach, 0.0, reach, np.nextafter(reach, 1.0) + 1e-9])
+    lab = label_traces(s, x, 400, 0.02e-9)[0]
+    assert (lab["box"][0], lab["box"][2]) == (1, 3)
+
+
+def test_apex_traces_on_two_positions_a_stop_at_the_end_and_lines_of_one_place():
+    s = scene()
+    s.targets[0].x_m = 0.05
+    assert label_traces(s, np.array([0.0, 0.1]), 400, 0.02e-9)[0]["apex_trace"] == pytest.approx(0.5)
+    s.targets[0].x_m = 0.3  # past a two-trace line: the step is its one interval
+    assert label_traces(s, np.array([0.0, 0.1]), 400, 0.02e-9)[0]["apex_trace"] == pytest.approx(3.0)
+    s.targets[0].x_m = 0.2  # exactly at the last place, where the cart stood for three traces: its first trace
+    lab = label_traces(s, np.array([0.0, 0.1, 0.2, 0.2, 0.2]), 400, 0.02e-9)[0]
+    assert lab["apex_trace"] == 2.0
+    s.targets[0].x_m = 0.7  # a cart that never moved: the step falls back to 1 m
+    lab = label_traces(s, np.array([0.5, 0.5, 0.5]), 400, 0.02e-9)[0]
+    assert lab["apex_trace"] == pytest.approx(0.2, rel=1e-12, abs=0) and lab["visible"]
+
+
+def test_visible_up_to_the_record_s_ends_inclusive():
+    s = scene()
+    x = np.array([0.0, 0.1, 0.2])
+    s.targets[0].x_m = 0.25  # half a step past the last trace (index 2.5 of 3): not visible
+    assert not label_traces(s, x, 400, 0.02e-9)[0]["visible"]
+    s.targets[0].x_m = 0.1
+    a = label_traces(s, x, 400, 0.02e-9, source_delay_s=0.0)[0]["apex_twt_s"]
+    # the apex exactly at the first sample (a negative source delay): visible
+    assert label_traces(s, x, 400, 0.02e-9, source_delay_s=-a)[0]["visible"]
+    assert not label_traces(s, x, 400, 0.02e-9, source_delay_s=np.nextafter(-a, -1.0))[0]["visible"]
+    # and exactly at the last sample
+    t_end = 399 * 0.02e-9
+    d = t_end - a
+    while d + a > t_end:
+        d = np.nextafter(d, -1.0)
+    while d + a < t_end:
+        d = np.nextafter(d, 1.0)
+    assert d + a == t_end
+    assert label_traces(s, x, 400, 0.02e-9, source_delay_s=d)[0]["visible"]
+    assert not label_traces(s, x, 400, 0.02e-9, source_delay_s=np.nextafter(d, 1.0) + 1e-15)[0]["visible"]
