@@ -255,3 +255,130 @@ def test_fit_boxes_takes_one_radius_per_box_and_checks_their_number():
         fit_boxes(s, boxes, radius_m=[0.01, 0.02])
     with pytest.raises(InvalidDataError, match=r"radius_m must be a number of metres in 0..50, got -1"):
         fit_boxes(s, boxes, radius_m=[0.01, -1, 0.02])
+
+
+def _joint_case(monkeypatch, *, noise, dw=None, t0=None, model="cylinder"):
+    """fit_record on picks made here (the picking replaced): three rods, eps 7, and a box with too few picks."""
+    from gpr3d.core.survey import Survey
+    from gpr3d.inversion import hyperbola as hb
+
+    h, eps, f = 0.05, 7.0, 1.0e9
+    v = C0 / math.sqrt(eps)
+    x = np.arange(240) * 0.01
+    t_zero = t0 if t0 is not None else hb.time_zero(dw, h, v)
+    targets = [(0.5, 0.30, 0.02), (1.2, 0.45, 0.10), (1.9, 0.25, 0.05)]  # x0, top, radius
+    picks = []
+    for k, (x0, top, r) in enumerate(targets):
+        tr = np.nonzero(np.abs(x - x0) <= 0.4)[0]
+        t = t_zero + (_circle_path(x[tr], h, x0, top + r, r) if model == "cylinder" else
+                      np.hypot(x[tr] - h / 2 - x0, top) + np.hypot(x[tr] + h / 2 - x0, top)) / v
+        t = t + noise * np.where(tr % 2 == 0, 1.0, -1.0) * (1 + 0.5 * k) * np.cos(tr)
+        picks.append((tr, t))
+    picks.append((np.array([10, 11, 12]), np.array([1e-9, 1e-9, 1e-9])))  # three picks: left out
+    s = Survey(data=np.zeros((240, 8), np.float32), dt_s=1e-10, positions_xyz=np.stack([x, 0 * x, 0 * x], 1),
+               offset_m=h, frequency_hz=f)
+    monkeypatch.setattr(hb, "_record_picks", lambda *a, **k: (x, dw, picks))
+    boxes = [[0, 0, 1, 1]] * 4
+    return hb.fit_record(s, boxes, t0_s=t0, model=model), x, picks, targets, v, t_zero
+
+
+@pytest.mark.parametrize("model", ["cylinder", "point"])
+def test_joint_fit_by_hand_exact_picks(monkeypatch, model):
+    (fits, info), x, picks, targets, v, t0 = _joint_case(monkeypatch, noise=0.0, t0=2e-9, model=model)
+    assert info["n_targets"] == 3 and info["eps_r"] == pytest.approx(7.0, rel=1e-6)
+    assert info["t0_s"] == 2e-9 and info["rms_s"] < 1e-15
+    for (x0, top, r), fit, (tr, t) in zip(targets, fits, picks):
+        r = r if model == "cylinder" else 0.0
+        assert fit.ok and fit.model == model and fit.n_picks == tr.size
+        assert fit.x0_m == pytest.approx(x0, abs=1e-7) and fit.depth_m == pytest.approx(top, abs=1e-6)
+        assert fit.radius_m == pytest.approx(r, abs=1e-5) and fit.eps_r == info["eps_r"]
+        assert fit.v_m_s == pytest.approx(v, rel=1e-7) and fit.t0_s == 2e-9
+        assert fit.apex_trace == pytest.approx(x0 / 0.01, abs=1e-4)
+        # at x0 the path goes straight down to the rod's top and back, h/2 to the side
+        assert fit.apex_time_s == pytest.approx(2e-9 + 2 * math.hypot(0.025, top) / v, rel=1e-9, abs=0)
+        assert fit.rms_s < 1e-15
+    bad = fits[3]
+    assert not bad.ok and bad.reason == "fewer than 5 picks"
+
+
+def _numeric_cov(x, picks, fits, v, t0_fixed, dw, h, model, scale):
+    """Covariance of [v, (x0, zc(, r)) per target] from a Jacobian by central differences (written here), each row
+    weighted as least_squares does under the Cauchy loss (sqrt(rho' + 2 rho'' z) = sqrt(1 - z) / (1 + z), z the
+    squared residual in units of the scale)."""
+    from gpr3d.inversion.hyperbola import time_zero
+
+    per = 3 if model == "cylinder" else 2
+    p = [v]
+    for f in fits:
+        p += [f.x0_m, f.depth_m + f.radius_m] + ([f.radius_m] if model == "cylinder" else [])
+    p = np.array(p)
+
+    def res(q):
+        t0 = t0_fixed if dw is None else time_zero(dw, h, q[0])
+        out = []
+        for i, (tr, t) in enumerate(picks):
+            a = q[1 + per * i: 1 + per * (i + 1)]
+            r = a[2] if model == "cylinder" else 0.0
+            out.append((t0 + _circle_path(x[tr], h, a[0], a[1], r) / q[0] - t) / scale)
+        return np.concatenate(out)
+
+    J = np.empty((res(p).size, p.size))
+    for j in range(p.size):
+        d = np.zeros_like(p)
+        d[j] = 1e-6 * max(abs(p[j]), 1e-3)
+        J[:, j] = (res(p + d) - res(p - d)) / (2 * d[j])
+    z = res(p) ** 2
+    J = J * (np.sqrt(1 - z) / (1 + z))[:, None]
+    r = res(p) * scale
+    s2 = np.sum(r**2) / (r.size - p.size)
+    return np.linalg.pinv((J * scale).T @ (J * scale)) * s2, r
+
+
+@pytest.mark.parametrize("model, use_dw", [("cylinder", False), ("point", True)])
+def test_joint_fit_uncertainties_and_misfits_by_hand(monkeypatch, model, use_dw):
+    kw = dict(dw=3e-9) if use_dw else dict(t0=2e-9)
+    (fits, info), x, picks, targets, v, t0 = _joint_case(monkeypatch, noise=2e-12, model=model, **kw)
+    used = fits[:3]
+    scale = 0.05 / 1e9
+    cov, r = _numeric_cov(x, picks[:3], used, used[0].v_m_s, None if use_dw else 2e-9,
+                          3e-9 if use_dw else None, 0.05, model, scale)
+    eps, vv = info["eps_r"], used[0].v_m_s
+    assert eps == pytest.approx((C0 / vv) ** 2, rel=1e-12)
+    assert info["sigma_eps_r"] == pytest.approx(2 * eps * math.sqrt(cov[0, 0]) / vv, rel=1e-4)
+    assert info["rms_s"] == pytest.approx(math.sqrt(np.mean(r**2)), rel=1e-6)
+    if use_dw:
+        from gpr3d.inversion.hyperbola import time_zero
+
+        assert info["t0_s"] == pytest.approx(time_zero(3e-9, 0.05, vv), rel=1e-12, abs=0)
+    per = 3 if model == "cylinder" else 2
+    ends = np.cumsum([0] + [len(p[0]) for p in picks[:3]])
+    for i, f in enumerate(used):
+        b = 1 + per * i
+        assert f.sigma_x0_m == pytest.approx(math.sqrt(cov[b, b]), rel=1e-4)
+        want = cov[b + 1, b + 1] + (cov[b + 2, b + 2] - 2 * cov[b + 1, b + 2] if model == "cylinder" else 0.0)
+        assert f.sigma_depth_m == pytest.approx(math.sqrt(want), rel=1e-4)
+        assert f.sigma_eps_r == info["sigma_eps_r"] and f.t0_s == info["t0_s"]
+        assert f.rms_s == pytest.approx(math.sqrt(np.mean(r[ends[i]:ends[i + 1]] ** 2)), rel=1e-6)
+        assert f.eps_r == pytest.approx(7.0, rel=0.01)
+
+
+def test_joint_fit_with_nothing_to_fit_and_a_wrong_model(monkeypatch):
+    from gpr3d.core.errors import InvalidDataError
+    from gpr3d.core.survey import Survey
+    from gpr3d.inversion import hyperbola as hb
+
+    x = np.arange(50) * 0.01
+    s = Survey(data=np.zeros((50, 8), np.float32), dt_s=1e-10, positions_xyz=np.stack([x, 0 * x, 0 * x], 1),
+               offset_m=0.05, frequency_hz=1e9)
+    # four picks, and five at one place (no spread): neither is fitted
+    picks = [(np.arange(4), np.full(4, 1e-9)), (np.full(5, 7), np.full(5, 1e-9))]
+    monkeypatch.setattr(hb, "_record_picks", lambda *a, **k: (x, 3e-9, picks))
+    fits, info = hb.fit_record(s, [[0, 0, 1, 1]] * 2)
+    assert [f.ok for f in fits] == [False, False] and fits[0].reason == "fewer than 5 picks"
+    assert info["n_targets"] == 0 and math.isnan(info["eps_r"]) and math.isnan(info["sigma_eps_r"])
+    assert len(info) == 3
+    fits, info = hb.fit_record(s, [[0, 0, 1, 1]] * 2, min_picks=4)  # four are now enough, the stack still is not
+    assert [f.ok for f in fits] == [True, False] and info["n_targets"] == 1
+    assert fits[1].reason == "fewer than 4 picks"
+    with pytest.raises(InvalidDataError, match="^joint fit model must be 'point' or 'cylinder', got 'auto'$"):
+        hb.fit_record(s, [[0, 0, 1, 1]], model="auto")
