@@ -382,3 +382,126 @@ def test_joint_fit_with_nothing_to_fit_and_a_wrong_model(monkeypatch):
     assert fits[1].reason == "fewer than 4 picks"
     with pytest.raises(InvalidDataError, match="^joint fit model must be 'point' or 'cylinder', got 'auto'$"):
         hb.fit_record(s, [[0, 0, 1, 1]], model="auto")
+
+
+def test_first_peak_by_hand():
+    from gpr3d.inversion.hyperbola import _first_peak
+
+    e = np.array([0.0, 1.0, 3.0, 2.0, 0.5, 6.0, 4.0, 0.0])
+    # the first sample reaching half of 6 is index 2 (3.0), a local maximum: parabola through (1, 3, 2)
+    y, v = _first_peak(e)
+    assert y == pytest.approx(2 + 0.5 * (1.0 - 2.0) / (1.0 - 6.0 + 2.0), rel=1e-15) and v == 3.0
+    y, v = _first_peak(e, level=0.6)  # 3.6: the first is 6.0 at 5
+    assert y == pytest.approx(5 + 0.5 * (0.5 - 4.0) / (0.5 - 12.0 + 4.0), rel=1e-15) and v == 6.0
+    # a rise: walked up to its top; a plateau counts as rising (>=), so its last sample
+    assert _first_peak(np.array([0.0, 2.0, 3.0, 3.0, 1.0]))[0] == pytest.approx(3 + 0.5 * 2.0 / -2.0)
+    assert _first_peak(np.array([0.0, 1.0, 2.0, 4.0])) == (3.0, 4.0)  # the last sample: no refinement
+    assert _first_peak(np.array([5.0, 1.0, 0.0])) == (0.0, 5.0)  # the first sample: no refinement
+    assert _first_peak(np.array([0.0, 2.0, 2.0, 2.0])) == (3.0, 2.0)  # flat to the end
+
+
+def test_envelope_dewows_over_one_period_then_takes_the_hilbert_magnitude():
+    from scipy.ndimage import uniform_filter1d
+    from scipy.signal import hilbert
+
+    from gpr3d.inversion.hyperbola import _envelope
+
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(3, 200)) + np.linspace(0, 5, 200)  # a trend (wow)
+    got = _envelope(x, 1e-10, 1e9)  # one period = 10 samples
+    want = np.abs(hilbert(x - uniform_filter1d(x, 10, axis=1, mode="nearest"), axis=1))
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(_envelope(x, 1e-10, None), np.abs(hilbert(x, axis=1)), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(_envelope(x, 1e-10, 5e9), np.abs(hilbert(  # 2 samples: at least 3
+        x - uniform_filter1d(x, 3, axis=1, mode="nearest"), axis=1)), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(_envelope(x, 1e-10, 1e6), np.abs(hilbert(  # 1000 samples: at most half the trace
+        x - uniform_filter1d(x, 100, axis=1, mode="nearest"), axis=1)), rtol=1e-12, atol=1e-12)
+    assert _envelope(x.astype(np.float32), 1e-10, 1e9).dtype == np.float64
+
+
+def test_direct_wave_time_and_its_spread_by_hand():
+    from gpr3d.core.survey import Survey
+    from gpr3d.inversion.hyperbola import direct_wave_time
+
+    dt, f = 1e-11, 1e9
+    tt = np.arange(400) * dt
+    arrivals = np.full(130, 1.0e-9)
+    arrivals[::3] += 0.1e-9  # every third trace 10 samples later
+    s = Survey(data=_pulses(arrivals, tt, f).astype(np.float32), dt_s=dt, frequency_hz=f)
+    t, spread = direct_wave_time(s)
+    from scipy.signal import hilbert
+
+    from gpr3d.inversion.hyperbola import _first_peak
+
+    data = np.asarray(s.data, np.float64)
+    k, _ = _first_peak(np.abs(hilbert(data.mean(axis=0))))
+    sub = data[:: 130 // 64]  # every other trace
+    per = np.array([_first_peak(e)[0] for e in np.abs(hilbert(sub, axis=1))])
+    assert t == pytest.approx(k * dt, rel=1e-12, abs=0)
+    assert spread == pytest.approx(np.median(np.abs(per - k)) * dt, rel=1e-12, abs=0)
+    assert 1.0e-9 < t < 1.1e-9 and spread > 0
+    # a record of fewer than 64 traces uses every trace
+    few = Survey(data=s.data[:10], dt_s=dt, frequency_hz=f)
+    k10, _ = _first_peak(np.abs(hilbert(np.asarray(few.data, np.float64).mean(axis=0))))
+    per10 = np.array([_first_peak(e)[0] for e in np.abs(hilbert(np.asarray(few.data, np.float64), axis=1))])
+    assert direct_wave_time(few)[1] == pytest.approx(np.median(np.abs(per10 - k10)) * dt, rel=1e-12, abs=0)
+
+
+def test_time_zero_is_half_way_between_the_air_and_ground_paths():
+    from gpr3d.inversion.hyperbola import time_zero
+
+    assert time_zero(5e-9, 0.3, 1e8) == pytest.approx(5e-9 - 0.5 * (0.3 / C0 + 0.3 / 1e8), rel=1e-15, abs=0)
+    assert time_zero(5e-9, 0.0, 1e8) == 5e-9
+
+
+def test_trace_positions_from_the_file_or_a_spacing():
+    from gpr3d.core.errors import InvalidDataError
+    from gpr3d.core.survey import Survey
+    from gpr3d.inversion.hyperbola import trace_positions
+
+    pts = np.array([[0, 0, 0], [3, 4, 0], [3, 4, 0], [3, 10, 0]], float)  # steps 5, 0, 6
+    s = Survey(data=np.zeros((4, 8), np.float32), dt_s=1e-10, positions_xyz=pts)
+    np.testing.assert_allclose(trace_positions(s), [0, 5, 5, 11], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(trace_positions(s, 0.25), [0, 0.25, 0.5, 0.75], rtol=0, atol=0)
+    for bad in (0.0, -0.1, float("nan"), float("inf")):
+        with pytest.raises(InvalidDataError) as err:
+            trace_positions(s, bad)
+        assert str(err.value) == f"trace spacing must be a positive number of metres, got {bad!r}"
+    bare = Survey(data=np.zeros((4, 8), np.float32), dt_s=1e-10)
+    still = Survey(data=np.zeros((4, 8), np.float32), dt_s=1e-10, positions_xyz=np.zeros((4, 3)))
+    for rec in (bare, still):
+        with pytest.raises(InvalidDataError, match="^the record has no trace positions: give a trace spacing \\(m\\)$"):
+            trace_positions(rec)
+    np.testing.assert_allclose(trace_positions(still, 0.1), [0, 0.1, 0.2, 0.3], rtol=1e-15, atol=0)
+
+
+def test_record_envelope_removes_the_median_of_the_traces_outside_every_box_when_enough_lie_outside():
+    from gpr3d.core.survey import Survey
+    from gpr3d.inversion.hyperbola import _envelope, _record_envelope
+
+    rng = np.random.default_rng(9)
+    data = rng.normal(size=(100, 64))
+    s = Survey(data=data.astype(np.float32), dt_s=1e-10, frequency_hz=1e9)
+    d = np.asarray(s.data, np.float64)
+    boxes = [[10.4, 0, 19.6, 1], [30, 0, 89.2, 1]]  # traces 10-20 and 30-90 covered (floor / ceil)
+    outside = np.ones(100, bool)
+    outside[10:21] = False
+    outside[30:91] = False
+    assert outside.sum() == 28
+    want = _envelope(d - np.median(d[outside], axis=0, keepdims=True), 1e-10, 1e9)
+    np.testing.assert_allclose(_record_envelope(s, boxes), want, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(_record_envelope(s, boxes, remove_background=False), _envelope(d, 1e-10, 1e9),
+                               rtol=1e-12, atol=1e-12)
+    # 10 outside: a tenth of 100 traces, and at least 8: enough; 9 outside: not
+    ten = [[0, 0, 89, 1]]
+    out10 = np.arange(90, 100)
+    np.testing.assert_allclose(_record_envelope(s, ten), _envelope(d - np.median(d[out10], axis=0, keepdims=True),
+                                                                    1e-10, 1e9), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(_record_envelope(s, [[0, 0, 90, 1]]), _envelope(d, 1e-10, 1e9), rtol=1e-12, atol=1e-12)
+    small = Survey(data=data[:40].astype(np.float32), dt_s=1e-10, frequency_hz=1e9)  # 8 needed even for 40 traces
+    d40 = np.asarray(small.data, np.float64)
+    np.testing.assert_allclose(_record_envelope(small, [[0, 0, 32, 1]]), _envelope(d40, 1e-10, 1e9), rtol=1e-12,
+                               atol=1e-12)
+    np.testing.assert_allclose(_record_envelope(small, [[-3, 0, 31, 1]]),  # a box starting before the record
+                               _envelope(d40 - np.median(d40[32:], axis=0, keepdims=True), 1e-10, 1e9), rtol=1e-12,
+                               atol=1e-12)
