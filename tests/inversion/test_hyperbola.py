@@ -505,3 +505,26 @@ def test_record_envelope_removes_the_median_of_the_traces_outside_every_box_when
     np.testing.assert_allclose(_record_envelope(small, [[-3, 0, 31, 1]]),  # a box starting before the record
                                _envelope(d40 - np.median(d40[32:], axis=0, keepdims=True), 1e-10, 1e9), rtol=1e-12,
                                atol=1e-12)
+
+
+def test_combine_permittivity_drops_around_the_weighted_median_not_the_plain_one():
+    F = HyperbolaFit
+    fits = [F(ok=True, eps_r=5.0, sigma_eps_r=0.2), F(ok=True, eps_r=6.0, sigma_eps_r=0.2),
+            F(ok=True, eps_r=7.0, sigma_eps_r=0.01),  # weight 10000 against 25 + 25: the weighted median is 7
+            F(ok=True, eps_r=3.0, sigma_eps_r=0.0), F(ok=True, eps_r=3.0, sigma_eps_r=float("inf")),
+            F(ok=True, eps_r=3.0, sigma_eps_r=float("nan")), F(ok=False, eps_r=3.0, sigma_eps_r=0.1)]
+    eps, sig, n = combine_permittivity(fits)
+    # 5 and 6 lie more than 3 x hypot(0.2, 0.02 x 7) = 0.73 from 7: only 7 is left
+    assert (eps, n) == (7.0, 1) and sig == pytest.approx(0.01, rel=1e-12, abs=0)
+    # with 6 at 7.5 it is 0.5 from 7: kept, and weighted in
+    fits[1] = F(ok=True, eps_r=7.5, sigma_eps_r=0.2)
+    eps, sig, n = combine_permittivity(fits)
+    w1, w2 = 1 / 0.2**2, 1 / 0.01**2
+    assert n == 2 and eps == pytest.approx((7.5 * w1 + 7.0 * w2) / (w1 + w2), rel=1e-12, abs=0)
+    assert sig == pytest.approx(1 / math.sqrt(w1 + w2), rel=1e-12, abs=0)
+    # equal weights: the median is the first whose cumulative weight reaches half: the lower middle of four
+    four = [F(ok=True, eps_r=e, sigma_eps_r=1.0) for e in (10.0, 4.0, 8.0, 30.0)]
+    eps, sig, n = combine_permittivity(four)  # median 8; within 3 x hypot(1, 0.16) = 3.04 of it: 8 and 10
+    assert n == 2 and eps == pytest.approx(9.0, rel=1e-12, abs=0) and sig == pytest.approx(1 / math.sqrt(2))
+    assert combine_permittivity([F(ok=False)]) == (pytest.approx(float("nan"), nan_ok=True),
+                                                    pytest.approx(float("nan"), nan_ok=True), 0)
