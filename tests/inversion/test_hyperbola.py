@@ -528,3 +528,100 @@ def test_combine_permittivity_drops_around_the_weighted_median_not_the_plain_one
     assert n == 2 and eps == pytest.approx(9.0, rel=1e-12, abs=0) and sig == pytest.approx(1 / math.sqrt(2))
     assert combine_permittivity([F(ok=False)]) == (pytest.approx(float("nan"), nan_ok=True),
                                                     pytest.approx(float("nan"), nan_ok=True), 0)
+
+
+def _single_cov(x, t, fit, t0, dw, h, kind, scale, radius=None):
+    """Covariance of [x0, zc, v(, r)] of one fit from a Jacobian written here (Cauchy-weighted rows), and the
+    residuals (s)."""
+    from gpr3d.inversion.hyperbola import time_zero
+
+    zc = fit.depth_m + fit.radius_m
+    p = np.array([fit.x0_m, zc, fit.v_m_s] + ([fit.radius_m] if kind == "cylinder" else []))
+
+    def res(q):
+        tz = t0 if dw is None else time_zero(dw, h, q[2])
+        r = q[3] if kind == "cylinder" else (radius or 0.0)
+        return (tz + _circle_path(x, h, q[0], q[1], r) / q[2] - t) / scale
+
+    J = np.empty((x.size, p.size))
+    for j in range(p.size):
+        d = np.zeros_like(p)
+        d[j] = 1e-6 * max(abs(p[j]), 1e-3)
+        J[:, j] = (res(p + d) - res(p - d)) / (2 * d[j])
+    z = res(p) ** 2
+    J = J * (np.sqrt(1 - z) / (1 + z))[:, None] * scale
+    r = res(p) * scale
+    return np.linalg.inv(J.T @ J) * np.sum(r**2) / max(r.size - p.size, 1), r
+
+
+@pytest.mark.parametrize("kind, radius, use_dw", [("point", None, False), ("cylinder", None, True),
+                                                  ("known", 0.05, False), ("known", 0.05, True)])
+def test_one_fit_s_uncertainties_misfit_and_fields_by_hand(kind, radius, use_dw):
+    from gpr3d.inversion.hyperbola import time_zero
+
+    h, f, eps = 0.06, 5e8, 9.0
+    v = C0 / math.sqrt(eps)
+    x = np.linspace(0.0, 1.2, 121)
+    r_true = 0.0 if kind == "point" else 0.05
+    t0 = time_zero(4e-9, h, v) if use_dw else 3e-9
+    t = _picks(x, t0=t0, h=h, x0=0.55, zc=0.35 + r_true, r=r_true, eps=eps)
+    t = t + 20e-12 * np.cos(7 * np.arange(x.size))  # a fixed, uneven misfit of 20 ps
+    kw = dict(direct_wave_s=4e-9) if use_dw else dict(t0_s=3e-9)
+    model = "point" if kind == "point" else "cylinder"
+    fit = fit_hyperbola(x, t, offset_m=h, frequency_hz=f, model=model, traces=np.arange(x.size) + 10,
+                        radius_m=radius, **kw)
+    scale = 0.05 / f
+    cov, r = _single_cov(x, t, fit, None if use_dw else 3e-9, 4e-9 if use_dw else None, h,
+                         "cylinder" if kind == "cylinder" else "point", scale, radius)
+    assert fit.ok and fit.model == model and fit.n_picks == 121 and fit.reason == ""
+    assert fit.eps_r == pytest.approx((C0 / fit.v_m_s) ** 2, rel=1e-12) and fit.eps_r == pytest.approx(9.0, rel=0.02)
+    assert fit.v_m_s == pytest.approx(v, rel=0.01)
+    assert fit.radius_m == (pytest.approx(0.05, abs=0.02) if kind != "point" else 0.0)
+    assert fit.sigma_x0_m == pytest.approx(math.sqrt(cov[0, 0]), rel=1e-4)
+    if kind == "cylinder":
+        want = cov[1, 1] + cov[3, 3] - 2 * cov[1, 3]
+    else:
+        want = cov[1, 1]
+    assert fit.sigma_depth_m == pytest.approx(math.sqrt(want), rel=1e-4)
+    assert fit.sigma_eps_r == pytest.approx(2 * fit.eps_r * math.sqrt(cov[2, 2]) / fit.v_m_s, rel=1e-4)
+    assert fit.rms_s == pytest.approx(math.sqrt(np.mean(r**2)), rel=1e-6)
+    tz = time_zero(4e-9, h, fit.v_m_s) if use_dw else 3e-9
+    assert fit.t0_s == pytest.approx(tz, rel=1e-12, abs=0)
+    zc = fit.depth_m + fit.radius_m
+    assert fit.apex_time_s == pytest.approx(tz + _circle_path(np.array([fit.x0_m]), h, fit.x0_m, zc, fit.radius_m)[0]
+                                            / fit.v_m_s, rel=1e-12, abs=0)
+    assert fit.apex_trace == pytest.approx(10 + fit.x0_m / 0.01, abs=1e-9)
+
+
+def test_picks_with_nan_are_left_out_and_the_messages_are_whole():
+    from gpr3d.core.errors import InvalidDataError
+
+    x = np.linspace(0.0, 1.2, 121)
+    t = _picks(x, t0=3e-9, h=0.06, x0=0.55, zc=0.35, r=0.0, eps=9.0)
+    x2, t2 = x.copy(), t.copy()
+    x2[5], t2[9] = np.nan, np.inf
+    fit = fit_hyperbola(x2, t2, t0_s=3e-9, offset_m=0.06, model="point", traces=np.arange(121))
+    assert fit.n_picks == 119 and fit.eps_r == pytest.approx(9.0, rel=1e-6)
+    assert fit.apex_trace == pytest.approx(55.0, abs=1e-4)
+    # positions that go back and forth: no apex trace
+    back = fit_hyperbola(x[::-1], t[::-1], t0_s=3e-9, offset_m=0.06, model="point", traces=np.arange(121))
+    assert math.isnan(back.apex_trace) and back.eps_r == pytest.approx(9.0, rel=1e-6)
+    assert fit_hyperbola(x[:5], t[:5], t0_s=3e-9, model="point").ok  # five picks are enough
+    four = fit_hyperbola(x[:4], t[:4], t0_s=3e-9, model="point")
+    assert not four.ok and four.reason == "4 usable picks (5 spread along the profile needed)"
+    stack = fit_hyperbola(np.full(6, 0.3), t[:6], t0_s=3e-9, model="point")
+    assert not stack.ok and stack.reason == "6 usable picks (5 spread along the profile needed)"
+    with pytest.raises(InvalidDataError) as err:
+        fit_hyperbola(x, t, t0_s=3e-9, model="hyper")
+    assert str(err.value) == "unknown hyperbola model 'hyper'; choose one of auto, point, cylinder"
+    for kw in ({}, {"t0_s": 1e-9, "direct_wave_s": 2e-9}):
+        with pytest.raises(InvalidDataError) as err:
+            fit_hyperbola(x, t, **kw)
+        assert str(err.value) == "give either the time zero t0_s or the direct wave's peak direct_wave_s"
+
+
+def test_integer_picks_are_read_as_numbers():
+    x = np.arange(0, 121)  # integer positions (m) and picks in integer nanoseconds x 1000 are still fitted
+    t = _picks(x * 1.0, t0=0.0, h=0.0, x0=60.0, zc=30.0, r=0.0, eps=4.0)
+    fit = fit_hyperbola(list(x), list(t), t0_s=0.0, model="point", traces=list(range(121)))
+    assert fit.ok and fit.eps_r == pytest.approx(4.0, rel=1e-6) and fit.apex_trace == pytest.approx(60.0, abs=1e-4)
