@@ -625,3 +625,84 @@ def test_integer_picks_are_read_as_numbers():
     t = _picks(x * 1.0, t0=0.0, h=0.0, x0=60.0, zc=30.0, r=0.0, eps=4.0)
     fit = fit_hyperbola(list(x), list(t), t0_s=0.0, model="point", traces=list(range(121)))
     assert fit.ok and fit.eps_r == pytest.approx(4.0, rel=1e-6) and fit.apex_trace == pytest.approx(60.0, abs=1e-4)
+
+
+DT = 1e-10  # the picking tests' sample interval; a period is 20 samples
+
+
+def _bumps(n=41, ns=300, distractor=True):
+    """An envelope made by hand: a hyperbola of Gaussian bumps (1.5 samples wide) with its apex at trace 20,
+    sample 100, fading away from it, and a 1.5x stronger bump 7 samples later in every trace."""
+    j = np.arange(n)
+    t = 100 + np.sqrt(30.0**2 + (2.0 * (j - 20)) ** 2) - 30  # samples
+    amp = np.exp(-(((j - 20) / 12.0) ** 2))
+    k = np.arange(ns)
+    env = amp[:, None] * np.exp(-0.5 * ((k[None, :] - t[:, None]) / 1.5) ** 2)
+    if distractor:  # away from the apex only (where the start takes the strongest peak)
+        far = (np.abs(j - 20) >= 3)[:, None]
+        env += far * 1.5 * amp[:, None] * np.exp(-0.5 * ((k[None, :] - t[:, None] - 7.0) / 1.5) ** 2)
+    return env, t
+
+
+def _peak_near(e, t):
+    """The parabola vertex (samples) of the local maximum of e nearest sample t, and its sample value."""
+    k = int(round(t))
+    while e[k + 1] > e[k]:
+        k += 1
+    while e[k - 1] > e[k]:
+        k -= 1
+    den = e[k - 1] - 2 * e[k] + e[k + 1]
+    return k + 0.5 * (e[k - 1] - e[k + 1]) / den, e[k]
+
+
+@pytest.mark.parametrize("apex", [(20, 100 * DT), (21.3, 103 * DT), None])
+def test_picks_follow_the_hyperbola_from_its_apex_to_where_it_fades(apex):
+    env, t = _bumps()
+    kw = dict(apex_trace=apex[0], apex_time_s=apex[1]) if apex else {}
+    tr, tp, amp = pick_arrivals(env, DT, [2, 80 * DT, 38, 200 * DT], period_s=20 * DT, **kw)
+    start = 21 if apex and apex[0] == 21.3 else 20
+    ref = {j: _peak_near(env[j], t[j]) for j in range(41)}
+    a0 = ref[start][1]
+    keep = [start]
+    for step in (-1, 1):  # outwards while the bump keeps 0.15 of the start's
+        j = start + step
+        while 2 <= j <= 38 and ref[j][1] >= 0.15 * a0:
+            keep.append(j)
+            j += step
+    keep.sort()
+    assert tr.dtype.kind == "i" and tr.tolist() == keep
+    assert len(keep) > 20 and keep[0] > 2 and keep[-1] < 38  # it faded before the box's sides
+    np.testing.assert_allclose(tp, [ref[j][0] * DT for j in keep], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(amp, [ref[j][1] for j in keep], rtol=1e-12, atol=0)
+
+
+def test_picks_stop_at_the_box_and_take_its_rows_only():
+    env, t = _bumps()
+    tr, tp, _ = pick_arrivals(env, DT, [10.5, 80 * DT, 29.5, 200 * DT], period_s=20 * DT, apex_trace=20,
+                              apex_time_s=100 * DT)
+    assert tr.tolist() == list(range(10, 31))  # floor and ceil of the box's sides
+    np.testing.assert_allclose(tp, [_peak_near(env[j], t[j])[0] * DT for j in tr], rtol=1e-12, atol=0)
+    # a box whose bottom cuts the hyperbola's flanks: picks only while the bump lies in its rows
+    tr, _, _ = pick_arrivals(env, DT, [0, 80 * DT, 40, 112 * DT], period_s=20 * DT, apex_trace=20,
+                             apex_time_s=100 * DT)
+    # the bump's top sample must lie in rows ..112: at traces 5 and 35 it is 112 (t = 112.43), at 4 and 36 it is 114
+    assert tr.tolist() == list(range(5, 36))
+
+
+def test_degenerate_boxes_give_no_picks():
+    env, _ = _bumps()
+    for box in ([30, 80 * DT, 20, 200 * DT], [0, 100 * DT, 40, 101 * DT], [0, 100 * DT, 40, 102 * DT]):
+        tr, tp, amp = pick_arrivals(env, DT, box, period_s=20 * DT)
+        assert tr.dtype.kind == "i" and tr.size == tp.size == amp.size == 0
+    tr, _, _ = pick_arrivals(env, DT, [0, 100 * DT, 40, 103 * DT], period_s=20 * DT)  # three rows: enough to try
+    assert tr.size >= 1
+    tr, _, _ = pick_arrivals(np.zeros((41, 300)), DT, [0, 80 * DT, 40, 200 * DT], period_s=20 * DT)
+    assert tr.size == 0  # silence: no strong peak to start from
+
+
+def test_the_default_period_is_a_tenth_of_the_box_height():
+    env, t = _bumps()
+    a = pick_arrivals(env, DT, [2, 80 * DT, 38, 280 * DT], apex_trace=20, apex_time_s=100 * DT)
+    b = pick_arrivals(env, DT, [2, 80 * DT, 38, 280 * DT], period_s=20 * DT, apex_trace=20, apex_time_s=100 * DT)
+    for u, w in zip(a, b):
+        np.testing.assert_array_equal(u, w)
