@@ -706,3 +706,85 @@ def test_the_default_period_is_a_tenth_of_the_box_height():
     b = pick_arrivals(env, DT, [2, 80 * DT, 38, 280 * DT], period_s=20 * DT, apex_trace=20, apex_time_s=100 * DT)
     for u, w in zip(a, b):
         np.testing.assert_array_equal(u, w)
+
+
+def _spied(monkeypatch, sizes):
+    """fit_boxes with pick_arrivals answering picks of the given sizes in turn and fit_hyperbola recording its
+    arguments."""
+    from gpr3d.inversion import hyperbola as hb
+
+    calls = {"pick": [], "fit": []}
+    answers = list(sizes)
+
+    def pick(env, dt, box, *, apex_trace=None, apex_time_s=None, period_s=None, min_rel=0.15):
+        calls["pick"].append((env, dt, list(box), apex_trace, apex_time_s, period_s))
+        n = answers.pop(0)
+        return np.arange(3, 3 + n), np.linspace(1e-9, 2e-9, n), np.ones(n)
+
+    def fit(x, t, **kw):
+        calls["fit"].append((np.asarray(x), np.asarray(t), kw))
+        return "FIT"
+
+    monkeypatch.setattr(hb, "pick_arrivals", pick)
+    monkeypatch.setattr(hb, "fit_hyperbola", fit)
+    return hb, calls
+
+
+def test_fit_boxes_tries_the_given_apex_then_the_box_centre_then_the_box_s_own_and_hands_everything_on(monkeypatch):
+    from gpr3d.core.survey import Survey
+    from gpr3d.io.coco import BOX_PAD_PERIODS
+
+    rng = np.random.default_rng(3)
+    x = np.arange(30) * 0.02
+    s = Survey(data=rng.normal(size=(30, 50)).astype(np.float32), dt_s=2e-11,
+               positions_xyz=np.stack([x, 0 * x, 0 * x], 1), offset_m=0.07, frequency_hz=2e9)
+    hb, calls = _spied(monkeypatch, [4, 3, 6, 5])  # box 0: apex 4 picks, centre 3, own 6; box 1: apex 5
+    boxes = [[2, 1e-10, 9, 6e-10], [12, 2e-10, 20, 7e-10]]
+    out = hb.fit_boxes(s, boxes, apexes=[(5.0, 3e-10), (16.0, 4e-10)], radius_m=[None, 0.01])
+    assert out == ["FIT", "FIT"]
+    env = hb._record_envelope(s, boxes, True)
+    p = calls["pick"]
+    assert [c[3:] for c in p] == [(5.0, 3e-10, 5e-10), (5.5, 1e-10 + BOX_PAD_PERIODS * 5e-10, 5e-10),
+                                  (None, None, 5e-10), (16.0, 4e-10, 5e-10)]
+    assert [c[2] for c in p] == [boxes[0]] * 3 + [boxes[1]] and all(c[1] == 2e-11 for c in p)
+    np.testing.assert_array_equal(p[0][0], env)
+    dw = hb.direct_wave_time(s)[0]
+    (x0, t0, k0), (x1, t1, k1) = calls["fit"]
+    np.testing.assert_array_equal(x0, x[3:9]) and np.testing.assert_array_equal(x1, x[3:8])
+    np.testing.assert_array_equal(t0, np.linspace(1e-9, 2e-9, 6))
+    assert k0 == dict(t0_s=None, direct_wave_s=dw, offset_m=0.07, frequency_hz=2e9, model="auto",
+                      traces=k0["traces"], radius_m=None)
+    np.testing.assert_array_equal(k0["traces"], np.arange(3, 9))
+    assert k1["model"] == "cylinder" and k1["radius_m"] == 0.01
+
+
+def test_fit_boxes_with_a_time_zero_a_spacing_no_apexes_and_no_frequency(monkeypatch):
+    from gpr3d.core.survey import Survey
+
+    rng = np.random.default_rng(4)
+    s = Survey(data=rng.normal(size=(30, 50)).astype(np.float32), dt_s=2e-11)  # no positions, no frequency
+    hb, calls = _spied(monkeypatch, [2, 7])  # without a frequency: only the box's own start
+    boxes = [[0, 1e-10, 29, 9e-10]]
+    hb.fit_boxes(s, boxes, t0_s=1e-10, trace_spacing_m=0.05, model="point", remove_background=False)
+    assert [c[3:] for c in calls["pick"]] == [(None, None, None)]
+    hb.fit_boxes(s, boxes, t0_s=1e-10, trace_spacing_m=0.05, model="point", remove_background=False)
+    np.testing.assert_array_equal(calls["pick"][0][0], hb._record_envelope(s, boxes, False))
+    xx, _, kw = calls["fit"][0]
+    np.testing.assert_allclose(xx, np.arange(3, 5) * 0.05, rtol=1e-15, atol=0)
+    assert kw["t0_s"] == 1e-10 and kw["direct_wave_s"] is None and kw["frequency_hz"] is None
+    assert kw["model"] == "point"
+    # the background is removed by default (here the box covers every trace, so nothing is outside to remove)
+    env_default = hb._record_envelope(s, [[0, 0, 5, 1e-10]])
+    assert not np.allclose(env_default, hb._record_envelope(s, [[0, 0, 5, 1e-10]], False))
+
+
+def test_five_picks_end_the_search_for_a_start(monkeypatch):
+    from gpr3d.core.survey import Survey
+
+    rng = np.random.default_rng(5)
+    x = np.arange(30) * 0.02
+    s = Survey(data=rng.normal(size=(30, 50)).astype(np.float32), dt_s=2e-11,
+               positions_xyz=np.stack([x, 0 * x, 0 * x], 1), frequency_hz=2e9)
+    hb, calls = _spied(monkeypatch, [5, 9, 9])
+    hb.fit_boxes(s, [[2, 1e-10, 9, 6e-10]], apexes=[(5.0, 3e-10)])
+    assert len(calls["pick"]) == 1 and calls["fit"][0][0].size == 5
