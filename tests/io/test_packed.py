@@ -139,3 +139,32 @@ def test_a_folder_without_samples_or_labels_is_named(tmp_path):
     (root / "samples" / "000001" / "labels.json").unlink()
     with pytest.raises(FormatError, match="^000001: sample folder has no labels.json$"):
         list(labelled_records(root))
+
+
+def test_a_damaged_packed_file_is_named_and_defaults_are_kept(tmp_path):
+    p = tmp_path / "set.h5"
+    write_packed(p)
+    with h5py.File(p, "a") as f:
+        del f.attrs["regenerate"]
+    assert PackedDataset(p).regenerate == ""
+    with h5py.File(p, "a") as f:
+        del f["scale"]
+    with pytest.raises(FormatError, match=r"^set.h5: "):
+        PackedDataset(p)
+
+
+def test_an_index_past_the_end_is_named():
+    class Three(PackedDataset):
+        def __init__(self):
+            self.index = [0, 1, 2]
+
+    with pytest.raises(IndexError, match="^7$"):
+        Three()[7]
+
+
+def test_last_without_a_count_is_every_record(tmp_path):
+    root = _folder(tmp_path)
+    assert [lab["index"] for _, lab in labelled_records(root, last=True)] == [10, 11, 12]
+    p = tmp_path / "set.h5"
+    write_packed(p)
+    assert [lab["index"] for _, lab in labelled_records(p, last=True)] == [10, 11, 12]

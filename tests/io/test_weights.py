@@ -88,3 +88,15 @@ def test_a_folder_is_not_a_weights_file(tmp_path):
     (tmp_path / "w.pt").mkdir()
     with pytest.raises(FormatError, match="^w.pt: no such detector weights file$"):
         read_weights_file(tmp_path / "w.pt", "gpr3d.detector", "detector")
+
+
+def test_a_reason_without_words_is_still_one_line(tmp_path, monkeypatch):
+    p = _save(tmp_path, {"format": "gpr3d.depthnet", "version": 1})
+
+    def fail(*a, **k):
+        raise ValueError()
+
+    monkeypatch.setattr(torch, "load", fail)
+    with pytest.raises(FormatError) as err:
+        read_weights_file(p, "gpr3d.depthnet", "DepthNet")
+    assert str(err.value) == "w.pt: not a readable weights file (ValueError: )"
