@@ -788,3 +788,12 @@ def test_five_picks_end_the_search_for_a_start(monkeypatch):
     hb, calls = _spied(monkeypatch, [5, 9, 9])
     hb.fit_boxes(s, [[2, 1e-10, 9, 6e-10]], apexes=[(5.0, 3e-10)])
     assert len(calls["pick"]) == 1 and calls["fit"][0][0].size == 5
+
+
+@pytest.mark.parametrize("h, x0, zc, r", [(1.0, 0.0, 0.3, 0.25), (0.6, 0.2, 0.2, 0.15), (0.3, 0.1, 0.12, 0.1)])
+def test_reflection_path_with_antennas_far_apart_over_a_wide_shallow_pipe(h, x0, zc, r):
+    """Where the start (the midpoint's direction) is far from the reflection point: Newton's steps need the
+    right second derivative to get there in four."""
+    x = np.linspace(-1.5, 1.5, 31)
+    np.testing.assert_allclose(_circle_path(x, h, x0, zc, r), brute_path(x, h, x0, zc, r, n=2000001), rtol=0,
+                               atol=1e-10)
