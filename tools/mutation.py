@@ -59,7 +59,7 @@ MODULES = {
     "migration.targets": None, "migration.metrics": None,
     "migration.profile": None, "migration.traditional": None, "migration.reconstruct": None,
     "migration.sitetiles": ["tests/migration/test_sitetiles.py"],
-    "migration.rtm": ["tests/migration/test_rtm.py"],
+    "migration.rtm": ["tests/migration/test_rtm.py", "tests/migration/test_rtm_by_hand.py"],
     # numba kernels: mutmut leaves decorated functions alone, so only their plain-Python helpers are mutated
     "migration._kernels": ["tests/migration/test_operator.py"], "migration._simd": ["tests/migration/test_operator.py"],
     "simulation.forward": ["tests/simulation/test_forward.py", "tests/simulation/test_forward_by_hand.py"],
