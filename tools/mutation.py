@@ -70,7 +70,7 @@ MODULES = {
     "pose.metrics": ["tests/pose/test_metrics.py"],
     "pose.imu": ["tests/pose/test_imu.py"],
     "pose.graph": ["tests/pose/test_graph.py"], "pose.vo": ["tests/pose/test_vo.py"],
-    "pose.render": ["tests/pose/test_render.py"],
+    "pose.render": ["tests/pose/test_render.py", "tests/pose/test_render_by_hand.py"],
     "pose.rig": ["tests/pose/test_eskf.py", "tests/pose/test_sync.py", "tests/pose/test_graph.py"],
     "inversion.hyperbola": ["tests/inversion/test_hyperbola.py"],
     "inversion.estimate": ["tests/inversion/test_estimate.py", "tests/inversion/test_estimate_by_hand.py"],
