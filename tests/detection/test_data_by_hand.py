@@ -95,15 +95,15 @@ def test_a_short_record_starts_at_zero():
 
 def test_the_mirror_flips_image_and_boxes_together():
     s, labels = _record()
-    rng = Scripted(randoms=[0.3, 0.2], integers=[0], uniforms=[0.25])  # 0.2 < 0.5: mirrored
+    rng = Scripted(randoms=[0.3, 0.2], integers=[0], uniforms=[0.5])  # 0.2 < 0.5: mirrored
     image, boxes = random_window(s, labels, CFG, rng)
-    want_img, want_boxes = _expected(s, labels, 21)
+    want_img, want_boxes = _expected(s, labels, 17)  # start round(25 - 8): the box (traces 20-30) wholly inside
     np.testing.assert_array_equal(image, want_img[:, :, ::-1])
-    assert len(want_boxes) >= 1
+    assert len(want_boxes) == 1 and 0 < want_boxes[0, 0] < want_boxes[0, 2] < 16
     np.testing.assert_allclose(boxes, np.stack([16 - want_boxes[:, 2], want_boxes[:, 1], 16 - want_boxes[:, 0],
                                                 want_boxes[:, 3]], axis=1), rtol=0, atol=0)
     assert image.flags["C_CONTIGUOUS"]
-    rng = Scripted(randoms=[0.3, 0.2], integers=[0], uniforms=[0.25])
+    rng = Scripted(randoms=[0.3, 0.2], integers=[0], uniforms=[0.5])
     image, _ = random_window(s, labels, CFG, rng, flip=False)  # no flip: no draw for it either
     np.testing.assert_array_equal(image, want_img)
     assert len(rng.calls) == 3
@@ -173,3 +173,51 @@ def test_packed_source_holdouts_by_file(tmp_path):
         PackedSource(str(p), holdout=3)
     with pytest.raises(GPR3DError, match="none left after holding out 5"):
         PackedSource([str(p), f"{p}:5"])
+
+
+def test_a_flip_draw_of_exactly_one_half_does_not_mirror():
+    s, labels = _record()
+    image, _ = random_window(s, labels, CFG, Scripted(randoms=[0.3, 0.5], integers=[0], uniforms=[0.5]))
+    np.testing.assert_array_equal(image, _expected(s, labels, 17)[0])
+
+
+def test_the_dataset_s_defaults_and_its_flip_switch():
+    pytest.importorskip("torch")
+    from gpr3d.detection.data import WindowDataset
+
+    s, labels = _record()
+    seen = []
+
+    def source(i):
+        seen.append(i)
+        return s, labels
+
+    ds = WindowDataset(source, 40, CFG)
+    assert ds.seed == 0 and ds.flip is True
+    ds[np.int64(3)]
+    assert seen == [3] and type(seen[0]) is int
+    # item i: the generator of (seed, i, 77); with flip=False the same draws but no mirror
+    plain = WindowDataset(source, 40, CFG, flip=False)
+    flipped = [i for i in range(40) if not np.array_equal(ds[i][0].numpy(), plain[i][0].numpy())]
+    assert 5 < len(flipped) < 35  # about half mirrored
+
+
+def test_packed_source_names_with_colons_and_a_holdout_of_all_but_one(tmp_path):
+    from tests.io.test_packed import write_packed
+
+    d = tmp_path / "a:b"
+    d.mkdir()
+    p = d / "p.h5"
+    write_packed(p)
+    assert PackedSource(str(p)).n == 3  # the colon in the folder is not a hold-out
+    assert PackedSource(f"{p}:2").n == 1  # one left is enough
+    with pytest.raises(GPR3DError, match=r"p.h5: 3 records; none left after holding out 3$"):
+        PackedSource(f"{p}:3")
+    with pytest.raises(Exception):
+        PackedSource(f"{p}:x")  # not a count: the whole name is a path, which does not exist
+
+
+def test_mixed_source_at_its_fraction_exactly():
+    i = 0
+    u = np.random.default_rng(np.random.SeedSequence([i, 0x313])).random()
+    assert MixedSource(lambda k: "first", lambda k: "second", u)(i) == "first"  # u < fraction: strictly
