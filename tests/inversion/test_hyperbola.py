@@ -804,3 +804,17 @@ def test_reflection_path_with_antennas_far_apart_over_a_wide_shallow_pipe(h, x0,
     x = np.linspace(-1.5, 1.5, 31)
     np.testing.assert_allclose(_circle_path(x, h, x0, zc, r), brute_path(x, h, x0, zc, r), rtol=0,
                                atol=1e-10)
+
+
+def test_a_faster_than_light_hyperbola_stops_at_eps_1_and_far_outliers_count_little():
+    x = np.linspace(0.0, 1.2, 121)
+    # picks made with a wave 1.3 x faster than light: no permittivity explains them; the fit stops at the bound
+    t = 3e-9 + (np.hypot(x - 0.03 - 0.55, 0.35) + np.hypot(x + 0.03 - 0.55, 0.35)) / (1.3 * C0)
+    f = fit_hyperbola(x, t, t0_s=3e-9, offset_m=0.06, frequency_hz=5e8, model="point")
+    assert f.ok and f.eps_r == pytest.approx(1.0, abs=1e-6)
+    # a tenth of the picks 2 ns late (a neighbour's tail): the Cauchy loss keeps eps_r within 0.5 %
+    good = _picks(x, t0=3e-9, h=0.06, x0=0.55, zc=0.35, r=0.0, eps=9.0)
+    bad = good.copy()
+    bad[::10] += 2e-9
+    f = fit_hyperbola(x, bad, t0_s=3e-9, offset_m=0.06, frequency_hz=5e8, model="point")
+    assert f.eps_r == pytest.approx(9.0, rel=0.005) and f.depth_m == pytest.approx(0.35, abs=0.002)
