@@ -117,27 +117,11 @@ def test_tracking_stays_on_its_own_hyperbola_where_another_crosses():
 
 def test_joint_fit_of_a_synthetic_record_recovers_speed_radii_and_depths():
     """Several cylinders in one record, direct wave included: one speed, each target's depth and radius back."""
-    from gpr3d.core.survey import Survey
     from gpr3d.inversion.hyperbola import fit_record, time_zero
 
-    f, dt, ns, h, eps = 1.0e9, 2e-11, 1500, 0.05, 7.0
-    v = C0 / math.sqrt(eps)
-    x = np.arange(240) * 0.01
-    tt = np.arange(ns) * dt
-    t_dw = 3e-9
-    t0 = time_zero(t_dw, h, v)
-    targets = [(0.5, 0.30, 0.02), (1.2, 0.45, 0.10), (1.9, 0.25, 0.05)]  # x0, top depth, radius
-    data = 3 * _pulses(np.full(x.size, t_dw), tt, f)
-    boxes, apexes = [], []
-    for x0, top, r in targets:
-        t = t0 + _circle_path(x, h, x0, top + r, r) / v
-        obliquity = ((top + r) / np.hypot(x - x0, top + r)) ** 4  # a broadside antenna's pattern: tails fade
-        data += _pulses(t, tt, f, amp=obliquity)
-        sel = np.nonzero(np.abs(x - x0) <= top + r)[0]
-        boxes.append([int(sel[0]), float(t.min() - 0.7 / f), int(sel[-1]), float(t[sel].max() + 0.7 / f)])
-        apexes.append((float(np.interp(x0, x, np.arange(x.size))), float(t.min())))
-    pos = np.stack([x, 0 * x, 0 * x], axis=1)
-    s = Survey(data=data, dt_s=dt, positions_xyz=pos, offset_m=h, frequency_hz=f)
+    s, boxes, apexes, targets, eps = _rods_record()
+    t0 = time_zero(3e-9, 0.05, C0 / math.sqrt(eps))  # the record's direct wave peaks at 3 ns
+    f = s.frequency_hz
     fits, info = fit_record(s, boxes, apexes=apexes, model="cylinder")
     assert info["n_targets"] == 3
     assert info["eps_r"] == pytest.approx(eps, rel=0.02)

@@ -195,41 +195,37 @@ def test_voc_by_hand_with_its_own_map_and_a_path_when_the_file_name_is_elsewhere
     assert lab["labels"][0]["box"] == pytest.approx([2.0, 2e-10, 8.0, 12e-10], rel=1e-12, abs=1e-22)
 
 
+def _refusal(path, **kw) -> str:
+    with pytest.raises(FormatError) as err:
+        read_user_labels(path, **kw)
+    return str(err.value)
+
+
 def test_what_is_not_labels_is_named(tmp_path, rec):
     (tmp_path / "empty").mkdir()
-    with pytest.raises(FormatError) as err:
-        read_user_labels(tmp_path / "empty")
-    assert str(err.value) == "empty: folder holds no Pascal VOC .xml files"
+    assert _refusal(tmp_path / "empty") == "empty: folder holds no Pascal VOC .xml files"
     (tmp_path / "l.txt").write_text("x")
-    with pytest.raises(FormatError) as err:
-        read_user_labels(tmp_path / "l.txt")
-    assert str(err.value) == "l.txt: labels must be COCO (.json), Pascal VOC (.xml) or a folder of VOC files"
+    assert _refusal(tmp_path / "l.txt") == ("l.txt: labels must be COCO (.json), Pascal VOC (.xml) or a folder of "
+                                            "VOC files")
     (tmp_path / "x.xml").write_text("<root/>")
-    with pytest.raises(FormatError) as err:
-        read_user_labels(tmp_path / "x.xml")
-    assert str(err.value) == "x.xml: not a Pascal VOC file (root element <root>, expected <annotation>)"
+    assert _refusal(tmp_path / "x.xml") == "x.xml: not a Pascal VOC file (root element <root>, expected <annotation>)"
     (tmp_path / "b.xml").write_text("<annotation>")
-    with pytest.raises(FormatError) as err:
-        read_user_labels(tmp_path / "b.xml")
-    assert str(err.value).startswith("b.xml: not valid XML (no element found")
+    assert _refusal(tmp_path / "b.xml").startswith("b.xml: not valid XML (no element found")
     (tmp_path / "q.png").write_bytes(b"not a png")
     p = _coco(tmp_path, [{"id": 1, "file_name": "q.png"}], [], name="q.json")
-    with pytest.raises(FormatError) as err:
-        read_user_labels(p, pixel_map="s_per_px=1e-10")
-    assert str(err.value).startswith("q.png: not a readable picture (cannot identify image file")
-    Image.fromarray(np.zeros((7, 4), np.uint8)).save(tmp_path / "s.png")
+    assert _refusal(p, pixel_map="s_per_px=1e-10").startswith("q.png: not a readable picture (cannot identify image")
+
+
+@pytest.mark.parametrize("shape, message", [((7, 4), "s.png: a 4 x 7 picture is too small for a B-scan"),
+                                            ((8, 1), "s.png: a 1 x 8 picture is too small for a B-scan"),
+                                            ((8, 2), None)])  # 2 x 8: just big enough
+def test_pictures_too_small_for_a_bscan(tmp_path, shape, message):
+    Image.fromarray(np.zeros(shape, np.uint8)).save(tmp_path / "s.png")
     p = _coco(tmp_path, [{"id": 1, "file_name": "s.png"}], [], name="s.json")
-    with pytest.raises(FormatError) as err:
-        read_user_labels(p, pixel_map="s_per_px=1e-10")
-    assert str(err.value) == "s.png: a 4 x 7 picture is too small for a B-scan"
-    Image.fromarray(np.zeros((8, 1), np.uint8)).save(tmp_path / "t.png")
-    p = _coco(tmp_path, [{"id": 1, "file_name": "t.png"}], [], name="t.json")
-    with pytest.raises(FormatError) as err:
-        read_user_labels(p, pixel_map="s_per_px=1e-10")
-    assert str(err.value) == "t.png: a 1 x 8 picture is too small for a B-scan"
-    Image.fromarray(np.zeros((8, 2), np.uint8)).save(tmp_path / "u.png")  # 2 x 8: just big enough
-    assert read_user_labels(_coco(tmp_path, [{"id": 1, "file_name": "u.png"}], [], name="u.json"),
-                            pixel_map="s_per_px=1e-10")[0][0].n_traces == 2
+    if message:
+        assert _refusal(p, pixel_map="s_per_px=1e-10") == message
+    else:
+        assert read_user_labels(p, pixel_map="s_per_px=1e-10")[0][0].n_traces == 2
 
 
 def test_voc_folders_pass_the_pixel_map_on(tmp_path):
