@@ -249,3 +249,99 @@ def test_camera_motion_to_imu_motion_and_its_covariance_by_derivatives():
 
     J = np.stack([(imu_of(e * 1e-6) - imu_of(-e * 1e-6)) / 2e-6 for e in np.eye(6)], 1)
     np.testing.assert_allclose(cb, J @ cov @ J.T, rtol=1e-4, atol=1e-12)
+
+
+def _propagated(x, fm, wm, dt, P=None):
+    g = _filter(np.random.default_rng(1))
+    g.p, g.v, g.R, g.ba, g.bg, g.pc, g.Rc = [np.array(a, copy=True) for a in x]
+    if P is not None:
+        g.P = P.copy()
+    g.Phi = np.eye(15)
+    g.propagate(fm, wm, dt)
+    return g
+
+
+def test_one_step_s_nominal_state_transition_and_noise_by_derivatives():
+    rng = np.random.default_rng(1)
+    f = _filter(rng)
+    f.ba, f.bg = rng.normal(size=3) * 0.1, rng.normal(size=3) * 0.01
+    x0 = f.state()
+    fm, wm, dt = np.array([0.3, -0.2, 9.9]), np.array([0.2, -0.1, 0.5]), 1e-3
+    y = _propagated(x0, fm, wm, dt, P=np.zeros((21, 21)))
+    # the nominal state: the specific force at the step's midpoint attitude, gravity along -z
+    fb, wb = fm - x0[3], wm - x0[4]
+    a = x0[2] @ so3_exp(0.5 * wb * dt) @ fb - np.array([0.0, 0.0, GRAVITY])
+    np.testing.assert_allclose(y.p, x0[0] + x0[1] * dt + 0.5 * a * dt * dt, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(y.v, x0[1] + a * dt, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(y.R, x0[2] @ so3_exp(wb * dt), rtol=0, atol=1e-15)
+    assert np.array_equal(y.pc, x0[5]) and np.array_equal(y.Rc, x0[6])  # the clone stays
+    # the transition: the derivative of the step in the invariant error (second order in dt left over)
+    y0 = y.state()
+    cols = []
+    for j in range(15):
+        d = np.zeros(21)
+        d[j] = 1e-7
+        hi = eskf._minus(_propagated(eskf._plus(x0, d), fm, wm, dt).state(), y0)
+        lo = eskf._minus(_propagated(eskf._plus(x0, -d), fm, wm, dt).state(), y0)
+        cols.append((hi - lo) / 2e-7)
+    Jn = np.stack(cols, 1)[:15]
+    assert np.abs(y.Phi - Jn).max() < 5e-6 and np.abs(Jn - np.eye(15)).max() > 5e-3
+    # the process noise from zero covariance: white accelerometer and gyro noise through the step's sensitivity to
+    # them (variance q / dt per sample), and the bias walks
+    def sens(k):
+        cols = []
+        for e in np.eye(3):
+            up = _propagated(x0, fm + e * 1e-6 * (k == 0), wm + e * 1e-6 * (k == 1), dt).state()
+            dn = _propagated(x0, fm - e * 1e-6 * (k == 0), wm - e * 1e-6 * (k == 1), dt).state()
+            cols.append((eskf._minus(up, y0) - eskf._minus(dn, y0)) / 2e-6)
+        return np.stack(cols, 1)[:15]
+
+    qa, qg, qba, qbg = y.q
+    Jf, Jw = sens(0), sens(1)
+    Q = Jf @ Jf.T * qa / dt + Jw @ Jw.T * qg / dt
+    Q[9:12, 9:12] += np.eye(3) * qba * dt
+    Q[12:15, 12:15] += np.eye(3) * qbg * dt
+    np.testing.assert_allclose(y.P[:15, :15], Q, rtol=0, atol=2e-3 * np.abs(Q).max())
+    assert not y.P[15:].any() and not y.P[:, 15:].any()
+    n = eskf.EskfConfig().imu_noise
+    assert (qa, qg, qba, qbg) == (n.accel_noise**2, n.gyro_noise**2, n.accel_bias_walk**2, n.gyro_bias_walk**2)
+    # with a covariance: F P F^T + Q, and the cross terms with the clone carried by F
+    P0 = _filter(np.random.default_rng(12)).P
+    z = _propagated(x0, fm, wm, dt, P=P0)
+    F = z.Phi
+    np.testing.assert_allclose(z.P[:15, :15], F @ P0[:15, :15] @ F.T + y.P[:15, :15], rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(z.P[:15, 15:], F @ P0[:15, 15:], rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(z.P[15:, 15:], P0[15:, 15:], rtol=0, atol=0)
+    np.testing.assert_array_equal(z.P, z.P.T)
+
+
+def test_a_clone_copies_the_pose_and_its_covariance_rows():
+    f = _filter(np.random.default_rng(13))
+    P = f.P.copy()
+    f.clone()
+    assert np.array_equal(f.pc, f.p) and np.array_equal(f.Rc, f.R) and f.pc is not f.p
+    core = [0, 1, 2, 6, 7, 8]
+    np.testing.assert_array_equal(f.P[:15, :15], P[:15, :15])
+    np.testing.assert_array_equal(f.P[15:, :15], P[core, :15])
+    np.testing.assert_array_equal(f.P[:15, 15:], P[:15, core])
+    np.testing.assert_array_equal(f.P[15:, 15:], P[np.ix_(core, core)])
+
+
+def test_the_start_covariance_by_hand():
+    R0 = so3_exp([0.1, -0.05, 0.3])
+    cfg = eskf.EskfConfig(sigma_accel_bias=0.2, sigma_gyro_bias=0.003)
+    f = eskf._Filter(cfg, R0, np.array([0.01, 0.0, -0.01]))
+    g_b = R0.T @ np.array([0.0, 0.0, GRAVITY])
+    M = eskf.skew(g_b) / GRAVITY**2
+    Pb = np.diag([1e-8] * 3 + [1e-4] * 3 + [1e-8] * 3 + [0.04] * 3 + [0.003**2] * 3)
+    Pb[6:9, 6:9] += 0.04 * M @ M.T  # tilt errs by the accelerometer bias across gravity
+    Pb[6:9, 9:12] = 0.04 * M
+    Pb[9:12, 6:9] = Pb[6:9, 9:12].T
+    T = np.eye(15)
+    T[6:9, 6:9] = R0
+    want = T @ Pb @ T.T
+    np.testing.assert_allclose(f.P[:15, :15], want, rtol=1e-12, atol=1e-18)
+    core = [0, 1, 2, 6, 7, 8]
+    np.testing.assert_allclose(f.P[15:, 15:], want[np.ix_(core, core)], rtol=1e-12, atol=1e-18)
+    assert np.array_equal(f.bg, [0.01, 0.0, -0.01]) and not f.p.any() and not f.v.any() and not f.ba.any()
+    assert np.array_equal(f.Phi, np.eye(15)) and f.nodes is None
