@@ -741,7 +741,8 @@ def test_fit_boxes_tries_the_given_apex_then_the_box_centre_then_the_box_s_own_a
     np.testing.assert_array_equal(p[0][0], env)
     dw = hb.direct_wave_time(s)[0]
     (x0, t0, k0), (x1, t1, k1) = calls["fit"]
-    np.testing.assert_array_equal(x0, x[3:9]) and np.testing.assert_array_equal(x1, x[3:8])
+    np.testing.assert_array_equal(x0, x[3:9])
+    np.testing.assert_array_equal(x1, x[3:8])
     np.testing.assert_array_equal(t0, np.linspace(1e-9, 2e-9, 6))
     assert k0 == dict(t0_s=None, direct_wave_s=dw, offset_m=0.07, frequency_hz=2e9, model="auto",
                       traces=k0["traces"], radius_m=None)

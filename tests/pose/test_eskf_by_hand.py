@@ -62,7 +62,8 @@ def test_the_invariant_error_and_its_inverse_by_hand():
     np.testing.assert_allclose(a[2], E @ b[2], atol=1e-14)  # R_true = Exp(dtheta) R
     np.testing.assert_allclose(a[0], E @ b[0] + d[0:3], atol=1e-14)  # p_true = Exp(dtheta) p + dp
     np.testing.assert_allclose(a[1], E @ b[1] + d[3:6], atol=1e-14)
-    np.testing.assert_allclose(a[3], b[3] + d[9:12], atol=1e-15) and np.testing.assert_allclose(a[4], b[4] + d[12:15])
+    np.testing.assert_allclose(a[3], b[3] + d[9:12], atol=1e-15)
+    np.testing.assert_allclose(a[4], b[4] + d[12:15])
     np.testing.assert_allclose(a[5], Ec @ b[5] + d[15:18], atol=1e-14)
     np.testing.assert_allclose(a[6], Ec @ b[6], atol=1e-14)
     np.testing.assert_allclose(eskf._minus(a, b), d, atol=1e-12)
@@ -240,7 +241,8 @@ def test_camera_motion_to_imu_motion_and_its_covariance_by_derivatives():
     Rb, pb, cb = eskf.camera_to_imu_motion(Rc, pc, cov, T)
     # the IMU's motion: T_bc (camera motion) T_bc^-1
     M = T @ np.block([[Rc, pc[:, None]], [np.zeros((1, 3)), np.ones((1, 1))]]) @ np.linalg.inv(T)
-    np.testing.assert_allclose(Rb, M[:3, :3], atol=1e-14) and np.testing.assert_allclose(pb, M[:3, 3], atol=1e-14)
+    np.testing.assert_allclose(Rb, M[:3, :3], atol=1e-14)
+    np.testing.assert_allclose(pb, M[:3, 3], atol=1e-14)
 
     def imu_of(d):  # the camera's motion perturbed (rotation on the right, as the odometry's covariance is)
         Rp, pp = Rc @ so3_exp(d[:3]), pc + d[3:]

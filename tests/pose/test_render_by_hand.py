@@ -151,7 +151,8 @@ def test_rig_camera_poses_by_hand():
     run = SimpleNamespace(truth=truth, config=SimpleNamespace(imu_T_camera=Tbc))
     T = rig_camera_poses(run, [0, 1])
     assert calls[0].dtype == np.float64
-    np.testing.assert_allclose(T[0][:3, :3], Tbc[:3, :3]) and np.testing.assert_allclose(T[0][:3, 3], [1.1, 2.2, 3.3])
+    np.testing.assert_allclose(T[0][:3, :3], Tbc[:3, :3])
+    np.testing.assert_allclose(T[0][:3, 3], [1.1, 2.2, 3.3])
     np.testing.assert_allclose(T[1][:3, :3], Rz @ Tbc[:3, :3], atol=1e-15)
     np.testing.assert_allclose(T[1][:3, 3], [4 - 0.2, 5 + 0.1, 6.3], atol=1e-15)
     np.testing.assert_array_equal(T[:, 3], [[0, 0, 0, 1]] * 2)
