@@ -246,6 +246,9 @@ def test_fit_boxes_takes_one_radius_per_box_and_checks_their_number():
         fit_boxes(s, boxes, radius_m=[0.01, 0.02])
     with pytest.raises(InvalidDataError, match=r"radius_m must be a number of metres in 0..50, got -1"):
         fit_boxes(s, boxes, radius_m=[0.01, -1, 0.02])
+    for bad in ("0.01", {"a": 0.01}, [[0.01, 0.02, 0.03]], np.full((3, 1), 0.01)):  # never split or iterated
+        with pytest.raises(InvalidDataError, match=r"^radius_m must be a number of metres, or a list of one per box"):
+            fit_boxes(s, boxes, radius_m=bad)
 
 
 def _joint_case(monkeypatch, *, noise, dw=None, t0=None, model="cylinder"):

@@ -355,23 +355,34 @@ def fit_hyperbola(x_m, t_s, *, t0_s: float | None = None, direct_wave_s: float |
             choice = "cylinder"
     elif model == "cylinder":
         choice = "cylinder"
-    sol = fits[choice]
+    return _result(fits[choice], x, t, tr, t0_s, direct_wave_s, offset_m, scale,
+                   radius=None if choice == "cylinder" else 0.0)
+
+
+def _result(sol, x, t, tr, t0_s, dw, h, scale, radius) -> HyperbolaFit:
+    """The fit's estimates and uncertainties from the solution ``sol``: a free radius (``p[3]``) when
+    ``radius`` is None, else a cylinder of that radius (0: a point)."""
     sig, cov = _sigmas(sol, scale)
     x0, zc, v = (float(a) for a in sol.x[:3])
-    r = float(sol.x[3]) if choice == "cylinder" else 0.0
+    free = radius is None
+    r = float(sol.x[3]) if free else float(radius)
     eps = (C0 / v) ** 2
-    s_eps = 2 * eps * sig[2] / v
-    if choice == "cylinder" and cov is not None:
+    if free and cov is not None:
         s_depth = math.sqrt(max(cov[1, 1] + cov[3, 3] - 2 * cov[1, 3], 0.0))
     else:
         s_depth = float(sig[1])
-    t0 = _t0(sol.x, t0_s, direct_wave_s, offset_m)
-    resid = (t0 + _travel(sol.x, x, offset_m, choice == "cylinder") - t)
+    t0 = _t0(sol.x, t0_s, dw, h)
+    fixed = None if free or r == 0.0 else r
+
+    def travel(xx):
+        return _travel(sol.x, xx, h, free, fixed)
+
+    resid = t0 + travel(x) - t
     apex_trace = float(np.interp(x0, x, tr)) if tr is not None and np.all(np.diff(x) >= 0) else float("nan")
-    apex_time = t0 + float(_travel(sol.x, np.array([x0]), offset_m, choice == "cylinder")[0])
-    return HyperbolaFit(ok=True, model=choice, x0_m=x0, depth_m=zc - r, radius_m=r, v_m_s=v, eps_r=eps,
-                        sigma_x0_m=float(sig[0]), sigma_depth_m=s_depth, sigma_eps_r=float(s_eps), t0_s=t0,
-                        apex_trace=apex_trace, apex_time_s=apex_time,
+    return HyperbolaFit(ok=True, model="cylinder" if r > 0 or free else "point", x0_m=x0, depth_m=zc - r,
+                        radius_m=r, v_m_s=v, eps_r=eps, sigma_x0_m=float(sig[0]), sigma_depth_m=s_depth,
+                        sigma_eps_r=float(2 * eps * sig[2] / v), t0_s=t0, apex_trace=apex_trace,
+                        apex_time_s=t0 + float(travel(np.array([x0]))[0]),
                         rms_s=float(np.sqrt(np.mean(resid**2))), n_picks=int(x.size))
 
 
@@ -392,17 +403,7 @@ def _fit_known_radius(x, t, tr, t0_s, dw, h, scale, k, radius) -> HyperbolaFit:
     sol = _solve(x, t, t0_s, dw, h, False, scale, float(x[k]), float(t[k]), radius=radius)
     if sol is None:
         return HyperbolaFit(ok=False, reason="the fit did not converge", n_picks=int(x.size))
-    sig, _ = _sigmas(sol, scale)
-    x0, zc, v = (float(a) for a in sol.x[:3])
-    eps = (C0 / v) ** 2
-    t0 = _t0(sol.x, t0_s, dw, h)
-    resid = t0 + _travel(sol.x, x, h, False, radius) - t
-    apex_trace = float(np.interp(x0, x, tr)) if tr is not None and np.all(np.diff(x) >= 0) else float("nan")
-    apex_time = t0 + float(_travel(sol.x, np.array([x0]), h, False, radius)[0])
-    return HyperbolaFit(ok=True, model="cylinder" if radius > 0 else "point", x0_m=x0, depth_m=zc - radius,
-                        radius_m=radius, v_m_s=v, eps_r=eps, sigma_x0_m=float(sig[0]), sigma_depth_m=float(sig[1]),
-                        sigma_eps_r=float(2 * eps * sig[2] / v), t0_s=t0, apex_trace=apex_trace,
-                        apex_time_s=apex_time, rms_s=float(np.sqrt(np.mean(resid**2))), n_picks=int(x.size))
+    return _result(sol, x, t, tr, t0_s, dw, h, scale, radius)
 
 
 def _record_picks(survey, boxes, apexes, trace_spacing_m, t0_s, remove_background=True):
@@ -451,6 +452,8 @@ def _radii(radius_m, n: int) -> list:
     """``radius_m`` (None, one number, or one per box) as a checked list of ``n``."""
     if radius_m is None or isinstance(radius_m, (int, float, np.floating, np.integer)):
         return [_check_radius(radius_m)] * n
+    if not isinstance(radius_m, (list, tuple, np.ndarray)) or np.ndim(radius_m) != 1:
+        raise InvalidDataError(f"radius_m must be a number of metres, or a list of one per box, got {radius_m!r}")
     radii = list(radius_m)
     if len(radii) != n:
         raise InvalidDataError(f"radius_m has {len(radii)} values for {n} boxes: give one, or one per box")
