@@ -61,12 +61,12 @@ MODULES = {
     "migration.sitetiles": ["tests/migration/test_sitetiles.py"],
     "migration.rtm": ["tests/migration/test_rtm.py", "tests/migration/test_rtm_by_hand.py"],
     # numba kernels: mutmut leaves decorated functions alone, so only their plain-Python helpers are mutated
-    "migration._kernels": ["tests/migration/test_operator.py"], "migration._simd": ["tests/migration/test_operator.py"],
+    "migration._kernels": ["tests/migration/test_operator.py", "tests/migration/test_kernels_by_hand.py"], "migration._simd": ["tests/migration/test_operator.py"],
     "simulation.forward": ["tests/simulation/test_forward.py", "tests/simulation/test_forward_by_hand.py"],
     "simulation.labels": ["tests/simulation/test_labels.py"],
     # the packages beside the pipeline: each module with the test files that import it (less the slow training,
     # ROS-bag and CLI ones that only pass through)
-    "pose.eskf": ["tests/pose/test_eskf_by_hand.py", "tests/pose/test_eskf.py", "-k",
+    "pose.eskf": ["tests/pose/test_eskf_by_hand.py", "tests/pose/test_eskf_driver_by_hand.py", "tests/pose/test_eskf.py", "-k",
                   "by_hand or noise_free or bad_inputs or bridges or camera_motion"], "pose.sync": ["tests/pose/test_sync.py"],
     "pose.metrics": ["tests/pose/test_metrics.py"],
     "pose.imu": ["tests/pose/test_imu.py"],

@@ -184,6 +184,10 @@ def test_each_update_is_one_correction_with_its_jacobian_residual_and_noise():
     r = np.concatenate([so3_log((g.Rc.T @ g.R).T @ Rz), pz - g.Rc.T @ (g.p - g.pc)])
     g._correct(H, r, cov, 100.0)
     _same(f, g)
+    # odometry far off is refused by the gate it is given, and changes nothing
+    h, _ = _twin(9)
+    P0 = h.P.copy()
+    assert not h.update_relative(Rz, pz + 50.0, cov, 100.0) and np.array_equal(h.P, P0)
 
 
 def test_pose_covariance_in_the_body_convention_by_hand():
@@ -304,6 +308,9 @@ def test_one_step_s_nominal_state_transition_and_noise_by_derivatives():
     Q[9:12, 9:12] += np.eye(3) * qba * dt
     Q[12:15, 12:15] += np.eye(3) * qbg * dt
     np.testing.assert_allclose(y.P[:15, :15], Q, rtol=0, atol=2e-3 * np.abs(Q).max())
+    # the bias walks alone drive the biases (far under the tolerance above): exactly q dt from a zero covariance
+    np.testing.assert_allclose(y.P[9:12, 9:12], np.eye(3) * qba * dt, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(y.P[12:15, 12:15], np.eye(3) * qbg * dt, rtol=1e-12, atol=0)
     assert not y.P[15:].any() and not y.P[:, 15:].any()
     n = eskf.EskfConfig().imu_noise
     assert (qa, qg, qba, qbg) == (n.accel_noise**2, n.gyro_noise**2, n.accel_bias_walk**2, n.gyro_bias_walk**2)
@@ -347,3 +354,62 @@ def test_the_start_covariance_by_hand():
     np.testing.assert_allclose(f.P[15:, 15:], want[np.ix_(core, core)], rtol=1e-12, atol=1e-18)
     assert np.array_equal(f.bg, [0.01, 0.0, -0.01]) and not f.p.any() and not f.v.any() and not f.ba.any()
     assert np.array_equal(f.Phi, np.eye(15)) and f.nodes is None
+
+
+def test_a_singular_innovation_is_refused_and_the_gate_is_strict():
+    f = _filter(np.random.default_rng(13))
+    P0 = f.P.copy()
+    assert not f._correct(np.zeros((1, 21)), np.array([1.0]), np.zeros((1, 1)), None)  # S = 0: no inverse
+    assert np.array_equal(f.P, P0)
+    # S = 1 exactly (H = 0, noise 1): r^2 = 4 equal to the gate passes, a gate of 4 - ulp refuses
+    assert f._correct(np.zeros((1, 21)), np.array([2.0]), np.ones((1, 1)), 4.0)
+    assert not f._correct(np.zeros((1, 21)), np.array([2.0]), np.ones((1, 1)), np.nextafter(4.0, 0.0))
+
+
+def test_poses_are_checked_with_a_tolerance_and_kept_as_floats():
+    c = eskf.EskfConfig(imu_T_camera=np.eye(4, dtype=int))
+    assert c.imu_T_camera.dtype == np.float64
+    T = np.eye(4)
+    T[0, 1] = 5e-7  # R^T R off the identity by 5e-7: within the 1e-6 allowed
+    assert eskf.EskfConfig(imu_T_antenna=T).imu_T_antenna[0, 1] == 5e-7
+    T = np.eye(4)
+    T[0, 0] = 1 - 1e-7  # determinant just under 1: a rotation still
+    assert eskf.EskfConfig(imu_T_antenna=T).imu_T_antenna[0, 0] == 1 - 1e-7
+    T = np.eye(4)
+    T[0, 0] = 1.1  # R^T R off by 0.21
+    with pytest.raises(InvalidDataError, match=r"^imu_T_antenna: its 3 x 3 block is not a rotation$"):
+        eskf.EskfConfig(imu_T_antenna=T)
+
+
+def test_the_still_start_allows_an_accelerometer_spread_of_half_a_metre_per_second_squared():
+    t = np.arange(10) * 0.1
+    for amp, still in ((0.5, True), (1.0, False)):  # x alternates +-amp: its spread is amp exactly
+        f = np.zeros((10, 3))
+        f[:, 0] = amp * (-1.0) ** np.arange(10)
+        f[:, 2] = GRAVITY
+        imu = ImuSamples(t, f, np.zeros((10, 3)))
+        if still:
+            assert eskf._align(imu, 1.0)[0].shape == (3, 3)
+        else:
+            with pytest.raises(InvalidDataError, match=r"accelerometer spread 1\.00 m/s\^2"):
+                eskf._align(imu, 1.0)
+
+
+def test_the_antenna_trajectory_carries_the_lever_arm_and_the_mount_rotation_by_hand():
+    n = 2
+    Rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 degrees about z
+    Ta = np.eye(4)
+    Ta[:3, :3] = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # 90 degrees about x
+    Ta[:3, 3] = [0.1, 0.2, 0.3]
+    z = np.zeros((0,))
+    res = eskf.FusionResult(np.array([0.0, 0.5]), np.array([[1.0, 2.0, 3.0], [0.0, 0.0, 0.0]]), np.zeros((n, 3)),
+                            np.stack([Rz, np.eye(3)]), np.zeros((n, 3)), np.zeros((n, 3)), z, np.zeros((0, 6, 6)),
+                            z.astype(int), np.zeros((0, 3)), np.zeros((0, 3, 3)), z.astype(bool), z.astype(bool), z, Ta)
+    tr = res.antenna_trajectory()
+    np.testing.assert_array_equal(tr.timestamps_s, [0.0, 0.5])
+    # Rz [0.1, 0.2, 0.3] = [-0.2, 0.1, 0.3]
+    np.testing.assert_allclose(tr.positions_xyz, [[0.8, 2.1, 3.3], [0.1, 0.2, 0.3]], rtol=0, atol=1e-15)
+    # z90 then x90: q = (cos45, 0, 0, sin45) (cos45, sin45, 0, 0) = (1/2, 1/2, 1/2, 1/2); x90 alone: (c, s, 0, 0)
+    s = math.sqrt(0.5)
+    q = tr.orientations_quat_wxyz * np.sign(tr.orientations_quat_wxyz[:, :1])
+    np.testing.assert_allclose(q, [[0.5, 0.5, 0.5, 0.5], [s, s, 0.0, 0.0]], rtol=0, atol=1e-12)

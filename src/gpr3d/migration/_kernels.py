@@ -472,7 +472,9 @@ def tiled_adjoint(path: int, fold: bool = False):
 
 def bin_traces(mid: np.ndarray, bsize: float):
     """Traces binned by their midpoints ``mid`` (n, 2) on a square grid of side ``bsize``: the trace order sorted by
-    bin, each bin's start in that order (``nbx * nby + 1``), the grid's origin and size.
+    bin (stable: by trace within a bin), each bin's start in that order (``nbx * nby + 1``), the grid's origin and
+    size. A trace's bin is ``(mid - origin) // bsize`` along each axis (Python's floor division, also for the
+    grid's extent), numbered ``i * nby + j``.
 
     The bins' origin is a whole multiple of ``bsize``, so that any subset of the traces (a site tile's) falls into
     the same bins, visited in the same order: the sums, and so the image, come out bit for bit the same."""

@@ -135,7 +135,6 @@ class _Filter:
     overconfident in heading and position."""
 
     def __init__(self, cfg: EskfConfig, R0, bg0):
-        self.cfg = cfg
         self.p, self.v, self.R = np.zeros(3), np.zeros(3), R0
         self.ba, self.bg = np.zeros(3), bg0
         self.P = np.zeros((21, 21))
@@ -214,9 +213,7 @@ class _Filter:
     def clone(self):
         self.pc, self.Rc = self.p.copy(), self.R.copy()
         core = np.r_[0:3, 6:9]
-        P = self.P
-        P[15:, :] = 0.0
-        P[:, 15:] = 0.0
+        P = self.P  # every clone row and column is overwritten: the core's, and its block
         P[15:, :15] = P[core, :15]
         P[:15, 15:] = P[:15, core]
         P[15:, 15:] = P[np.ix_(core, core)]
