@@ -441,10 +441,17 @@ def test_direct_wave_time_and_its_spread_by_hand():
     assert direct_wave_time(few)[1] == pytest.approx(np.median(np.abs(per10 - k10)) * dt, rel=1e-12, abs=0)
 
 
-def test_time_zero_is_half_way_between_the_air_and_ground_paths():
-    from gpr3d.inversion.hyperbola import time_zero
+def test_time_zero_lies_its_share_of_the_way_from_the_air_path_to_the_ground_path():
+    from gpr3d.inversion.hyperbola import DIRECT_WAVE_MIX, time_zero
 
-    assert time_zero(5e-9, 0.3, 1e8) == pytest.approx(5e-9 - 0.5 * (0.3 / C0 + 0.3 / 1e8), rel=1e-15, abs=0)
+    assert DIRECT_WAVE_MIX == 0.62
+    # 0.3 m apart, v = c / 2: the air wave 1.00069 ns, the ground wave 2.00138 ns after the pulse leaves
+    air, ground = 0.3 / C0, 0.6 / C0
+    assert time_zero(5e-9, 0.3, C0 / 2) == pytest.approx(5e-9 - air - 0.62 * (ground - air), rel=1e-15, abs=0)
+    assert time_zero(5e-9, 0.3, C0 / 2) == pytest.approx(5e-9 - 1.62 * 1.0006923e-9, rel=1e-7, abs=0)
+    assert time_zero(5e-9, 0.3, C0 / 2, mix=0.0) == pytest.approx(5e-9 - air, rel=1e-15, abs=0)
+    assert time_zero(5e-9, 0.3, C0 / 2, mix=1.0) == pytest.approx(5e-9 - ground, rel=1e-15, abs=0)
+    assert time_zero(5e-9, 0.3, 1e8, mix=0.5) == pytest.approx(5e-9 - 0.5 * (0.3 / C0 + 0.3 / 1e8), rel=1e-15, abs=0)
     assert time_zero(5e-9, 0.0, 1e8) == 5e-9
 
 

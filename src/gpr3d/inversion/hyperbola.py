@@ -13,8 +13,8 @@ the surface). So the fit needs, for each hyperbola:
 * **time zero from the data**: the direct wave (air and ground coupling between the
   antennas) is the first strong event common to every trace; its envelope peaks
   between the air wave's ``h / c`` and the ground wave's ``h / v`` after the pulse,
-  taken half-way (:func:`time_zero`), so ``t0`` is solved with ``v``
-  (:func:`direct_wave_time`).
+  a share ``DIRECT_WAVE_MIX`` of the way (:func:`time_zero`), so ``t0`` is solved
+  with ``v`` (:func:`direct_wave_time`).
 * **arrivals**: in each trace of the detection box, the first envelope peak of the
   background-removed record that reaches half of that trace's strongest in the
   box (the hyperbola is the earliest event under the box top). :func:`pick_arrivals`.
@@ -50,7 +50,13 @@ from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.units import C0, velocity_from_eps_r
 from gpr3d.io.coco import BOX_PAD_PERIODS
 
-__all__ = ["HyperbolaFit", "direct_wave_time", "time_zero", "pick_arrivals", "fit_hyperbola", "fit_boxes",
+#: where the direct wave's envelope peaks between the air wave (0) and the ground wave (1), for antennas on the
+#: ground: the median over 40 records of the gprMax training twin (0.616, spread 0.03 from 100 MHz to 1.7 GHz, eps_r
+#: 4-24; ``python benchmarks/eval_time_zero.py``, ``benchmarks/results/time_zero.md``). Half-way (0.5) put time zero
+#: about a tenth of the offset's ground-wave delay late.
+DIRECT_WAVE_MIX = 0.62
+
+__all__ = ["DIRECT_WAVE_MIX", "HyperbolaFit", "direct_wave_time", "time_zero", "pick_arrivals", "fit_hyperbola", "fit_boxes",
            "combine_permittivity", "fit_record", "trace_positions", "MODELS"]
 
 MODELS = ("auto", "point", "cylinder")
@@ -119,13 +125,15 @@ def direct_wave_time(survey) -> tuple[float, float]:
     return k * survey.dt_s, float(np.median(np.abs(per - k))) * survey.dt_s
 
 
-def time_zero(direct_wave_s: float, offset_m: float, v_m_s: float) -> float:
+def time_zero(direct_wave_s: float, offset_m: float, v_m_s: float, mix: float | None = None) -> float:
     """Time zero (when the pulse's peak leaves the surface) from the direct wave's envelope peak.
 
     The direct wave mixes the air wave (``offset / c``) and the ground wave
-    (``offset / v``); its envelope peaks between them, taken half-way.
+    (``offset / v``); its envelope peaks between them, a share ``mix`` (default
+    ``DIRECT_WAVE_MIX``) of the way from the first to the second.
     """
-    return direct_wave_s - 0.5 * offset_m * (1.0 / C0 + 1.0 / v_m_s)
+    m = DIRECT_WAVE_MIX if mix is None else mix
+    return direct_wave_s - offset_m / C0 - m * offset_m * (1.0 / v_m_s - 1.0 / C0)
 
 
 def trace_positions(survey, trace_spacing_m: float | None = None) -> np.ndarray:
