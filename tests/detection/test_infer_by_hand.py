@@ -1,0 +1,166 @@
+"""``Detector.detect`` and ``load_detector`` by hand: the window, merge and apex helpers replaced by spies with
+scripted answers (they are tested on their own), the network by a fake; what detect adds (labels kept, batches,
+clipping to the record, the score threshold, the order, which boxes set the width rate, the apex data, the output's
+fields) is written out here."""
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from gpr3d.core.errors import GPR3DError, InvalidDataError  # noqa: E402
+from gpr3d.core.survey import Survey  # noqa: E402
+from gpr3d.detection import infer  # noqa: E402
+from gpr3d.detection.windows import WindowConfig  # noqa: E402
+
+
+class _Win:
+    def __init__(self, k):
+        self.image = np.full((3, 4, 4), float(k), np.float32)
+        self.k = k
+
+
+class _Net:
+    """Per window image k: one hyperbola box (label 1) and one box of another label."""
+
+    def __init__(self):
+        self.batches, self.mode = [], None
+
+    def eval(self):
+        self.mode = "eval"
+        return self
+
+    def __call__(self, batch):
+        assert not torch.is_grad_enabled()
+        self.batches.append([int(im[0, 0, 0]) for im in batch])
+        out = []
+        for im in batch:
+            k = float(im[0, 0, 0])
+            out.append({"boxes": torch.tensor([[k, 1.0, k + 2, 3.0], [9.0, 9.0, 10.0, 10.0]]),
+                        "scores": torch.tensor([0.1 * (k + 1), 0.99]), "labels": torch.tensor([1, 2])})
+        return out
+
+
+@pytest.fixture
+def spies(monkeypatch):
+    log = {}
+
+    def prepare(survey, cfg):
+        log.setdefault("prepare", []).append(cfg.equalise)
+        return np.full((survey.n_traces, 8), 7.0 if cfg.equalise else 3.0, np.float32)
+
+    def windows(survey, cfg, processed):
+        log["windows_processed"] = float(processed[0, 0])
+        return [_Win(k) for k in range(5)]
+
+    def merge(per_window, n_traces, dt_s, nms):
+        log["merge"] = ([w.k for w, _, _ in per_window], [b.tolist() for _, b, _ in per_window],
+                        [s.tolist() for _, _, s in per_window], n_traces, dt_s, nms)
+        boxes = np.array([[-3.0, -1e-9, 10.0, 2e-9],  # clipped at the record's start
+                          [20.0, 1e-9, 60.0, 20e-9],  # clipped at its end (49 traces, 9.9 ns)
+                          [5.0, 1e-9, 5.0, 2e-9],  # no width: dropped
+                          [30.0, 3e-9, 35.0, 4e-9],  # under the threshold: dropped
+                          [12.0, 2e-9, 18.0, 5e-9],
+                          [40.0, 4e-9, 44.0, 4e-9]])  # no height: dropped
+        return boxes, np.array([0.6, 0.95, 0.9, 0.2, 0.45, 0.8])
+
+    def rows_interval(survey, cfg):
+        return 2.5e-11
+
+    def width_rate(boxes, n_traces, t_end, f):
+        log["width_rate"] = ([list(b) for b in boxes], n_traces, t_end, f)
+        return 123.0
+
+    def apex_of_box(data, b, s_per_row, *, frequency_hz, n_traces, width_per_s):
+        log.setdefault("apex", []).append((float(data[0, 0]), list(b), s_per_row, frequency_hz, n_traces, width_per_s))
+        return b[0] + 1.4, b[1] + 1e-9
+
+    for name, fn in dict(prepare=prepare, windows=windows, merge=merge, rows_interval=rows_interval,
+                         width_rate=width_rate, apex_of_box=apex_of_box).items():
+        monkeypatch.setattr(infer, name, fn)
+    return log
+
+
+def _survey(positions=True):
+    n = 50
+    pos = np.c_[np.arange(n) * 0.02, np.zeros(n), np.zeros(n)] if positions else None
+    return Survey(data=np.zeros((n, 100), np.float32), dt_s=1e-10, positions_xyz=pos, frequency_hz=1e9,
+                  metadata={"path": "LINE.DZT", "channel": 2})
+
+
+def test_detect_keeps_clips_thresholds_orders_and_fills_the_contract(spies):
+    net = _Net()
+    det = infer.Detector(net, WindowConfig(equalise=True), provenance={"name": "test net"}, batch=2)
+    out = det.detect(_survey(), score_threshold=0.4)
+    assert net.mode == "eval" and net.batches == [[0, 1], [2, 3], [4]]
+    ks, boxes, scores, n, dt, nms = spies["merge"]
+    assert ks == [0, 1, 2, 3, 4] and (n, dt, nms) == (50, 1e-10, None)
+    assert boxes == [[[k, 1.0, k + 2, 3.0]] for k in range(5)]  # label 2 left out
+    assert scores == [[pytest.approx(0.1 * (k + 1))] for k in range(5)]
+    assert spies["windows_processed"] == 7.0  # the windows see the equalised view
+    assert spies["prepare"] == [True, False]  # ... the apexes a plain one
+    t_end = (100 - 1) * 1e-10
+    want = [([20.0, 1e-9, 49.0, t_end], 0.95), ([0.0, 0.0, 10.0, 2e-9], 0.6), ([12.0, 2e-9, 18.0, 5e-9], 0.45)]
+    assert spies["width_rate"] == ([want[0][0], want[1][0]], 50, t_end, 1e9)  # the boxes scoring 0.5 or more
+    assert [a[1] for a in spies["apex"]] == [w[0] for w in want]
+    assert all(a[0] == 3.0 and a[2:] == (2.5e-11, 1e9, 50, 123.0) for a in spies["apex"])
+    assert [t["box"] for t in out["targets"]] == [w[0] for w in want]
+    assert [t["score"] for t in out["targets"]] == [0.95, 0.6, 0.45]
+    assert [t["apex_trace"] for t in out["targets"]] == [21, 1, 13]  # rounded from 21.4, 1.4, 13.4
+    assert [t["apex_time_s"] for t in out["targets"]] == pytest.approx([2e-9, 1e-9, 3e-9], rel=1e-12)
+    assert [t["x_m"] for t in out["targets"]] == pytest.approx([0.428, 0.028, 0.268], rel=1e-12)
+    assert (out["input"], out["channel"], out["n_traces"], out["dt_s"], out["n_windows"]) == \
+        ("LINE.DZT", 2, 50, 1e-10, 5)
+    assert (out["detector"], out["score_threshold"]) == ("test net", 0.4) and out["wall_s"] >= 0
+
+
+def test_detect_without_positions_equalising_or_a_name(spies):
+    det = infer.Detector(_Net(), WindowConfig(equalise=False))
+    out = det.detect(_survey(positions=False), input_name="given.h5")
+    assert spies["prepare"] == [False]  # one view serves both
+    assert [t["score"] for t in out["targets"]] == [0.95, 0.6]  # the default threshold: 0.5
+    assert all("x_m" not in t for t in out["targets"])
+    assert (out["input"], out["detector"], out["score_threshold"]) == ("given.h5", "gpr3d detector", 0.5)
+    assert det.batch == 8 and det.provenance == {} and det.device == "cpu"
+
+
+@pytest.mark.parametrize("bad", [-0.01, 1.01, float("nan")])
+def test_a_wrong_threshold_is_named_before_any_work(spies, bad):
+    with pytest.raises(InvalidDataError) as err:
+        infer.Detector(_Net(), WindowConfig()).detect(_survey(), score_threshold=bad)
+    assert str(err.value) == f"score threshold must lie in 0..1, got {bad!r}"
+    assert "prepare" not in spies
+
+
+def test_the_engine_is_chosen_by_the_file_the_device_and_what_is_installed(monkeypatch, tmp_path):
+    from gpr3d.detection import ort
+
+    calls = []
+    monkeypatch.setattr(ort.OnnxDetector, "load", classmethod(lambda cls, p, device: calls.append(("onnx", p, device))))
+    monkeypatch.setattr(infer.Detector, "load", classmethod(lambda cls, p, device: calls.append(("torch", p, device))))
+    shipped = tmp_path / "default.onnx"
+    monkeypatch.setattr(ort, "DEFAULT_ONNX", shipped)
+    import importlib.util
+
+    have = {"onnxruntime": True}
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name: object() if have.get(name) else None)
+    infer.load_detector()  # no shipped export: torch
+    shipped.write_bytes(b"x")
+    infer.load_detector()  # shipped export, runtime installed, CPU: onnx
+    infer.load_detector(device="cuda")  # a GPU: torch
+    have["onnxruntime"] = False
+    infer.load_detector()  # runtime missing: torch
+    infer.load_detector("m.ONNX")  # an export: onnx, whatever is installed
+    infer.load_detector("m.pt", engine="torch")
+    infer.load_detector("m.pt")  # a weights file: torch
+    infer.load_detector(engine="onnx")  # the shipped export
+    assert calls == [("torch", None, "cpu"), ("onnx", None, "cpu"), ("torch", None, "cuda"), ("torch", None, "cpu"),
+                     ("onnx", "m.ONNX", "cpu"), ("torch", "m.pt", "cpu"), ("torch", "m.pt", "cpu"),
+                     ("onnx", None, "cpu")]
+    for kw, msg in [(dict(engine="tensorrt"), "unknown engine 'tensorrt'; choose one of auto, torch, onnx"),
+                    (dict(path="m.pt", engine="onnx"), "--runtime onnx needs an .onnx file (export one with python "
+                     "references/detection/export_onnx.py m.pt OUT.onnx), not m.pt"),
+                    (dict(path="m.onnx", engine="torch"), "m.onnx is an ONNX export: run it with --runtime onnx (or auto)")]:
+        with pytest.raises(GPR3DError) as err:
+            infer.load_detector(**kw)
+        assert str(err.value) == msg
