@@ -51,6 +51,7 @@ def spies(monkeypatch):
 
     def windows(survey, cfg, processed):
         log["windows_processed"] = float(processed[0, 0])
+        log["windows_args"] = (survey, cfg)
         return [_Win(k) for k in range(5)]
 
     def merge(per_window, n_traces, dt_s, nms):
@@ -62,9 +63,10 @@ def spies(monkeypatch):
                           [30.0, 3e-9, 35.0, 4e-9],  # under the threshold: dropped
                           [12.0, 2e-9, 18.0, 5e-9],
                           [40.0, 4e-9, 44.0, 4e-9]])  # no height: dropped
-        return boxes, np.array([0.6, 0.95, 0.9, 0.2, 0.45, 0.8])
+        return boxes, np.array([0.5, 0.95, 0.9, 0.2, 0.45, 0.8])
 
     def rows_interval(survey, cfg):
+        log["rows_args"] = (survey, cfg)
         return 2.5e-11
 
     def width_rate(boxes, n_traces, t_end, f):
@@ -81,44 +83,52 @@ def spies(monkeypatch):
     return log
 
 
-def _survey(positions=True):
+def _survey(positions=True, metadata=None):
     n = 50
     pos = np.c_[np.arange(n) * 0.02, np.zeros(n), np.zeros(n)] if positions else None
     return Survey(data=np.zeros((n, 100), np.float32), dt_s=1e-10, positions_xyz=pos, frequency_hz=1e9,
-                  metadata={"path": "LINE.DZT", "channel": 2})
+                  metadata={"path": "LINE.DZT", "channel": 2} if metadata is None else metadata)
 
 
 def test_detect_keeps_clips_thresholds_orders_and_fills_the_contract(spies):
     net = _Net()
     det = infer.Detector(net, WindowConfig(equalise=True), provenance={"name": "test net"}, batch=2)
-    out = det.detect(_survey(), score_threshold=0.4)
+    det.nms = np.sort  # a stand-in: handed to merge as it is
+    survey = _survey()
+    out = det.detect(survey, score_threshold=0.45)
+    assert spies["windows_args"][0] is survey and spies["windows_args"][1] is det.window
+    assert spies["rows_args"][0] is survey and spies["rows_args"][1] is det.window
     assert net.mode == "eval" and net.batches == [[0, 1], [2, 3], [4]]
     ks, boxes, scores, n, dt, nms = spies["merge"]
-    assert ks == [0, 1, 2, 3, 4] and (n, dt, nms) == (50, 1e-10, None)
+    assert ks == [0, 1, 2, 3, 4] and (n, dt, nms) == (50, 1e-10, np.sort)
     assert boxes == [[[k, 1.0, k + 2, 3.0]] for k in range(5)]  # label 2 left out
     assert scores == [[pytest.approx(0.1 * (k + 1))] for k in range(5)]
     assert spies["windows_processed"] == 7.0  # the windows see the equalised view
     assert spies["prepare"] == [True, False]  # ... the apexes a plain one
     t_end = (100 - 1) * 1e-10
-    want = [([20.0, 1e-9, 49.0, t_end], 0.95), ([0.0, 0.0, 10.0, 2e-9], 0.6), ([12.0, 2e-9, 18.0, 5e-9], 0.45)]
+    # (scores equal to the threshold are kept; a score of 0.5 counts as whole for the width rate)
+    want = [([20.0, 1e-9, 49.0, t_end], 0.95), ([0.0, 0.0, 10.0, 2e-9], 0.5), ([12.0, 2e-9, 18.0, 5e-9], 0.45)]
     assert spies["width_rate"] == ([want[0][0], want[1][0]], 50, t_end, 1e9)  # the boxes scoring 0.5 or more
     assert [a[1] for a in spies["apex"]] == [w[0] for w in want]
     assert all(a[0] == 3.0 and a[2:] == (2.5e-11, 1e9, 50, 123.0) for a in spies["apex"])
     assert [t["box"] for t in out["targets"]] == [w[0] for w in want]
-    assert [t["score"] for t in out["targets"]] == [0.95, 0.6, 0.45]
+    assert [t["score"] for t in out["targets"]] == [0.95, 0.5, 0.45]
     assert [t["apex_trace"] for t in out["targets"]] == [21, 1, 13]  # rounded from 21.4, 1.4, 13.4
     assert [t["apex_time_s"] for t in out["targets"]] == pytest.approx([2e-9, 1e-9, 3e-9], rel=1e-12)
     assert [t["x_m"] for t in out["targets"]] == pytest.approx([0.428, 0.028, 0.268], rel=1e-12)
     assert (out["input"], out["channel"], out["n_traces"], out["dt_s"], out["n_windows"]) == \
         ("LINE.DZT", 2, 50, 1e-10, 5)
-    assert (out["detector"], out["score_threshold"]) == ("test net", 0.4) and out["wall_s"] >= 0
+    assert (out["detector"], out["score_threshold"]) == ("test net", 0.45) and 0 <= out["wall_s"] < 5
 
 
 def test_detect_without_positions_equalising_or_a_name(spies):
     det = infer.Detector(_Net(), WindowConfig(equalise=False))
-    out = det.detect(_survey(positions=False), input_name="given.h5")
+    out = det.detect(_survey(positions=False, metadata={}), input_name="given.h5")
     assert spies["prepare"] == [False]  # one view serves both
-    assert [t["score"] for t in out["targets"]] == [0.95, 0.6]  # the default threshold: 0.5
+    assert [t["score"] for t in out["targets"]] == [0.95, 0.5]  # the default threshold: 0.5
+    assert out["channel"] == 0
+    assert len(det.detect(_survey(), score_threshold=0.0)["targets"]) == 4  # the ends of 0..1 are allowed
+    assert [t["score"] for t in det.detect(_survey(), score_threshold=1.0)["targets"]] == []
     assert all("x_m" not in t for t in out["targets"])
     assert (out["input"], out["detector"], out["score_threshold"]) == ("given.h5", "gpr3d detector", 0.5)
     assert det.batch == 8 and det.provenance == {} and det.device == "cpu"
@@ -164,3 +174,16 @@ def test_the_engine_is_chosen_by_the_file_the_device_and_what_is_installed(monke
         with pytest.raises(GPR3DError) as err:
             infer.load_detector(**kw)
         assert str(err.value) == msg
+
+
+def test_the_shipped_weights_load_into_a_detector_and_its_windows_give_float64_boxes():
+    from gpr3d.detection.weights import load_weights
+
+    det = infer.Detector.load()
+    model, window, prov = load_weights()
+    assert det.window == window and det.provenance == prov and det.device == "cpu" and det.batch == 8
+    assert isinstance(det.model, torch.nn.Module) and not det.model.training
+    sd, ref = det.model.state_dict(), model.state_dict()
+    assert all(torch.equal(sd[k], ref[k]) for k in ref)
+    out = det.predict_windows([np.random.default_rng(0).random((3, window.rows, window.traces), dtype=np.float32)])
+    assert len(out) == 1 and out[0][0].dtype == np.float64 and out[0][1].dtype == np.float64

@@ -139,4 +139,5 @@ def test_an_unknown_name_is_named():
         build_model("yolo")
     assert str(err.value) == ("unknown detector 'yolo'; choose one of frcnn_lean, frcnn_r18, frcnn_r50, frcnn_r101, "
                               "frcnn_mobilenet, retinanet_r18, fcos_r18, ssdlite")
-    assert build_model.__defaults__ == ("frcnn_lean",)
+    m = build_model()  # the lean one by default
+    assert m.backbone.out_channels == 128 and not hasattr(m.backbone.body, "layer4")

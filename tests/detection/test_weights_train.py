@@ -87,3 +87,27 @@ def test_detector_finds_separate_pipes_at_their_apexes():
     assert len(found) <= len(true) + 2
     assert all(0 <= t["box"][0] <= t["box"][2] <= s.n_traces - 1 for t in res["targets"])
     assert all(0 <= t["box"][1] < t["box"][3] <= (s.n_samples - 1) * s.dt_s for t in res["targets"])
+
+
+def test_weight_file_messages_in_full_and_the_window_size_rebuilds_the_model(tmp_path):
+    m = build_model("ssdlite")
+    save_weights(m, "yolo", WindowConfig().to_dict(), tmp_path / "unknown.pt")
+    with pytest.raises(FormatError) as err:
+        load_weights(tmp_path / "unknown.pt")
+    assert str(err.value) == "unknown.pt: unknown model 'yolo' in the weights file"
+    save_weights(m, "frcnn_lean", WindowConfig().to_dict(), tmp_path / "mismatch.pt")
+    with pytest.raises(FormatError) as err:
+        load_weights(tmp_path / "mismatch.pt")
+    try:  # what torch says, second line (the first names the model class)
+        build_model("frcnn_lean").load_state_dict({k: v.float() for k, v in m.state_dict().items()})
+    except RuntimeError as exc:
+        torch_says = str(exc).splitlines()[1].strip()
+    assert len(torch_says) > 160
+    assert str(err.value) == f"mismatch.pt: weights do not fit model 'frcnn_lean': {torch_says[:160]}"
+    small = build_model("ssdlite", image_size=320)
+    save_weights(small, "ssdlite", WindowConfig(rows=320, traces=320).to_dict(), tmp_path / "w320.pt", provenance={})
+    m2, win, prov = load_weights(tmp_path / "w320.pt")
+    assert win.rows == 320 and m2.transform.fixed_size == (320, 320) and prov == {} and not m2.training
+    torch.save({k: v for k, v in torch.load(tmp_path / "w320.pt", weights_only=True).items() if k != "provenance"},
+               tmp_path / "noprov.pt")
+    assert load_weights(tmp_path / "noprov.pt")[2] == {}

@@ -78,7 +78,16 @@ def test_a_kernel_that_fails_to_build_or_run_is_none():
 def test_the_kernels_build_here_once_per_path_and_fold(monkeypatch):
     built = []
     real = _kernels._probe
-    monkeypatch.setattr(_kernels, "_probe", lambda fn, *extra: built.append(len(extra)) or real(fn, *extra))
+
+    def checked(fn):
+        def run(*args):
+            assert _consistent_problem(args) is None, _consistent_problem(args)
+            return fn(*args)
+        return run
+
+    # every probe builds one consistent float32 problem (a wrong one makes the probe, and so the kernel, None)
+    monkeypatch.setattr(_kernels, "_probe",
+                        lambda fn, *extra: built.append(len(extra)) or (fn if real(checked(fn), *extra) else None))
     g, lo = _kernels.simd_adjoint(GATHER), _kernels.simd_adjoint(LOADS)
     assert g is not None and lo is not None and g is not lo
     assert _kernels.simd_adjoint(GATHER) is g and _kernels.simd_adjoint() is g  # built once, GATHER by default
@@ -86,6 +95,12 @@ def test_the_kernels_build_here_once_per_path_and_fold(monkeypatch):
     assert all(t is not None for t in tiles.values()) and len({id(t) for t in tiles.values()}) == 6
     assert _kernels.tiled_adjoint(0) is tiles[(0, False)]  # no fold unless asked
     assert built == [0, 0] + [10] * 6
+
+
+def test_a_kernel_whose_probe_fails_is_none(monkeypatch):
+    monkeypatch.setattr(_kernels, "_probe", lambda fn, *extra: None)
+    assert _kernels.simd_adjoint(GATHER) is None and _kernels.tiled_adjoint(0) is None
+    assert _kernels.tiled_adjoint(LOADS, True) is None
 
 
 def _problem(rng, n=40, nd=13):
@@ -148,6 +163,10 @@ def test_bins_use_floor_division_on_every_edge():
     assert (bx0, by0, nbx, nby) == (0.0, 0.0, 13, 1)
     assert start.tolist() == [0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 4]  # bins 0, 3, 8, 12
     assert order.tolist() == [0, 3, 2, 1]
+    # the same along y (x and y swapped)
+    order, start, bx0, by0, nbx, nby = _kernels.bin_traces(mid[:, ::-1].copy(), 0.1)
+    assert (bx0, by0, nbx, nby) == (0.0, 0.0, 1, 13)
+    assert start.tolist() == [0, 1, 1, 1, 2, 2, 2, 2, 2, 3, 3, 3, 3, 4] and order.tolist() == [0, 3, 2, 1]
     # an origin below zero: -0.3 / 0.1 is -2.9999999999999996, floored to -3; y then spans 0.55 // 0.1 + 1 bins
     o, s, bx, by, nx, ny = _kernels.bin_traces(np.array([[0.05, -0.3], [0.05, 0.25]]), 0.1)
     assert (bx, by, nx, ny) == (0.0, -3 * 0.1, 1, 6)
