@@ -45,7 +45,7 @@ MODULES = {
     "io._common": None, "io.registry": None,
     # (the other tests of tests/io that reach the trajectory readers are slow: rosbag, inertial)
     "io.trajectory": ["tests/io/test_trajectory.py", "tests/io/test_track.py"],
-    "io.inertial": ["tests/io/test_inertial.py", "tests/io/test_inertial_by_hand.py"], "io.rosbag": ["tests/io/test_rosbag.py", "-k", "not rgbd_bag"],
+    "io.inertial": ["tests/io/test_inertial.py", "tests/io/test_inertial_by_hand.py"], "io.rosbag": ["tests/io/test_rosbag.py", "tests/io/test_rosbag_by_hand.py", "-k", "not rgbd_bag"],
     "io.userlabels": ["tests/io/test_userlabels.py", "tests/io/test_userlabels_by_hand.py"], "io.packed": ["tests/io/test_packed.py"],
     "io.weights": ["tests/io/test_weights.py"], "io.onnxweights": ["tests/io/test_onnxweights.py"],
     "processing.dewow": None, "processing.background": None, "processing.gain": None, "processing.filters": None,
