@@ -7,19 +7,27 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("torchvision")
 
 from gpr3d.core.errors import InvalidDataError  # noqa: E402
-from gpr3d.detection.models import MODELS, build_model, count_parameters  # noqa: E402
+from gpr3d.detection.models import build_model, count_parameters  # noqa: E402
 
 RATIOS = (0.25, 0.5, 1.0, 2.0)  # anchor heights over widths: wide and flat to square
 TWO_SCALES = ((16, 24), (32, 48), (64, 96), (128, 192), (256, 384))
 
 
-@pytest.fixture(scope="module")
-def built():
-    import warnings
+class _Build:
+    """Each test builds the models it reads, in its own body (so that a mutation test run maps every model's
+    construction to the tests that check it)."""
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return {name: build_model(name) for name in MODELS}
+    def __getitem__(self, name):
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return build_model(name)
+
+
+@pytest.fixture
+def built():
+    return _Build()
 
 
 def _inner_channels(model):

@@ -34,10 +34,11 @@ IMAGE_MEAN = [0.5, 0.5, 0.5]
 IMAGE_STD = [0.25, 0.25, 0.25]
 
 
-def _anchors(n_levels: int, base: int = 16, two_scales: bool = True):
+def _anchors(n_levels: int, base: int = 16):
+    """Two sizes per level (``base 2^k`` and 1.5 times that), each in every aspect ratio."""
     from torchvision.models.detection.anchor_utils import AnchorGenerator
 
-    sizes = tuple((base * 2**k, int(base * 2**k * 1.5)) if two_scales else (base * 2**k,) for k in range(n_levels))
+    sizes = tuple((base * 2**k, int(base * 2**k * 1.5)) for k in range(n_levels))
     return AnchorGenerator(sizes=sizes, aspect_ratios=(ASPECT_RATIOS,) * n_levels)
 
 
@@ -45,14 +46,12 @@ def _resnet_fpn(name: str, *, returned=(1, 2, 3, 4), out_channels: int = 256, ex
     import torch.nn as nn
     import torchvision
     from torchvision.models.detection.backbone_utils import BackboneWithFPN
-    from torchvision.ops.feature_pyramid_network import LastLevelMaxPool
-
     body = getattr(torchvision.models, name)(weights=None, norm_layer=nn.BatchNorm2d)
     in_ch = body.inplanes // 8  # channels of layer1's output (64 for resnet18, 256 for resnet50)
     return_layers = {f"layer{k}": str(i) for i, k in enumerate(returned)}
     in_list = [in_ch * 2 ** (k - 1) for k in returned]
-    return BackboneWithFPN(body, return_layers, in_list, out_channels,
-                           extra_blocks=extra if extra is not None else LastLevelMaxPool(), norm_layer=None)
+    # extra None: torchvision's max-pool level on top
+    return BackboneWithFPN(body, return_layers, in_list, out_channels, extra_blocks=extra, norm_layer=None)
 
 
 def _frcnn_common(image_size: int) -> dict:
