@@ -32,6 +32,27 @@ def test_onnx_nms_keeps_what_torchvision_keeps():
     assert onnx_nms(np.zeros((0, 4)), np.zeros(0), 0.5).size == 0
 
 
+def test_the_nms_graph_builder_makes_the_shipped_graph_and_it_runs_as_torchvision_s_nms():
+    onnx = pytest.importorskip("onnx")
+    from torchvision.ops import nms
+
+    from gpr3d.detection import ort as gort
+
+    built = gort._nms_graph()
+    onnx.checker.check_model(built)
+    shipped = onnx.load(str(gort.NMS_ONNX))
+    assert built.graph == shipped.graph and list(built.opset_import) == list(shipped.opset_import)
+    sess = ort.InferenceSession(built.SerializeToString(), providers=["CPUExecutionProvider"])
+    rng = np.random.default_rng(9)
+    xy = rng.uniform(0, 50, (60, 2))
+    boxes = np.concatenate([xy, xy + rng.uniform(5, 30, (60, 2))], axis=1).astype(np.float32)
+    scores = rng.random(60).astype(np.float32)
+    sel = sess.run(None, {"boxes": boxes[None], "scores": scores[None, None], "max_out": np.array([60], np.int64),
+                          "iou": np.array([0.4], np.float32)})[0]
+    assert sel.dtype == np.int64 and sel.shape[1] == 3 and not sel[:, :2].any()  # batch 0, class 0
+    np.testing.assert_array_equal(sel[:, 2], nms(torch.as_tensor(boxes), torch.as_tensor(scores), 0.4).numpy())
+
+
 def test_shipped_onnx_is_the_shipped_weights_and_detects_the_same():
     onnx_det = OnnxDetector.load()
     assert onnx_det.provenance.get("name") == Detector.load().provenance.get("name")
