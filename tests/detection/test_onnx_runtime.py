@@ -99,3 +99,52 @@ def test_detect_with_onnx_runtime_never_imports_torch(tmp_path):
     r = subprocess.run([sys.executable, "-c", code, str(f), str(tmp_path / "d.json")], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip().splitlines()[-1] == "False False"
+
+
+@pytest.fixture
+def fresh_nms(monkeypatch):
+    from gpr3d.detection import ort as gort
+
+    monkeypatch.setattr(gort, "_nms_session", None)  # built in the test, not by an earlier one
+    return gort
+
+
+def test_onnx_nms_builds_its_session_and_returns_int64_indices(fresh_nms):
+    from torchvision.ops import nms
+
+    boxes = np.array([[0, 0, 10, 10], [1, 1, 11, 11], [20, 20, 30, 30]], np.float64)
+    scores = np.array([0.5, 0.9, 0.7])
+    got = fresh_nms.onnx_nms(boxes, scores, 0.5)
+    assert got.dtype == np.int64 and got.tolist() == [1, 2] == nms(torch.as_tensor(boxes), torch.as_tensor(scores),
+                                                                    0.5).tolist()
+    assert fresh_nms._nms_session.get_providers() == ["CPUExecutionProvider"]
+    empty = fresh_nms.onnx_nms(np.zeros((0, 4)), np.zeros(0), 0.5)
+    assert empty.dtype == np.int64 and empty.shape == (0,)
+
+
+def test_onnx_detector_settings_and_messages_in_full(tmp_path, fresh_nms):
+    from gpr3d.core.errors import FormatError
+
+    det = OnnxDetector.load(threads=1)
+    opts = det.session.get_session_options()
+    assert (opts.intra_op_num_threads, opts.log_severity_level) == (1, 3)
+    assert det.session.get_providers() == ["CPUExecutionProvider"]
+    assert det.path == DEFAULT_ONNX and det.device == "cpu" and det.model is None and det.provenance
+    assert OnnxDetector.load().session.get_session_options().intra_op_num_threads == 0  # ONNX Runtime's choice
+    im = np.random.default_rng(0).random((3, det.window.rows, det.window.traces)).astype(np.float64)
+    (b, s), = det.predict_windows([im])  # float64 images are cast for the graph
+    assert b.dtype == np.float64 and s.dtype == np.float64 and b.shape == (s.size, 4)
+    cases = [(dict(path=DEFAULT_ONNX, device="cuda"),
+              f"{DEFAULT_ONNX.name}: the ONNX engine runs on the CPU; use the torch engine for --device cuda"),
+             (dict(path=tmp_path / "absent.onnx"), "absent.onnx: no such ONNX detector file"),
+             (dict(path=fresh_nms.NMS_ONNX), "nms.onnx: an ONNX file without gpr3d detector metadata")]
+    for kw, msg in cases:
+        with pytest.raises(FormatError) as err:
+            OnnxDetector.load(**kw)
+        assert str(err.value) == msg
+    (tmp_path / "junk.onnx").write_bytes(b"not a graph")
+    with pytest.raises(FormatError) as err:
+        OnnxDetector.load(tmp_path / "junk.onnx")
+    text = str(err.value)
+    assert text.startswith("junk.onnx: not a readable ONNX detector (") and text.endswith(")")
+    assert "None" not in text and len(text.splitlines()) == 1
