@@ -148,3 +148,30 @@ def test_onnx_detector_settings_and_messages_in_full(tmp_path, fresh_nms):
     text = str(err.value)
     assert text.startswith("junk.onnx: not a readable ONNX detector (") and text.endswith(")")
     assert "None" not in text and len(text.splitlines()) == 1
+
+
+def test_export_writes_a_graph_with_its_names_metadata_and_pytorch_s_answer(tmp_path):
+    import json
+
+    onnx = pytest.importorskip("onnx")
+    from gpr3d.detection.ort import OPSET, export_onnx
+    from gpr3d.detection.weights import load_weights
+
+    out = tmp_path / "d.onnx"
+    info = export_onnx(out=out)
+    assert info["file"] == str(out) and info["bytes"] == out.stat().st_size and 0 <= info["max_abs_diff"] < 0.1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.onnx"]  # nothing left beside it
+    g = onnx.load(str(out))
+    assert [i.name for i in g.graph.input] == ["image"]
+    assert [o.name for o in g.graph.output] == ["boxes", "labels", "scores"]
+    assert OPSET == 17 and {o.domain: o.version for o in g.opset_import}[""] == 17
+    meta = json.loads({p.key: p.value for p in g.metadata_props}["gpr3d.detector"])
+    _, window, prov = load_weights()
+    assert meta == {"window": window.to_dict(), "provenance": prov, "source_weights": DEFAULT_WEIGHTS.name,
+                    "source_sha256": hashlib.sha256(DEFAULT_WEIGHTS.read_bytes()).hexdigest(), "opset": 17}
+    det = OnnxDetector.load(out)
+    assert det.window == window and det.provenance == prov
+    im = np.random.default_rng(3).random((3, window.rows, window.traces), dtype=np.float32)
+    (b, s), = det.predict_windows([im])
+    (b0, s0), = Detector.load().predict_windows([im])
+    assert b.shape == b0.shape and np.abs(np.sort(s) - np.sort(s0)).max() < 2e-3
