@@ -123,3 +123,25 @@ def test_bad_data_is_named():
         migrate_site(op(), bad)
     with pytest.raises(InvalidDataError, match="data must be"):
         migrate_site(op(), DATA[:10])
+
+
+def test_a_given_in_process_client_runs_every_tile_and_gives_the_same_image(tmp_path):
+    """A ``distributed.Client`` of threads in this process (so that every tile's work is seen here): the image, fold
+    and per-tile trace counts equal the one-process run's; the client is left open; the checkpoint is written."""
+    distributed = pytest.importorskip("distributed")
+    o = op("numpy")
+    one = migrate_site(o, DATA, tile_m=0.8)
+    logged = []
+    with distributed.Client(processes=False, n_workers=1, threads_per_worker=2, dashboard_address=":0") as client:
+        got = migrate_site(o, DATA, tile_m=0.8, client=client, checkpoint=tmp_path / "ck", log=logged.append)
+        assert client.status == "running"  # left open
+        assert got.workers == "the given client (1 worker(s))"
+        again = migrate_site(o, DATA, tile_m=0.8, client=client, checkpoint=tmp_path / "ck", log=logged.append)
+    np.testing.assert_array_equal(got.image, one.image)
+    np.testing.assert_array_equal(got.fold, one.fold)
+    assert sorted(got.traces_per_tile) == sorted(one.traces_per_tile) and got.tiles == one.tiles
+    assert again.resumed == got.tiles and again.traces_per_tile == []
+    np.testing.assert_array_equal(again.image, one.image)
+    assert logged == [f"resumed {got.tiles} of {got.tiles} tiles from {tmp_path / 'ck'}"]
+    assert sorted(p.name for p in (tmp_path / "ck").iterdir()) == sorted(
+        ["checkpoint.json"] + [f"{t.name}.npz" for t in plan_tiles(GRID, 0.8)])
