@@ -35,25 +35,35 @@ def share(survey, eps_r: float) -> float:
     return (direct_wave_time(survey)[0] - t0 - h / C0) / (h / v - h / C0)
 
 
+def _positive(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}")
+    return n
+
+
 def main(argv=None):
     from gpr3d.inversion.hyperbola import DIRECT_WAVE_MIX
 
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--survey", action="append", default=None,
                    help="packed gprMax survey file(s) (default: the training twin and the held-out set)")
-    p.add_argument("--n", type=int, default=40, help="first N records of each file")
+    p.add_argument("--n", type=_positive, default=40, help="first N records of each file")
     p.add_argument("--no-example", action="store_true", help="skip gprMax's cylinder_Bscan_2D example")
     p.add_argument("--work", default=str(ROOT / "build" / "gprmax_example"))
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
     args = p.parse_args(argv)
     surveys = args.survey or [str(ROOT / "datasets" / "gprmax_survey_train.h5"), str(ROOT / "datasets" / "gprmax_survey.h5")]
+    from gpr3d.io.packed import labelled_records
+
     rows = []
     for path in surveys:
         if not Path(path).exists():
             print(f"skipped {path}: not found")
             continue
-        from gpr3d.io.packed import labelled_records
-
         s = np.array([share(rec, lab["eps_r"]) for rec, lab in labelled_records(path, n=args.n)])
         rows.append((Path(path).name, s))
     if not args.no_example:
