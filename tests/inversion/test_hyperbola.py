@@ -455,6 +455,17 @@ def test_time_zero_lies_its_share_of_the_way_from_the_air_path_to_the_ground_pat
     assert time_zero(5e-9, 0.0, 1e8) == 5e-9
 
 
+def test_time_zero_names_a_mix_outside_0_to_1():
+    from gpr3d.core.errors import InvalidDataError
+    from gpr3d.inversion.hyperbola import time_zero
+
+    for bad in (-0.01, 1.01, float("nan"), float("inf"), "0.5", [0.5]):
+        with pytest.raises(InvalidDataError) as err:
+            time_zero(5e-9, 0.3, 1e8, mix=bad)
+        assert str(err.value) == f"the direct wave's mix must be a share from 0 to 1, got {bad!r}"
+    assert time_zero(5e-9, 0.3, 1e8, mix=np.float64(0.25)) == time_zero(5e-9, 0.3, 1e8, mix=0.25)
+
+
 def test_trace_positions_from_the_file_or_a_spacing():
     from gpr3d.core.errors import InvalidDataError
     from gpr3d.core.survey import Survey

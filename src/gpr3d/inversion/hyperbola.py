@@ -133,6 +133,8 @@ def time_zero(direct_wave_s: float, offset_m: float, v_m_s: float, mix: float | 
     ``DIRECT_WAVE_MIX``) of the way from the first to the second.
     """
     m = DIRECT_WAVE_MIX if mix is None else mix
+    if not (isinstance(m, (int, float)) and 0.0 <= m <= 1.0):  # NaN fails the range
+        raise InvalidDataError(f"the direct wave's mix must be a share from 0 to 1, got {mix!r}")
     return direct_wave_s - offset_m / C0 - m * offset_m * (1.0 / v_m_s - 1.0 / C0)
 
 
