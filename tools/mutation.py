@@ -58,7 +58,8 @@ MODULES = {
     "migration.velocity": ["tests/migration/test_velocity.py", "-k", "not oblique"],
     "migration.targets": None, "migration.metrics": None,
     "migration.profile": None, "migration.traditional": None, "migration.reconstruct": None,
-    "migration.sitetiles": ["tests/migration/test_sitetiles.py", "-k", "not dask"],
+    "migration.sitetiles": ["tests/migration/test_sitetiles.py", "tests/migration/test_sitetiles_by_hand.py", "-k",
+                            "not dask"],
     "migration.rtm": ["tests/migration/test_rtm.py", "tests/migration/test_rtm_by_hand.py"],
     # numba kernels: mutmut leaves decorated functions alone, so only their plain-Python helpers are mutated
     "migration._kernels": ["tests/migration/test_operator.py", "tests/migration/test_kernels_by_hand.py"], "migration._simd": ["tests/migration/test_operator.py"],
