@@ -73,6 +73,7 @@ MODULES = {
     "detection.models": ["tests/detection/test_models_by_hand.py"],
     "detection.infer": ["tests/detection/test_infer_by_hand.py"],
     "detection.ort": ["tests/detection/test_onnx_runtime.py"],
+    "detection.train": ["tests/detection/test_train_by_hand.py"],
     "detection.weights": ["tests/detection/test_weights_train.py", "-k", "round_trip or bad_weight or default_weights or messages_in_full"],
     "pose.imu": ["tests/pose/test_imu.py"],
     "pose.graph": ["tests/pose/test_graph.py"], "pose.vo": ["tests/pose/test_vo.py"],
