@@ -80,6 +80,8 @@ MODULES = {
     "pose.render": ["tests/pose/test_render.py", "tests/pose/test_render_by_hand.py"],
     "pose.rig": ["tests/pose/test_eskf.py", "tests/pose/test_sync.py", "tests/pose/test_graph.py"],
     "inversion.hyperbola": ["tests/inversion/test_hyperbola.py"],
+    "inversion.depthnet": ["tests/inversion/test_depthnet_by_hand.py", "tests/inversion/test_depthnet.py", "-k",
+                           "not training_learns"],
     "inversion.estimate": ["tests/inversion/test_estimate.py", "tests/inversion/test_estimate_by_hand.py"],
     "inversion.evaluate": ["tests/inversion/test_estimate.py", "tests/inversion/test_evaluate_by_hand.py"],
     "detection.windows": ["tests/detection/test_windows.py", "tests/detection/test_windows_by_hand.py"],
