@@ -62,7 +62,7 @@ MODULES = {
                             "not dask"],
     "migration.rtm": ["tests/migration/test_rtm.py", "tests/migration/test_rtm_by_hand.py"],
     # numba kernels: mutmut leaves decorated functions alone, so only their plain-Python helpers are mutated
-    "migration._kernels": ["tests/migration/test_operator.py", "tests/migration/test_kernels_by_hand.py"], "migration._simd": ["tests/migration/test_operator.py"],
+    "migration._kernels": ["tests/migration/test_operator.py", "tests/migration/test_kernels_by_hand.py"], "migration._simd": ["tests/migration/test_simd_by_hand.py"],
     "simulation.forward": ["tests/simulation/test_forward.py", "tests/simulation/test_forward_by_hand.py"],
     "simulation.labels": ["tests/simulation/test_labels.py"],
     # the packages beside the pipeline: each module with the test files that import it (less the slow training,
