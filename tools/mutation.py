@@ -76,7 +76,7 @@ MODULES = {
     "detection.train": ["tests/detection/test_train_by_hand.py"],
     "detection.weights": ["tests/detection/test_weights_train.py", "-k", "round_trip or bad_weight or default_weights or messages_in_full"],
     "pose.imu": ["tests/pose/test_imu.py"],
-    "pose.graph": ["tests/pose/test_graph_by_hand.py"], "pose.vo": ["tests/pose/test_vo.py"],
+    "pose.graph": ["tests/pose/test_graph_by_hand.py"], "pose.vo": ["tests/pose/test_vo_by_hand.py", "tests/pose/test_vo.py", "-k", "by_hand or bad_frames or plain_floor"],
     "pose.render": ["tests/pose/test_render.py", "tests/pose/test_render_by_hand.py"],
     "pose.rig": ["tests/pose/test_eskf.py", "tests/pose/test_sync.py", "tests/pose/test_graph.py"],
     "inversion.hyperbola": ["tests/inversion/test_hyperbola.py"],
