@@ -78,7 +78,7 @@ MODULES = {
     "pose.imu": ["tests/pose/test_imu.py"],
     "pose.graph": ["tests/pose/test_graph_by_hand.py"], "pose.vo": ["tests/pose/test_vo_by_hand.py", "tests/pose/test_vo.py", "-k", "by_hand or bad_frames or plain_floor"],
     "pose.render": ["tests/pose/test_render.py", "tests/pose/test_render_by_hand.py"],
-    "pose.rig": ["tests/pose/test_eskf.py", "tests/pose/test_sync.py", "tests/pose/test_graph.py"],
+    "pose.rig": ["tests/pose/test_rig_by_hand.py"],
     "inversion.hyperbola": ["tests/inversion/test_hyperbola.py"],
     "inversion.depthnet": ["tests/inversion/test_depthnet_by_hand.py", "tests/inversion/test_depthnet.py", "-k",
                            "not training_learns"],
