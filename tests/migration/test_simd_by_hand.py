@@ -15,7 +15,6 @@ numba = pytest.importorskip("numba")
 from gpr3d.migration import _simd  # noqa: E402
 
 W = _simd.W
-RNG = np.random.default_rng(8)
 
 
 def build(monkeypatch, weights, fold):
@@ -33,6 +32,8 @@ def build(monkeypatch, weights, fold):
     return run
 
 
+#: float32 times of about 100 samples carry rounding of some 1e-5 samples, and the trace changes by up to ~3 a
+#: sample: sums agree to about 1e-4 (a wrong formula is off by far more)
 def reference(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, nblk, weights):
     """The sums in float64, one depth at a time."""
     acc, facc = acc.astype(np.float64), (None if facc is None else facc.astype(np.float64))
@@ -56,14 +57,15 @@ def reference(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k
     return acc, facc
 
 
-def problem(n_samples=120, n_blocks=3):
+def problem(n_samples=120, n_blocks=3, seed=8):
+    rng = np.random.default_rng(seed)  # the same problem whichever tests run, in whatever order
     row = np.zeros(n_samples + 2, np.float32)
-    row[:n_samples] = RNG.standard_normal(n_samples)
+    row[:n_samples] = rng.standard_normal(n_samples)
     depth = (0.02 + 0.015 * np.arange(n_blocks * W)).astype(np.float32)
     slow = np.full(n_blocks * W, 1 / 1.2e8, np.float32)
     slow[W:] *= 1.1  # a slower layer from the second block down
-    acc = RNG.standard_normal(n_blocks * W).astype(np.float32)  # sums already there: added to
-    facc = RNG.random(n_blocks * W).astype(np.float32)
+    acc = rng.standard_normal(n_blocks * W).astype(np.float32)  # sums already there: added to
+    facc = rng.random(n_blocks * W).astype(np.float32)
     return row, depth, slow, acc, facc
 
 
@@ -84,13 +86,13 @@ def test_each_intrinsic_sums_what_the_formula_gives(monkeypatch, weights, fold):
             want_acc, want_facc = reference(row, depth.astype(np.float64), slow.astype(np.float64), acc0,
                                             facc0 if fold else None, *[float(v) for v in scal.values()], k0, nblk,
                                             weights)
-            np.testing.assert_allclose(acc, want_acc, rtol=2e-5, atol=2e-5, err_msg=f"k0 {k0} nblk {nblk} g {gather}")
+            np.testing.assert_allclose(acc, want_acc, rtol=1e-4, atol=2e-4, err_msg=f"k0 {k0} nblk {nblk} g {gather}")
             # depths before the first live one and blocks past nblk are left exactly as they were
             untouched = np.r_[np.arange(0, k0), np.arange(nblk * W, 3 * W)]
             np.testing.assert_array_equal(acc[untouched], acc0[untouched])
             assert not np.array_equal(acc, acc0)
             if fold:
-                np.testing.assert_allclose(facc, want_facc, rtol=2e-5, atol=2e-5)
+                np.testing.assert_allclose(facc, want_facc, rtol=1e-4, atol=2e-4)
                 np.testing.assert_array_equal(facc[untouched], facc0[untouched])
             else:
                 np.testing.assert_array_equal(facc, facc0)
@@ -121,8 +123,8 @@ def test_times_before_the_trace_read_its_first_sample(monkeypatch, gather):
             np.float32(1e10), np.float32(120.0))
     run(row, depth, slow, acc, facc, *scal, 0, 3, gather)
     want_acc, want_facc = reference(row, depth, slow, acc0, facc0, *[float(v) for v in scal], 0, 3, 0)
-    np.testing.assert_allclose(acc, want_acc, rtol=2e-5, atol=2e-5)
-    np.testing.assert_allclose(facc, want_facc, rtol=2e-5, atol=2e-5)
+    np.testing.assert_allclose(acc, want_acc, rtol=1e-4, atol=2e-4)
+    np.testing.assert_allclose(facc, want_facc, rtol=1e-4, atol=2e-4)
 
 
 def test_a_voxel_at_an_antenna_has_no_obliquity_not_nan(monkeypatch):
@@ -137,8 +139,8 @@ def test_a_voxel_at_an_antenna_has_no_obliquity_not_nan(monkeypatch):
     assert np.isfinite(acc).all() and np.isfinite(facc).all()
     assert acc[0] == acc0[0] and facc[0] == facc0[0]
     want_acc, want_facc = reference(row, depth, slow, acc0, facc0, *[float(v) for v in scal], 0, 3, 1)
-    np.testing.assert_allclose(acc, want_acc, rtol=2e-5, atol=2e-5)
-    np.testing.assert_allclose(facc, want_facc, rtol=2e-5, atol=2e-5)
+    np.testing.assert_allclose(acc, want_acc, rtol=1e-4, atol=2e-4)
+    np.testing.assert_allclose(facc, want_facc, rtol=1e-4, atol=2e-4)
 
 
 def test_the_gather_intrinsic_is_named_for_the_llvm_in_use():
