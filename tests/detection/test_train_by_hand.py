@@ -7,6 +7,7 @@ that a run stopped and resumed ends exactly where an uninterrupted run ends.
 
 import json
 import math
+import os
 from dataclasses import asdict
 
 import pytest
@@ -34,6 +35,7 @@ class Tiny(torch.nn.Module):
     def forward(self, images, targets):
         x = torch.stack(images).mean()
         self.seen.append(([float(i) for i in images], [int(t["k"]) for t in targets], self.w.detach().clone()))
+        self.pids = getattr(self, "pids", set()) | {int(t["pid"]) for t in targets if "pid" in t}
         return {"loss_a": (self.w[0] - x) ** 2 / 100, "loss_b": 0.5 * (self.w[1] + x) ** 2 / 100}
 
 
@@ -50,7 +52,7 @@ class Items:
         return self.n
 
     def __getitem__(self, k):
-        return torch.tensor([float(k)]), {"k": torch.tensor(k)}
+        return torch.tensor([float(k)]), {"k": torch.tensor(k), "pid": torch.tensor(os.getpid())}
 
 
 @pytest.fixture
@@ -119,8 +121,8 @@ def test_a_whole_run_sees_each_item_once_in_order_and_logs_every_step(tmp_path, 
     assert torch.equal(ck["model"]["w"], res["model"].w.detach())
     assert ck["optimizer"]["param_groups"][0]["lr"] == pytest.approx(lr_at(5, 1e-3, 2, 5), rel=1e-12)
     assert ck["scheduler"]["last_epoch"] == 5
-    saved = json.loads((tmp_path / "run" / "config.json").read_text())
-    assert saved == {"gpr3d": __version__, "config": asdict(cfg)}
+    saved = (tmp_path / "run" / "config.json").read_text()
+    assert saved == json.dumps({"gpr3d": __version__, "config": asdict(cfg)}, indent=2)  # for people to read
 
 
 def test_checkpoints_every_n_steps_and_at_the_end(tmp_path, stand_ins, monkeypatch):
@@ -185,9 +187,48 @@ def test_an_unreadable_checkpoint_is_named(tmp_path, stand_ins):
     (tmp_path / "run" / "checkpoint.pt").write_bytes(b"not a checkpoint")
     with pytest.raises(GPR3DError) as err:
         train_detector(cfg_for(tmp_path), None, progress=False, log=quiet)
-    msg = str(err.value)
-    assert msg.startswith(f"{tmp_path / 'run' / 'checkpoint.pt'}: cannot read the checkpoint (")
-    assert msg.endswith("); delete it to restart") and "\n" not in msg
+    with pytest.raises(Exception) as direct:
+        torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
+    assert str(err.value) == (f"{tmp_path / 'run' / 'checkpoint.pt'}: cannot read the checkpoint "
+                              f"({type(direct.value).__name__}); delete it to restart")
+
+
+def test_a_checkpoint_holding_code_is_not_loaded(tmp_path, stand_ins):
+    """Checkpoints are read with ``weights_only``: one that would unpickle an arbitrary object is refused."""
+    from fractions import Fraction
+
+    (tmp_path / "run").mkdir()
+    torch.save({"step": 1, "resume_key": None, "payload": Fraction(1, 3)}, tmp_path / "run" / "checkpoint.pt")
+    with pytest.raises(GPR3DError) as err:
+        train_detector(cfg_for(tmp_path), None, progress=False, log=quiet)
+    assert str(err.value) == (f"{tmp_path / 'run' / 'checkpoint.pt'}: cannot read the checkpoint (UnpicklingError); "
+                              "delete it to restart")
+
+
+def test_a_restart_after_deleting_the_checkpoint_starts_a_new_log(tmp_path, stand_ins):
+    cfg = cfg_for(tmp_path)
+    train_detector(cfg, None, progress=False, log=quiet)
+    (tmp_path / "run" / "checkpoint.pt").unlink()
+    train_detector(cfg, None, progress=False, log=quiet)
+    lines = (tmp_path / "run" / "losses.csv").read_text().splitlines()
+    assert lines[0] == "step,lr,loss,wall_s,terms" and [ln.split(",")[0] for ln in lines[1:]] == list("12345")
+
+
+def test_data_loading_processes_as_asked(tmp_path, stand_ins):
+    one = train_detector(cfg_for(tmp_path / "a", steps=2, workers=1), None, progress=False, log=quiet)
+    assert one["model"].pids and os.getpid() not in one["model"].pids
+    none = train_detector(cfg_for(tmp_path / "b", steps=2), None, progress=False, log=quiet)
+    assert none["model"].pids == {os.getpid()}
+    assert [s[1] for s in stand_ins["seen"][:2]] == [s[1] for s in stand_ins["seen"][2:]]  # the same items
+
+
+def test_a_device_that_is_not_here_is_named_before_any_work(tmp_path, stand_ins):
+    if torch.cuda.is_available():
+        pytest.skip("this machine has CUDA")
+    with pytest.raises(GPR3DError) as err:
+        train_detector(cfg_for(tmp_path, device="cuda:0"), None, progress=False, log=quiet)
+    assert str(err.value) == "--device cuda:0: CUDA is not available on this machine (use --device cpu)"
+    assert stand_ins["built"] == [] and not (tmp_path / "run" / "losses.csv").exists()
 
 
 def test_a_diverging_loss_stops_with_the_step_named(tmp_path, stand_ins, monkeypatch):
@@ -208,6 +249,8 @@ def test_the_progress_bar_only_when_asked(tmp_path, stand_ins, capsys):
     train_detector(cfg_for(tmp_path / "b"), None, progress=True, log=quiet)
     err = capsys.readouterr().err
     assert "train ssdlite" in err and "5/5" in err and "loss=" in err
+    train_detector(cfg_for(tmp_path / "c"), None, log=quiet)  # shown by default
+    assert "5/5" in capsys.readouterr().err
 
 
 def test_init_weights_start_the_model_or_are_refused(tmp_path, stand_ins, monkeypatch):
@@ -215,8 +258,10 @@ def test_init_weights_start_the_model_or_are_refused(tmp_path, stand_ins, monkey
     with torch.no_grad():
         start.w.copy_(torch.tensor([0.25, -0.5]))
     window = WindowConfig(**cfg_for(tmp_path).window)
-    monkeypatch.setattr(weights_mod, "load_weights", lambda path: (start, window, {}))
+    asked = []
+    monkeypatch.setattr(weights_mod, "load_weights", lambda path: (asked.append(path), (start, window, {}))[1])
     train_detector(cfg_for(tmp_path / "a", init="w.pt"), None, progress=False, log=quiet)
+    assert asked == ["w.pt"]
     assert torch.equal(stand_ins["seen"][0][2], torch.tensor([0.25, -0.5]))
 
     monkeypatch.setattr(weights_mod, "load_weights", lambda path: (torch.nn.Linear(2, 2), window, {}))
