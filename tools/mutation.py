@@ -58,8 +58,10 @@ MODULES = {
     "migration.velocity": ["tests/migration/test_velocity.py", "-k", "not oblique"],
     "migration.targets": None, "migration.metrics": None,
     "migration.profile": None, "migration.traditional": None, "migration.reconstruct": None,
+    # less the tests that start a real Dask client: in mutmut's forked children its event loop hangs (the parent's
+    # loop thread is gone); the Dask plumbing is checked against a recording stand-in (test_sitetiles_by_hand.py)
     "migration.sitetiles": ["tests/migration/test_sitetiles.py", "tests/migration/test_sitetiles_by_hand.py", "-k",
-                            "not dask"],
+                            "not dask and not given_in_process_client"],
     "migration.rtm": ["tests/migration/test_rtm.py", "tests/migration/test_rtm_by_hand.py"],
     # numba kernels: mutmut leaves decorated functions alone, so only their plain-Python helpers are mutated
     "migration._kernels": ["tests/migration/test_operator.py", "tests/migration/test_kernels_by_hand.py"], "migration._simd": ["tests/migration/test_simd_by_hand.py"],
