@@ -116,7 +116,7 @@ def test_a_local_cluster_is_made_as_the_settings_say_and_closed(monkeypatch):
     assert got.traces_per_tile == one.traces_per_tile
 
 
-@pytest.mark.parametrize("workers, cores, per", [(2, 8, 4), (3, 1, 1), (2, None, 1), (1, 5, 5)])
+@pytest.mark.parametrize("workers, cores, per", [(2, 8, 4), (3, 1, 1), (2, None, 1), (1, None, 1), (1, 5, 5)])
 def test_threads_per_local_worker_share_out_the_cores(monkeypatch, workers, cores, per):
     book = _fake_distributed(monkeypatch, n_workers=workers)
     monkeypatch.setattr(sitetiles.os, "cpu_count", lambda: cores)
@@ -196,6 +196,18 @@ def test_one_tile_of_work():
     edge = Tile(40, 45, 32, 37)
     assert migrate_tile(o.with_traces(idx[:0]), edge, DATA[:0], False)["image"].shape == (5, 5, GRID.nd)
     assert migrate_tile(o.with_traces(idx[:0]), edge, DATA[:0], False)["fold"] is None
+
+
+def test_threads_in_this_process_go_to_every_tile(monkeypatch):
+    import numba
+
+    calls = []
+    monkeypatch.setattr(numba, "set_num_threads", calls.append)
+    got = migrate_site(op("numpy"), DATA, tile_m=0.8, threads=1)
+    assert got.workers == "this process" and calls == [1] * got.tiles
+    calls.clear()
+    migrate_site(op("numpy"), DATA, tile_m=0.8)
+    assert calls == []
 
 
 def test_a_tile_sets_the_numba_threads_it_is_given(monkeypatch):
