@@ -20,29 +20,31 @@ def rotz(a):
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def straight_run(m=11, speed=0.2, rate=10):
-    """Frames at 1 Hz along +x at ``speed`` m/s, 0.1 m up, heading 0; IMU samples at ``rate`` Hz."""
+def straight_run(m=11, speed=0.2, rate=10, heading=0.0, start=(0.0, 0.0)):
+    """Frames at 1 Hz from ``start`` along ``heading`` at ``speed`` m/s, 0.1 m up; IMU samples at ``rate`` Hz."""
     t = np.arange(m, dtype=float)
     ti = np.arange((m - 1) * rate + 1) / rate
     n = ti.size
-    fp = np.c_[speed * t, np.zeros(m), np.full(m, 0.1)]
-    return FusionResult(t_s=ti, p=np.c_[speed * ti, np.zeros(n), np.full(n, 0.1)], v=np.tile([speed, 0.0, 0.0], (n, 1)),
-                        R=np.tile(np.eye(3), (n, 1, 1)), accel_bias=np.zeros((n, 3)), gyro_bias=np.zeros((n, 3)),
-                        frame_t_s=t, frame_cov=np.zeros((m, 6, 6)), frame_index=np.arange(m) * rate, frame_p=fp,
-                        frame_R=np.tile(np.eye(3), (m, 1, 1)), vo_used=np.ones(m, bool), vo_rejected=np.zeros(m, bool),
-                        zupt_t_s=np.zeros(0), imu_T_antenna=np.eye(4))
+    u = np.array([math.cos(heading), math.sin(heading), 0.0])
+    base = np.array([start[0], start[1], 0.1])
+    Rh = rotz(heading)
+    return FusionResult(t_s=ti, p=base + speed * ti[:, None] * u, v=np.tile(speed * u, (n, 1)),
+                        R=np.tile(Rh, (n, 1, 1)), accel_bias=np.zeros((n, 3)), gyro_bias=np.zeros((n, 3)),
+                        frame_t_s=t, frame_cov=np.zeros((m, 6, 6)), frame_index=np.arange(m) * rate,
+                        frame_p=base + speed * t[:, None] * u, frame_R=np.tile(Rh, (m, 1, 1)), vo_used=np.ones(m, bool),
+                        vo_rejected=np.zeros(m, bool), zupt_t_s=np.zeros(0), imu_T_antenna=np.eye(4))
 
 
 def cauchy(r, f):
     return f * f * np.log1p((r / f) ** 2)
 
 
-def graph_cost(edges, f):
-    """The cost of keyframe poses ``z = (x1, y1, yaw1, x2, y2, yaw2, ...)`` (keyframe 0 fixed at the origin, heading 0),
+def graph_cost(edges, f, start=(0.0, 0.0, 0.0)):
+    """The cost of keyframe poses ``z = (x1, y1, yaw1, x2, y2, yaw2, ...)`` (keyframe 0 held at ``start``: x, y, yaw),
     each edge ``(a, b, d (2,), dyaw, sigma_m, sigma_rad)`` a measured motion of b in a's heading frame."""
 
     def cost(z):
-        P = np.vstack([[0.0, 0.0, 0.0], np.reshape(z, (-1, 3))])
+        P = np.vstack([start, np.reshape(z, (-1, 3))])
         total = 0.0
         for a, b, d, dyaw, st, sr in edges:
             c, s = math.cos(P[a, 2]), math.sin(P[a, 2])
@@ -54,9 +56,9 @@ def graph_cost(edges, f):
     return cost
 
 
-def solve(edges, z0, f=3.0):
-    out = minimize(graph_cost(edges, f), z0, method="BFGS", options={"gtol": 1e-10, "maxiter": 2000})
-    return np.vstack([[0.0, 0.0, 0.0], out.x.reshape(-1, 3)])
+def solve(edges, z0, f=3.0, start=(0.0, 0.0, 0.0)):
+    out = minimize(graph_cost(edges, f, start), z0, method="BFGS", options={"gtol": 1e-10, "maxiter": 2000})
+    return np.vstack([start, out.x.reshape(-1, 3)])
 
 
 CFG = GraphConfig()  # 1 % of the step + 0.5 mm a frame, 0.03 deg a frame; keyframes every 5 frames
@@ -134,6 +136,112 @@ def test_a_closure_that_turns_the_far_keyframe_by_hand():
     assert out.p[73, 2] == res.p[73, 2]
 
 
+def test_a_run_heading_north_east_by_hand():
+    """The same graph on a run that starts at (1, -2) heading 0.7 rad at 0.15 m/s (0.75 m between keyframes): each
+    edge is measured in its first keyframe's heading frame; keyframe 0 is held where it was."""
+    res = straight_run(speed=0.15, heading=0.7, start=(1.0, -2.0))
+    lc = LoopClosure(0, 10, rotz(0.003), np.array([1.488, 0.008, 0.0]))
+    report = {}
+    out = close_loops(res, [lc], CFG, report=report)
+    assert report["used"] == 1
+    st = math.sqrt(5 * 5e-4 ** 2 + (0.01 * 0.75) ** 2 / 5)
+    edges = [(0, 1, [0.75, 0.0], 0.0, st, SR_ODO), (1, 2, [0.75, 0.0], 0.0, st, SR_ODO),
+             (0, 2, [1.488, 0.008], 0.003, 0.005, math.radians(0.2))]
+    kf = res.frame_p[[0, 5, 10]]
+    z0 = np.c_[kf[1:, :2], [0.7, 0.7]].ravel()
+    P = solve(edges, z0, start=(1.0, -2.0, 0.7))
+    np.testing.assert_allclose(out.frame_p[[0, 5, 10], :2], P[:, :2], rtol=0, atol=2e-6)
+    np.testing.assert_allclose(_yaw(out.frame_R[[0, 5, 10]]), P[:, 2], rtol=0, atol=2e-7)
+    assert abs(P[2, 2] - 0.7) > 1e-4 and np.linalg.norm(P[2, :2] - kf[2, :2]) > 1e-3
+    # frame 3: 60 % of the way from keyframe 0 (held) to keyframe 1, each keyframe's planar motion applied
+    f, p3 = 0.6, res.frame_p[3]
+    moved = [rotz(P[k, 2] - 0.7) @ (p3 - kf[k]) + kf[k] + [P[k, 0] - kf[k, 0], P[k, 1] - kf[k, 1], 0.0]
+             for k in (0, 1)]
+    np.testing.assert_allclose(out.frame_p[3], (1 - f) * moved[0] + f * moved[1], rtol=0, atol=2e-6)
+    np.testing.assert_allclose(out.frame_R[3], rotz(0.7 + f * (P[1, 2] - 0.7)), rtol=0, atol=2e-7)
+    # IMU sample 35 (3.5 s): 70 % of the way; its velocity turned by the blended turn
+    np.testing.assert_allclose(out.v[35], rotz(0.7 * (P[1, 2] - 0.7)) @ res.v[35], rtol=0, atol=5e-8)
+
+
+def test_a_closure_that_the_solution_leaves_far_off_is_dropped_and_the_graph_solved_again():
+    """Two closures over the same keyframes: a sharp one (1 mm) 5 mm short, and one 3 cm to the right. Both pass the
+    gate, but the second stays more than 5 sigmas off the solution: it is dropped, and the result is the graph
+    with the first alone."""
+    res = straight_run()
+    good = LoopClosure(0, 10, np.eye(3), np.array([1.995, 0.0, 0.0]), sigma_m=0.001)
+    wrong = LoopClosure(0, 10, np.eye(3), np.array([1.995, -0.03, 0.0]))
+    report = {}
+    out = close_loops(res, [good, wrong], CFG, report=report)
+    assert report == {"closures": 2, "gated": 0, "rejected": 1, "used": 1}
+    edges = [(0, 1, [1.0, 0.0], 0.0, ST_ODO, SR_ODO), (1, 2, [1.0, 0.0], 0.0, ST_ODO, SR_ODO),
+             (0, 2, [1.995, 0.0], 0.0, 0.001, math.radians(0.2))]
+    P = solve(edges, [1.0, 0, 0, 2.0, 0, 0])
+    np.testing.assert_allclose(out.frame_p[[0, 5, 10], :2], P[:, :2], rtol=0, atol=2e-6)
+    # the order does not matter, and without the wrong one nothing is rejected
+    report2 = {}
+    out2 = close_loops(res, [wrong, good], CFG, report=report2)
+    assert report2 == report
+    np.testing.assert_allclose(out2.frame_p, out.frame_p, rtol=0, atol=2e-6)
+    report3 = {}
+    close_loops(res, [good], CFG, report=report3)
+    assert report3["rejected"] == 0
+
+
+def test_a_closure_from_a_frame_before_a_keyframe_turned():
+    """Frame 4 to frame 10 (keyframe 2): carried to keyframe 1 (frame 5) through the fused step back from 5 to 4:
+    measured 1.195 m on and 4 mm left, turned 0.002 rad, so keyframe 2 lies (0.995, 0.004) from keyframe 1; one
+    frame carried: sigmas widened by one frame's odometry error."""
+    res = straight_run()
+    lc = LoopClosure(4, 10, rotz(0.002), np.array([1.195, 0.004, 0.0]))
+    report = {}
+    out = close_loops(res, [LoopClosure(1, 2, np.eye(3), np.array([0.2, 0.0, 0.0])), lc], CFG, report=report)
+    assert report == {"closures": 2, "gated": 0, "rejected": 0, "used": 1}  # the first lies within one keyframe
+    st = math.hypot(0.005, 5e-4 * 3)
+    sr = math.hypot(math.radians(0.2), math.radians(0.03))
+    edges = [(0, 1, [1.0, 0.0], 0.0, ST_ODO, SR_ODO), (1, 2, [1.0, 0.0], 0.0, ST_ODO, SR_ODO),
+             (1, 2, [0.995, 0.004], 0.002, st, sr)]
+    P = solve(edges, [1.0, 0, 0, 2.0, 0, 0])
+    np.testing.assert_allclose(out.frame_p[[0, 5, 10], :2], P[:, :2], rtol=0, atol=2e-6)
+    np.testing.assert_allclose(_yaw(out.frame_R[[0, 5, 10]]), P[:, 2], rtol=0, atol=2e-7)
+    assert P[2, 1] > 1e-4 and P[2, 2] > 1e-4
+
+
+def test_keyframes_every_four_frames_end_on_the_last():
+    res = straight_run()
+    lc = LoopClosure(0, 10, np.eye(3), np.array([1.99, 0.003, 0.0]))
+    out = close_loops(res, [lc], GraphConfig(keyframe_every=4))
+    st4 = math.sqrt(4 * 5e-4 ** 2 + (0.01 * 0.8) ** 2 / 4)
+    st2 = math.sqrt(2 * 5e-4 ** 2 + (0.01 * 0.4) ** 2 / 2)
+    r4, r2 = 2 * math.radians(0.03), math.sqrt(2) * math.radians(0.03)
+    edges = [(0, 1, [0.8, 0.0], 0.0, st4, r4), (1, 2, [0.8, 0.0], 0.0, st4, r4), (2, 3, [0.4, 0.0], 0.0, st2, r2),
+             (0, 3, [1.99, 0.003], 0.0, 0.005, math.radians(0.2))]
+    P = solve(edges, [0.8, 0, 0, 1.6, 0, 0, 2.0, 0, 0])
+    np.testing.assert_allclose(out.frame_p[[0, 4, 8, 10], :2], P[:, :2], rtol=0, atol=2e-6)
+
+
+def test_two_frames_are_enough():
+    res = straight_run(m=2)
+    out = close_loops(res, [LoopClosure(0, 1, np.eye(3), np.array([0.199, 0.0, 0.0]))], CFG)
+    st = math.sqrt(5e-4 ** 2 + (0.01 * 0.2) ** 2)
+    P = solve([(0, 1, [0.2, 0.0], 0.0, st, math.radians(0.03)), (0, 1, [0.199, 0.0], 0.0, 0.005, math.radians(0.2))],
+              [0.2, 0, 0])
+    np.testing.assert_allclose(out.frame_p[:, :2], P[:, :2], rtol=0, atol=2e-6)
+    # a closure may run backwards in time
+    back = close_loops(straight_run(), [LoopClosure(10, 0, np.eye(3), np.array([-1.99, 0.0, 0.0]))], CFG)
+    assert back.frame_p[10, 0] < 1.999
+
+
+def test_the_gate_between_later_keyframes_counts_their_own_frames():
+    """Keyframes 1 and 2 (frames 5 and 10): five frames of drift."""
+    res = straight_run()
+    var = 5 * 5e-4 ** 2 + 5 * (0.01 * 0.2) ** 2 + 5 * math.radians(0.03) ** 2 * 1.0 + 0.005 ** 2
+    for k, gated in ((3.70, 0), (3.72, 1)):
+        report = {}
+        close_loops(res, [LoopClosure(5, 10, np.eye(3), np.array([1.0 - k * math.sqrt(var), 0, 0]))], CFG,
+                    report=report)
+        assert report["gated"] == gated, k
+
+
 def test_a_closure_far_from_the_fused_motion_is_gated_out():
     res = straight_run()
     report = {}
@@ -198,6 +306,10 @@ def test_messages_in_full():
         with pytest.raises(InvalidDataError) as err:
             GraphConfig(keyframe_every=v)
         assert str(err.value) == f"keyframe_every must be a whole number >= 1, got {v!r}"
+    assert GraphConfig(keyframe_every=1).keyframe_every == 1
+    with pytest.raises(InvalidDataError) as err:
+        close_loops(res, [LoopClosure(11, 3, np.eye(3), np.zeros(3))])
+    assert str(err.value) == "loop closure (11, 3) names frames outside 0..10 or one frame twice"
     g = GraphConfig()
     assert (g.trans_frac, g.trans_floor_m, g.rot_deg, g.keyframe_every, g.loss_scale) == (0.01, 5e-4, 0.03, 5, 3.0)
     lc = LoopClosure(0, 1, np.eye(3), np.zeros(3))
@@ -253,6 +365,24 @@ def test_revisits_gate_on_the_heading_and_the_view(turn_deg, max_angle, radius, 
     p = np.array([[0.0, 0.0, 0.0], [5.0, 5.0, 0.0], [0.0, 0.0, 0.0]])
     R = np.stack([np.eye(3), np.eye(3), rotz(math.radians(turn_deg))])
     assert revisits(t, p, R, radius_m=radius, max_angle_deg=max_angle) == ([(0, 2)] if found else [])
+
+
+def test_revisits_defaults_and_edges():
+    """Defaults: views within 0.4 m, headings within 45 deg, 15 s apart; two frames are enough; the view lies 0.8 m
+    ahead (a cart that comes back from the side sees the same ground)."""
+    def pair(t2, turn_deg, p2=(0.0, 0.0), **kw):
+        t = np.array([0.0, t2])
+        p = np.array([[0.0, 0.0, 0.0], [p2[0], p2[1], 0.0]])
+        return revisits(t, p, np.stack([np.eye(3), rotz(math.radians(turn_deg))]), **kw)
+
+    assert pair(15.5, 0.0) == [(0, 1)] and pair(14.5, 0.0) == []
+    assert pair(20.0, 45.5, radius_m=1.0) == [] and pair(20.0, 44.5, radius_m=1.0) == [(0, 1)]
+    # coming back turned 30 deg from a spot chosen so that its view 0.8 m ahead is the first one's
+    c, s_ = math.cos(math.radians(30)), math.sin(math.radians(30))
+    assert pair(20.0, 30.0, p2=(0.8 - 0.8 * c, -0.8 * s_), radius_m=0.05) == [(0, 1)]
+    # exactly at the radius: out (0.5 m: the view from (0.5, 0) is (1.3, 0))
+    assert pair(20.0, 0.0, p2=(0.5, 0.0), radius_m=0.5) == []
+    assert pair(20.0, 0.0, p2=(0.5, 0.0), radius_m=0.5000001) == [(0, 1)]
 
 
 def test_revisits_need_two_frames_and_positive_settings():
