@@ -372,3 +372,113 @@ def test_loop_candidates_pass_their_settings_on(monkeypatch):
     (args, kw), = seen
     assert args[0] is res.frame_t_s and args[1] is res.frame_p and args[2] is res.frame_R
     assert kw == {"every_s": 2.0, "radius_m": 0.3, "max_angle_deg": 20.0, "min_gap_s": 9.0}
+
+
+@pytest.mark.parametrize("answer, reason", [
+    (lambda i, j, init: (False, np.eye(4), np.zeros((6, 6))), "open3d failed"),
+    (lambda i, j, init: (True, np.linalg.inv(moved(1.0)), np.eye(6) * 1e4), "implausible motion"),
+    (lambda i, j, init: creep(i, j, init, np.diag([0.1, 1e4, 1e4, 1e4, 1e4, 1e4])), "degenerate information"),
+])
+def test_every_lost_frame_is_counted(fake, answer, reason):
+    fake(answer)
+    rel, report = rgbd_odometry(frames(5), INTR, OdometryConfig())
+    assert report["lost"] == {reason: 4} and report["registered"] == 0 and report["keyframes"] == 5
+    assert not rel.valid.any()
+
+
+def test_seconds_per_registration(fake, monkeypatch):
+    import time
+
+    fake()
+    clock = iter(np.arange(0.0, 1000.0, 0.25))
+    monkeypatch.setattr(time, "perf_counter", lambda: float(next(clock)))
+    _, report = rgbd_odometry(frames(6), INTR, OdometryConfig())
+    assert report["s_per_frame"] == 0.25  # each registration timed on its own: 5 of them, 0.25 s each
+    fake(lambda i, j, init: (False, np.eye(4), np.zeros((6, 6))))
+    _, report = rgbd_odometry(frames(2), INTR, OdometryConfig())
+    assert report["s_per_frame"] == 0.25
+
+
+def test_the_configured_texture_gradient_and_keyframe_distance_are_used(fake):
+    fake()
+    _, report = rgbd_odometry(frames(4), INTR, OdometryConfig(texture_gradient=300.0))
+    assert report["lost"] == {"too little texture": 3}
+    rel, _ = rgbd_odometry(frames(8), INTR, OdometryConfig(keyframe_m=1.0))
+    np.testing.assert_array_equal(rel.ref, [-1, 0, 0, 0, 0, 0, 0, 0])  # 21 cm in all: one keyframe
+
+
+def test_texture_share_edges_by_hand():
+    g = np.zeros((6, 8))
+    g[:, 4:] = 20.0
+    depth = np.ones((6, 8))
+    assert texture_share(g, depth, gradient=20.0) == 0.0  # exactly the gradient: not over it
+    g65 = np.zeros((6, 8))
+    g65[:, 4:] = 6.5
+    assert texture_share(g65, depth) == pytest.approx(2 / 6, rel=1e-12)  # the default: over 6 grey levels
+    # a fourth channel (alpha) is not picture
+    rgba = np.zeros((6, 8, 4))
+    rgba[..., 3] = np.random.default_rng(1).integers(0, 255, (6, 8))
+    assert texture_share(rgba, depth) == 0.0
+    # differences that vary along the other axis: a step down only in the left half, one across only in the top
+    h = np.zeros((6, 8))
+    h[2:, :4] = 30.0  # halved: rows 1, 2 of columns 0, 1: dy 30 at (0, 0), (0, 1); dx 30 at (1, 1)
+    assert texture_share(h, depth) == pytest.approx(3 / 6, rel=1e-12)
+    v = np.zeros((6, 8))
+    v[:2, 2:] = 30.0  # halved: row 0 of columns 1..3: dx 30 at (0, 0); dy 30 at (0, 1), (0, 2)
+    assert texture_share(v, depth) == pytest.approx(3 / 6, rel=1e-12)
+
+
+def test_loop_closures_use_their_settings(fake, monkeypatch):
+    seen = []
+    monkeypatch.setattr(vo, "loop_candidates", lambda res, **kw: seen.append(kw) or [])
+    fake()
+    rgbd_loop_closures(None, fused(), INTR, np.eye(4))
+    rgbd_loop_closures(None, fused(), INTR, np.eye(4), every_s=2.0, radius_m=0.3, max_angle_deg=30.0, min_gap_s=9.0)
+    assert seen == [{"every_s": 1.0, "radius_m": 0.4, "max_angle_deg": 45.0, "min_gap_s": 15.0},
+                    {"every_s": 2.0, "radius_m": 0.3, "max_angle_deg": 30.0, "min_gap_s": 9.0}]
+
+
+def test_loop_candidates_defaults(monkeypatch):
+    import gpr3d.pose.graph as graph
+
+    seen = []
+    monkeypatch.setattr(graph, "revisits", lambda *a, **kw: seen.append(kw) or [])
+    vo.loop_candidates(fused(5))
+    assert seen == [{"every_s": 1.0, "radius_m": 0.4, "max_angle_deg": 45.0, "min_gap_s": 15.0}]
+
+
+def test_loop_closure_registrations_by_hand(fake):
+    """Open3D's pinhole, options and Jacobian reach each registration; an answer with infinite numbers is dropped;
+    a frame that does not fit the camera is named; the texture gradient is the configured one; the translation
+    sigma is the largest of the three axes'."""
+    res = fused()
+
+    def get_frame(k):
+        colour = np.random.default_rng(k).integers(0, 255, (6, 8, 3)).astype(np.uint8)
+        depth = np.full((6, 8), 1500, np.uint16)
+        depth.flat[0] = 1000 + k
+        return (colour[:5] if k == 26 else colour), depth
+
+    bad = np.eye(4)
+    bad[1, 3] = np.inf
+
+    def answer(i, j, init):
+        if j == 21:
+            return True, bad, np.eye(6) * 1e4
+        return True, np.linalg.inv(moved(0.1 * (j - i))), np.diag([1e4, 1e4, 1e4, 2e3, 1e4, 1e4])
+
+    o3d = fake(answer)
+    cfg = OdometryConfig(depth_min_m=0.3, iterations=(4, 2))
+    out, report = rgbd_loop_closures(get_frame, res, INTR, np.eye(4), cfg, candidates=[(0, 20), (1, 21)])
+    assert report == {"candidates": 2, "closures": 1} and [(c.i, c.j) for c in out] == [(0, 20)]
+    for c in o3d.calls:
+        assert c["pin"] == ("pinhole", 8, 6, 5.0, 5.5, 3.5, 2.5) and c["jac"] == "hybrid"
+        assert c["opt"].iteration_number_per_pyramid_level == ("IntVector", (4, 2)) and c["opt"].depth_min == 0.3
+    assert out[0].sigma_m == pytest.approx(math.sqrt(0.012 / 2e3), rel=1e-9)  # x's, the largest
+    with pytest.raises(InvalidDataError) as err:
+        rgbd_loop_closures(get_frame, res, INTR, np.eye(4), cfg, candidates=[(0, 26)])
+    assert str(err.value) == "frame 26: colour (5, 8, 3) / depth (6, 8) do not match the 8 x 6 camera"
+    fake(answer)
+    out, _ = rgbd_loop_closures(get_frame, res, INTR, np.eye(4), OdometryConfig(texture_gradient=300.0),
+                                candidates=[(0, 20)])
+    assert out == []
