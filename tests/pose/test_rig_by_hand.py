@@ -326,3 +326,158 @@ def test_nees_runs_are_the_filter_s_nees_over_noise_draws_on_one_path():
         want.append(nees(res.frame_R, res.frame_p, res.frame_cov, R_t, p_t))
     np.testing.assert_array_equal(got, np.asarray(want))
     assert got.shape == (2, len(want[0])) and not np.array_equal(got[0], got[1])
+
+
+# ------------------------------------------------------------------------------------------------ more edges
+
+def test_rates_and_keyframe_angles_below_one_are_allowed():
+    RigConfig(imu_rate_hz=0.9, camera_rate_hz=0.5)
+    RigConfig(vo_keyframe_deg=0.5)
+
+
+def test_the_random_motion_takes_both_signs_and_its_ranges():
+    cfg = RigConfig(duration_s=60.0, turn_rate_rad_s=0.7)
+    yaws, starts = [], []
+    for seed in range(12):
+        run = simulate_rig(cfg, seed=seed)
+        knots = np.arange(0.0, 61.0)
+        turn = run.truth.turn(knots)
+        assert np.abs(turn).max() <= 0.7 + 1e-12
+        if seed == 0:
+            assert turn.min() < -0.1 and turn.max() > 0.1
+        yaws.append(run.truth.yaw0)
+        starts.append(run.truth(np.array([0.0]))["p"][0, :2])
+    yaws, starts = np.array(yaws), np.array(starts)
+    assert yaws.min() < -0.5 and yaws.max() > 0.5 and np.abs(yaws).max() <= np.pi
+    assert starts.min() < -1 and starts.max() > 1 and np.abs(starts).max() <= 5
+    assert not np.allclose(starts[:, 0], starts[:, 1])
+
+
+def test_stops_are_still_spells_in_the_run():
+    knots = np.arange(0.0, 61.0)
+    for stops, seed in ((0, 1), (3, 1), (3, 2)):
+        run = simulate_rig(RigConfig(duration_s=60.0, stops=stops), seed=seed)
+        s = run.truth.speed(knots)
+        inner = s[4:58]  # past the still start (3 s) and before the still end (2 s)
+        still = np.flatnonzero(inner == 0.0)
+        if stops == 0:
+            assert still.size == 0
+        else:
+            assert 2 <= still.size <= 12  # 2-4 knots each, stops may overlap
+
+
+def test_the_ground_waves_and_the_planned_turns():
+    run = simulate_rig(RigConfig(duration_s=30.0), seed=2)
+    for key, amp in (("roll", math.radians(1.5)), ("pitch", math.radians(1.5)), ("z", 0.01)):
+        a, k, ph = run.truth.ground[key]
+        assert a == pytest.approx(amp, rel=1e-12)
+        assert 2 * np.pi / 3.0 <= k <= 2 * np.pi / 1.3 and 0 <= ph <= 2 * np.pi
+    area = simulate_rig(RigConfig(duration_s=30.0, area=((0.0, 3.0), (0.0, 3.0))), seed=2)
+    # steering plans the turn rate at whole seconds and holds it linear between (the plan is the path)
+    t = np.array([5.5, 10.25, 17.75])
+    lo, hi = area.truth.turn(np.floor(t)), area.truth.turn(np.ceil(t))
+    np.testing.assert_allclose(area.truth.turn(t), lo + (t - np.floor(t)) * (hi - lo), rtol=0, atol=1e-12)
+
+
+def test_a_single_time_gives_one_pose():
+    run = simulate_rig(RigConfig(duration_s=10.0, still_start_s=1.0, still_end_s=1.0), seed=1)
+    one, many = run.truth(5.0), run.truth(np.array([5.0]))
+    for key in ("p", "v", "a", "w"):
+        assert one[key].shape == (3,)
+        np.testing.assert_array_equal(one[key], many[key][0])
+
+
+@pytest.mark.parametrize("area, ok", [(((1.0, 1.3), (0.0, 3.0)), False), (((0.0, 0.5), (0.0, 3.0)), False),
+                                      (((0.0, 3.0), (0.0, 0.5)), False), (((0.0, 1.0), (0.0, 1.0)), True),
+                                      (((2.0, 2.6), (-1.0, -0.4)), True)])
+def test_areas_must_be_wider_than_half_a_metre(area, ok):
+    cfg = RigConfig(duration_s=12.0, area=area)
+    if ok:
+        run = simulate_rig(cfg, seed=0)
+        (x0, x1), (y0, y1) = area
+        start = run.truth(np.array([0.0]))["p"][0, :2]
+        assert abs(start[0] - 0.5 * (x0 + x1)) <= 0.1 * (x1 - x0) + 1e-9
+        assert abs(start[1] - 0.5 * (y0 + y1)) <= 0.1 * (x1 - x0) + 1e-9
+    else:
+        with pytest.raises(InvalidDataError) as err:
+            simulate_rig(cfg, seed=0)
+        assert str(err.value) == f"area must be at least 0.5 m x 0.5 m, got {area!r}"
+
+
+def test_starts_in_an_area_spread_around_its_centre():
+    off = []
+    for seed in range(16):
+        run = simulate_rig(RigConfig(duration_s=12.0, area=((1.0, 4.0), (-2.0, 0.5))), seed=seed)
+        off.append(run.truth(np.array([0.0]))["p"][0, :2] - [2.5, -0.75])
+    off = np.array(off)
+    assert np.abs(off).max() <= 0.3 + 1e-9 and np.abs(off).max() > 0.15
+    assert off.min() < 0 < off.max() and not np.allclose(off[:, 0], off[:, 1])
+
+
+def test_wheel_defaults_and_a_start_without_a_still_spell():
+    cfg = RigConfig(duration_s=10.0, still_start_s=0.0, still_end_s=1.0, stops=0, speed_m_s=(0.4, 0.5))
+    run = simulate_rig(cfg, seed=3)
+    t, d = run.wheel()
+    np.testing.assert_allclose(t, np.arange(0, 10.0 + 1e-9, 0.01), atol=1e-12)
+    want = np.floor((run.truth.dist(t) - run.truth.dist(0.0)) * 1.005 / 0.001) * 0.001
+    np.testing.assert_allclose(d, want, atol=1e-12)
+    assert d[0] == 0.0 and d[100] > 0.1
+    # the filter's world starts at the first IMU sample, which moves already
+    _, pf = run.truth_in_filter_frame(run.imu.t_s[[0, 1, 100]])
+    np.testing.assert_allclose(pf[0], 0.0, atol=1e-12)
+    assert np.linalg.norm(pf[1]) > 1e-9 and np.linalg.norm(pf[2]) > 1e-3
+    g0 = run.truth(np.array([0.0]))
+    back = run.to_world(Trajectory(np.array([0.0]), np.zeros((1, 3)), np.array([[1.0, 0, 0, 0]])))
+    np.testing.assert_allclose(back.positions_xyz[0], g0["p"][0], atol=1e-12)
+
+
+def test_loop_closure_defaults_and_their_draws(monkeypatch):
+    import gpr3d.pose.graph as graph
+
+    run = simulate_rig(RigConfig(duration_s=60.0, area=((0.0, 2.5), (0.0, 2.5)), turn_rate_rad_s=1.0), seed=3)
+    frame_t = run.vo.t_s + run.config.camera_time_offset_s
+    a, b = run.loop_closures(frame_t), run.loop_closures(frame_t, seed=0)
+    assert len(a) > 10 and all(np.array_equal(x.p, y.p) and np.array_equal(x.R, y.R) for x, y in zip(a, b))
+    assert a[0].sigma_m == 0.003 and a[0].sigma_rad == pytest.approx(math.radians(0.1), rel=1e-15)
+    other = run.loop_closures(frame_t, seed=1)
+    assert not np.array_equal(other[0].p, a[0].p)
+    # the noise is drawn per axis
+    exact = run.loop_closures(frame_t, sigma_m=1e-12, sigma_deg=1e-12)
+    dp = np.array([x.p - e.p for x, e in zip(a, exact)])
+    assert not np.allclose(dp[:, 0], dp[:, 1])
+    # wrong ones: of various sizes, turned either way
+    wrong = run.loop_closures(frame_t, sigma_m=1e-12, sigma_deg=1e-12, outlier_rate=1.0)
+    size = np.array([np.linalg.norm(w.p - e.p) for w, e in zip(wrong, exact)])
+    turn = np.array([so3_log(e.R.T @ w.R)[2] for w, e in zip(wrong, exact)])
+    assert size.std() > 0.1 and turn.min() < 0 < turn.max()
+    seen = []
+    real = graph.revisits
+    monkeypatch.setattr(graph, "revisits", lambda *a_, **kw: seen.append(kw) or real(*a_, **kw))
+    run.loop_closures(frame_t)
+    run.loop_closures(frame_t, every_s=2.0, radius_m=0.3, max_angle_deg=30.0, min_gap_s=9.0)
+    assert seen == [{"every_s": 1.0, "radius_m": 0.4, "max_angle_deg": 45.0, "min_gap_s": 15.0},
+                    {"every_s": 2.0, "radius_m": 0.3, "max_angle_deg": 30.0, "min_gap_s": 9.0}]
+
+
+def test_simulation_defaults_and_per_axis_draws():
+    cfg = RigConfig(duration_s=10.0, still_start_s=1.0, still_end_s=1.0)
+    a, b = simulate_rig(cfg), simulate_rig(cfg, seed=0)
+    np.testing.assert_array_equal(a.imu.accel, b.imu.accel)
+    np.testing.assert_array_equal(a.vo.p, b.vo.p)
+    assert not np.allclose(a.accel_bias[0], a.accel_bias[0][0]) and not np.allclose(a.gyro_bias[0], a.gyro_bias[0][0])
+    g = a.truth(a.vo.t_s + cfg.camera_time_offset_s)
+    Rc = g["R"] @ cfg.imu_T_camera[:3, :3]
+    pc = g["p"] + np.einsum("nij,j->ni", g["R"], cfg.imu_T_camera[:3, 3])
+    err = np.array([a.vo.p[k] - Rc[k - 1].T @ (pc[k] - pc[k - 1]) for k in range(1, pc.shape[0])])
+    assert not np.allclose(err[:, 0], err[:, 1])
+
+
+def test_keyframes_without_a_gap_and_frame_0_is_never_an_outlier():
+    run = simulate_rig(RigConfig(duration_s=20.0, vo_keyframe_m=0.1, vo_outlier_rate=1.0, stops=0), seed=4)
+    assert not run.vo_outliers[0] and run.vo_outliers[1:].all()
+    assert np.unique(run.vo.ref[1:]).size > 5
+
+
+def test_nees_runs_defaults():
+    cfg = RigConfig(duration_s=10.0, still_start_s=2.0, still_end_s=1.0, stops=0)
+    np.testing.assert_array_equal(nees_runs(cfg, 1), nees_runs(cfg, 1, motion_seed=7, first_seed=100))
