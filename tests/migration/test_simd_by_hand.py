@@ -143,6 +143,11 @@ def test_a_voxel_at_an_antenna_has_no_obliquity_not_nan(monkeypatch):
     np.testing.assert_allclose(facc, want_facc, rtol=1e-4, atol=2e-4)
 
 
+def test_without_the_fold_by_default(monkeypatch):
+    monkeypatch.setattr(_simd, "_STACKS", {})
+    assert _simd.stack(2) is _simd.stack(2, False) and set(_simd._STACKS) == {(2, False)}
+
+
 def test_the_gather_intrinsic_is_named_for_the_llvm_in_use():
     import llvmlite.binding as llb
 
