@@ -146,13 +146,3 @@ def test_a_voxel_at_an_antenna_has_no_obliquity_not_nan(monkeypatch):
 def test_without_the_fold_by_default(monkeypatch):
     monkeypatch.setattr(_simd, "_STACKS", {})
     assert _simd.stack(2) is _simd.stack(2, False) and set(_simd._STACKS) == {(2, False)}
-
-
-def test_the_gather_intrinsic_is_named_for_the_llvm_in_use():
-    import llvmlite.binding as llb
-
-    name = _simd._gather_names()
-    if llb.llvm_version_info[0] >= 17:
-        assert name == "llvm.masked.gather.v16i64.v16p0"
-    else:
-        assert name == "llvm.masked.gather.v16i64.v16p0i64"
