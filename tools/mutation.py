@@ -167,6 +167,13 @@ def run_module(module: str, *, max_children: int, equivalents: list, keep: bool)
         'filterwarnings = ["ignore::DeprecationWarning"]\n'
     )
     (work / "pyproject.toml").write_text(cfg, encoding="utf-8")
+    # tqdm guards its bars with a process-shared semaphore, created once in mutmut's parent and inherited by every
+    # forked child: a child killed at its timeout while drawing a bar (a mutant that loops) leaves it held, and
+    # every later child that makes a bar then waits on it until its own timeout, counted as killed. A per-process
+    # lock (and no monitor thread, which a fork does not carry) keeps one child's death from reaching the others.
+    with open(work / "tests" / "conftest.py", "a", encoding="utf-8") as f:
+        f.write("\n\nimport threading as _threading\n\nimport tqdm as _tqdm\n\n"
+                "_tqdm.tqdm.set_lock(_threading.RLock())\n_tqdm.tqdm.monitor_interval = 0\n")
     # the copies' tests must still find the real recordings beside the repository
     # numba's OpenMP threading layer raises SIGTERM in a process forked after it ran a parallel kernel, and mutmut
     # forks every mutant's run from the process that ran the tests once: the workqueue layer survives the fork
@@ -199,6 +206,7 @@ def run_module(module: str, *, max_children: int, equivalents: list, keep: bool)
         shutil.rmtree(work, ignore_errors=True)
     return {"module": module, "tests": tests, "total": total, "killed": killed, "survived": len(survivors),
             "equivalent": len(equivalent), "suspicious": stats.get("suspicious", 0),
+            "timed_out": stats.get("timeout", 0),
             "score": killed / judged if judged else 1.0, "wall_s": wall, "survivors": survivors,
             "equivalents": equivalent}
 
@@ -277,23 +285,28 @@ def write_report(rows: list[dict], path: Path, command: str) -> None:
     """The table (score per module, with the host CPU and commit each was measured on) and every survivor's and
     listed equivalent's diff."""
     lines = ["mutmut, one module at a time with the tests of its package; score = killed / (mutants - equivalent)", "",
-             "| module | mutants | killed | survived | equivalent | unclassified | score | time (s) | host CPU | commit |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "| module | mutants | killed | of which timed out | survived | equivalent | unclassified | score | time (s) | "
+             "host CPU | commit |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         where = f"{r.get('cpu', cpu_label())} | {(r.get('commit') or head_commit() or '?')[:10]}"
         if "error" in r:
-            lines.append(f"| {r['module']} | error: {r['error'][:80]} | | | | | | {r['wall_s']:.0f} | {where} |")
+            lines.append(f"| {r['module']} | error: {r['error'][:80]} | | | | | | | {r['wall_s']:.0f} | {where} |")
             continue
-        lines.append(f"| {r['module']} | {r['total']} | {r['killed']} | {r['survived']} | {r['equivalent']} | "
+        lines.append(f"| {r['module']} | {r['total']} | {r['killed']} | {r.get('timed_out', '?')} | {r['survived']} | "
+                     f"{r['equivalent']} | "
                      f"{r.get('suspicious', 0)} | {100 * r['score']:.1f} % | {r['wall_s']:.0f} | {where} |")
     done = [r for r in rows if "error" not in r]
     if done:
         tot = sum(r["total"] - r["equivalent"] for r in done)
         lines.append(f"| **all {len(done)}** | {sum(r['total'] for r in done)} | {sum(r['killed'] for r in done)} | "
+                     f"{sum(r.get('timed_out', 0) for r in done)} | "
                      f"{sum(r['survived'] for r in done)} | {sum(r['equivalent'] for r in done)} | "
                      f"{sum(r.get('suspicious', 0) for r in done)} | "
                      f"{100 * sum(r['killed'] for r in done) / max(tot, 1):.1f} % | "
                      f"{sum(r['wall_s'] for r in done):.0f} | | |")
+        lines += ["", "of which timed out: killed by mutmut's time limit, not by a failing test ('?': measured before "
+                      "the count was kept)"]
         lines += ["", "unclassified: mutants whose test run ended with an exit status mutmut does not classify "
                       "('suspicious'): neither killed nor survived, and counted against the score"]
         lines += ["", "Not yet scored: " + (", ".join(m for m in MODULES if m not in {r['module'] for r in rows})

@@ -383,3 +383,38 @@ def test_train_config_edges_that_are_allowed(tmp_path):
             d.checkpoint_every, d.packed_fraction, d.packed_holdout, d.labels_fraction) == (
         "frcnn_lean", 3000, 8, None, "adamw", 200, 0, 1000, 0, 100, 0.2, 60, 0.5)
     assert d.window == WindowConfig().to_dict()
+
+
+class Clock:
+    """A stand-in for ``time``: each reading is half a second after the last, from 1000 s."""
+
+    def __init__(self):
+        self.t = 999.5
+
+    def perf_counter(self):
+        self.t += 0.5
+        return self.t
+
+
+def test_a_run_times_its_steps_and_stops_when_late(tmp_path, stand_ins, monkeypatch):
+    monkeypatch.setattr(train_mod, "time", Clock())
+    res = train_detector(cfg_for(tmp_path / "a", steps=3), None, progress=False, log=quiet)
+    lines = (tmp_path / "a" / "run" / "losses.csv").read_text().splitlines()[1:]
+    assert [ln.split(",")[3] for ln in lines] == ["0.5", "1.0", "1.5"] and res["wall_s"] == 2.0
+    monkeypatch.setattr(train_mod, "time", Clock())
+    logged = []
+    res = train_detector(cfg_for(tmp_path / "b"), None, progress=False, log=logged.append, max_seconds=1.0)
+    # step 1 is logged at 0.5 s and checked at 1.0 s (not past 1 s); step 2 checked at 2.0 s
+    assert res["steps"] == 2 and logged == ["stopped after 1 s at step 2; run again to continue"]
+
+
+def test_the_bar_counts_on_from_where_a_run_resumes(tmp_path, stand_ins, capsys):
+    import re
+
+    cfg = cfg_for(tmp_path)
+    train_detector(cfg, None, progress=False, log=quiet, max_seconds=0.0)  # one step
+    capsys.readouterr()
+    train_detector(cfg, None, progress=True, log=quiet)
+    last = capsys.readouterr().err.rstrip().split("\r")[-1]
+    assert last.startswith("train ssdlite: 100%") and "| 5/5 [" in last, last
+    assert re.search(r"\d(step/s|s/step), loss=\d+\.\d{3}\]$", last), last

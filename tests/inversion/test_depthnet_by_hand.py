@@ -474,10 +474,10 @@ def test_training_warm_up_is_a_tenth_of_the_steps_at_most_100(tmp_path, stand_in
     got = []
     real = dn.warmup_cosine
     monkeypatch.setattr(dn, "warmup_cosine", lambda w, s: (got.append((w, s)), real(w, s))[1])
-    for steps in (1, 25, 2000):
+    for steps in (1, 25, 50, 2000):
         cfg = tcfg(tmp_path / str(steps), steps=steps)
         dn.train_depthnet(cfg, [labelled_record()], log=quiet, progress=False, max_seconds=0.0)
-    assert got == [(1, 1), (2, 25), (100, 2000)]
+    assert got == [(1, 1), (2, 25), (5, 50), (100, 2000)]
 
 
 def test_training_from_given_weights(tmp_path, stand_in, monkeypatch):
@@ -567,9 +567,9 @@ def test_the_estimate_without_boxes_tiles_the_record():
 def test_one_window_has_no_spread_and_a_short_record_one_window():
     rec = labelled_record()
     rec.x_m = rec.x_m * 0.01  # 7.9 mm long
-    s = Session(eps=[5.0])
+    s = Session(eps=[5.0, 5.0])
     got = estimator(s).estimate(None, [], record=rec)
-    assert got["n_windows"] == 1 and got["sigma_eps_r"] == pytest.approx(0.15 * 5.0, rel=1e-12)
+    assert len(s.calls[0]["images"]) == 1 and got["n_windows"] == 1 and got["sigma_eps_r"] == pytest.approx(0.15 * 5.0, rel=1e-12)
 
 
 def test_windows_go_to_the_network_sixteen_at_a_time():
@@ -756,12 +756,455 @@ def test_the_onnx_export_answers_as_pytorch_and_carries_its_metadata(tmp_path):
     est_onnx, est_pt = DepthEstimator.load(tmp_path / "w.onnx"), DepthEstimator.load(tmp_path / "w.pt")
     assert est_onnx.session is not None and est_onnx.model is None and est_onnx.net == cfg
     assert est_onnx.provenance == {"validation": {"eps_rel_rmse": 0.07}} and est_pt.session is None
+    assert est_pt.provenance == {"validation": {"eps_rel_rmse": 0.07}}
     rec = labelled_record()
     e1, q1 = est_onnx.predict(rec, [0.2, 0.5, 0.6], [[[15, 1e-9, 25, 3e-9]], [], [[55, 2e-9, 65, 4e-9]] * 2])
     e2, q2 = est_pt.predict(rec, [0.2, 0.5, 0.6], [[[15, 1e-9, 25, 3e-9]], [], [[55, 2e-9, 65, 4e-9]] * 2])
     np.testing.assert_allclose(e1, e2, rtol=1e-3)
     assert [len(q) for q in q1] == [1, 0, 2]
     np.testing.assert_allclose(np.concatenate(q1), np.concatenate(q2), rtol=1e-3, atol=1e-5)
+    for centres, boxes in (([0.2], [[[15, 1e-9, 25, 3e-9]]]), ([0.2, 0.5], [[], []])):  # 2 and 1 RoIs, 1 and 2 windows
+        e1, q1 = est_onnx.predict(rec, centres, boxes)
+        e2, q2 = est_pt.predict(rec, centres, boxes)
+        np.testing.assert_allclose(e1, e2, rtol=1e-3)
+        np.testing.assert_allclose(np.concatenate(q1), np.concatenate(q2), rtol=1e-3, atol=1e-5)
+    import onnx
+
+    assert [(o.domain, o.version) for o in onnx.load(tmp_path / "w.onnx").opset_import] == [("", 17)]
+    # the largest difference reported is the one the test windows show (eps relative, depth fractions absolute)
+    images = np.random.default_rng(0).random((2, 3, 64, 64), dtype=np.float32)
+    rois = dn._rois([[[20, 30, 90, 80]], [[100, 50, 200, 120], [10, 10, 60, 40]]])
+    direct = np.array([0.1, 0.2], np.float32)
+    got = sess.run(None, {"images": images, "rois": rois, "direct": direct})
+    with torch.no_grad():
+        ref = [x.numpy() for x in dn.load_depthnet(tmp_path / "w.pt")[0](torch.from_numpy(images),
+                                                                          torch.from_numpy(rois),
+                                                                          torch.from_numpy(direct))]
+    assert info["max_diff"] == pytest.approx(max(float(np.max(np.abs(got[0] - ref[0]) / ref[0])),
+                                                 float(np.max(np.abs(got[1] - ref[1])))), rel=1e-3, abs=1e-12)
     with pytest.raises(FormatError) as err:
         DepthEstimator.load(tmp_path / "none.onnx")
     assert str(err.value) == "none.onnx: no such DepthNet file"
+
+
+# ------------------------------------------------------------------------------------------------ records by hand
+
+def test_a_record_prepared_by_hand():
+    from gpr3d.core.survey import Survey
+    from gpr3d.inversion.hyperbola import direct_wave_time
+    from gpr3d.processing.image import network_view, record_scale
+
+    rng = np.random.default_rng(11)
+    n, ns, dt = 12, 300, 5e-11
+    data = 0.05 * rng.standard_normal((n, ns))
+    data[:, 40:44] += [1.0, 3.0, -3.0, -1.0]  # a direct wave
+    x = 2.0 + 0.03 * np.arange(n)
+    x[5] = x[4]  # the cart stood still once
+    s = Survey(data=data.astype(np.float32), dt_s=dt, positions_xyz=np.stack([x, 0 * x, 0 * x], 1), offset_m=0.08,
+               frequency_hz=1e9)
+    labs = [{"apex_trace": 3, "visible": True}, {"apex_trace": 5, "visible": False}, {"apex_trace": 7}]
+    rec = dn.prepare_depth_record(s, {"eps_r": 7.5, "labels": labs})
+    want_proc = network_view(s, 224)  # the default size
+    assert rec.proc.shape == (n, 224)
+    np.testing.assert_array_equal(rec.proc, want_proc)
+    along = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(x)))])
+    np.testing.assert_allclose(rec.x_m, along + np.arange(n) * 1e-9, rtol=0, atol=1e-12)
+    assert np.all(np.diff(rec.x_m) > 0)
+    window = (ns - 1) * dt
+    assert (rec.window_s, rec.dt_s, rec.offset_m, rec.eps_r) == (window, dt, 0.08, 7.5)
+    assert rec.direct_frac == direct_wave_time(s)[0] / window
+    assert rec.scale == record_scale(want_proc)
+    assert rec.labels == [labs[0], labs[2]] and rec.labels[0] is not labs[0]
+    # no positions (a spacing instead), no offset, no eps_r
+    s0 = Survey(data=data.astype(np.float32), dt_s=dt, offset_m=0.0, frequency_hz=1e9)
+    for labels in (None, {"labels": labs}):
+        r0 = dn.prepare_depth_record(s0, labels, size=64, trace_spacing_m=0.02)
+        assert math.isnan(r0.eps_r) and r0.offset_m == 0.0 and r0.proc.shape == (n, 64)
+        np.testing.assert_allclose(r0.x_m, np.arange(n) * (0.02 + 1e-9), rtol=0, atol=1e-12)
+
+
+def test_window_columns_at_the_record_s_ends():
+    """Traces at 0, 0.25 and 0.5 m (half a spacing: 0.125 m); columns 0.125 m wide centred at -0.125 ... 0.75 m."""
+    rec = ramp_record(n=3, size=2, spacing=0.25)
+    t = rec.proc.astype(np.float64)
+    block = dn._columns(rec, -0.1875, 1.0, 8, rec.proc)
+    want = [t[0], t[0], (t[0] + t[1]) / 2, t[1], (t[1] + t[2]) / 2, t[2], t[2], 0 * t[0]]  # the last lies outside
+    np.testing.assert_allclose(block, want, rtol=1e-7)
+    two = ramp_record(n=2, size=2, spacing=0.25)  # two traces still reach half a spacing past their ends
+    t = two.proc.astype(np.float64)
+    np.testing.assert_allclose(dn._columns(two, -0.1875, 1.0, 8, two.proc),
+                               [t[0], t[0], (t[0] + t[1]) / 2, t[1], t[1], 0 * t[0], 0 * t[0], 0 * t[0]], rtol=1e-7)
+
+
+def test_traces_box_filtered_by_hand_at_the_edges():
+    three = ramp_record(n=3, size=2, spacing=0.01)
+    t = three.proc.astype(np.float64)
+    # five traces a column: a five-wide box, the end traces repeated beyond the ends
+    np.testing.assert_allclose(dn._smoothed(three, 8 * 0.05, 8),
+                               [(3 * t[0] + t[1] + t[2]) / 5, (2 * t[0] + t[1] + 2 * t[2]) / 5,
+                                (t[0] + t[1] + 3 * t[2]) / 5], rtol=1e-6)
+    two = ramp_record(n=2, size=2, spacing=0.01)
+    t = two.proc.astype(np.float64)
+    np.testing.assert_allclose(dn._smoothed(two, 8 * 0.03, 8), [(2 * t[0] + t[1]) / 3, (t[0] + 2 * t[1]) / 3],
+                               rtol=1e-6)
+    exact = ramp_record(n=3, size=2, spacing=0.25)
+    assert dn._smoothed(exact, 3.0, 8) is exact.proc  # 1.5 traces a column: not filtered
+
+
+def test_window_targets_by_the_apex_not_the_box():
+    """Traces 0.1 m apart, rows 0.1 ns apart; the window spans 0.2 .. 1.0 m in 64 columns."""
+    labels = [
+        {"apex_trace": 10.5, "box": [9, 0.5e-9, 11, 2e-9], "depth_m": 0.1},  # apex beyond the right edge: left out
+        {"apex_trace": 3, "box": [2, 0.0, 4, 1e-9], "depth_m": 0.2},  # from the first row
+        {"apex_trace": 5, "box": [4, 2e-9, 6, 2.04e-9], "depth_m": 0.3},  # under a pixel tall: left out
+        {"apex_trace": 7, "box": [6, 3e-9, 8, 4e-9], "depth_m": 0.4},
+    ]
+    rec = ramp_record(n=13, size=64, spacing=0.1, window_s=6.3e-9, labels=labels)
+    boxes, q = window_targets_m(rec, 0.2, 0.8, 64)
+    np.testing.assert_allclose(boxes, [[0, 0.5, 16, 10.5], [32, 30.5, 48, 40.5]], rtol=1e-6, atol=1e-5)
+    np.testing.assert_allclose(q, [0.2 / rec.depth_scale_m, 0.4 / rec.depth_scale_m], rtol=1e-6)
+
+
+def test_a_mirrored_training_item_with_two_boxes():
+    rec, cfg = labelled_record(), DepthConfig(size=64, alpha=0.5)
+    rec.labels[0].update(apex_trace=40, box=[35, 1e-9, 45, 3e-9])
+    rec.labels[1].update(apex_trace=50, box=[45, 2e-9, 55, 4e-9])
+    rng = Script(random=[0.9, 0.5, 0.1], uniform=[0.0], integers=[0])
+    image, boxes, q, _, _ = dn._training_item(rec, cfg, rng)
+    want_img, left, w = depth_window(rec, 0.4, cfg)
+    np.testing.assert_array_equal(image, want_img[:, :, ::-1])
+    want_b, want_q = window_targets_m(rec, left, w, 64)
+    assert len(want_b) == 2
+    np.testing.assert_allclose(boxes, np.c_[64 - want_b[:, 2], want_b[:, 1], 64 - want_b[:, 0], want_b[:, 3]],
+                               rtol=0, atol=1e-5)
+    np.testing.assert_array_equal(q, want_q)
+
+
+def test_records_are_cached_at_224_rows_unless_asked(tmp_path, monkeypatch):
+    made = []
+
+    def prepare(survey, labels, *, size):
+        made.append(size)
+        return ramp_record(n=3, size=4)
+
+    monkeypatch.setattr(dn, "prepare_depth_record", prepare)
+    dn.cache_depth_records(lambda i: ("s", {"labels": []}), [0], tmp_path, log=quiet)
+    assert made == [224]
+
+
+# ------------------------------------------------------------------------------------------------ training, more
+
+def dense_record():
+    """labelled_record's two targets over traces 2 mm apart: about three traces share each 5.9 mm column."""
+    rec = labelled_record()
+    rec.x_m = np.arange(400) * 0.002
+    rec.proc = np.random.default_rng(8).standard_normal((400, 64)).astype(np.float32)
+    for lab, apex in zip(rec.labels, (100, 300)):
+        lab.update(apex_trace=apex, box=[apex - 25, lab["box"][1], apex + 25, lab["box"][3]])
+    return rec
+
+
+def test_training_windows_of_dense_traces_are_smoothed(tmp_path, stand_in):
+    rec, net_cfg = dense_record(), DepthConfig(width=8, size=64)
+    sm = dn._smoothed(rec, 0.5 * rec.depth_scale_m, 64)
+    assert not np.array_equal(sm, rec.proc)
+    dn.train_depthnet(tcfg(tmp_path, steps=1, seed=1), [rec], log=quiet, progress=False)  # a window not cut short
+    rng = np.random.default_rng(np.random.SeedSequence([1, 0, 0xD3]))
+    items = []
+    for _ in range(2):
+        rng.integers(1)
+        items.append(dn._training_item(rec, net_cfg, rng, sm))
+    np.testing.assert_array_equal(stand_in["seen"][0][0].numpy(), np.stack([it[0] for it in items]))
+
+
+def test_the_logged_depth_loss_is_that_of_the_boxes_without_the_dummy(tmp_path, stand_in):
+    torch = stand_in["torch"]
+    rec, net_cfg = labelled_record(), DepthConfig(width=8, size=64)
+    dn.train_depthnet(tcfg(tmp_path, steps=1, seed=5), [rec], log=quiet, progress=False)
+    _, rois, _, a = stand_in["seen"][0]
+    torch.manual_seed(5)  # the stand-in draws a, then b
+    a0, b0 = float(torch.randn(()) * 0.1), float(torch.randn(()) * 0.1)
+    assert a0 == float(a)
+    rng = np.random.default_rng(np.random.SeedSequence([5, 0, 0xD3]))
+    tq = []
+    for _ in range(2):
+        rng.integers(1)
+        tq += list(dn._training_item(rec, net_cfg, rng, None)[2])
+    q = b0 + rois.numpy()[:-1, 2] / 1000.0
+    assert len(q) == len(tq) == len(set(tq)) >= 2  # windows over two targets
+    line = (tmp_path / "run" / "losses.csv").read_text().splitlines()[1].split(",")
+    assert float(line[4]) == pytest.approx(float(np.mean((q - np.asarray(tq)) ** 2) * 100), abs=2e-5)
+
+
+class Clock:
+    """A stand-in for ``time``: each reading is half a second after the last, from 1000 s."""
+
+    def __init__(self):
+        self.t = 999.5
+
+    def perf_counter(self):
+        self.t += 0.5
+        return self.t
+
+
+def test_training_times_its_steps_and_stops_when_late(tmp_path, stand_in, monkeypatch):
+    monkeypatch.setattr(dn, "time", Clock())
+    res = dn.train_depthnet(tcfg(tmp_path / "a"), [labelled_record()], log=quiet, progress=False)
+    lines = (tmp_path / "a" / "run" / "losses.csv").read_text().splitlines()[1:]
+    assert [ln.split(",")[-1] for ln in lines] == ["0.5", "1.0", "1.5", "2.0"] and res["wall_s"] == 2.5
+    monkeypatch.setattr(dn, "time", Clock())
+    logged = []
+    res = dn.train_depthnet(tcfg(tmp_path / "b"), [labelled_record()], log=logged.append, progress=False,
+                            max_seconds=1.0)
+    # step 1 is logged at 0.5 s and checked at 1.0 s (not past 1 s); step 2 checked at 2.0 s
+    assert res["steps"] == 2 and logged == ["stopped after 1 s at step 2; run again to continue"]
+
+
+def test_training_s_bar_counts_on_from_where_it_resumes(tmp_path, stand_in, capsys):
+    import re
+
+    cfg = tcfg(tmp_path)
+    dn.train_depthnet(cfg, [labelled_record()], log=quiet, progress=False, max_seconds=0.0)  # one step
+    capsys.readouterr()
+    dn.train_depthnet(cfg, [labelled_record()], log=quiet)  # the bar is shown by default
+    last = capsys.readouterr().err.rstrip().split("\r")[-1]
+    assert last.startswith("train depthnet: 100%") and "| 4/4 [" in last, last
+    assert re.search(r"\d(step/s|s/step), depth=\d+\.\d{3}, eps=\d+\.\d{3}\]$", last), last
+
+
+def test_a_run_whose_checkpoint_was_deleted_starts_a_new_log(tmp_path, stand_in):
+    from dataclasses import asdict
+
+    cfg = tcfg(tmp_path)
+    dn.train_depthnet(cfg, [labelled_record()], log=quiet, progress=False)
+    (tmp_path / "run" / "checkpoint.pt").unlink()
+    dn.train_depthnet(cfg, [labelled_record()], log=quiet, progress=False)
+    lines = (tmp_path / "run" / "losses.csv").read_text().splitlines()
+    assert lines[0] == "step,lr,loss,log_eps_mse,depth_mse_x100,wall_s"
+    assert [ln.split(",")[0] for ln in lines[1:]] == ["1", "2", "3", "4"]
+    saved = (tmp_path / "run" / "config.json").read_text()
+    assert saved == json.dumps({"gpr3d": __version__, "config": asdict(cfg), "n_records": 1}, indent=2)
+
+
+def test_a_checkpoint_that_cannot_be_read_or_holds_code_is_named(tmp_path, stand_in):
+    from fractions import Fraction
+
+    torch = stand_in["torch"]
+    ck = tmp_path / "run" / "checkpoint.pt"
+    ck.parent.mkdir()
+    ck.write_bytes(b"not a checkpoint")
+    with pytest.raises(GPR3DError) as err:
+        dn.train_depthnet(tcfg(tmp_path), [labelled_record()], log=quiet, progress=False)
+    with pytest.raises(Exception) as direct:
+        torch.load(ck, weights_only=True)
+    assert str(err.value) == f"{ck}: cannot read the checkpoint ({type(direct.value).__name__}); delete it to restart"
+    torch.save({"step": 1, "payload": Fraction(1, 3)}, ck)
+    with pytest.raises(GPR3DError) as err:
+        dn.train_depthnet(tcfg(tmp_path), [labelled_record()], log=quiet, progress=False)
+    assert str(err.value) == f"{ck}: cannot read the checkpoint (UnpicklingError); delete it to restart"
+
+
+def test_a_diverging_run_names_its_step(tmp_path, stand_in, monkeypatch):
+    torch, Net = stand_in["torch"], stand_in["Net"]
+
+    def build(cfg=None):
+        net = Net()
+        with torch.no_grad():
+            net.a.fill_(float("nan"))
+        return net
+
+    monkeypatch.setattr(dn, "build_depthnet", build)
+    with pytest.raises(GPR3DError) as err:
+        dn.train_depthnet(tcfg(tmp_path), [labelled_record()], log=quiet, progress=False)
+    assert str(err.value) == "DepthNet training diverged at step 0 (loss nan); lower --lr"
+
+
+def test_training_starts_from_the_weights_file_it_is_given(tmp_path, stand_in, monkeypatch):
+    asked = []
+    monkeypatch.setattr(dn, "load_depthnet",
+                        lambda path: (asked.append(path), stand_in["Net"](), DepthConfig(width=8, size=64), {})[1:])
+    dn.train_depthnet(tcfg(tmp_path, init="start.pt", steps=1), [labelled_record()], log=quiet, progress=False)
+    assert asked == ["start.pt"]
+
+
+# ------------------------------------------------------------------------------------------------ the estimator, more
+
+def test_the_estimator_smooths_dense_traces():
+    rec = dense_record()
+    s = Session(eps=[6.0])
+    est = estimator(s)
+    est.estimate(None, [[90, 1e-9, 110, 3e-9]], record=rec)
+    img, _, _ = depth_window(rec, rec.x_of_trace(100.0), est.net)  # smoothed by itself
+    np.testing.assert_array_equal(s.calls[0]["images"][0], img)
+
+
+def test_the_estimate_of_a_survey_prepares_its_record_at_the_net_s_size():
+    from gpr3d.core.survey import Survey
+
+    rng = np.random.default_rng(12)
+    data = 0.05 * rng.standard_normal((30, 200))
+    data[:, 30:34] += [1.0, 3.0, -3.0, -1.0]
+    s = Survey(data=data.astype(np.float32), dt_s=5e-11, frequency_hz=1e9)  # no positions: a spacing is needed
+    sess = Session(eps=[6.0])
+    est = estimator(sess)
+    est.estimate(s, [[5, 1e-9, 15, 3e-9]], trace_spacing_m=0.01)
+    rec = dn.prepare_depth_record(s, size=64, trace_spacing_m=0.01)
+    np.testing.assert_array_equal(sess.calls[0]["images"][0], depth_window(rec, rec.x_of_trace(10.0), est.net)[0])
+
+
+def test_the_tiles_follow_a_record_that_starts_past_zero():
+    rec = ramp_record(n=9, size=64, spacing=0.1, window_s=5e-9)
+    rec.x_m = rec.x_m + 1.0  # 1.0 .. 1.8 m; windows 0.375 m wide, a tile every 0.187 m
+    s = Session(eps=[5.0] * 8)
+    got = estimator(s).estimate(None, [], record=rec)
+    assert got["n_windows"] == 5 and len(s.calls[0]["images"]) == 5  # ceil(0.8 / 0.1875)
+    for j, c in enumerate(np.linspace(rec.x_m[0], rec.x_m[-1], 6)[:5] + 0.25 * 0.5 * rec.depth_scale_m):
+        np.testing.assert_array_equal(s.calls[0]["images"][j], depth_window(rec, c, estimator(None).net)[0])
+
+
+def test_two_windows_have_a_spread():
+    s = Session(eps=[6.0, 9.0])
+    got = estimator(s).estimate(None, [[10, 1e-9, 30, 3e-9], [50, 2e-9, 70, 4e-9]], record=labelled_record())
+    assert got["eps_r"] == 7.5
+    assert got["sigma_eps_r"] == pytest.approx(math.hypot(0.15 * 7.5, 1.4826 * 1.5 / math.sqrt(2)), rel=1e-12)
+
+
+def test_validation_uses_the_visible_labels_only(monkeypatch):
+    import warnings
+
+    calls = []
+
+    class Est:
+        def __init__(self, model, net):
+            pass
+
+        def estimate(self, survey, boxes):
+            calls.append(boxes)
+            return {"eps_r": 6.0, "depth_m": [b[0] / 100 for b in boxes]}
+
+    class Model:
+        def eval(self):
+            return self
+
+    monkeypatch.setattr(dn, "DepthEstimator", Est)
+    labs = [{"box": [10, 0, 20, 1], "depth_m": 0.05, "visible": True},
+            {"box": [30, 0, 40, 1], "depth_m": 0.2, "visible": False}, {"box": [50, 0, 60, 1], "depth_m": 0.4}]
+    got = dn.validate_depthnet(Model(), DepthConfig(), lambda i: ("s", {"eps_r": 5.0, "labels": labs}), 1)
+    assert calls == [[[10, 0, 20, 1], [50, 0, 60, 1]]]
+    assert got == {"n_records": 1, "eps_rel_rmse": pytest.approx(0.2), "eps_mape": pytest.approx(0.2),
+                   "depth_mae_m": pytest.approx((0.05 + 0.1) / 2)}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no mean of nothing
+        got = dn.validate_depthnet(Model(), DepthConfig(), lambda i: ("s", {"eps_r": 5.0, "labels": labs[1:2]}), 1)
+    assert math.isnan(got["depth_mae_m"])
+
+
+def test_weights_without_provenance_and_the_default_estimator(tmp_path):
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("torchvision")
+    pytest.importorskip("onnxruntime")
+    dn.save_depthnet(dn.build_depthnet(DepthConfig(width=8, size=64)), DepthConfig(width=8, size=64), tmp_path / "w.pt")
+    obj = torch.load(tmp_path / "w.pt", weights_only=True)
+    del obj["provenance"]  # a file written before provenance was kept
+    torch.save(obj, tmp_path / "old.pt")
+    assert dn.load_depthnet(tmp_path / "old.pt")[2] == {}
+    est = DepthEstimator.load()
+    assert est.session is not None and est.net == dn._onnx_session(dn.DEFAULT_DEPTHNET)[1]
+
+
+def test_onnx_files_that_are_not_depthnets_are_named(tmp_path):
+    onnx = pytest.importorskip("onnx")
+    ort = pytest.importorskip("onnxruntime")
+    from dataclasses import asdict
+
+    from onnx import TensorProto, helper
+
+    bad = tmp_path / "bad.onnx"
+    bad.write_bytes(b"not onnx")
+    with pytest.raises(FormatError) as err:
+        dn._onnx_session(bad)
+    with pytest.raises(Exception) as direct:
+        ort.InferenceSession(str(bad), providers=["CPUExecutionProvider"])
+    assert str(err.value) == f"bad.onnx: not a readable ONNX DepthNet ({type(direct.value).__name__})"
+    graph = helper.make_graph([helper.make_node("Identity", ["x"], ["y"])], "g",
+                              [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1])],
+                              [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1])])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    onnx.save(model, tmp_path / "plain.onnx")
+    with pytest.raises(FormatError) as err:
+        dn._onnx_session(tmp_path / "plain.onnx")
+    assert str(err.value) == "plain.onnx: an ONNX file without gpr3d DepthNet metadata"
+    entry = model.metadata_props.add()
+    entry.key, entry.value = "gpr3d.depthnet", json.dumps({"net": asdict(DepthConfig(width=8, size=64))})
+    onnx.save(model, tmp_path / "meta.onnx")
+    _, net, prov = dn._onnx_session(tmp_path / "meta.onnx")
+    assert net == DepthConfig(width=8, size=64) and prov == {}
+
+
+# ------------------------------------------------------------------------------------------------ the network, more
+
+def test_resnet10n_at_width_64_is_torchvision_s_resnet_with_one_basic_block_a_stage():
+    torch = pytest.importorskip("torch")
+    tvr = pytest.importorskip("torchvision.models.resnet")
+    torch.manual_seed(1)
+    ref = tvr.ResNet(tvr.BasicBlock, [1, 1, 1, 1]).eval()
+    with torch.no_grad():  # running statistics that are not the identity
+        for m in ref.modules():
+            if isinstance(m, torch.nn.BatchNorm2d):
+                m.running_mean.uniform_(-0.2, 0.2)
+                m.running_var.uniform_(0.5, 2.0)
+    names = {"conv1.": "stem.0.", "bn1.": "stem.1."}
+    state = {}
+    for k, v in ref.state_dict().items():
+        if k.startswith("fc."):
+            continue
+        head = next((a for a in names if k.startswith(a)), None)
+        state[names[head] + k[len(head):] if head else k.replace(".0.", ".", 1)] = v
+    net = dn.build_depthnet(DepthConfig(width=64, size=64)).eval()
+    mine = {k for k in net.state_dict() if k.startswith(("stem.", "layer"))}
+    assert mine == set(state)
+    net.load_state_dict(state, strict=False)
+    x = torch.rand(2, 3, 64, 64)
+    with torch.no_grad():
+        want = ref.layer4(ref.layer3(ref.layer2(ref.layer1(ref.maxpool(ref.relu(ref.bn1(ref.conv1(x))))))))
+        got = net.layer4(net.layer3(net.layer2(net.layer1(net.stem(x)))))
+    np.testing.assert_allclose(got.numpy(), want.numpy(), rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.parametrize("arch", ["resnet18", "resnet50"])
+def test_a_torchvision_encoder_is_its_resnet_without_the_classifier(arch):
+    torch = pytest.importorskip("torch")
+    tvm = pytest.importorskip("torchvision.models")
+    torch.manual_seed(2)
+    ref = getattr(tvm, arch)(weights=None).eval()
+    torch.manual_seed(2)
+    net = dn.build_depthnet(DepthConfig(arch=arch, width=8, size=64)).eval()  # its encoder is made first
+    x = torch.rand(1, 3, 64, 64)
+    with torch.no_grad():
+        want = ref.layer4(ref.layer3(ref.layer2(ref.layer1(ref.maxpool(ref.relu(ref.bn1(ref.conv1(x))))))))
+        got = net.layer4(net.layer3(net.layer2(net.layer1(net.stem(x)))))
+    assert torch.equal(got, want)
+
+
+def test_the_heads_are_perceptrons_with_one_hidden_relu_layer():
+    torch, net = _small_net()
+
+    def params(module):
+        return [p.detach().numpy().astype(np.float64) for p in module.parameters()]
+
+    with torch.no_grad():
+        for seq, n_in in ((net.eps_head, 65), (net.depth_head, 71)):
+            x = torch.randn(5, n_in)
+            w1, b1, w2, b2 = params(seq)
+            want = np.maximum(x.numpy() @ w1.T + b1, 0) @ w2.T + b2
+            got = seq(x).numpy()
+            assert got.shape == (5, 1)
+            np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5)
+        f = torch.randn(2, 32, 7, 7)
+        w, b = params(net.roi_reduce)
+        want = np.maximum(np.einsum("oc,nchw->nohw", w[:, :, 0, 0], f.numpy()) + b[None, :, None, None], 0)
+        np.testing.assert_allclose(net.roi_reduce(f).numpy(), want, rtol=1e-4, atol=1e-5)
+        v = torch.randn(2, 16 * 7 * 7)
+        w, b = params(net.roi_fc)
+        np.testing.assert_allclose(net.roi_fc(v).numpy(), np.maximum(v.numpy() @ w.T + b, 0), rtol=1e-4, atol=1e-5)

@@ -7,7 +7,7 @@ import math
 
 from gpr3d.core.errors import GPR3DError
 
-__all__ = ["warmup_cosine", "optimiser_step"]
+__all__ = ["warmup_cosine", "optimiser_step", "read_checkpoint"]
 
 
 def warmup_cosine(warmup: int, steps: int, floor: float = 0.02):
@@ -32,3 +32,14 @@ def optimiser_step(model, opt, sched, loss, step: int, *, max_norm: float = 10.0
     torch.nn.utils.clip_grad_norm_(model.parameters(), max_norm)
     opt.step()
     sched.step()
+
+
+def read_checkpoint(path, device):
+    """A training checkpoint, read with ``weights_only`` (nothing that would run code is unpickled); one line
+    naming the file when it cannot be read."""
+    import torch
+
+    try:
+        return torch.load(path, map_location=device, weights_only=True)
+    except Exception as exc:  # a checkpoint cut by a kill is never left behind (atomic), but be plain
+        raise GPR3DError(f"{path}: cannot read the checkpoint ({type(exc).__name__}); delete it to restart") from None

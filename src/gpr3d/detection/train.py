@@ -19,7 +19,7 @@ from pathlib import Path
 from gpr3d import __version__
 from gpr3d.core.deps import require
 from gpr3d.core.errors import GPR3DError, InvalidDataError
-from gpr3d.core.training import optimiser_step, warmup_cosine
+from gpr3d.core.training import optimiser_step, read_checkpoint, warmup_cosine
 from gpr3d.detection.models import MODELS, resolve_device
 from gpr3d.detection.windows import WindowConfig
 from gpr3d.io.atomic import atomic_path, atomic_write_text
@@ -146,10 +146,7 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
     sched = torch.optim.lr_scheduler.LambdaLR(opt, warmup_cosine(cfg.warmup, cfg.steps))
     step = 0
     if ckpt_path.exists():
-        try:
-            ck = torch.load(ckpt_path, map_location=device, weights_only=True)
-        except Exception as exc:  # a checkpoint cut by a kill is never left behind (atomic), but be plain
-            raise GPR3DError(f"{ckpt_path}: cannot read the checkpoint ({type(exc).__name__}); delete it to restart")
+        ck = read_checkpoint(ckpt_path, device)
         if ck.get("resume_key") != same:
             raise GPR3DError(f"{ckpt_path}: made with other settings; use another --out or delete the checkpoint")
         model.load_state_dict(ck["model"])

@@ -38,7 +38,7 @@ import numpy as np
 
 from gpr3d import __version__
 from gpr3d.core.deps import require, resolve_device
-from gpr3d.core.training import optimiser_step, warmup_cosine
+from gpr3d.core.training import optimiser_step, read_checkpoint, warmup_cosine
 from gpr3d.core.errors import FormatError, GPR3DError, InvalidDataError
 from gpr3d.core.units import C0
 from gpr3d.io.atomic import atomic_path, atomic_write_text
@@ -405,7 +405,7 @@ def train_depthnet(cfg: DepthTrainConfig, records: list[DepthRecord], *, log=pri
     key = {k: v for k, v in asdict(cfg).items() if k not in ("out", "device", "checkpoint_every")}
     step = 0
     if ckpt.exists():
-        ck = torch.load(ckpt, map_location=device, weights_only=True)
+        ck = read_checkpoint(ckpt, device)
         if ck.get("resume_key") != key:
             raise GPR3DError(f"{ckpt}: made with other settings; use another --out or delete the checkpoint")
         model.load_state_dict(ck["model"])
