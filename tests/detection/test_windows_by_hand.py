@@ -220,3 +220,68 @@ def test_apex_time_from_the_envelope_without_a_frequency():
     assert abs(t - 30.3 * spr) < 0.3 * spr  # near the pulse's true centre
     # a box wholly outside the record's rows: no envelope, the box's top
     assert apex_of_box(proc, [10, 20e-9, 20, 30e-9], spr) == (15.0, 20e-9)
+
+
+@pytest.mark.parametrize("box, n_traces, want", [
+    ([0.5, 1e-9, 25, 5e-9], None, "left"),  # within half a trace of the first trace: cut
+    ([1.0, 1e-9, 25, 5e-9], None, 13.0),  # a trace in: whole, its centre
+    ([40, 1e-9, 58.5, 5e-9], None, "right"),  # within 1.5 traces of the last (59): cut
+    ([40, 1e-9, 58.0, 5e-9], None, 49.0),
+    ([56, 1e-9, 59, 5e-9], None, 59.0),  # the full width would reach past the last trace: the last trace
+])
+def test_apex_of_a_box_at_the_record_s_sides(box, n_traces, want):
+    from gpr3d.detection.windows import apex_of_box
+    from gpr3d.io.coco import BOX_PAD_PERIODS
+
+    f, spr, rate = 1e9, 0.1e-9, 4e9
+    pad = BOX_PAD_PERIODS / f
+    half = 0.5 * rate * (box[3] - box[1] - 2 * pad)  # 5.2 traces
+    tr, t = apex_of_box(np.zeros((60, 100), np.float32), box, spr, frequency_hz=f, width_per_s=rate)
+    want = {"left": box[2] - half, "right": box[0] + half}.get(want, want)
+    assert tr == pytest.approx(want, abs=1e-9) and t == pytest.approx(box[1] + pad, rel=1e-12, abs=0)
+
+
+def test_a_box_reaching_the_record_s_end_takes_its_apex_from_the_data():
+    """A cut box whose bottom reaches 99 % of the record's last row (9.801 ns of 9.9) gets no full width from the
+    rate (the end may have cut it too): with no data in it, its centre."""
+    from gpr3d.detection.windows import apex_of_box
+
+    f, spr, rate = 1e9, 0.1e-9, 4e9
+    proc = np.zeros((60, 100), np.float32)
+    end = 0.99 * (100 - 1) * spr
+    assert apex_of_box(proc, [0, 1e-9, 25, end], spr, frequency_hz=f, width_per_s=rate)[0] == 12.5
+    below = 0.99 * 98.5 * spr  # just above: the rate decides
+    tr, _ = apex_of_box(proc, [0, 1e-9, 25, below], spr, frequency_hz=f, width_per_s=rate)
+    assert tr == pytest.approx(25 - 0.5 * rate * (below - 1e-9 - 1.4e-9), abs=1e-9)
+
+
+@pytest.mark.parametrize("centre, want", [(19.7, 20.0), (21.4, None), (48.4, None), (49.4, 49.0)])
+def test_apex_time_at_the_ends_of_the_envelope_s_search(centre, want):
+    """The envelope's peak is searched in the upper half of the box (rows 20 .. 49 here) and refined by a parabola
+    only between two neighbours: a peak on the first or last searched row stays on it; one a row in is refined."""
+    from gpr3d.detection.windows import apex_of_box
+
+    spr = 0.1e-9
+    r = np.arange(140)
+    pulse = np.exp(-0.5 * ((r - centre) / 3.0) ** 2) * np.cos(2 * np.pi * (r - centre) / 6.0)
+    tr, t = apex_of_box(np.tile(pulse, (40, 1)).astype(np.float32), [10, 2.05e-9, 20, 7.85e-9], spr)
+    assert tr == 15.0
+    if want is not None:
+        assert t == pytest.approx(want * spr, rel=1e-12, abs=0)
+    else:
+        assert abs(t / spr - centre) < 0.1  # the peak row itself is 0.4 rows off
+
+
+def test_a_cut_box_without_a_rate_takes_the_middle_of_its_earliest_arrivals():
+    """Arrivals on row 30 for traces 1 .. 9 and 3 rows later each trace beyond: smoothed over five traces, traces
+    3 .. 7 lie within half a row of the earliest, and the apex is their middle one, 5."""
+    from gpr3d.detection.windows import apex_of_box
+    from gpr3d.io.coco import BOX_PAD_PERIODS
+
+    spr, f = 0.1e-9, 1e9
+    proc = np.zeros((60, 120), np.float32)
+    for i in range(21):
+        row = 30 + 3 * max(abs(i - 5) - 4, 0)
+        proc[i, row - 2: row + 3] = [0.5, 1.0, 0.0, -1.0, -0.5]
+    tr, t = apex_of_box(proc, [0, 2.5e-9, 20, 11.5e-9], spr, frequency_hz=f)
+    assert tr == 5.0 and t == pytest.approx(2.5e-9 + BOX_PAD_PERIODS / f, rel=1e-12, abs=0)
