@@ -41,7 +41,7 @@ def test_stored_results_keep_their_commit_and_make_the_report(tmp_path):
            "wall_s": 1.0, "survivors": [{"removed": "a", "added": "b", "why": None}], "equivalents": []}
     tool.save_result(row, store, "python tools/mutation.py processing.dewow")
     tool.save_result({**row, "module": "io.dt1", "total": 20, "killed": 15, "survived": 2, "equivalent": 3,
-                      "score": 15 / 17, "survivors": []}, store, "python tools/mutation.py io.dt1")
+                      "score": 15 / 17, "survivors": [], "timed_out": 4}, store, "python tools/mutation.py io.dt1")
     head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
     assert tool.guarded(store) == {"io.dt1": head or None, "processing.dewow": head or None}
     rows = tool.load_results(store)
@@ -49,9 +49,11 @@ def test_stored_results_keep_their_commit_and_make_the_report(tmp_path):
     tool.write_report(rows, report, "python tools/mutation.py")
     text = report.read_text()
     assert "- `a` -> `b`" in text
-    assert "| io.dt1 | 20 | 15 | 2 | 3 | 0 | 88.2 % |" in text and "| processing.dewow | 10 | 9 | 1 | 0 | 0 | 90.0 % |" in text
+    # killed, of which timed out ('?': a result stored before the count was kept), survived, equivalent, unclassified
+    assert "| io.dt1 | 20 | 15 | 4 | 2 | 3 | 0 | 88.2 % |" in text
+    assert "| processing.dewow | 10 | 9 | ? | 1 | 0 | 0 | 90.0 % |" in text
     # the total: 24 killed of 30 - 3 equivalent
-    assert "| **all 2** | 30 | 24 | 3 | 3 | 0 | 88.9 % |" in text
+    assert "| **all 2** | 30 | 24 | 4 | 3 | 3 | 0 | 88.9 % |" in text
 
 
 def test_the_guard_passes_on_this_checkout():
