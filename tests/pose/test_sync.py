@@ -137,3 +137,44 @@ def test_time_offset_to_a_fraction_of_its_grid_step_with_a_gyro_bias():
     # searched no further than asked: an offset beyond max_offset_s lands on the grid's edge
     far = estimate_time_offset(imu, vo, max_offset_s=0.002, step_s=0.0005)
     assert far["at_search_edge"] and far["offset_s"] == pytest.approx(0.002, abs=1e-9)
+
+
+def _bursts(t_cam, t_imu, offset, *, bias=0.02, period=0.5, turning=0.35, peak=2.0):
+    """IMU and odometry of a camera turning about z in sin^2 bursts (``turning`` s of each ``period``, still the
+    rest), the gyro reading the rate plus ``bias``; the camera's clock ``offset`` behind the IMU's."""
+    from types import SimpleNamespace
+
+    from gpr3d.pose.imu import so3_exp
+
+    def angle(t):
+        ph = np.mod(t, period)
+        inside = np.where(ph < turning, peak * (ph / 2 - turning / (4 * np.pi) * np.sin(2 * np.pi * ph / turning)),
+                          peak * turning / 2)
+        return np.floor(t / period) * peak * turning / 2 + inside
+
+    ph = np.mod(t_imu, period)
+    rate = np.where(ph < turning, peak * np.sin(np.pi * ph / turning) ** 2, 0.0)
+    imu = SimpleNamespace(t_s=t_imu, gyro=np.c_[0 * t_imu, 0 * t_imu, rate + bias])
+    R = np.stack([np.eye(3)] + [so3_exp([0.0, 0.0, angle(t_cam[k] + offset) - angle(t_cam[k - 1] + offset)])
+                                for k in range(1, t_cam.size)])
+    return imu, SimpleNamespace(t_s=t_cam, R=R, valid=np.r_[False, np.ones(t_cam.size - 1, bool)])
+
+
+def test_time_offset_frames_are_those_whose_interval_the_search_keeps_on_the_imu_record():
+    """Binary-exact times: IMU 0 .. 2 s, frames every 1/16 s from 0, a search of +-1/8 s. Frame k (k >= 1) spans
+    stamps (k - 1) / 16 .. k / 16 and is used when both ends, moved by up to 1/8 s, stay on the IMU record:
+    k = 3 .. 30, 28 frames, the ends included. The camera turns 70 % of the time, so the gyro bias can only come
+    from the still frames."""
+    t_imu = np.arange(2049) / 1024
+    imu, vo = _bursts(np.arange(32) / 16, t_imu, 0.0041)
+    est = estimate_time_offset(imu, vo, max_offset_s=0.125, step_s=1 / 1024)
+    assert est["frames"] == 28 and est["offset_s"] == pytest.approx(0.0041, abs=2e-4)
+    imu, vo = _bursts(np.arange(13) / 16, t_imu, 0.0041)  # frames 3 .. 12: ten, enough
+    assert estimate_time_offset(imu, vo, max_offset_s=0.125, step_s=1 / 1024)["frames"] == 10
+    imu, vo = _bursts(np.arange(12) / 16, t_imu, 0.0041)
+    with pytest.raises(InvalidDataError) as err:
+        estimate_time_offset(imu, vo, max_offset_s=0.125, step_s=1 / 1024)
+    assert str(err.value) == "too few odometry frames (9) overlap the IMU record to estimate an offset"
+    with pytest.raises(InvalidDataError) as err:
+        estimate_time_offset(imu, vo, max_offset_s=0.125, step_s=0.125)
+    assert str(err.value) == "max_offset_s and step_s must be positive, step_s the smaller; got 0.125, 0.125"
