@@ -30,3 +30,21 @@ def real_files():
         return []
     exts = {".dzt", ".dt1", ".rd3"}
     return sorted(p for p in REAL.rglob("*") if p.suffix.lower() in exts)
+
+
+class StepClock:
+    """A stand-in for the ``time`` module in a training loop: each ``perf_counter()`` reading is half a second
+    after the last, the first at 1000 s."""
+
+    def __init__(self):
+        self.t = 999.5
+
+    def perf_counter(self):
+        self.t += 0.5
+        return self.t
+
+
+@pytest.fixture
+def step_clock():
+    """:class:`StepClock`, to make fresh clocks from."""
+    return StepClock

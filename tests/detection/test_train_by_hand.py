@@ -385,23 +385,12 @@ def test_train_config_edges_that_are_allowed(tmp_path):
     assert d.window == WindowConfig().to_dict()
 
 
-class Clock:
-    """A stand-in for ``time``: each reading is half a second after the last, from 1000 s."""
-
-    def __init__(self):
-        self.t = 999.5
-
-    def perf_counter(self):
-        self.t += 0.5
-        return self.t
-
-
-def test_a_run_times_its_steps_and_stops_when_late(tmp_path, stand_ins, monkeypatch):
-    monkeypatch.setattr(train_mod, "time", Clock())
+def test_a_run_times_its_steps_and_stops_when_late(tmp_path, stand_ins, monkeypatch, step_clock):
+    monkeypatch.setattr(train_mod, "time", step_clock())
     res = train_detector(cfg_for(tmp_path / "a", steps=3), None, progress=False, log=quiet)
     lines = (tmp_path / "a" / "run" / "losses.csv").read_text().splitlines()[1:]
     assert [ln.split(",")[3] for ln in lines] == ["0.5", "1.0", "1.5"] and res["wall_s"] == 2.0
-    monkeypatch.setattr(train_mod, "time", Clock())
+    monkeypatch.setattr(train_mod, "time", step_clock())
     logged = []
     res = train_detector(cfg_for(tmp_path / "b"), None, progress=False, log=logged.append, max_seconds=1.0)
     # step 1 is logged at 0.5 s and checked at 1.0 s (not past 1 s); step 2 checked at 2.0 s

@@ -936,23 +936,12 @@ def test_the_logged_depth_loss_is_that_of_the_boxes_without_the_dummy(tmp_path, 
     assert float(line[4]) == pytest.approx(float(np.mean((q - np.asarray(tq)) ** 2) * 100), abs=2e-5)
 
 
-class Clock:
-    """A stand-in for ``time``: each reading is half a second after the last, from 1000 s."""
-
-    def __init__(self):
-        self.t = 999.5
-
-    def perf_counter(self):
-        self.t += 0.5
-        return self.t
-
-
-def test_training_times_its_steps_and_stops_when_late(tmp_path, stand_in, monkeypatch):
-    monkeypatch.setattr(dn, "time", Clock())
+def test_training_times_its_steps_and_stops_when_late(tmp_path, stand_in, monkeypatch, step_clock):
+    monkeypatch.setattr(dn, "time", step_clock())
     res = dn.train_depthnet(tcfg(tmp_path / "a"), [labelled_record()], log=quiet, progress=False)
     lines = (tmp_path / "a" / "run" / "losses.csv").read_text().splitlines()[1:]
     assert [ln.split(",")[-1] for ln in lines] == ["0.5", "1.0", "1.5", "2.0"] and res["wall_s"] == 2.5
-    monkeypatch.setattr(dn, "time", Clock())
+    monkeypatch.setattr(dn, "time", step_clock())
     logged = []
     res = dn.train_depthnet(tcfg(tmp_path / "b"), [labelled_record()], log=logged.append, progress=False,
                             max_seconds=1.0)
