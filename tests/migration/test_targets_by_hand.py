@@ -381,3 +381,31 @@ def test_the_hough_accumulator_finds_weighs_and_forgets_lines():
     r = (p - p.mean(axis=0)) @ h.normals.T
     assert np.all(np.abs(r) < h.rmax) and h.nr * 0.02 >= 2 * h.rmax
     np.testing.assert_allclose(h.acc.sum(axis=1), w.sum())
+
+
+def test_chain_runs_at_their_exact_limits():
+    """Binary-exact positions (1/8 m cells), every test met with equality: a run stepping exactly run_gap once is
+    one run; a line exactly min_line long is a line; pieces exactly join_gap away, exactly as strong as level, exactly
+    depth_tol off the line's depth, and of exactly min_columns columns are all taken in. A piece taken by the line
+    before it is not taken again by the line after it."""
+    c = 0.125
+
+    def piece(start, n, weight=1.0, depth=0.5, skip=None):
+        s = start + c * np.arange(n)
+        if skip is not None:
+            s[skip:] += c  # one step of 2 cells (= run_gap)
+        return s, np.full(n, weight), np.full(n, depth)
+
+    parts = [piece(-1.5, 3),  # L2: 0.5 before L
+             piece(-0.75, 3, weight=0.5),  # L: 0.5 before A, as strong as level
+             piece(0.0, 16, skip=8),  # A: 0 .. 2.0 m, exactly min_line, one 0.25 m step inside
+             piece(2.5, 3),  # P: 0.5 after A (and 0.5 before B): min_columns
+             piece(3.25, 17),  # B: 3.25 .. 5.25
+             piece(5.75, 3, depth=0.75),  # R: 0.5 after B, exactly depth_tol deeper
+             piece(6.5, 3)]  # R2: 0.5 after R
+    s, w, z = (np.concatenate([p[i] for p in parts]) for i in range(3))
+    kw = dict(run_gap=0.25, join_gap=0.5, min_columns=3, min_line=2.0, min_density=0.5, cell=c, level=0.5,
+              depth_tol=0.25)
+    a, b = _chain_runs(s, w, z, **kw)
+    np.testing.assert_array_equal(a, np.arange(0, 3 + 3 + 16 + 3))  # L2, L, A and P
+    np.testing.assert_array_equal(b, np.arange(25, len(s)))  # B, R and R2, not P again
