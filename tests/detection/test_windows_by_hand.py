@@ -222,14 +222,14 @@ def test_apex_time_from_the_envelope_without_a_frequency():
     assert apex_of_box(proc, [10, 20e-9, 20, 30e-9], spr) == (15.0, 20e-9)
 
 
-@pytest.mark.parametrize("box, n_traces, want", [
-    ([0.5, 1e-9, 25, 5e-9], None, "left"),  # within half a trace of the first trace: cut
-    ([1.0, 1e-9, 25, 5e-9], None, 13.0),  # a trace in: whole, its centre
-    ([40, 1e-9, 58.5, 5e-9], None, "right"),  # within 1.5 traces of the last (59): cut
-    ([40, 1e-9, 58.0, 5e-9], None, 49.0),
-    ([56, 1e-9, 59, 5e-9], None, 59.0),  # the full width would reach past the last trace: the last trace
+@pytest.mark.parametrize("box, want", [
+    ([0.5, 1e-9, 25, 5e-9], "left"),  # within half a trace of the first trace: cut
+    ([1.0, 1e-9, 25, 5e-9], 13.0),  # a trace in: whole, its centre
+    ([40, 1e-9, 58.5, 5e-9], "right"),  # within 1.5 traces of the last (59): cut
+    ([40, 1e-9, 58.0, 5e-9], 49.0),
+    ([56, 1e-9, 59, 5e-9], 59.0),  # the full width would reach past the last trace: the last trace
 ])
-def test_apex_of_a_box_at_the_record_s_sides(box, n_traces, want):
+def test_apex_of_a_box_at_the_record_s_sides(box, want):
     from gpr3d.detection.windows import apex_of_box
     from gpr3d.io.coco import BOX_PAD_PERIODS
 
@@ -245,6 +245,7 @@ def test_a_box_reaching_the_record_s_end_takes_its_apex_from_the_data():
     """A cut box whose bottom reaches 99 % of the record's last row (9.801 ns of 9.9) gets no full width from the
     rate (the end may have cut it too): with no data in it, its centre."""
     from gpr3d.detection.windows import apex_of_box
+    from gpr3d.io.coco import BOX_PAD_PERIODS
 
     f, spr, rate = 1e9, 0.1e-9, 4e9
     proc = np.zeros((60, 100), np.float32)
@@ -252,7 +253,7 @@ def test_a_box_reaching_the_record_s_end_takes_its_apex_from_the_data():
     assert apex_of_box(proc, [0, 1e-9, 25, end], spr, frequency_hz=f, width_per_s=rate)[0] == 12.5
     below = 0.99 * 98.5 * spr  # just above: the rate decides
     tr, _ = apex_of_box(proc, [0, 1e-9, 25, below], spr, frequency_hz=f, width_per_s=rate)
-    assert tr == pytest.approx(25 - 0.5 * rate * (below - 1e-9 - 1.4e-9), abs=1e-9)
+    assert tr == pytest.approx(25 - 0.5 * rate * (below - 1e-9 - 2 * BOX_PAD_PERIODS / f), abs=1e-9)
 
 
 @pytest.mark.parametrize("centre, want", [(19.7, 20.0), (21.4, None), (48.4, None), (49.4, 49.0)])
