@@ -144,6 +144,19 @@ def _diff(workdir: Path, name: str) -> tuple[str, str]:
     return " ¶ ".join(minus), " ¶ ".join(plus)
 
 
+def fork_safe_tqdm(conftest: Path) -> None:
+    """Append to the copied tests' ``conftest`` a per-process tqdm lock and no monitor thread.
+
+    tqdm guards its bars with a process-shared semaphore, created once in mutmut's parent and inherited by every
+    forked child: a child killed at its time limit while drawing a bar (a mutant that loops) leaves it held, and
+    every later child that makes a bar then waits on it until its own limit, counted as killed. A lock of each
+    process's own (and no monitor thread, which a fork does not carry) keeps one child's death from the others.
+    """
+    with open(conftest, "a", encoding="utf-8") as f:
+        f.write("\n\nimport threading as _threading\n\nimport tqdm as _tqdm\n\n"
+                "_tqdm.tqdm.set_lock(_threading.RLock())\n_tqdm.tqdm.monitor_interval = 0\n")
+
+
 def run_module(module: str, *, max_children: int, equivalents: list, keep: bool) -> dict:
     src = ROOT / source_of(module)
     if not src.exists():
@@ -167,13 +180,7 @@ def run_module(module: str, *, max_children: int, equivalents: list, keep: bool)
         'filterwarnings = ["ignore::DeprecationWarning"]\n'
     )
     (work / "pyproject.toml").write_text(cfg, encoding="utf-8")
-    # tqdm guards its bars with a process-shared semaphore, created once in mutmut's parent and inherited by every
-    # forked child: a child killed at its timeout while drawing a bar (a mutant that loops) leaves it held, and
-    # every later child that makes a bar then waits on it until its own timeout, counted as killed. A per-process
-    # lock (and no monitor thread, which a fork does not carry) keeps one child's death from reaching the others.
-    with open(work / "tests" / "conftest.py", "a", encoding="utf-8") as f:
-        f.write("\n\nimport threading as _threading\n\nimport tqdm as _tqdm\n\n"
-                "_tqdm.tqdm.set_lock(_threading.RLock())\n_tqdm.tqdm.monitor_interval = 0\n")
+    fork_safe_tqdm(work / "tests" / "conftest.py")
     # the copies' tests must still find the real recordings beside the repository
     # numba's OpenMP threading layer raises SIGTERM in a process forked after it ran a parallel kernel, and mutmut
     # forks every mutant's run from the process that ran the tests once: the workqueue layer survives the fork
@@ -299,8 +306,11 @@ def write_report(rows: list[dict], path: Path, command: str) -> None:
     done = [r for r in rows if "error" not in r]
     if done:
         tot = sum(r["total"] - r["equivalent"] for r in done)
+        counted = [r for r in done if "timed_out" in r]
+        timed = f"{sum(r['timed_out'] for r in counted)}" + (
+            "" if len(counted) == len(done) else f" (in {len(counted)} modules)")
         lines.append(f"| **all {len(done)}** | {sum(r['total'] for r in done)} | {sum(r['killed'] for r in done)} | "
-                     f"{sum(r.get('timed_out', 0) for r in done)} | "
+                     f"{timed} | "
                      f"{sum(r['survived'] for r in done)} | {sum(r['equivalent'] for r in done)} | "
                      f"{sum(r.get('suspicious', 0) for r in done)} | "
                      f"{100 * sum(r['killed'] for r in done) / max(tot, 1):.1f} % | "

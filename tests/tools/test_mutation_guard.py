@@ -53,7 +53,36 @@ def test_stored_results_keep_their_commit_and_make_the_report(tmp_path):
     assert "| io.dt1 | 20 | 15 | 4 | 2 | 3 | 0 | 88.2 % |" in text
     assert "| processing.dewow | 10 | 9 | ? | 1 | 0 | 0 | 90.0 % |" in text
     # the total: 24 killed of 30 - 3 equivalent
-    assert "| **all 2** | 30 | 24 | 4 | 3 | 3 | 0 | 88.9 % |" in text
+    assert "| **all 2** | 30 | 24 | 4 (in 1 modules) | 3 | 3 | 0 | 88.9 % |" in text
+    tool.save_result({**row, "timed_out": 1}, store, "python tools/mutation.py processing.dewow")
+    tool.write_report(tool.load_results(store), report, "python tools/mutation.py")
+    assert "| **all 2** | 30 | 24 | 5 | 3 | 3 | 0 | 88.9 % |" in report.read_text()
+
+
+def test_mutants_forked_after_one_was_killed_drawing_a_bar_do_not_wait_on_its_lock(tmp_path):
+    """The copied tests' conftest gives each process its own tqdm lock: a child killed while holding it (here: a
+    child that exits holding it) leaves the next one free to draw a bar."""
+    tool = _tool()
+    conftest = tmp_path / "conftest.py"
+    conftest.write_text("X = 1\n")
+    tool.fork_safe_tqdm(conftest)
+    code = conftest.read_text() + (
+        "import os, tqdm\n"
+        "tqdm.tqdm.get_lock().acquire()\n"  # the parent draws; its first child dies in the middle of a bar
+        "tqdm.tqdm.get_lock().release()\n"
+        "pid = os.fork()\n"
+        "if pid == 0:\n"
+        "    tqdm.tqdm.get_lock().acquire()\n"
+        "    os._exit(0)\n"
+        "os.waitpid(pid, 0)\n"
+        "pid = os.fork()\n"
+        "if pid == 0:\n"
+        "    with tqdm.tqdm(total=1, disable=True) as bar:\n"
+        "        bar.update(1)\n"
+        "    os._exit(7)\n"
+        "print(os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]), X, tqdm.tqdm.monitor_interval)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=20)
+    assert r.stdout.split() == ["7", "1", "0"], r.stderr[-500:]
 
 
 def test_the_guard_passes_on_this_checkout():
