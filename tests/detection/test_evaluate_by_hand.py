@@ -30,9 +30,34 @@ def test_coco_metrics_by_hand():
     assert m["AR@1"] == pytest.approx(0.1, abs=1e-9)
     assert m["AR@10"] == pytest.approx((3 + 7 * 2 / 3) / 10, abs=1e-9)
     assert m["AR@100"] == pytest.approx((3 + 7 * 2 / 3) / 10, abs=1e-9)
-    assert set(m) == {"mAP", "mAP@0.5", "mAP@0.75", "AR@1", "AR@10", "AR@100"}
+    assert m["recall@0.5"] == 1.0  # every truth matched at IoU 0.5, whatever the score
+    assert set(m) == {"mAP", "mAP@0.5", "mAP@0.75", "AR@1", "AR@10", "AR@100", "recall@0.5"}
     none = coco_metrics(gt, [np.zeros((0, 4)), np.zeros((0, 4))], [np.zeros(0), np.zeros(0)])
-    assert none == {"mAP@0.5": 0.0, "mAP@0.75": 0.0, "mAP": 0.0, "AR@1": 0.0, "AR@10": 0.0, "AR@100": 0.0}
+    assert none == {"mAP@0.5": 0.0, "mAP@0.75": 0.0, "mAP": 0.0, "AR@1": 0.0, "AR@10": 0.0, "AR@100": 0.0,
+                    "recall@0.5": 0.0}
+    # recall@0.5 at IoU 0.62 but not past it: image 2's box shifted so that IoU is 0.45
+    far = 55 / 1.45
+    m = coco_metrics(gt, [det[0], np.array([[far, 0, 100 + far, 50]])], [np.array([0.9, 0.8, 0.95]), np.array([0.7])])
+    assert m["recall@0.5"] == pytest.approx(2 / 3)
+
+
+def test_class_averaged_metrics_count_a_box_only_under_its_kind():
+    """Two images, a rebar and a pipe each, both found exactly; the pipe of image 2 is called a rebar and scored
+    below the true rebar. Class-agnostic: every truth found first: AP 1. By kind: rebar AP 1 (its false box
+    scores last), pipe: one of two found, ranked first: AP = 1 on the 51 recall points up to 0.5 -> 51/101;
+    the mean over the two kinds; a third kind without truths does not count."""
+    gt = [np.array([[0.0, 0, 50, 20], [100, 0, 150, 20]]), np.array([[0.0, 0, 50, 20], [100, 0, 150, 20]])]
+    kinds_gt = [["rebar", "pvc_pipe"], ["rebar", "pvc_pipe"]]
+    det = [g.copy() for g in gt]
+    scores = [np.array([0.9, 0.8]), np.array([0.9, 0.3])]
+    kinds_det = [["rebar", "pvc_pipe"], ["rebar", "rebar"]]
+    agnostic = coco_metrics(gt, det, scores)
+    assert agnostic["mAP@0.5"] == pytest.approx(1.0) and agnostic["recall@0.5"] == 1.0
+    m = coco_metrics(gt, det, scores, gt_kinds=kinds_gt, det_kinds=kinds_det, kinds=["rebar", "pvc_pipe", "void"])
+    assert m["mAP@0.5"] == pytest.approx((1.0 + 51 / 101) / 2, abs=1e-9)
+    assert m["mAP"] == pytest.approx((1.0 + 51 / 101) / 2, abs=1e-9)  # exact boxes: the same at every IoU
+    assert m["recall@0.5"] == pytest.approx((1.0 + 0.5) / 2)
+    assert m["AR@100"] == pytest.approx((1.0 + 0.5) / 2)
 
 
 def test_apex_matching_prefers_the_nearer_truth_in_both_units_and_goes_by_score():

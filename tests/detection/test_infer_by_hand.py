@@ -54,7 +54,8 @@ def spies(monkeypatch):
         log["windows_args"] = (survey, cfg)
         return [_Win(k) for k in range(5)]
 
-    def merge(per_window, n_traces, dt_s, nms):
+    def merge(per_window, n_traces, dt_s, nms, return_index=False):
+        assert return_index  # detect carries the kinds of the kept boxes by their places
         log["merge"] = ([w.k for w, _, _ in per_window], [b.tolist() for _, b, _ in per_window],
                         [s.tolist() for _, _, s in per_window], n_traces, dt_s, nms)
         boxes = np.array([[-3.0, -1e-9, 10.0, 2e-9],  # clipped at the record's start
@@ -63,7 +64,7 @@ def spies(monkeypatch):
                           [30.0, 3e-9, 35.0, 4e-9],  # under the threshold: dropped
                           [12.0, 2e-9, 18.0, 5e-9],
                           [40.0, 4e-9, 44.0, 4e-9]])  # no height: dropped
-        return boxes, np.array([0.5, 0.95, 0.9, 0.2, 0.45, 0.8])
+        return boxes, np.array([0.5, 0.95, 0.9, 0.2, 0.45, 0.8]), log.get("merge_index", np.array([0, 1, 2, 3, 4, 0]))
 
     def rows_interval(survey, cfg):
         log["rows_args"] = (survey, cfg)
@@ -119,6 +120,37 @@ def test_detect_keeps_clips_thresholds_orders_and_fills_the_contract(spies):
     assert (out["input"], out["channel"], out["n_traces"], out["dt_s"], out["n_windows"]) == \
         ("LINE.DZT", 2, 50, 1e-10, 5)
     assert (out["detector"], out["score_threshold"]) == ("test net", 0.45) and 0 <= out["wall_s"] < 5
+    # a one-class network names no kind
+    assert [(t["kind"], t["kind_score"]) for t in out["targets"]] == [("target", None)] * 3
+
+
+class _KindNet(_Net):
+    """Per window image k: boxes of labels 1..3 (kinds) and 4 (past the kinds: dropped), with kind shares."""
+
+    gpr3d_kinds = ["rebar", "pvc_pipe", "void"]
+
+    def __call__(self, batch):
+        out = []
+        for im in batch:
+            k = float(im[0, 0, 0])
+            out.append({"boxes": torch.tensor([[k, 1.0, k + 2, 3.0], [9.0, 9.0, 10.0, 10.0]]),
+                        "scores": torch.tensor([0.1 * (k + 1), 0.99]),
+                        "labels": torch.tensor([int(k) % 3 + 1, 4]),
+                        "kind_scores": torch.tensor([0.5 + 0.1 * k, 1.0])})
+        return out
+
+
+def test_detect_names_each_kept_box_by_its_place_in_the_windows(spies):
+    det = infer.Detector(_KindNet(), WindowConfig(equalise=False))
+    assert det.kinds == ["rebar", "pvc_pipe", "void"]
+    spies["merge_index"] = np.array([4, 1, 0, 2, 3, 3])  # the merged boxes came from these window boxes
+    out = det.detect(_survey(), score_threshold=0.45)
+    _, boxes, scores, *_ = spies["merge"]
+    assert boxes == [[[k, 1.0, k + 2, 3.0]] for k in range(5)]  # label 4 left out
+    # kept in score order: merged boxes 1 (from window box 1), 0 (from 4), 4 (from 3)
+    assert [t["score"] for t in out["targets"]] == [0.95, 0.5, 0.45]
+    assert [t["kind"] for t in out["targets"]] == ["pvc_pipe", "pvc_pipe", "rebar"]
+    assert [t["kind_score"] for t in out["targets"]] == pytest.approx([0.6, 0.9, 0.8])
 
 
 def test_detect_without_positions_equalising_or_a_name(spies):

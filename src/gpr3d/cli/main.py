@@ -640,9 +640,17 @@ def cmd_detect(args):
     _check_suffix(args.out, (".json",), "--out")
     _check_suffix(args.overlay, (".png",), "--overlay")
     _check_radius(args, args.depth)
+    from gpr3d.io.userlabels import IMAGE_SUFFIXES, read_picture
+
+    picture = Path(args.input).suffix.lower() in IMAGE_SUFFIXES
+    if picture:
+        read_picture(args.input, args.pixel_map)  # a picture without a time axis fails before the model loads
+    elif args.pixel_map is not None:
+        raise GPR3DError(f"--pixel-map is for pictures (PNG, JPG, ...); {args.input} is a radar file")
     det = _detector(args)  # weights checked before the recording is read
     depthnet = _depthnet(args) if args.depth in ("hybrid", "net") else None
-    surveys = read_all(args.input, format=args.format)
+    surveys = [read_picture(args.input, args.pixel_map, frequency_hz=args.frequency)] if picture else \
+        read_all(args.input, format=args.format)
     results = [det.detect(s, score_threshold=args.score, input_name=str(args.input)) for s in surveys]
     if args.depth != "none":
         for s, r in zip(surveys, results):
@@ -658,7 +666,8 @@ def cmd_detect(args):
         for t in r["targets"]:
             extra = f"  depth {t['depth_m']:.3f} m" if t.get("depth_m") is not None else ""
             extra += f"  x {t['x_m']:.2f} m" if t.get("x_m") is not None else ""
-            print(f"  trace {t['apex_trace']:5d}  {t['apex_time_s'] * 1e9:8.2f} ns  score {t['score']:.2f}{extra}")
+            kind = f"  {t['kind']} ({t['kind_score']:.2f})" if t.get("kind_score") is not None else ""
+            print(f"  trace {t['apex_trace']:5d}  {t['apex_time_s'] * 1e9:8.2f} ns  score {t['score']:.2f}{kind}{extra}")
     if args.overlay:
         from gpr3d.viz.bscan import save_bscan_png
 
@@ -860,25 +869,42 @@ def cmd_train(args):
                       device=args.device,
                       workers=args.workers, checkpoint_every=args.checkpoint_every, init=args.init,
                       packed=args.packed, packed_fraction=args.packed_fraction, packed_holdout=args.packed_holdout,
-                      labels=args.labels, labels_fraction=args.labels_fraction, pixel_map=args.pixel_map)
+                      labels=args.labels, labels_fraction=args.labels_fraction, pixel_map=args.pixel_map,
+                      labels_names=_names_list(args.class_names), labels_kinds=args.class_kinds,
+                      labels_frequency_hz=args.labels_frequency, kinds=_names_list(args.kinds), freeze=args.freeze)
     if cfg.packed:  # a wrong packed file (or hold-out) fails in one line before any model is built
         from gpr3d.detection.data import PackedSource
 
         PackedSource(cfg.packed, holdout=cfg.packed_holdout)
     if cfg.labels:  # a wrong label file fails in one line before any model is built
-        from gpr3d.io.userlabels import read_user_labels
-
-        read_user_labels(cfg.labels, pixel_map=cfg.pixel_map)
+        _read_labels(args, cfg.labels)
     res = train_detector(cfg, SurveySource(cfg.data_seed), progress=not args.no_progress,
                          max_seconds=args.max_seconds)
     weights = Path(args.out) / "weights.pt"
     cmd = "gpr3d " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("gpr3d") else "gpr3d train detector"
-    save_weights(res["model"], cfg.model, cfg.window, weights,
+    save_weights(res["model"], cfg.model, cfg.window, weights, kinds=res.get("kinds"),
                  provenance={"name": cfg.model, "command": cmd, "config": asdict(cfg), "train_wall_s": res["wall_s"],
                              "device": cfg.device, "data": f"survey_sample(seed={cfg.data_seed}, i)",
                              "steps_done": res["steps"], **_labels_provenance(cfg.labels)})
     print(f"trained {cfg.model} for {res['steps']} steps in {res['wall_s']:.0f} s; wrote {weights}")
     return 0
+
+
+def _names_list(text):
+    """``"a,b"`` -> ``["a", "b"]`` (``None`` stays ``None``); an empty name is refused."""
+    if text is None:
+        return None
+    names = [n.strip() for n in str(text).split(",")]
+    if not all(names):
+        raise GPR3DError(f"a list of names must be comma-separated words, got {text!r}")
+    return names
+
+
+def _read_labels(args, path, split: str = "train"):
+    from gpr3d.io.labelled import read_labelled
+
+    return read_labelled(path, pixel_map=args.pixel_map, split=split, names=_names_list(args.class_names),
+                         kinds=args.class_kinds, frequency_hz=args.labels_frequency)
 
 
 def _eval_records(args):
@@ -887,6 +913,12 @@ def _eval_records(args):
         raise GPR3DError(f"--n must be at least 1, got {args.n}")
     if args.seed < 0:
         raise GPR3DError(f"--seed must be 0 or more, got {args.seed}")
+    if getattr(args, "labels", None) is not None:
+        if args.data is not None:
+            raise GPR3DError("give --data or --labels, not both")
+        recs = _read_labels(args, args.labels, args.split)
+        recs = recs[: args.n] if args.n else recs
+        return recs, f"{args.labels} ({len(recs)} labelled B-scans)"
     if args.data is not None:
         from gpr3d.io.packed import PackedDataset, labelled_records
 
@@ -924,6 +956,11 @@ def cmd_eval(args):
     print("|---|---|---|---|---|---|---|")
     print(f"| {m['mAP@0.75']:.3f} | {m['mAP@0.5']:.3f} | {m['AR@10']:.3f} | {m['AR@100']:.3f} | "
           f"{m['apex_recall']:.3f} | {m['false_per_true']:.3f} | {m['s_per_window']:.3f} |")
+    print(f"class-agnostic: mAP@[.5:.95] {m['mAP']:.3f}, recall@0.5 {m['recall@0.5']:.3f}")
+    if "by_kind" in m:
+        k = m["by_kind"]
+        print(f"class-averaged ({', '.join(k['kinds'])}): mAP@0.5 {k['mAP@0.5']:.3f}, mAP@0.75 {k['mAP@0.75']:.3f}, "
+              f"mAP@[.5:.95] {k['mAP']:.3f}, AR@100 {k['AR@100']:.3f}, recall@0.5 {k['recall@0.5']:.3f}")
     print("apex recall by kind: " + ", ".join(f"{k} {v['recall']:.2f} ({v['found']}/{v['n']})"
                                               for k, v in m["apex_recall_by_kind"].items()))
     return 0
@@ -974,6 +1011,17 @@ def build_parser() -> argparse.ArgumentParser:
                         help="the targets' radius in metres when known (e.g. 0.008 for 16 mm rebar): the hyperbola "
                              "fit then takes that cylinder instead of a point, which reads eps_r low by about "
                              "radius / (depth + radius)")
+
+    def add_label_args(sp):
+        sp.add_argument("--pixel-map", default=None,
+                        help="time axis of labelled pictures: s_per_px=SECONDS[,t0_s=..,traces_per_px=..,trace0=..] "
+                             "(P-GPR: s_per_px=3.125e-11, 8 ns over 256 rows)")
+        sp.add_argument("--class-names", default=None, metavar="A,B",
+                        help="YOLO class names in id order when the dataset has no data.yaml (P-GPR: steel,pipe)")
+        sp.add_argument("--class-kinds", default=None, metavar="NAME=KIND,..",
+                        help="map class names onto target kinds (P-GPR: pipe=pvc_pipe; steel is rebar already)")
+        sp.add_argument("--labels-frequency", type=float, default=None, metavar="HZ",
+                        help="antenna frequency of labelled pictures (P-GPR: 1.6e9)")
 
     def add_marks(sp):
         sp.add_argument("--marks-every", type=float, default=None, metavar="M",
@@ -1210,11 +1258,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = add("detect", cmd_detect, "find hyperbolas in a radar file (boxes, scores, apexes as JSON)",
              "examples:\n  gpr3d detect FILE____032.DZT --out det.json --overlay det.png\n"
-             "  gpr3d detect line.h5 --out det.json --weights my_detector.pt --score 0.3\n\n"
+             "  gpr3d detect line.h5 --out det.json --weights my_detector.pt --score 0.3\n"
+             "  gpr3d detect bscan.png --pixel-map s_per_px=3.125e-11 --frequency 1.6e9 --out det.json\n\n"
              "output: {input, n_traces, dt_s, targets: [{box: [trace_start, t_start_s, trace_end, t_end_s], score,\n"
-             "apex_trace, apex_time_s}]}; times from the first recorded sample; a list for multi-channel files")
-    sp.add_argument("input", help="radar file (DZT, DT1/HD, RD3/RAD, gprMax .h5/.out, gpr3d .h5)")
+             "apex_trace, apex_time_s, kind, kind_score}]}; times from the first recorded sample; a list for\n"
+             "multi-channel files")
+    sp.add_argument("input", help="radar file (DZT, DT1/HD, RD3/RAD, gprMax .h5/.out, gpr3d .h5) or a picture of a "
+                                  "B-scan (PNG, JPG, ...: give --pixel-map)")
     sp.add_argument("--format", default=None, help="force a reader: dzt, dt1, rd3, gprmax, gpr3d")
+    sp.add_argument("--pixel-map", default=None,
+                    help="a picture's time axis: s_per_px=SECONDS[,t0_s=..] (one trace per column)")
+    sp.add_argument("--frequency", type=float, default=None, metavar="HZ",
+                    help="a picture's antenna frequency (apex times, depths)")
     sp.add_argument("--out", required=True, help="JSON file to write")
     sp.add_argument("--overlay", default=None, help="PNG of the B-scan with the boxes drawn (first channel)")
     add_detector_args(sp)
@@ -1260,11 +1315,16 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--max-seconds", type=float, default=None, help="stop after this long (resume later)")
     sp.add_argument("--init", default=None, help="start from these weights (fine-tuning); 'default': the shipped ones")
     sp.add_argument("--labels", default=None,
-                    help="your own labelled B-scans mixed in: COCO .json, Pascal VOC .xml or a folder of them "
-                         "(images may be radar files or pictures; see docs/CONVENTIONS.md)")
+                    help="your own labelled B-scans mixed in: a YOLO dataset (data.yaml, or a folder with images/ "
+                         "and labels/), COCO .json, Pascal VOC .xml or a folder of them (images may be radar files "
+                         "or pictures; see docs/CONVENTIONS.md)")
     sp.add_argument("--labels-fraction", type=float, default=0.5, help="share of windows from --labels (0.5)")
-    sp.add_argument("--pixel-map", default=None,
-                    help="time axis of labelled pictures: s_per_px=SECONDS[,t0_s=..,traces_per_px=..,trace0=..]")
+    add_label_args(sp)
+    sp.add_argument("--kinds", default=None, metavar="K,K",
+                    help="target kinds the detector tells apart, e.g. rebar,steel_pipe,pvc_pipe,void,tank "
+                         "(default: those of --init; a one-class --init is widened to them)")
+    sp.add_argument("--freeze", type=int, default=0,
+                    help="backbone stages kept fixed: 1 the stem, 2 with layer1 (faster CPU fine-tuning; default 0)")
     sp.add_argument("--packed", nargs="+", default=None,
                     help="mix records of packed datasets in, each FILE or FILE:N (its last N held out; default "
                          "--packed-holdout), e.g. datasets/gprmax400.h5 datasets/gprmax_survey_train.h5:0")
@@ -1283,6 +1343,13 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--data", default=None,
                     help="evaluate on a labelled dataset instead: packed file or gpr3d simulate folder "
                          "(e.g. datasets/gprmax_survey.h5)")
+    sp.add_argument("--labels", default=None,
+                    help="evaluate on labelled B-scans: a YOLO dataset, COCO .json or Pascal VOC .xml "
+                         "(e.g. pgpr_1600MHz/val with --pixel-map s_per_px=3.125e-11 --class-names steel,pipe "
+                         "--class-kinds pipe=pvc_pipe)")
+    sp.add_argument("--split", default="val", choices=("train", "val", "test"),
+                    help="the split of a YOLO data.yaml to evaluate on (default val)")
+    add_label_args(sp)
     add_detector_args(sp)
 
     sp = add("demo", cmd_demo, "run the end-to-end demo (embedded example by default)",

@@ -13,16 +13,16 @@ import numpy as np
 
 from gpr3d.detection.windows import WindowConfig, make_window, prepare, record_scale, rows_interval, window_targets
 
-__all__ = ["random_window", "WindowDataset", "collate", "PackedSource", "MixedSource", "RecordsSource"]
+__all__ = ["random_window", "WindowDataset", "collate", "PackedSource", "MixedSource", "RecordsSource", "kind_labels"]
 
 
 def random_window(survey, labels: dict, cfg: WindowConfig, rng: np.random.Generator, *, flip: bool = True,
-                  target_bias: float = 0.8):
+                  target_bias: float = 0.8, return_kinds: bool = False):
     """One training window of a record: ``(image (3, rows, traces), boxes (k, 4) px)``.
 
     With probability ``target_bias`` the window is placed over a labelled apex
     (anywhere in it); otherwise anywhere. ``flip`` mirrors half of the windows
-    left-right (hyperbolas are symmetric).
+    left-right (hyperbolas are symmetric). ``return_kinds``: a third item, the boxes' kinds.
     """
     proc = prepare(survey, cfg)
     n = proc.shape[0]
@@ -34,13 +34,32 @@ def random_window(survey, labels: dict, cfg: WindowConfig, rng: np.random.Genera
     else:
         s0 = int(rng.integers(0, hi + 1))
     win = make_window(proc, s0, cfg, rows_interval(survey, cfg), record_scale(proc))
-    boxes = window_targets(labels["labels"], win)
+    boxes, kinds = window_targets(labels["labels"], win, return_kinds=True)
     image = win.image
     if flip and rng.random() < 0.5:
         image = image[:, :, ::-1].copy()
         w = float(cfg.traces)
         boxes = np.stack([w - boxes[:, 2], boxes[:, 1], w - boxes[:, 0], boxes[:, 3]], axis=1).reshape(-1, 4)
-    return np.ascontiguousarray(image, dtype=np.float32), boxes.astype(np.float32)
+    out = np.ascontiguousarray(image, dtype=np.float32), boxes.astype(np.float32)
+    return out + (kinds,) if return_kinds else out
+
+
+def kind_labels(kinds, names) -> np.ndarray:
+    """Class labels (int64) of boxes of ``kinds`` for a network naming ``names`` (``None``: all 1).
+
+    A kind the network does not name is an error: its box would be learnt as background.
+    """
+    from gpr3d.core.errors import GPR3DError
+
+    if not names:
+        return np.ones(len(kinds), dtype=np.int64)
+    out = []
+    for k in kinds:
+        if k not in names:
+            raise GPR3DError(f"a label of kind {k!r}, which the detector does not name ({', '.join(names)}): "
+                             "map the dataset's class names onto kinds (--class-kinds NAME=KIND)")
+        out.append(names.index(k) + 1)
+    return np.asarray(out, dtype=np.int64)
 
 
 class WindowDataset:
@@ -50,8 +69,10 @@ class WindowDataset:
     window placement, so item ``i`` is the same window every time.
     """
 
-    def __init__(self, source, n: int, cfg: WindowConfig | None = None, *, seed: int = 0, flip: bool = True):
+    def __init__(self, source, n: int, cfg: WindowConfig | None = None, *, seed: int = 0, flip: bool = True,
+                 kinds=None):
         self.source, self.n, self.cfg, self.seed, self.flip = source, int(n), cfg or WindowConfig(), seed, flip
+        self.kinds = list(kinds) if kinds else None  #: the network's kinds (None: one class)
 
     def __len__(self) -> int:
         return self.n
@@ -61,8 +82,8 @@ class WindowDataset:
 
         survey, labels = self.source(int(i))
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, int(i), 77]))
-        image, boxes = random_window(survey, labels, self.cfg, rng, flip=self.flip)
-        target = {"boxes": torch.from_numpy(boxes), "labels": torch.ones(len(boxes), dtype=torch.int64)}
+        image, boxes, kinds = random_window(survey, labels, self.cfg, rng, flip=self.flip, return_kinds=True)
+        target = {"boxes": torch.from_numpy(boxes), "labels": torch.from_numpy(kind_labels(kinds, self.kinds))}
         return torch.from_numpy(image), target
 
 

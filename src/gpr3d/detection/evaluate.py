@@ -1,8 +1,9 @@
-"""Detector evaluation on whole records: COCO metrics and apex recall.
+"""Detector evaluation on whole records: COCO metrics (class-agnostic and class-averaged) and apex recall.
 
 Each record is one COCO image whose pixels are traces (x) and samples (y); IoU
 does not change when an axis is scaled, so the metrics are those of the record
-itself, whatever the window size. ``pycocotools`` computes mAP@0.5, mAP@0.75
+itself, whatever the window size. For a detector that names kinds, ``by_kind`` holds the
+same metrics averaged over the kinds the true boxes hold (a box counts only under its kind). ``pycocotools`` computes mAP@0.5, mAP@0.75
 (one class, ``hyperbola``; all box sizes), AR@10 and AR@100.
 
 Apex recall: a true apex counts as found when a detection (score >= the
@@ -24,8 +25,19 @@ from gpr3d.core.deps import require
 __all__ = ["coco_metrics", "apex_matches", "evaluate_detector"]
 
 
-def coco_metrics(gt_boxes: list[np.ndarray], det_boxes: list[np.ndarray], det_scores: list[np.ndarray]) -> dict:
-    """mAP@0.5, mAP@0.75, mAP@[.5:.95], AR@1, AR@10, AR@100 for boxes ``[x0, y0, x1, y1]`` per image."""
+def coco_metrics(gt_boxes: list[np.ndarray], det_boxes: list[np.ndarray], det_scores: list[np.ndarray], *,
+                 gt_kinds=None, det_kinds=None, kinds=None) -> dict:
+    """mAP@0.5, mAP@0.75, mAP@[.5:.95], AR@1, AR@10, AR@100 and recall@0.5 for boxes ``[x0, y0, x1, y1]`` per image.
+
+    One class unless ``kinds`` (the category names) is given with per-image ``gt_kinds`` and
+    ``det_kinds`` (lists of names): then each metric is the mean over the kinds that hold a
+    true box (pycocotools' class average). ``recall@0.5``: the share of true boxes matched
+    at IoU >= 0.5 by any of the 100 best detections of their image, whatever the score.
+    """
+    cats = list(kinds) if kinds else ["hyperbola"]
+
+    def cat(names, k, j):
+        return 1 if not kinds else cats.index(names[k][j]) + 1
     require("pycocotools")
     from pycocotools.coco import COCO
     from pycocotools.cocoeval import COCOeval
@@ -36,28 +48,33 @@ def coco_metrics(gt_boxes: list[np.ndarray], det_boxes: list[np.ndarray], det_sc
         w = float(max(g[:, 2].max() if len(g) else 1.0, 1.0)) + 1
         h = float(max(g[:, 3].max() if len(g) else 1.0, 1.0)) + 1
         images.append({"id": k + 1, "width": w, "height": h})
-        for b in g:
+        for j, b in enumerate(g):
             bw, bh = float(b[2] - b[0]), float(b[3] - b[1])
-            anns.append({"id": len(anns) + 1, "image_id": k + 1, "category_id": 1, "bbox": [float(b[0]), float(b[1]), bw, bh],
-                         "area": bw * bh, "iscrowd": 0})
-        for b, s in zip(np.asarray(det_boxes[k], float).reshape(-1, 4), np.asarray(det_scores[k], float).reshape(-1)):
-            dets.append({"image_id": k + 1, "category_id": 1, "bbox": [float(b[0]), float(b[1]), float(b[2] - b[0]),
-                                                                       float(b[3] - b[1])], "score": float(s)})
+            anns.append({"id": len(anns) + 1, "image_id": k + 1, "category_id": cat(gt_kinds, k, j),
+                         "bbox": [float(b[0]), float(b[1]), bw, bh], "area": bw * bh, "iscrowd": 0})
+        for j, (b, s) in enumerate(zip(np.asarray(det_boxes[k], float).reshape(-1, 4),
+                                       np.asarray(det_scores[k], float).reshape(-1))):
+            dets.append({"image_id": k + 1, "category_id": cat(det_kinds, k, j),
+                         "bbox": [float(b[0]), float(b[1]), float(b[2] - b[0]), float(b[3] - b[1])], "score": float(s)})
     quiet = io.StringIO()
     with contextlib.redirect_stdout(quiet):
         gt = COCO()
-        gt.dataset = {"images": images, "annotations": anns, "categories": [{"id": 1, "name": "hyperbola"}]}
+        gt.dataset = {"images": images, "annotations": anns,
+                      "categories": [{"id": i + 1, "name": n} for i, n in enumerate(cats)]}
         gt.createIndex()
         if not dets:
-            return {"mAP@0.5": 0.0, "mAP@0.75": 0.0, "mAP": 0.0, "AR@1": 0.0, "AR@10": 0.0, "AR@100": 0.0}
+            return {"mAP@0.5": 0.0, "mAP@0.75": 0.0, "mAP": 0.0, "AR@1": 0.0, "AR@10": 0.0, "AR@100": 0.0,
+                    "recall@0.5": 0.0}
         dt = gt.loadRes(dets)
         ev = COCOeval(gt, dt, "bbox")
         ev.evaluate()
         ev.accumulate()
         ev.summarize()
     s = ev.stats
+    rec = ev.eval["recall"][0, :, 0, -1]  # IoU 0.5, every kind, all areas, 100 detections
+    rec = rec[rec > -1]
     return {"mAP": float(s[0]), "mAP@0.5": float(s[1]), "mAP@0.75": float(s[2]), "AR@1": float(s[6]),
-            "AR@10": float(s[7]), "AR@100": float(s[8])}
+            "AR@10": float(s[7]), "AR@100": float(s[8]), "recall@0.5": float(rec.mean()) if rec.size else 0.0}
 
 
 def apex_matches(true_apexes, found_apexes, found_scores, *, max_traces: float, max_s: float,
@@ -88,7 +105,7 @@ def apex_matches(true_apexes, found_apexes, found_scores, *, max_traces: float, 
 def evaluate_detector(detector, records, *, score_threshold: float = 0.5, apex_traces: float = 3.0,
                       log=None) -> dict:
     """Metrics of ``detector`` over ``records`` (iterable of ``(Survey, labels)``), with per-record rows."""
-    gts, dboxes, dscores, rows = [], [], [], []
+    gts, dboxes, dscores, rows, gkinds, dkinds = [], [], [], [], [], []
     found_total = true_total = false_total = 0
     by_kind: dict = {}
     t_windows = n_windows = 0.0
@@ -103,6 +120,8 @@ def evaluate_detector(detector, records, *, score_threshold: float = 0.5, apex_t
         tg = res["targets"]
         dboxes.append(np.asarray([t["box"] for t in tg], float).reshape(-1, 4) * to_px)
         dscores.append(np.asarray([t["score"] for t in tg], float))
+        gkinds.append([lab.get("kind", "target") for lab in vis])
+        dkinds.append([t.get("kind", "target") for t in tg])
         sel = [t for t in tg if t["score"] >= score_threshold]
         quarter = 0.25 / (survey.frequency_hz or 1e9)
         found, false, hit = apex_matches([[lab["apex_trace"], lab["apex_time_s"]] for lab in vis],
@@ -121,6 +140,11 @@ def evaluate_detector(detector, records, *, score_threshold: float = 0.5, apex_t
         if log:
             log(f"  record {k}: {len(vis)} true, {len(sel)} detected, {found} apexes found, {false} false")
     m = coco_metrics(gts, dboxes, dscores)
+    named = sorted({k for g in gkinds for k in g})
+    kinds = getattr(detector, "kinds", None)
+    if kinds and named and set(named) <= set(kinds):  # class-averaged over the kinds the records hold
+        m["by_kind"] = coco_metrics(gts, dboxes, dscores, gt_kinds=gkinds, det_kinds=dkinds, kinds=kinds)
+        m["by_kind"]["kinds"] = named
     m.update({"apex_recall": found_total / max(true_total, 1), "false_per_true": false_total / max(true_total, 1),
               "n_records": len(rows), "n_true": true_total, "s_per_window": t_windows / max(n_windows, 1),
               "score_threshold": score_threshold, "rows": rows,

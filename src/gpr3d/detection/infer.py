@@ -58,6 +58,14 @@ def load_detector(path=None, *, device: str = "cpu", engine: str = "auto") -> "D
     return Detector.load(path, device=device)
 
 
+def _kept(kinds, boxes, scores, labels, shares):
+    """One window's network output as float64 arrays; a one-class network's label-1 boxes only."""
+    labels = np.asarray(labels, dtype=np.int64)
+    keep = labels == 1 if not kinds else (labels >= 1) & (labels <= len(kinds))
+    shares = np.ones(len(labels)) if shares is None else np.asarray(shares, dtype=np.float64)
+    return (np.asarray(boxes, np.float64)[keep], np.asarray(scores, np.float64)[keep], labels[keep], shares[keep])
+
+
 class Detector:
     """A trained detector with its window settings."""
 
@@ -74,8 +82,20 @@ class Detector:
         model, window, prov = load_weights(path, device=device)
         return cls(model, window, provenance=prov, device=device)
 
+    @property
+    def kinds(self) -> list[str] | None:
+        """The target kinds the network names (label ``k + 1`` is ``kinds[k]``); ``None``: one class."""
+        return getattr(self.model, "gpr3d_kinds", None)
+
     def predict_windows(self, images: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
         """Raw network output per window image ``(3, rows, traces)``: ``(boxes px (k, 4), scores (k,))``."""
+        return [(b, s) for b, s, _, _ in self.predict_windows_kinds(images)]
+
+    def predict_windows_kinds(self, images: list[np.ndarray]) -> list[tuple]:
+        """Per window ``(boxes px (k, 4), scores (k,), labels (k,), kind shares (k,))``.
+
+        One-class networks: only label 1 (hyperbola) is kept and every share is 1.
+        """
         torch = require("torch")
         out = []
         self.model.eval()
@@ -83,9 +103,9 @@ class Detector:
             for i in range(0, len(images), self.batch):
                 batch = [torch.from_numpy(np.ascontiguousarray(im)).to(self.device) for im in images[i : i + self.batch]]
                 for r in self.model(batch):
-                    keep = r["labels"] == 1
-                    out.append((r["boxes"][keep].cpu().numpy().astype(np.float64),
-                                r["scores"][keep].cpu().numpy().astype(np.float64)))
+                    out.append(_kept(self.kinds, r["boxes"].cpu().numpy(), r["scores"].cpu().numpy(),
+                                     r["labels"].cpu().numpy(),
+                                     r["kind_scores"].cpu().numpy() if "kind_scores" in r else None))
         return out
 
     def detect(self, survey, *, score_threshold: float = 0.5, input_name: str | None = None) -> dict:
@@ -95,26 +115,32 @@ class Detector:
         t0 = time.perf_counter()
         proc = prepare(survey, self.window)
         wins = windows(survey, self.window, processed=proc)
-        raw = self.predict_windows([w.image for w in wins])
-        boxes, scores = merge([(w, b, s) for w, (b, s) in zip(wins, raw)], survey.n_traces, survey.dt_s,
-                              nms=self.nms)
+        raw = self.predict_windows_kinds([w.image for w in wins])
+        boxes, scores, index = merge([(w, b, s) for w, (b, s, _, _) in zip(wins, raw)], survey.n_traces,
+                                     survey.dt_s, nms=self.nms, return_index=True)
+        kinds = self.kinds
+        labels = np.concatenate([r[2] for r in raw])[index] if raw else np.zeros(0, np.int64)
+        shares = np.concatenate([r[3] for r in raw])[index] if raw else np.zeros(0)
         s_per_row = rows_interval(survey, self.window)
         # apexes from data whose rows keep the pulse's shape (equalising the rows distorts it)
         plain = prepare(survey, replace(self.window, equalise=False)) if self.window.equalise else proc
         t_end = (survey.n_samples - 1) * survey.dt_s
         kept = []
-        for b, s in sorted(zip(boxes, scores), key=lambda p: -p[1]):
+        for j in np.argsort(-np.asarray(scores, float), kind="stable"):
+            b, s = boxes[j], scores[j]
             b = [float(np.clip(b[0], 0, survey.n_traces - 1)), float(np.clip(b[1], 0, t_end)),
                  float(np.clip(b[2], 0, survey.n_traces - 1)), float(np.clip(b[3], 0, t_end))]
             if s >= score_threshold and b[2] > b[0] and b[3] > b[1]:
-                kept.append((b, s))
+                kind = kinds[int(labels[j]) - 1] if kinds else "target"
+                kept.append((b, s, kind, float(shares[j]) if kinds else None))
         # cut boxes take their width from the record's whole ones (one wave speed, one trace step)
-        rate = width_rate([b for b, s in kept if s >= 0.5], survey.n_traces, t_end, survey.frequency_hz)
+        rate = width_rate([b for b, s, _, _ in kept if s >= 0.5], survey.n_traces, t_end, survey.frequency_hz)
         targets = []
-        for b, s in kept:
+        for b, s, kind, share in kept:
             at, att = apex_of_box(plain, b, s_per_row, frequency_hz=survey.frequency_hz, n_traces=survey.n_traces,
                                   width_per_s=rate)
-            t = {"box": b, "score": float(s), "apex_trace": int(round(at)), "apex_time_s": float(att)}
+            t = {"box": b, "score": float(s), "apex_trace": int(round(at)), "apex_time_s": float(att),
+                 "kind": kind, "kind_score": share}
             if survey.positions_xyz is not None and survey.distances_m is not None:
                 t["x_m"] = float(np.interp(at, np.arange(survey.n_traces), survey.distances_m))
             targets.append(t)

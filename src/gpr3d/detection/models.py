@@ -1,7 +1,11 @@
 """Hyperbola detectors from torchvision, built without downloaded weights.
 
 Every model takes the 3-channel 256 x 256 windows of :mod:`gpr3d.detection.windows`
-and finds one class, ``hyperbola`` (label 1). Names (``MODELS``):
+and finds hyperbolas: one class, ``hyperbola`` (label 1), or with ``kinds`` one class per
+target kind (label ``k + 1`` for ``kinds[k]``). A Faster R-CNN with kinds scores each box
+by how likely it is a target of any kind (one minus the background probability) and
+names its most likely kind with that kind's share (``kind_scores``), so a hyperbola whose
+kind is in doubt is still found (:class:`KindRoIHeads`). Names (``MODELS``):
 
 * ``frcnn_lean`` (the default): Faster R-CNN on a ResNet-18 cut after its third
   stage, a 128-channel FPN, anchors shaped for hyperbola boxes (wide and flat to
@@ -23,7 +27,7 @@ from functools import partial
 from gpr3d.core.deps import require, resolve_device  # noqa: F401 - resolve_device kept here for callers
 from gpr3d.core.errors import InvalidDataError
 
-__all__ = ["MODELS", "build_model", "count_parameters", "resolve_device"]
+__all__ = ["MODELS", "build_model", "count_parameters", "resolve_device", "KindRoIHeads", "widen_to_kinds"]
 
 MODELS = ("frcnn_lean", "frcnn_r18", "frcnn_r50", "frcnn_r101", "frcnn_mobilenet", "retinanet_r18", "fcos_r18",
           "ssdlite")
@@ -61,8 +65,11 @@ def _frcnn_common(image_size: int) -> dict:
                 box_score_thresh=0.01)
 
 
-def build_model(name: str = "frcnn_lean", *, image_size: int = 256):
-    """A fresh detector ``name`` (see ``MODELS``) for ``image_size`` square windows; 2 classes."""
+def build_model(name: str = "frcnn_lean", *, image_size: int = 256, kinds=None):
+    """A fresh detector ``name`` (see ``MODELS``) for ``image_size`` square windows.
+
+    ``kinds``: the target kinds it tells apart (``None``: one class, ``hyperbola``).
+    """
     torch = require("torch")
     require("torchvision")
     import torchvision.models.detection as det
@@ -71,19 +78,20 @@ def build_model(name: str = "frcnn_lean", *, image_size: int = 256):
 
     if name not in MODELS:
         raise InvalidDataError(f"unknown detector {name!r}; choose one of {', '.join(MODELS)}")
+    n_cls = 2 if not kinds else len(kinds) + 1
     torch.manual_seed(0)
     common = _frcnn_common(image_size)
     if name == "frcnn_lean":
         bb = _resnet_fpn("resnet18", returned=(1, 2, 3), out_channels=128)
         pool = MultiScaleRoIAlign(featmap_names=["0", "1", "2"], output_size=7, sampling_ratio=2)
         model = det.FasterRCNN(bb, num_classes=None, rpn_anchor_generator=_anchors(4), box_roi_pool=pool,
-                               box_head=TwoMLPHead(128 * 7 * 7, 512), box_predictor=FastRCNNPredictor(512, 2),
+                               box_head=TwoMLPHead(128 * 7 * 7, 512), box_predictor=FastRCNNPredictor(512, n_cls),
                                **common)
     elif name in ("frcnn_r18", "frcnn_r50", "frcnn_r101"):
         bb = _resnet_fpn({"frcnn_r18": "resnet18", "frcnn_r50": "resnet50", "frcnn_r101": "resnet101"}[name])
-        model = det.FasterRCNN(bb, num_classes=2, rpn_anchor_generator=_anchors(5), **common)
+        model = det.FasterRCNN(bb, num_classes=n_cls, rpn_anchor_generator=_anchors(5), **common)
     elif name == "frcnn_mobilenet":
-        model = det.fasterrcnn_mobilenet_v3_large_fpn(weights=None, weights_backbone=None, num_classes=2,
+        model = det.fasterrcnn_mobilenet_v3_large_fpn(weights=None, weights_backbone=None, num_classes=n_cls,
                                                       trainable_backbone_layers=6, **common)
     elif name in ("retinanet_r18", "fcos_r18"):
         from torchvision.ops.feature_pyramid_network import LastLevelP6P7
@@ -92,16 +100,16 @@ def build_model(name: str = "frcnn_lean", *, image_size: int = 256):
         kw = dict(min_size=image_size, max_size=image_size, image_mean=IMAGE_MEAN, image_std=IMAGE_STD,
                   score_thresh=0.01, detections_per_img=100)
         if name == "retinanet_r18":
-            model = det.RetinaNet(bb, num_classes=2, anchor_generator=_anchors(5, base=16), **kw)
+            model = det.RetinaNet(bb, num_classes=n_cls, anchor_generator=_anchors(5, base=16), **kw)
         else:
             from torchvision.models.detection.anchor_utils import AnchorGenerator
 
             anchors = AnchorGenerator(sizes=tuple((8 * 2**k,) for k in range(5)), aspect_ratios=((1.0,),) * 5)
-            model = det.FCOS(bb, num_classes=2, anchor_generator=anchors, **kw)
+            model = det.FCOS(bb, num_classes=n_cls, anchor_generator=anchors, **kw)
     else:  # ssdlite
         from torchvision.models.detection import ssdlite
 
-        model = det.ssdlite320_mobilenet_v3_large(weights=None, weights_backbone=None, num_classes=2,
+        model = det.ssdlite320_mobilenet_v3_large(weights=None, weights_backbone=None, num_classes=n_cls,
                                                   norm_layer=partial(torch.nn.BatchNorm2d, eps=0.001, momentum=0.03),
                                                   image_mean=IMAGE_MEAN, image_std=IMAGE_STD, score_thresh=0.01,
                                                   detections_per_img=100)
@@ -109,7 +117,88 @@ def build_model(name: str = "frcnn_lean", *, image_size: int = 256):
         model.transform.max_size = image_size
         model.transform.fixed_size = (image_size, image_size)
         _ = ssdlite
+    if kinds and isinstance(model, det.FasterRCNN):
+        model.roi_heads.__class__ = __getattr__("KindRoIHeads")  # the same parts; only inference differs
     return model
+
+
+def _kind_roi_heads():
+    from torchvision.models.detection.roi_heads import RoIHeads
+
+    class _KindRoIHeads(RoIHeads):
+        """Faster R-CNN's box head, scoring boxes by target-or-not and naming the kind apart.
+
+        Training is torchvision's (softmax over background and every kind). At inference
+        each RoI gives one box: the regression of its most likely kind, scored by
+        ``1 - p(background)``, labelled with that kind, ``kind_scores`` its share
+        ``p(kind) / (1 - p(background))``; boxes are then suppressed across kinds (one
+        box a hyperbola). With one kind this is torchvision's own post-processing.
+        """
+
+        def forward(self, features, proposals, image_shapes, targets=None):
+            if self.training:
+                return super().forward(features, proposals, image_shapes, targets)
+            import torch
+            import torch.nn.functional as F
+            from torchvision.ops import boxes as box_ops
+
+            feats = self.box_head(self.box_roi_pool(features, proposals, image_shapes))
+            class_logits, box_regression = self.box_predictor(feats)
+            pred_boxes = self.box_coder.decode(box_regression, proposals)  # (N, classes, 4)
+            probs = F.softmax(class_logits, -1)
+            fg = probs[:, 1:]
+            score = fg.sum(dim=1)
+            best, kind = fg.max(dim=1)
+            label = kind + 1
+            box = pred_boxes[torch.arange(pred_boxes.shape[0], device=pred_boxes.device), label]
+            share = best / score.clamp_min(1e-12)
+            result = []
+            counts = [p.shape[0] for p in proposals]
+            for b, s, lab, sh, shape in zip(box.split(counts), score.split(counts), label.split(counts),
+                                            share.split(counts), image_shapes):
+                b = box_ops.clip_boxes_to_image(b, shape)
+                keep = torch.where(s > self.score_thresh)[0]
+                b, s, lab, sh = b[keep], s[keep], lab[keep], sh[keep]
+                keep = box_ops.remove_small_boxes(b, min_size=1e-2)
+                b, s, lab, sh = b[keep], s[keep], lab[keep], sh[keep]
+                keep = box_ops.nms(b, s, self.nms_thresh)[: self.detections_per_img]
+                result.append({"boxes": b[keep], "labels": lab[keep], "scores": s[keep], "kind_scores": sh[keep]})
+            return result, {}
+
+    _KindRoIHeads.__name__ = _KindRoIHeads.__qualname__ = "KindRoIHeads"
+    _KindRoIHeads.__module__ = __name__
+    return _KindRoIHeads
+
+
+def __getattr__(name):  # KindRoIHeads is built on first use, so that importing this module needs no torchvision
+    if name == "KindRoIHeads":
+        if "KindRoIHeads" not in globals():
+            globals()["KindRoIHeads"] = _kind_roi_heads()
+        return globals()["KindRoIHeads"]
+    raise AttributeError(name)
+
+
+def widen_to_kinds(state_dict: dict, kinds) -> dict:
+    """A one-class Faster R-CNN state dict made into one of ``len(kinds)`` kinds that finds the same boxes.
+
+    Each kind starts as a copy of ``hyperbola`` (its class row and box regression), its
+    logit lowered by ``log(len(kinds))``, so that ``1 - p(background)`` and every box are
+    those of the one-class model; training then tells the kinds apart.
+    """
+    import math
+
+    torch = require("torch")
+    out = dict(state_dict)
+    k = len(kinds)
+    w, b = state_dict["roi_heads.box_predictor.cls_score.weight"], state_dict["roi_heads.box_predictor.cls_score.bias"]
+    if w.shape[0] != 2:
+        raise InvalidDataError(f"only a one-class detector can be widened to kinds (this one has {w.shape[0] - 1})")
+    out["roi_heads.box_predictor.cls_score.weight"] = torch.cat([w[:1]] + [w[1:2]] * k)
+    out["roi_heads.box_predictor.cls_score.bias"] = torch.cat([b[:1]] + [b[1:2] - math.log(k)] * k)
+    bw, bb = state_dict["roi_heads.box_predictor.bbox_pred.weight"], state_dict["roi_heads.box_predictor.bbox_pred.bias"]
+    out["roi_heads.box_predictor.bbox_pred.weight"] = torch.cat([bw[:4]] + [bw[4:8]] * k)
+    out["roi_heads.box_predictor.bbox_pred.bias"] = torch.cat([bb[:4]] + [bb[4:8]] * k)
+    return out
 
 
 def count_parameters(model) -> int:

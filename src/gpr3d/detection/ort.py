@@ -52,12 +52,16 @@ def export_onnx(weights=None, out=DEFAULT_ONNX) -> dict:
     model.eval()
     rng = np.random.default_rng(0)
     example = torch.from_numpy(rng.random((3, window.rows, window.traces), dtype=np.float32))
+    kinds = getattr(model, "gpr3d_kinds", None)
     meta = {"window": window.to_dict(), "provenance": prov,
             "source_weights": src.name, "source_sha256": hashlib.sha256(src.read_bytes()).hexdigest(),
             "opset": OPSET}
+    if kinds:
+        meta["kinds"] = kinds
     with atomic_path(out, suffix=".onnx.part") as tmp:
         torch.onnx.export(model, ([example],), str(tmp), opset_version=OPSET, input_names=["image"],
-                          output_names=["boxes", "labels", "scores"], dynamo=False)
+                          output_names=["boxes", "labels", "scores"] + (["kind_scores"] if kinds else []),
+                          dynamo=False)
         finish_export(tmp, _META, meta)
         # the graph must give PyTorch's answer (float16 weights in both)
         sess = ort.InferenceSession(str(tmp), providers=["CPUExecutionProvider"])
@@ -116,9 +120,13 @@ class OnnxDetector(Detector):
 
     nms = staticmethod(onnx_nms)
 
-    def __init__(self, session, window: WindowConfig, *, provenance: dict | None = None, path=None):
+    def __init__(self, session, window: WindowConfig, *, provenance: dict | None = None, path=None, kinds=None):
         super().__init__(None, window, provenance=provenance, device="cpu")
-        self.session, self.path = session, path
+        self.session, self.path, self._kinds = session, path, kinds
+
+    @property
+    def kinds(self) -> list[str] | None:
+        return self._kinds
 
     @classmethod
     def load(cls, path=None, *, device: str = "cpu", threads: int | None = None) -> "OnnxDetector":
@@ -141,12 +149,15 @@ class OnnxDetector(Detector):
         if meta is None:
             raise FormatError(p, "an ONNX file without gpr3d detector metadata")
         meta = json.loads(meta)
-        return cls(sess, WindowConfig(**meta["window"]), provenance=meta.get("provenance", {}), path=p)
+        return cls(sess, WindowConfig(**meta["window"]), provenance=meta.get("provenance", {}), path=p,
+                   kinds=meta.get("kinds"))
 
-    def predict_windows(self, images: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+    def predict_windows_kinds(self, images: list[np.ndarray]) -> list[tuple]:
+        from gpr3d.detection.infer import _kept
+
         out = []
         for im in images:
-            boxes, labels, scores = self.session.run(None, {"image": np.ascontiguousarray(im, dtype=np.float32)})
-            keep = labels == 1
-            out.append((boxes[keep].astype(np.float64), scores[keep].astype(np.float64)))
+            got = self.session.run(None, {"image": np.ascontiguousarray(im, dtype=np.float32)})
+            boxes, labels, scores = got[:3]
+            out.append(_kept(self.kinds, boxes, scores, labels, got[3] if len(got) > 3 else None))
         return out

@@ -57,6 +57,12 @@ class TrainConfig:
     labels: str | None = None  #: the user's own labelled B-scans (COCO .json, VOC .xml or folder) mixed in
     labels_fraction: float = 0.5  #: share of the windows drawn from ``labels``
     pixel_map: str | None = None  #: time axis of labelled pictures (screenshots): "s_per_px=...,t0_s=..."
+    labels_names: list | None = None  #: YOLO class names in id order (when the dataset has no data.yaml)
+    labels_kinds: str | None = None  #: class name -> target kind, "pipe=pvc_pipe,steel=rebar"
+    labels_frequency_hz: float | None = None  #: the labelled pictures' antenna frequency
+    #: target kinds the detector names (None: one class, or those of --init); a one-class --init is widened
+    kinds: list | None = None
+    freeze: int = 0  #: backbone stages kept fixed: 0 none, 1 the stem, 2 the stem and layer1, ...
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -80,6 +86,16 @@ class TrainConfig:
             raise InvalidDataError(f"--packed-holdout must be 0 or more, got {self.packed_holdout!r}")
         if not 0.0 <= self.labels_fraction <= 1.0:
             raise InvalidDataError(f"--labels-fraction must lie in 0..1, got {self.labels_fraction!r}")
+        if not isinstance(self.freeze, int) or not 0 <= self.freeze <= 4:
+            raise InvalidDataError(f"--freeze must be an integer in 0..4 (backbone stages kept fixed), got {self.freeze!r}")
+        if self.kinds is not None:
+            from gpr3d.io.coco import CATEGORIES
+
+            self.kinds = list(self.kinds)
+            bad = [k for k in self.kinds if k not in CATEGORIES]
+            if bad or not self.kinds or len(set(self.kinds)) != len(self.kinds):
+                raise InvalidDataError(f"--kinds must name distinct target kinds ({', '.join(CATEGORIES)}), "
+                                       f"got {self.kinds!r}")
         if self.init == "default":
             from gpr3d.detection.weights import DEFAULT_WEIGHTS
 
@@ -96,6 +112,22 @@ def _optimiser(cfg: TrainConfig, params):
         return torch.optim.AdamW(params, lr=lr, weight_decay=1e-4 if cfg.weight_decay is None else cfg.weight_decay)
     wd = {"sgd": 1e-4, "reference": 5e-5}[cfg.optimiser] if cfg.weight_decay is None else cfg.weight_decay
     return torch.optim.SGD(params, lr=lr, momentum=0.9, weight_decay=wd)
+
+
+def _freeze(model, stages: int) -> None:
+    """Keep the first ``stages`` backbone stages of a ResNet-FPN model fixed (1: the stem, 2: with layer1, ...)."""
+    if not stages:
+        return
+    body = getattr(getattr(model, "backbone", None), "body", None)
+    if body is None or not hasattr(body, "conv1"):
+        raise GPR3DError("--freeze needs a ResNet backbone (a frcnn_*, retinanet_r18 or fcos_r18 model)")
+    parts = [["conv1", "bn1"], ["layer1"], ["layer2"], ["layer3"]][:stages]
+    for name in (n for group in parts for n in group):
+        mod = getattr(body, name, None)
+        if mod is None:
+            raise GPR3DError(f"--freeze {stages}: the backbone has no {name}")
+        for p in mod.parameters():
+            p.requires_grad_(False)
 
 
 def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print,
@@ -118,17 +150,35 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
     cfg_dict = asdict(cfg)
     same = {k: v for k, v in cfg_dict.items() if k not in ("device", "workers", "checkpoint_every", "out")}
     torch.manual_seed(cfg.seed)
-    model = build_model(cfg.model, image_size=cfg.window["rows"])
+    kinds = cfg.kinds
+    init = None
     if cfg.init:
         from gpr3d.detection.weights import load_weights
 
         init, init_window, _ = load_weights(cfg.init)
-        if type(init) is not type(model) or init_window.to_dict() != cfg.window:
-            raise GPR3DError(f"--init {cfg.init}: made for another model or window; it cannot start {cfg.model!r}")
+        init_kinds = getattr(init, "gpr3d_kinds", None)
+        kinds = kinds if kinds is not None else init_kinds
+        if init_window.to_dict() != cfg.window or (init_kinds and init_kinds != kinds):
+            raise GPR3DError(f"--init {cfg.init}: made for another window or other kinds; it cannot start "
+                             f"{cfg.model!r} with kinds {kinds}")
+    model = build_model(cfg.model, image_size=cfg.window["rows"], kinds=kinds)
+    if init is not None:
+        state = init.state_dict()
+        if kinds and not getattr(init, "gpr3d_kinds", None):
+            from gpr3d.detection.models import widen_to_kinds
+
+            try:
+                state = widen_to_kinds(state, kinds)
+            except KeyError:
+                raise GPR3DError(f"--init {cfg.init}: only a Faster R-CNN can be widened to kinds") from None
         try:
-            model.load_state_dict(init.state_dict())
+            if type(init) is not type(model):
+                raise RuntimeError
+            model.load_state_dict(state)
         except RuntimeError:
             raise GPR3DError(f"--init {cfg.init}: its weights do not fit {cfg.model!r}") from None
+    model.gpr3d_kinds = kinds
+    _freeze(model, cfg.freeze)
     model = model.to(device)
     if cfg.packed:
         from gpr3d.detection.data import MixedSource, PackedSource
@@ -136,9 +186,10 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
         source = MixedSource(source, PackedSource(cfg.packed, holdout=cfg.packed_holdout), cfg.packed_fraction)
     if cfg.labels:
         from gpr3d.detection.data import MixedSource, RecordsSource
-        from gpr3d.io.userlabels import read_user_labels
+        from gpr3d.io.labelled import read_labelled
 
-        user = RecordsSource(read_user_labels(cfg.labels, pixel_map=cfg.pixel_map))
+        user = RecordsSource(read_labelled(cfg.labels, pixel_map=cfg.pixel_map, names=cfg.labels_names,
+                                           kinds=cfg.labels_kinds, frequency_hz=cfg.labels_frequency_hz))
         log(f"{len(user.records)} labelled record(s), {user.n_boxes} box(es) from {cfg.labels}: "
             f"{cfg.labels_fraction:.0%} of the windows")
         source = MixedSource(source, user, cfg.labels_fraction)
@@ -155,7 +206,7 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
         step = int(ck["step"])
         log(f"resuming from step {step} of {cfg.steps}")
     atomic_write_text(out / "config.json", json.dumps({"gpr3d": __version__, "config": cfg_dict}, indent=2))
-    ds = WindowDataset(source, cfg.steps * cfg.batch, WindowConfig(**cfg.window), seed=cfg.data_seed)
+    ds = WindowDataset(source, cfg.steps * cfg.batch, WindowConfig(**cfg.window), seed=cfg.data_seed, kinds=kinds)
     # item k of the whole run is drawn in order; resuming skips what was already seen
     sampler = list(range(step * cfg.batch, cfg.steps * cfg.batch))
     loader = torch.utils.data.DataLoader(ds, batch_size=cfg.batch, sampler=sampler, collate_fn=collate,
@@ -204,5 +255,5 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
     if step and not ckpt_path.exists():
         save()
     wall = time.perf_counter() - t0
-    return {"steps": step, "wall_s": wall, "parameters": count_parameters(model), "model": model,
+    return {"steps": step, "wall_s": wall, "parameters": count_parameters(model), "model": model, "kinds": kinds,
             "checkpoint": str(ckpt_path)}

@@ -24,17 +24,22 @@ FORMAT = "gpr3d.detector"
 DEFAULT_WEIGHTS = Path(__file__).with_name("default_detector.pt")
 
 
-def save_weights(model, name: str, window: dict, path, *, provenance: dict | None = None) -> None:
-    """Write ``model``'s weights (float16 for floating tensors) atomically."""
+def save_weights(model, name: str, window: dict, path, *, provenance: dict | None = None, kinds=None) -> None:
+    """Write ``model``'s weights (float16 for floating tensors) atomically; ``kinds`` the target kinds it names."""
     torch = require("torch")
     obj = {"format": FORMAT, "version": 1, "model": name, "window": dict(window), "state_dict": half_state_dict(model),
            "provenance": provenance or {}}
+    if kinds:
+        obj["kinds"] = [str(k) for k in kinds]
     with atomic_path(path, suffix=".pt.part") as tmp:
         torch.save(obj, tmp)
 
 
 def load_weights(path=None, *, device: str = "cpu"):
-    """``(model in eval mode, WindowConfig, provenance)`` from a weights file (default: the shipped one)."""
+    """``(model in eval mode, WindowConfig, provenance)`` from a weights file (default: the shipped one).
+
+    The model's ``gpr3d_kinds`` attribute lists the target kinds it names (``None``: one class).
+    """
     from gpr3d.detection.models import MODELS, build_model, resolve_device
     from gpr3d.detection.windows import WindowConfig
 
@@ -45,7 +50,11 @@ def load_weights(path=None, *, device: str = "cpu"):
     if name not in MODELS:
         raise FormatError(p, f"unknown model {name!r} in the weights file")
     window = WindowConfig(**obj["window"])
-    model = build_model(name, image_size=window.rows)
+    kinds = obj.get("kinds")
+    if kinds is not None and (not isinstance(kinds, list) or not kinds or not all(isinstance(k, str) for k in kinds)):
+        raise FormatError(p, f"kinds must be a list of target kinds, got {kinds!r:.80}")
+    model = build_model(name, image_size=window.rows, kinds=kinds)
+    model.gpr3d_kinds = kinds
     sd = {k: v.float() if v.is_floating_point() else v for k, v in obj["state_dict"].items()}
     try:
         model.load_state_dict(sd)

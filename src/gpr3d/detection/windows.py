@@ -102,12 +102,14 @@ def windows(survey, cfg: WindowConfig | None = None, *, processed: np.ndarray | 
     return [make_window(proc, s0, cfg, spr, scale) for s0 in starts]
 
 
-def window_targets(labels: list[dict], win: Window, *, min_inside: float = 0.6) -> np.ndarray:
+def window_targets(labels: list[dict], win: Window, *, min_inside: float = 0.6, return_kinds: bool = False):
     """Boxes ``(k, 4)`` in window pixels of the visible labels whose apex lies in the window.
 
     A box cut by the window's edge is kept (clipped) when at least ``min_inside`` of
-    its width is inside; otherwise it is left out.
+    its width is inside; otherwise it is left out. With ``return_kinds`` also the
+    kept labels' kinds (a list, ``"target"`` where a label names none).
     """
+    kinds = []
     w = win.image.shape[2]
     h = win.image.shape[1]
     out = []
@@ -125,11 +127,13 @@ def window_targets(labels: list[dict], win: Window, *, min_inside: float = 0.6) 
         if cy1 - cy0 < 1 or cx1 - cx0 < 1:
             continue
         out.append([cx0, cy0, min(cx1, w), cy1])
-    return np.asarray(out, dtype=np.float32).reshape(-1, 4)
+        kinds.append(lab.get("kind", "target"))
+    boxes = np.asarray(out, dtype=np.float32).reshape(-1, 4)
+    return (boxes, kinds) if return_kinds else boxes
 
 
 def merge(per_window: list[tuple[Window, np.ndarray, np.ndarray]], n_traces: int, dt_s: float, *,
-          iou: float = 0.5, edge_px: float = 2.0, nms=None) -> tuple[np.ndarray, np.ndarray]:
+          iou: float = 0.5, edge_px: float = 2.0, nms=None, return_index: bool = False):
     """Window detections -> record boxes ``(k, 4)`` [trace_start, t_start_s, trace_end, t_end_s] and scores.
 
     A box that touches a window's inner edge (not the record's) is cut by it: its
@@ -137,7 +141,8 @@ def merge(per_window: list[tuple[Window, np.ndarray, np.ndarray]], n_traces: int
     wins; duplicates are removed by non-maximum suppression in record coordinates
     (time in samples, so that IoU does not depend on units): torchvision's, or ``nms``
     (``nms(boxes, scores, iou) -> kept indices``, e.g. ONNX Runtime's in
-    :func:`gpr3d.detection.ort.onnx_nms`).
+    :func:`gpr3d.detection.ort.onnx_nms`). With ``return_index`` a third item: the kept
+    boxes' places in the windows' boxes taken in order (to carry what else they hold).
     """
 
     boxes, scores, ranks = [], [], []
@@ -151,7 +156,7 @@ def merge(per_window: list[tuple[Window, np.ndarray, np.ndarray]], n_traces: int
             scores.append(float(ss))
             ranks.append(float(ss) * (0.5 if cut else 1.0))
     if not boxes:
-        return np.zeros((0, 4)), np.zeros(0)
+        return (np.zeros((0, 4)), np.zeros(0)) + ((np.zeros(0, np.int64),) if return_index else ())
     boxes_a = np.asarray(boxes)
     scaled = boxes_a.copy()
     scaled[:, [1, 3]] /= dt_s
@@ -162,6 +167,8 @@ def merge(per_window: list[tuple[Window, np.ndarray, np.ndarray]], n_traces: int
         keep = tv_nms(torch.as_tensor(scaled), torch.as_tensor(np.asarray(ranks)), iou).numpy()
     else:
         keep = np.asarray(nms(scaled, np.asarray(ranks), iou), dtype=np.int64)
+    if return_index:
+        return boxes_a[keep], np.asarray(scores)[keep], keep
     return boxes_a[keep], np.asarray(scores)[keep]
 
 

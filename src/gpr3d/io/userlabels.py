@@ -38,7 +38,8 @@ from gpr3d.core.errors import FormatError, InvalidDataError
 from gpr3d.io._common import check_file
 from gpr3d.io.coco import BOX_PAD_PERIODS, CATEGORIES, PixelMap
 
-__all__ = ["read_user_labels", "parse_pixel_map", "IMAGE_SUFFIXES"]
+__all__ = ["read_user_labels", "read_picture", "parse_pixel_map", "check_frequency", "IMAGE_SUFFIXES",
+           "KIND_ALIASES"]
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".gif"}
 _MAP_KEYS = ("trace0", "traces_per_px", "t0_s", "s_per_px")
@@ -80,12 +81,19 @@ def parse_pixel_map(spec) -> PixelMap:
     return PixelMap(**vals)
 
 
+#: class names that other datasets use for gpr3d's target kinds (P-GPR's ``steel`` is rebar)
+KIND_ALIASES = {"steel": "rebar", "rebars": "rebar", "bar": "rebar", "reinforcement": "rebar", "metal_pipe": "steel_pipe",
+                "plastic_pipe": "pvc_pipe", "pvc": "pvc_pipe", "ppr": "pvc_pipe", "ppr_pipe": "pvc_pipe",
+                "cavity": "void", "air_void": "void"}
+
+
 def _kind(name) -> str:
-    name = str(name).strip().lower().replace(" ", "_")
+    name = str(name).strip().lower().replace(" ", "_").replace("-", "_")
+    name = KIND_ALIASES.get(name, name)
     return name if name in CATEGORIES else "target"
 
 
-def _picture_survey(path: Path, pm: PixelMap):
+def _picture_survey(path: Path, pm: PixelMap, frequency_hz: float | None = None):
     from PIL import Image, UnidentifiedImageError
 
     from gpr3d.core.survey import Survey
@@ -98,8 +106,54 @@ def _picture_survey(path: Path, pm: PixelMap):
     if grey.shape[0] < 8 or grey.shape[1] < 2:
         raise FormatError(path, f"a {grey.shape[1]} x {grey.shape[0]} picture is too small for a B-scan")
     data = grey.T - float(grey.mean())  # one trace per column, one sample per row
-    return Survey(data=data, dt_s=pm.s_per_px, metadata={"format": "picture", "path": str(path),
+    return Survey(data=data, dt_s=pm.s_per_px, frequency_hz=frequency_hz,
+                  metadata={"format": "picture", "path": str(path),
                                                           "pixel_map": {k: getattr(pm, k) for k in _MAP_KEYS}})
+
+
+def read_picture(path, pixel_map, *, frequency_hz: float | None = None):
+    """A picture of a B-scan (PNG, JPG, ...; a screenshot) as a Survey: one trace per column, one sample per row.
+
+    Parameters
+    ----------
+    path : str or Path
+        The picture.
+    pixel_map : str or dict
+        Its time axis (``s_per_px`` at least; :func:`parse_pixel_map`).
+    frequency_hz : float, optional
+        The radar's centre frequency, when known.
+
+    Returns
+    -------
+    Survey
+        Grey levels less their mean, ``dt_s`` = ``s_per_px``; the map kept in ``metadata["pixel_map"]``.
+
+    Raises
+    ------
+    FormatError
+        Not a readable picture, or too small for a B-scan.
+    InvalidDataError
+        No or a wrong pixel map.
+    """
+    p = check_file(path)
+    if pixel_map is None:
+        raise InvalidDataError(f"{p.name} is a picture: give its time axis (--pixel-map s_per_px=SECONDS)")
+    pm = parse_pixel_map(pixel_map)
+    check_frequency(frequency_hz)
+    return _picture_survey(p, pm, frequency_hz)
+
+
+def check_frequency(frequency_hz) -> None:
+    """Refuse an antenna frequency no GPR has (outside 1 MHz .. 100 GHz, or not a number); ``None`` passes."""
+    if frequency_hz is None:
+        return
+    try:
+        f = float(frequency_hz)
+    except (TypeError, ValueError):
+        raise InvalidDataError(f"frequency {frequency_hz!r} is not a number (Hz)") from None
+    if not (math.isfinite(f) and 1e6 <= f <= 1e11):
+        raise InvalidDataError(f"frequency {frequency_hz!r} Hz is not a GPR antenna's (1 MHz .. 100 GHz; give Hz, "
+                               "e.g. 1.6e9)")
 
 
 def _record_map(survey, image: dict, width, height) -> PixelMap:
@@ -113,8 +167,12 @@ def _record_map(survey, image: dict, width, height) -> PixelMap:
                     s_per_px=(survey.n_samples - 1) * survey.dt_s / (height - 1))
 
 
-def _labels(survey, boxes_px, names, pm: PixelMap, where: str) -> dict:
-    """Pixel boxes ``[x0, y0, x1, y1]`` -> labels in the record's traces and seconds."""
+def _labels(survey, boxes_px, names, pm: PixelMap, where: str, *, tight: bool = False) -> dict:
+    """Pixel boxes ``[x0, y0, x1, y1]`` -> labels in the record's traces and seconds.
+
+    ``tight``: the boxes enclose the hyperbola's vertex and legs tightly (YOLO datasets
+    such as P-GPR), so the apex is a tenth of the way down the box whatever the frequency.
+    """
     t_end = (survey.n_samples - 1) * survey.dt_s
     f = survey.frequency_hz
     out = []
@@ -130,7 +188,7 @@ def _labels(survey, boxes_px, names, pm: PixelMap, where: str) -> dict:
                                    f"{t_end * 1e9:.3g} ns): check the pixel map")
         i0, i1 = max(i0, 0.0), min(i1, survey.n_traces - 1.0)
         t0, t1 = max(t0, 0.0), min(t1, t_end)
-        down = BOX_PAD_PERIODS / f if f else 0.1 * (t1 - t0)
+        down = BOX_PAD_PERIODS / f if f and not tight else 0.1 * (t1 - t0)
         kind = _kind(name)
         out.append({"kind": kind, "category": CATEGORIES.index(kind) + 1 if kind in CATEGORIES else 0,
                     "box": [i0, t0, i1, t1], "apex_trace": 0.5 * (i0 + i1),

@@ -1,0 +1,236 @@
+"""Target kinds in the detector: the widened one-class model finds the same boxes, the kind head's inference worked
+out by hand (score, kind, share, box of the kind, suppression across kinds), training labels by kind, frozen stages,
+kinds through the weights file and the evaluation's class average."""
+
+import math
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("torchvision")
+
+from gpr3d.core.errors import GPR3DError, InvalidDataError  # noqa: E402
+from gpr3d.core.survey import Survey  # noqa: E402
+from gpr3d.detection.data import WindowDataset, kind_labels, random_window  # noqa: E402
+from gpr3d.detection.models import build_model, widen_to_kinds  # noqa: E402
+from gpr3d.detection.windows import WindowConfig  # noqa: E402
+
+KINDS = ["rebar", "steel_pipe", "pvc_pipe", "void", "tank"]
+
+
+def _window(seed=0):
+    return torch.from_numpy(np.random.default_rng(seed).random((3, 256, 256), dtype=np.float32))
+
+
+def test_a_widened_detector_finds_what_the_one_class_one_finds():
+    from gpr3d.detection.weights import load_weights
+
+    one, _, _ = load_weights()  # the shipped one-class weights: real boxes to keep
+    wide = build_model("frcnn_lean", kinds=KINDS)
+    wide.load_state_dict(widen_to_kinds(one.state_dict(), KINDS))
+    wide.eval()
+    with torch.inference_mode():
+        for seed in (0, 1):
+            a, b = one([_window(seed)])[0], wide([_window(seed)])[0]
+            assert len(a["boxes"]) == len(b["boxes"]) > 0
+            torch.testing.assert_close(b["boxes"], a["boxes"], rtol=0, atol=1e-3)
+            torch.testing.assert_close(b["scores"], a["scores"], rtol=0, atol=1e-5)
+            # every kind alike (which wins the tie is rounding's choice), each with a fifth of the score
+            torch.testing.assert_close(b["kind_scores"], torch.full_like(b["scores"], 0.2), rtol=0, atol=1e-5)
+
+
+def test_widening_copies_the_hyperbola_row_lowered_by_log_k():
+    sd = build_model("frcnn_lean").state_dict()
+    out = widen_to_kinds(sd, ["rebar", "void"])
+    w, b = sd["roi_heads.box_predictor.cls_score.weight"], sd["roi_heads.box_predictor.cls_score.bias"]
+    ow, ob = out["roi_heads.box_predictor.cls_score.weight"], out["roi_heads.box_predictor.cls_score.bias"]
+    assert ow.shape == (3, 512) and torch.equal(ow[0], w[0]) and torch.equal(ow[1], w[1]) and torch.equal(ow[2], w[1])
+    assert ob[0] == b[0] and ob[1] == pytest.approx(float(b[1]) - math.log(2)) and ob[2] == ob[1]
+    bw = sd["roi_heads.box_predictor.bbox_pred.weight"]
+    obw = out["roi_heads.box_predictor.bbox_pred.weight"]
+    assert obw.shape == (12, 512) and torch.equal(obw[:4], bw[:4]) and torch.equal(obw[4:8], bw[4:])
+    assert torch.equal(obw[8:], bw[4:])
+    assert torch.equal(out["roi_heads.box_predictor.bbox_pred.bias"][8:], sd["roi_heads.box_predictor.bbox_pred.bias"][4:])
+    assert all(torch.equal(out[k], sd[k]) for k in sd if "box_predictor" not in k)
+    with pytest.raises(InvalidDataError) as err:
+        widen_to_kinds(out, ["rebar"])
+    assert str(err.value) == "only a one-class detector can be widened to kinds (this one has 2)"
+
+
+class _Pool(torch.nn.Module):
+    def forward(self, features, proposals, shapes):
+        return torch.cat(proposals)
+
+
+class _Same(torch.nn.Module):
+    def forward(self, x):
+        return x
+
+
+class _Answer(torch.nn.Module):
+    """The predictor's stand-in: RoI i gets ``logits[i]`` and ``regression[i]``."""
+
+    def __init__(self, logits, regression):
+        super().__init__()
+        self.answer = (logits, regression)
+
+    def forward(self, x):
+        assert len(x) == len(self.answer[0])
+        return self.answer
+
+
+def _kind_heads(logits, regression, **kw):
+    model = build_model("frcnn_lean", kinds=["rebar", "pvc_pipe"])
+    heads = model.roi_heads
+    heads.box_roi_pool, heads.box_head, heads.box_predictor = _Pool(), _Same(), _Answer(logits, regression)
+    for k, v in kw.items():
+        setattr(heads, k, v)
+    return heads.eval()
+
+
+def test_kind_head_inference_in_full():
+    proposals = [torch.tensor([[10.0, 10, 50, 30], [12, 10, 52, 30], [100, 40, 140, 60], [0, 0, 20, 20]])]
+    probs = torch.tensor([[0.1, 0.5, 0.4], [0.2, 0.1, 0.7], [0.6, 0.1, 0.3], [0.995, 0.003, 0.002]])
+    reg = torch.zeros(4, 12)
+    reg[2, 8] = 1.0  # RoI 2, class 2 (pvc_pipe): dx = 1 / 10 of its 40 px width: 4 px right
+    reg[2, 4] = -1.0  # RoI 2, class 1 (rebar): 4 px left; not its kind, so not used
+    heads = _kind_heads(probs.log(), reg)
+    (r,), _ = heads({}, proposals, [(256, 256)])
+    # RoI 0 (score 0.9, rebar 0.5 / 0.9) wins over RoI 1 (0.8), which overlaps it with IoU 38/42 > 0.5
+    assert r["scores"].tolist() == pytest.approx([0.9, 0.4], abs=1e-6)
+    assert r["labels"].tolist() == [1, 2]
+    assert r["kind_scores"].tolist() == pytest.approx([0.5 / 0.9, 0.3 / 0.4], abs=1e-6)
+    torch.testing.assert_close(r["boxes"], torch.tensor([[10.0, 10, 50, 30], [104, 40, 144, 60]]), rtol=0, atol=1e-4)
+    # boxes are clipped to the image (RoI 2, past its right edge, loses all its width and goes); a lower
+    # threshold keeps RoI 3 (score 0.005)
+    heads = _kind_heads(probs.log(), reg, score_thresh=0.001)
+    (r,), _ = heads({}, [proposals[0] + torch.tensor([200.0, 0, 200, 0])], [(256, 250)])
+    torch.testing.assert_close(r["boxes"], torch.tensor([[210.0, 10, 250, 30], [200, 0, 220, 20]]), rtol=0, atol=1e-4)
+    assert r["scores"].tolist() == pytest.approx([0.9, 0.005], abs=1e-6)
+
+
+def test_with_one_kind_the_head_is_torchvision_s():
+    from torchvision.models.detection.roi_heads import RoIHeads
+
+    model = build_model("frcnn_lean", kinds=["rebar"]).eval()
+    plain = build_model("frcnn_lean").eval()
+    plain.load_state_dict(model.state_dict())
+    assert type(plain.roi_heads) is RoIHeads and type(model.roi_heads).__name__ == "KindRoIHeads"
+    with torch.inference_mode():
+        a, b = plain([_window(3)])[0], model([_window(3)])[0]
+    assert torch.equal(a["boxes"], b["boxes"]) and torch.equal(a["labels"], b["labels"])
+    torch.testing.assert_close(a["scores"], b["scores"], rtol=0, atol=1e-6)
+    assert torch.equal(b["kind_scores"], torch.ones_like(b["scores"]))
+
+
+def test_training_labels_follow_the_kinds():
+    assert kind_labels(["pvc_pipe", "rebar", "pvc_pipe"], KINDS).tolist() == [3, 1, 3]
+    assert kind_labels(["target", "void"], None).tolist() == [1, 1]  # a one-class network: all hyperbolas
+    assert kind_labels([], KINDS).dtype == np.int64
+    with pytest.raises(GPR3DError) as err:
+        kind_labels(["rebar", "target"], ["rebar", "pvc_pipe"])
+    assert str(err.value) == ("a label of kind 'target', which the detector does not name (rebar, pvc_pipe): map the "
+                              "dataset's class names onto kinds (--class-kinds NAME=KIND)")
+
+
+def _record():
+    n, dt = 300, 1e-10
+    s = Survey(data=np.random.default_rng(0).normal(size=(n, 128)).astype(np.float32), dt_s=dt, frequency_hz=1e9)
+    labs = [{"box": [a - 20, 2e-9, a + 20, 5e-9], "apex_trace": a, "apex_time_s": 2.7e-9, "kind": k, "visible": True}
+            for a, k in ((60, "void"), (100, "rebar"), (150, "pvc_pipe"), (200, "rebar"))]
+    return s, {"labels": labs}
+
+
+def test_the_window_dataset_labels_each_box_by_its_kind():
+    s, labels = _record()
+    cfg = WindowConfig(traces=256)
+    ds = WindowDataset(lambda i: (s, labels), 6, cfg, seed=1, kinds=KINDS)
+    seen = set()
+    for i in range(6):
+        img, t = ds[i]
+        rng = np.random.default_rng(np.random.SeedSequence([1, i, 77]))
+        want_img, boxes, kinds = random_window(s, labels, cfg, rng, return_kinds=True)
+        np.testing.assert_array_equal(img.numpy(), want_img)
+        np.testing.assert_array_equal(t["boxes"].numpy(), boxes)
+        assert t["labels"].tolist() == [KINDS.index(k) + 1 for k in kinds]
+        # each box is the one of its kind: box centres (flipped or not) put back on the labels' apexes
+        seen.update(kinds)
+    assert seen == {"void", "rebar", "pvc_pipe"}
+    one = WindowDataset(lambda i: (s, labels), 2, cfg, seed=1)
+    assert one[0][1]["labels"].tolist() == [1] * len(one[0][1]["boxes"])
+
+
+def test_frozen_stages_keep_their_weights_fixed():
+    from gpr3d.detection.train import _freeze
+
+    model = build_model("frcnn_lean")
+    _freeze(model, 2)
+    body = model.backbone.body
+    fixed = [n for n, p in body.named_parameters() if not p.requires_grad]
+    assert fixed and all(n.split(".")[0] in ("conv1", "bn1", "layer1") for n in fixed)
+    assert all(p.requires_grad for n, p in body.named_parameters() if n.split(".")[0] not in ("conv1", "bn1", "layer1"))
+    assert sum(1 for n in fixed if n.startswith("layer1")) == len(list(body.layer1.parameters()))
+    model = build_model("frcnn_lean")
+    _freeze(model, 1)
+    assert {n.split(".")[0] for n, p in model.backbone.body.named_parameters() if not p.requires_grad} == {"conv1", "bn1"}
+    _freeze(model, 0)
+    with pytest.raises(GPR3DError) as err:
+        _freeze(build_model("ssdlite"), 1)
+    assert str(err.value) == "--freeze needs a ResNet backbone (a frcnn_*, retinanet_r18 or fcos_r18 model)"
+    model = build_model("frcnn_lean")
+    _freeze(model, 4)  # frcnn_lean is cut after layer3: all of its body may be fixed
+    assert not any(p.requires_grad for p in model.backbone.body.parameters())
+    assert all(p.requires_grad for p in model.backbone.fpn.parameters())
+
+
+def test_kinds_travel_in_the_weights_file(tmp_path):
+    from gpr3d.detection.infer import Detector
+    from gpr3d.detection.weights import load_weights, save_weights
+    from gpr3d.io.coco import CATEGORIES
+
+    model = build_model("frcnn_lean", kinds=["rebar", "pvc_pipe"])
+    save_weights(model, "frcnn_lean", WindowConfig().to_dict(), tmp_path / "w.pt", kinds=["rebar", "pvc_pipe"])
+    back, _, _ = load_weights(tmp_path / "w.pt")
+    assert back.gpr3d_kinds == ["rebar", "pvc_pipe"] and back.roi_heads.box_predictor.cls_score.out_features == 3
+    assert Detector.load(tmp_path / "w.pt").kinds == ["rebar", "pvc_pipe"]
+    save_weights(build_model("frcnn_lean"), "frcnn_lean", WindowConfig().to_dict(), tmp_path / "one.pt")
+    assert load_weights(tmp_path / "one.pt")[0].gpr3d_kinds is None
+    obj = torch.load(tmp_path / "w.pt", weights_only=True)
+    obj["kinds"] = "rebar"
+    torch.save(obj, tmp_path / "bad.pt")
+    from gpr3d.core.errors import FormatError
+
+    with pytest.raises(FormatError) as err:
+        load_weights(tmp_path / "bad.pt")
+    assert str(err.value) == "bad.pt: kinds must be a list of target kinds, got 'rebar'"
+    assert set(CATEGORIES) >= {"rebar", "pvc_pipe"}
+
+
+def test_evaluation_averages_over_the_kinds_a_detector_names():
+    pytest.importorskip("pycocotools")
+    from gpr3d.detection.evaluate import coco_metrics, evaluate_detector
+
+    dt = 1e-10
+    s = Survey(data=np.zeros((100, 80), np.float32), dt_s=dt, frequency_hz=1e9)
+    lab = {"labels": [{"box": [10, 1e-9, 30, 3e-9], "apex_trace": 20, "apex_time_s": 1.1e-9, "kind": "rebar"},
+                      {"box": [50, 2e-9, 70, 4e-9], "apex_trace": 60, "apex_time_s": 2.1e-9, "kind": "pvc_pipe"}]}
+
+    class Stub:
+        kinds = ["rebar", "pvc_pipe", "void"]
+
+        def detect(self, survey, score_threshold):
+            return {"n_windows": 1, "targets": [
+                {"box": [10, 1e-9, 30, 3e-9], "score": 0.9, "apex_trace": 20, "apex_time_s": 1.1e-9, "kind": "rebar"},
+                {"box": [50, 2e-9, 70, 4e-9], "score": 0.8, "apex_trace": 60, "apex_time_s": 2.1e-9, "kind": "rebar"}]}
+
+    m = evaluate_detector(Stub(), [(s, lab)])
+    px = np.array([1, 1 / dt, 1, 1 / dt])
+    gt = [np.array([b["box"] for b in lab["labels"]]) * px]
+    want = coco_metrics(gt, [gt[0].copy()], [np.array([0.9, 0.8])], gt_kinds=[["rebar", "pvc_pipe"]],
+                        det_kinds=[["rebar", "rebar"]], kinds=Stub.kinds)
+    assert m["mAP@0.5"] == pytest.approx(1.0)  # class-agnostic: both found
+    assert m["by_kind"] == {**want, "kinds": ["pvc_pipe", "rebar"]}
+    assert m["by_kind"]["mAP@0.5"] == pytest.approx(0.5)  # the pipe called a rebar: pipe AP 0
+    Stub.kinds = None
+    assert "by_kind" not in evaluate_detector(Stub(), [(s, lab)])
