@@ -45,10 +45,11 @@ def main(argv=None):
     p.add_argument("--real", type=float, default=0.75, help="share of windows from P-GPR")
     p.add_argument("--freeze", type=int, default=2)
     p.add_argument("--max-seconds", type=float, default=None)
+    p.add_argument("--only", default=None, help="train on these pictures only (a glob: AIR_* for one radar)")
     args = p.parse_args(argv)
     cfg = TrainConfig(out=args.out, init=args.init, kinds=list(CATEGORIES), steps=args.steps, batch=args.batch,
                       lr=args.lr, warmup=50, labels=str(Path(args.pgpr) / args.split), labels_fraction=args.real,
-                      freeze=args.freeze, checkpoint_every=50, **PGPR)
+                      freeze=args.freeze, checkpoint_every=50, labels_pattern=args.only, **PGPR)
     res = train_detector(cfg, SurveySource(cfg.data_seed), progress=False, max_seconds=args.max_seconds)
     if res["steps"] < cfg.steps:
         print(f"step {res['steps']} of {cfg.steps}; run the same line again to continue")

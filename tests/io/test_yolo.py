@@ -52,6 +52,11 @@ def test_a_folder_by_hand(tmp_path):
     assert b["box"] == pytest.approx([0.0, 0.0, 9.5, 19 * S], rel=1e-12, abs=1e-22)
     assert recs[1][1]["labels"] == []  # no label file: a picture with no targets
     assert records_summary(recs) == {"records": 2, "boxes": 2, "by_kind": {"pvc_pipe": 1, "rebar": 1}}
+    only = read_yolo(root, pixel_map=PM, pattern="b*")
+    assert [r[1]["image"] for r in only] == [str(root / "images" / "b.png")]
+    with pytest.raises(FormatError) as err:
+        read_yolo(root, pixel_map=PM, pattern="AIR_*")
+    assert str(err.value) == "ds: a YOLO dataset with no pictures (train, AIR_*)"
 
 
 def test_names_from_a_data_yaml_as_a_list_or_a_mapping_and_splits(tmp_path):

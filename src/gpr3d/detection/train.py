@@ -60,6 +60,7 @@ class TrainConfig:
     labels_names: list | None = None  #: YOLO class names in id order (when the dataset has no data.yaml)
     labels_kinds: str | None = None  #: class name -> target kind, "pipe=pvc_pipe,steel=rebar"
     labels_frequency_hz: float | None = None  #: the labelled pictures' antenna frequency
+    labels_pattern: str | None = None  #: YOLO pictures whose name matches this glob only (e.g. one radar's)
     #: target kinds the detector names (None: one class, or those of --init); a one-class --init is widened
     kinds: list | None = None
     freeze: int = 0  #: backbone stages kept fixed: 0 none, 1 the stem, 2 the stem and layer1, ...
@@ -189,7 +190,8 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
         from gpr3d.io.labelled import read_labelled
 
         user = RecordsSource(read_labelled(cfg.labels, pixel_map=cfg.pixel_map, names=cfg.labels_names,
-                                           kinds=cfg.labels_kinds, frequency_hz=cfg.labels_frequency_hz))
+                                           kinds=cfg.labels_kinds, frequency_hz=cfg.labels_frequency_hz,
+                                           pattern=cfg.labels_pattern))
         log(f"{len(user.records)} labelled record(s), {user.n_boxes} box(es) from {cfg.labels}: "
             f"{cfg.labels_fraction:.0%} of the windows")
         source = MixedSource(source, user, cfg.labels_fraction)

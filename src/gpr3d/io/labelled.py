@@ -14,7 +14,7 @@ __all__ = ["read_labelled"]
 
 
 def read_labelled(path, *, pixel_map=None, split: str = "train", names=None, kinds=None,
-                  frequency_hz: float | None = None) -> list:
+                  frequency_hz: float | None = None, pattern: str | None = None) -> list:
     """Labelled records ``[(Survey, labels dict), ...]`` from any supported label format.
 
     Parameters
@@ -23,7 +23,7 @@ def read_labelled(path, *, pixel_map=None, split: str = "train", names=None, kin
         YOLO dataset (``data.yaml`` or a folder with ``images/``), COCO ``.json``, VOC ``.xml`` or a folder of them.
     pixel_map : str or dict, optional
         The time axis of pictures (``s_per_px=...``); required for YOLO datasets.
-    split, names, kinds, frequency_hz
+    split, names, kinds, frequency_hz, pattern
         For YOLO datasets: see :func:`gpr3d.io.yolo.read_yolo`.
 
     Returns
@@ -39,5 +39,6 @@ def read_labelled(path, *, pixel_map=None, split: str = "train", names=None, kin
         A wrong pixel map, split, class name or kind.
     """
     if is_yolo(path):
-        return read_yolo(path, split=split, names=names, kinds=kinds, pixel_map=pixel_map, frequency_hz=frequency_hz)
+        return read_yolo(path, split=split, names=names, kinds=kinds, pixel_map=pixel_map, frequency_hz=frequency_hz,
+                         pattern=pattern)
     return read_user_labels(path, pixel_map=pixel_map)

@@ -25,6 +25,7 @@ that is no kind becomes ``"target"``. Boxes are taken as tight around the hyperb
 from __future__ import annotations
 
 import math
+from fnmatch import fnmatch
 from pathlib import Path
 
 import numpy as np
@@ -175,7 +176,7 @@ def _read_boxes(lab: Path, width: int, height: int, n_names: int | None):
 
 
 def read_yolo(path, *, split: str = "train", names=None, kinds=None, pixel_map=None,
-              frequency_hz: float | None = None) -> list:
+              frequency_hz: float | None = None, pattern: str | None = None) -> list:
     """Labelled records ``[(Survey, labels dict), ...]`` of a YOLO dataset (see the module's text).
 
     Parameters
@@ -192,6 +193,8 @@ def read_yolo(path, *, split: str = "train", names=None, kinds=None, pixel_map=N
         The pictures' time axis, ``s_per_px`` at least (:func:`~gpr3d.io.userlabels.parse_pixel_map`).
     frequency_hz : float, optional
         The radar's centre frequency (kept on the records; the detector's processing uses it).
+    pattern : str, optional
+        Only the pictures whose file name matches this glob (``"AIR_*"``: one radar's files of P-GPR).
 
     Returns
     -------
@@ -231,8 +234,10 @@ def read_yolo(path, *, split: str = "train", names=None, kinds=None, pixel_map=N
         if not (p / "images").is_dir():
             raise FormatError(p, "not a YOLO dataset: no data.yaml and no images/ folder")
         images = yolo_images(p)
+    if pattern is not None:
+        images = [im for im in images if fnmatch(im.name, pattern)]
     if not images:
-        raise FormatError(p, f"a YOLO dataset with no pictures ({split})")
+        raise FormatError(p, f"a YOLO dataset with no pictures ({split}" + (f", {pattern}" if pattern else "") + ")")
     n_names = len(names) if names is not None else None
     records = []
     for img in images:
