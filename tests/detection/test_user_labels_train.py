@@ -85,3 +85,43 @@ def test_fine_tuning_bad_arguments_one_line(tmp_path, user_set, args, msg):
     assert r.returncode != 0
     assert msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert not (tmp_path / "x" / "checkpoint.pt").exists()
+
+
+def test_fine_tuning_on_a_yolo_set_with_kinds_names_them_in_the_weights_and_in_detect(tmp_path):
+    """A one-class start widened to two kinds, trained on YOLO pictures; the weights and their detections name
+    the kinds (each detection one of them, its share a probability)."""
+    from gpr3d.detection.weights import load_weights
+    from tests.cli.test_labels_cli import PM, _yolo
+
+    root = _yolo(tmp_path / "ds")
+    out = tmp_path / "ft"
+    r = run_cli("train", "detector", "--init", "default", "--kinds", "rebar,pvc_pipe", "--labels", root,
+                "--class-names", "steel,pipe", "--class-kinds", "pipe=pvc_pipe", "--pixel-map", PM,
+                "--labels-fraction", "1", "--freeze", "2", "--steps", "2", "--batch", "2", "--warmup", "1",
+                "--out", out, "--no-progress")
+    assert r.returncode == 0, r.stderr
+    model, _, prov = load_weights(out / "weights.pt")
+    assert model.gpr3d_kinds == ["rebar", "pvc_pipe"] and prov["config"]["freeze"] == 2
+    old, _, _ = load_weights()
+    # the frozen stem did not move; the widened head did
+    assert torch.equal(model.backbone.body.conv1.weight, old.backbone.body.conv1.weight)
+    assert model.roi_heads.box_predictor.cls_score.out_features == 3
+    d = tmp_path / "d.json"
+    r = run_cli("detect", root / "images" / "b0.png", "--pixel-map", PM, "--weights", out / "weights.pt",
+                "--score", "0", "--depth", "none", "--out", d)
+    assert r.returncode == 0, r.stderr
+    targets = json.loads(d.read_text())["targets"]
+    assert targets and all(t["kind"] in ("rebar", "pvc_pipe") and 0.5 <= t["kind_score"] <= 1 for t in targets)
+
+
+def test_coco_category_names_map_onto_kinds(tmp_path, user_set):
+    from gpr3d.io.labelled import read_labelled
+
+    recs = read_labelled(user_set)
+    names = {lab["source_name"] for _, r in recs for lab in r["labels"]}
+    first = sorted(names)[0]
+    mapped = read_labelled(user_set, kinds=f"{first}=tank")
+    for (_, a), (_, b) in zip(recs, mapped):
+        for la, lb in zip(a["labels"], b["labels"]):
+            assert lb["kind"] == ("tank" if la["source_name"] == first else la["kind"])
+            assert lb["category"] == (5 if la["source_name"] == first else la["category"])

@@ -2,9 +2,14 @@
 
 from importlib.resources import files
 
-__all__ = ["example_dzt"]
+__all__ = ["example_dzt", "example_pgpr"]
 
 
 def example_dzt():
     """Path of the embedded example recording (GSSI 400 MHz, MIT licence, from GPRPy)."""
     return files(__name__) / "FILE____032.DZT"
+
+
+def example_pgpr():
+    """Folder of the embedded real labelled 1.6 GHz B-scan (P-GPR, CC BY 4.0): ``images/`` and ``labels/`` (YOLO)."""
+    return files(__name__) / "pgpr"

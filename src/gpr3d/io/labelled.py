@@ -7,8 +7,9 @@ reads it with :func:`gpr3d.io.yolo.read_yolo` or :func:`gpr3d.io.userlabels.read
 
 from __future__ import annotations
 
+from gpr3d.io.coco import CATEGORIES
 from gpr3d.io.userlabels import read_user_labels
-from gpr3d.io.yolo import is_yolo, read_yolo
+from gpr3d.io.yolo import is_yolo, parse_kinds, read_yolo
 
 __all__ = ["read_labelled"]
 
@@ -23,7 +24,9 @@ def read_labelled(path, *, pixel_map=None, split: str = "train", names=None, kin
         YOLO dataset (``data.yaml`` or a folder with ``images/``), COCO ``.json``, VOC ``.xml`` or a folder of them.
     pixel_map : str or dict, optional
         The time axis of pictures (``s_per_px=...``); required for YOLO datasets.
-    split, names, kinds, frequency_hz, pattern
+    kinds : str or dict, optional
+        Class (or COCO/VOC category) name -> target kind, ``"hyperbola=rebar"`` (:func:`gpr3d.io.yolo.parse_kinds`).
+    split, names, frequency_hz, pattern
         For YOLO datasets: see :func:`gpr3d.io.yolo.read_yolo`.
 
     Returns
@@ -41,4 +44,12 @@ def read_labelled(path, *, pixel_map=None, split: str = "train", names=None, kin
     if is_yolo(path):
         return read_yolo(path, split=split, names=names, kinds=kinds, pixel_map=pixel_map, frequency_hz=frequency_hz,
                          pattern=pattern)
-    return read_user_labels(path, pixel_map=pixel_map)
+    records = read_user_labels(path, pixel_map=pixel_map)
+    mapping = parse_kinds(kinds)
+    if mapping:  # COCO/VOC category names mapped onto kinds as YOLO class names are
+        for _, labels in records:
+            for lab in labels["labels"]:
+                kind = mapping.get(str(lab.get("source_name", "")).strip().lower())
+                if kind:
+                    lab["kind"], lab["category"] = kind, CATEGORIES.index(kind) + 1
+    return records

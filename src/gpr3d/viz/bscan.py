@@ -39,6 +39,8 @@ def plot_bscan(
     boxes=None,
     apexes=None,
     title: str | None = None,
+    box_labels=None,
+    truth_boxes=None,
 ):
     """Draw ``survey`` as an image on ``ax`` (created if None); returns the axes.
 
@@ -52,6 +54,8 @@ def plot_bscan(
     clip_percentile : colour limits at this percentile of the absolute amplitude.
     boxes : iterable of ``(trace_start, t_start_s, trace_end, t_end_s)`` to outline.
     apexes : iterable of ``(trace, t_s)`` (times from the first sample) to mark with a cross.
+    box_labels : a text per box (e.g. its kind and score), written above it.
+    truth_boxes : boxes like ``boxes`` drawn dashed in yellow (the labels, to compare).
     """
     check_plot_args(cmap=cmap, clip_percentile=clip_percentile, axis=axis)
     plt = pyplot()
@@ -86,17 +90,28 @@ def plot_bscan(
     ax.set_ylabel(ylabel)
     if title:
         ax.set_title(title, fontsize=10)
-    if boxes is not None:
-        from matplotlib.patches import Rectangle
+    from matplotlib.patches import Rectangle
 
-        for b in boxes:
-            i0, t0, i1, t1 = b[:4]
-            xa = np.interp([i0, i1], np.arange(survey.n_traces), x)
-            if axis == "depth":
-                ya = np.interp(np.array([t0, t1]), survey.times_s, survey.depths_m(eps_r))
-            else:
-                ya = (np.array([t0, t1]) - survey.t0_s) * 1e9
-            ax.add_patch(Rectangle((xa[0], ya[0]), xa[1] - xa[0], ya[1] - ya[0], fill=False, ec="cyan", lw=1.2))
+    def outline(b, **style):
+        i0, t0, i1, t1 = b[:4]
+        xa = np.interp([i0, i1], np.arange(survey.n_traces), x)
+        if axis == "depth":
+            ya = np.interp(np.array([t0, t1]), survey.times_s, survey.depths_m(eps_r))
+        else:
+            ya = (np.array([t0, t1]) - survey.t0_s) * 1e9
+        ax.add_patch(Rectangle((xa[0], ya[0]), xa[1] - xa[0], ya[1] - ya[0], fill=False, **style))
+        return xa[0], ya[0]
+
+    for b in truth_boxes if truth_boxes is not None else ():
+        outline(b, ec="yellow", lw=1.0, ls="--")
+    if box_labels is not None and (boxes is None or len(box_labels) != len(boxes)):
+        from gpr3d.core.errors import InvalidDataError
+
+        raise InvalidDataError(f"{len(box_labels)} box labels for {0 if boxes is None else len(boxes)} boxes")
+    for k, b in enumerate(boxes if boxes is not None else ()):
+        xa, ya = outline(b, ec="cyan", lw=1.2)
+        if box_labels is not None:
+            ax.text(xa, ya, str(box_labels[k]), color="cyan", fontsize=6, va="bottom", ha="left")
     if apexes is not None:
         for tr, ts in apexes:
             xa = float(np.interp(tr, np.arange(survey.n_traces), x))
