@@ -77,6 +77,42 @@ def evaluate(det, records):
     return m
 
 
+def worst_cases(det, recs, k: int, folder: Path) -> list[str]:
+    """Overlays of the ``k`` records with the most labels missed at IoU 0.5 (score >= 0.5), and a line each."""
+    import numpy as np
+
+    from gpr3d.detection.evaluate import box_matches
+    from gpr3d.viz.bscan import save_bscan_png
+
+    rows = []
+    for survey, lab in recs:
+        res = det.detect(survey, score_threshold=0.5)
+        px = np.array([1.0, 1 / survey.dt_s, 1.0, 1 / survey.dt_s])
+        truth = lab["labels"]
+        hits = box_matches([np.asarray(x["box"]) * px for x in truth], [x["kind"] for x in truth],
+                           [np.asarray(t["box"]) * px for t in res["targets"]], [t["kind"] for t in res["targets"]],
+                           [t["score"] for t in res["targets"]])
+        missed = [x["kind"] for x, h in zip(truth, hits) if h is None]
+        wrong = sum(bool(h) and not h[2] for h in hits)
+        false = len(res["targets"]) - sum(h is not None for h in hits)
+        rows.append((len(missed), false, wrong, missed, survey, lab, res))
+    rows.sort(key=lambda r: (-r[0], -r[1]))
+    folder.mkdir(parents=True, exist_ok=True)
+    out = [f"Worst {k} B-scans (most labels missed at IoU 0.5, score >= 0.5), overlays in "
+           f"{folder.relative_to(ROOT) if folder.is_relative_to(ROOT) else folder}:"]
+    for n_miss, false, wrong, missed, survey, lab, res in rows[:k]:
+        name = Path(lab["image"]).stem
+        save_bscan_png(survey, folder / f"worst_{name}.png", cmap="gray", boxes=[t["box"] for t in res["targets"]],
+                       box_labels=[f"{t['kind']} {t['score']:.2f}" for t in res["targets"]],
+                       truth_boxes=[x["box"] for x in lab["labels"]],
+                       title=f"{name} (P-GPR val): {n_miss} of {len(lab['labels'])} labels missed, {false} false, "
+                             f"{wrong} of the wrong kind; labels dashed")
+        kinds = ", ".join(f"{missed.count(m)} {m}" for m in sorted(set(missed))) or "none"
+        out.append(f"- {name}: {n_miss} of {len(lab['labels'])} missed ({kinds}), {false} false boxes, {wrong} found "
+                   f"with the wrong kind (`worst_{name}.png`)")
+    return out
+
+
 def _row(name, what, m):
     return (f"| {name} | {what} | {m['mAP@0.5']:.3f} | {m['mAP@0.75']:.3f} | {m['mAP']:.3f} | {m['AR@10']:.3f} | "
             f"{m['AR@100']:.3f} | {m['recall@0.5']:.3f} |")
@@ -88,6 +124,9 @@ def main(argv=None):
     p.add_argument("--pgpr", default=str(PGPR_DEFAULT), help="P-GPR folder (train/ and val/)")
     p.add_argument("--split", default="val")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
+    p.add_argument("--worst", type=int, default=0, help="overlays of the K B-scans with the most missed labels "
+                   "(first detector), into --figures")
+    p.add_argument("--figures", default=str(ROOT / "docs" / "figures" / "pgpr"))
     args = p.parse_args(argv)
     recs = pgpr_records(args.pgpr, args.split)
     devices = {dev: [r for r in recs if Path(r[1]["image"]).name.startswith(dev + "_")] for dev in ("AIR", "IECAS")}
@@ -109,6 +148,8 @@ def main(argv=None):
             if what == args.split:
                 timing.append(f"{name}: {m['s_per_window'] * 1e3:.0f} ms per window, {m['wall_s']:.0f} s for the set")
             print(lines[-1], flush=True)
+        if args.worst and spec == args.detectors[0]:
+            lines += ["", *worst_cases(det, recs, args.worst, Path(args.figures)), ""]
     for name, m50, m, rec in PUBLISHED:
         lines.append(f"| {name} | P-GPR test, class-averaged | {m50:.3f} | - | {m:.3f} | - | - | "
                      f"{'-' if rec is None else f'{rec:.3f}'} |")

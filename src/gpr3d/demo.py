@@ -409,16 +409,10 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
     return row
 
 
-def _box_iou(a, b) -> float:
-    ix = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
-    iy = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
-    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - ix * iy
-    return ix * iy / union if union > 0 else 0.0
-
-
 def _pgpr_rows(det, out: Path, log) -> dict:
     """The detector on the embedded real P-GPR B-scan (1.6 GHz, a wall with rebars and pipes), against its labels."""
     from gpr3d.data import example_pgpr
+    from gpr3d.detection.evaluate import box_matches
     from gpr3d.io.yolo import read_yolo
     from gpr3d.viz.bscan import save_bscan_png
 
@@ -430,17 +424,12 @@ def _pgpr_rows(det, out: Path, log) -> dict:
     wall = time.perf_counter() - t
     truth = labels["labels"]
     # one to one, best score first: a label is found by a box at IoU >= 0.5, of the right kind or not
-    used, found, right = set(), 0, 0
-    for tg in res["targets"]:
-        # boxes compared in traces and samples (IoU does not depend on the units of an axis)
-        cand = [(_box_iou([tg["box"][0], tg["box"][1] / survey.dt_s, tg["box"][2], tg["box"][3] / survey.dt_s],
-                          [lab["box"][0], lab["box"][1] / survey.dt_s, lab["box"][2], lab["box"][3] / survey.dt_s]), j)
-                for j, lab in enumerate(truth) if j not in used]
-        best = max(cand, default=(0.0, -1))
-        if best[0] >= 0.5:
-            used.add(best[1])
-            found += 1
-            right += int(tg["kind"] == truth[best[1]]["kind"])
+    px = np.array([1.0, 1 / survey.dt_s, 1.0, 1 / survey.dt_s])  # traces and samples
+    hits = box_matches([np.asarray(lab["box"]) * px for lab in truth], [lab["kind"] for lab in truth],
+                       [np.asarray(tg["box"]) * px for tg in res["targets"]], [tg["kind"] for tg in res["targets"]],
+                       [tg["score"] for tg in res["targets"]])
+    found = sum(h is not None for h in hits)
+    right = sum(bool(h and h[2]) for h in hits)
     kinds = [tg["kind"] for tg in res["targets"]]
     named = ", ".join(f"{kinds.count(k)} {k}" for k in sorted(set(kinds))) or "none"
     truth_kinds = [lab["kind"] for lab in truth]

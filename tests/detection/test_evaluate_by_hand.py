@@ -127,3 +127,19 @@ def test_evaluate_detector_bookkeeping():
     for k, v in want.items():
         assert m[k] == pytest.approx(v, abs=1e-12), k
     assert m["mAP@0.5"] == pytest.approx(1.0, abs=1e-12)  # every truth boxed exactly, above the one false box
+
+
+def test_box_matches_one_to_one_by_score_at_the_iou_limit():
+    from gpr3d.detection.evaluate import box_matches
+
+    true = [[0.0, 0, 10, 10], [20, 0, 30, 10], [50, 0, 60, 10]]
+    # found 1 (score 0.9) covers half of truth 0 (IoU 50 / 100 = 0.5, the limit: a match) and is matched first,
+    # so found 0 (0.5), which fits truth 0 exactly, finds it taken; found 2 (0.7) meets truth 1 at IoU 1/3 (under
+    # the limit); found 3 (0.8) is truth 2 exactly, of the wrong kind
+    found = [[0.0, 0, 10, 10], [0, 0, 5, 10], [25, 0, 35, 10], [50, 0, 60, 10]]
+    got = box_matches(true, ["rebar", "rebar", "void"], found, ["rebar", "void", "void", "rebar"], [0.5, 0.9, 0.7, 0.8])
+    assert got[0] == (1, pytest.approx(0.5), False)  # the better-scored box wins truth 0, although found 0 fits it
+    assert got[1] is None
+    assert got[2] == (3, pytest.approx(1.0), False)
+    assert box_matches(true, ["a"] * 3, [], [], []) == [None, None, None]
+    assert box_matches([], [], found, ["a"] * 4, [1, 1, 1, 1]) == []

@@ -22,7 +22,7 @@ import numpy as np
 
 from gpr3d.core.deps import require
 
-__all__ = ["coco_metrics", "apex_matches", "evaluate_detector"]
+__all__ = ["coco_metrics", "apex_matches", "box_matches", "evaluate_detector"]
 
 
 def coco_metrics(gt_boxes: list[np.ndarray], det_boxes: list[np.ndarray], det_scores: list[np.ndarray], *,
@@ -100,6 +100,31 @@ def apex_matches(true_apexes, found_apexes, found_scores, *, max_traces: float, 
     if return_found:
         return int(used.sum()), false, used
     return int(used.sum()), false
+
+
+def box_matches(true_boxes, true_kinds, found_boxes, found_kinds, found_scores, *, iou: float = 0.5):
+    """One-to-one matching of found boxes to true ones at IoU >= ``iou``, best score first.
+
+    Boxes ``[x0, y0, x1, y1]`` in one unit per axis (traces and samples, say). Returns a list, per
+    true box, of ``None`` (missed) or ``(found index, IoU, kind right)``.
+    """
+    true = np.asarray(true_boxes, float).reshape(-1, 4)
+    found = np.asarray(found_boxes, float).reshape(-1, 4)
+    out: list = [None] * len(true)
+    for j in np.argsort(-np.asarray(found_scores, float).reshape(-1), kind="stable"):
+        free = [k for k in range(len(true)) if out[k] is None]
+        if not free:
+            break
+        b = found[j]
+        ix = np.clip(np.minimum(true[free, 2], b[2]) - np.maximum(true[free, 0], b[0]), 0, None)
+        iy = np.clip(np.minimum(true[free, 3], b[3]) - np.maximum(true[free, 1], b[1]), 0, None)
+        inter = ix * iy
+        union = (true[free, 2] - true[free, 0]) * (true[free, 3] - true[free, 1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
+        v = np.where(union > 0, inter / np.where(union > 0, union, 1), 0.0)
+        k = int(np.argmax(v))
+        if v[k] >= iou:
+            out[free[k]] = (int(j), float(v[k]), true_kinds[free[k]] == found_kinds[j])
+    return out
 
 
 def evaluate_detector(detector, records, *, score_threshold: float = 0.5, apex_traces: float = 3.0,

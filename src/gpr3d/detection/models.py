@@ -5,7 +5,7 @@ and finds hyperbolas: one class, ``hyperbola`` (label 1), or with ``kinds`` one 
 target kind (label ``k + 1`` for ``kinds[k]``). A Faster R-CNN with kinds scores each box
 by how likely it is a target of any kind (one minus the background probability) and
 names its most likely kind with that kind's share (``kind_scores``), so a hyperbola whose
-kind is in doubt is still found (:class:`KindRoIHeads`). Names (``MODELS``):
+kind is in doubt is still found (``KindRoIHeads``, made on first use). Names (``MODELS``):
 
 * ``frcnn_lean`` (the default): Faster R-CNN on a ResNet-18 cut after its third
   stage, a 128-channel FPN, anchors shaped for hyperbola boxes (wide and flat to
@@ -27,7 +27,7 @@ from functools import partial
 from gpr3d.core.deps import require, resolve_device  # noqa: F401 - resolve_device kept here for callers
 from gpr3d.core.errors import InvalidDataError
 
-__all__ = ["MODELS", "build_model", "count_parameters", "resolve_device", "KindRoIHeads", "widen_to_kinds"]
+__all__ = ["MODELS", "build_model", "count_parameters", "resolve_device", "widen_to_kinds"]
 
 MODELS = ("frcnn_lean", "frcnn_r18", "frcnn_r50", "frcnn_r101", "frcnn_mobilenet", "retinanet_r18", "fcos_r18",
           "ssdlite")
