@@ -36,10 +36,16 @@ def test_detect_takes_a_picture_with_its_time_axis(tmp_path):
     out = tmp_path / "d.json"
     r = run_cli("detect", root / "images" / "b0.png", "--pixel-map", PM, "--frequency", "1.6e9", "--out", out)
     assert r.returncode == 0, r.stderr
+    from gpr3d.detection.infer import load_detector
+
+    kinds = load_detector().kinds
     d = json.loads(out.read_text())
     assert (d["n_traces"], d["dt_s"]) == (300, 3.125e-11)
     for t in d["targets"]:
-        assert t["kind"] == "target" and t["kind_score"] is None  # the shipped one-class model names no kind
+        if kinds:  # the kind it names, with its share of the score: at least an even one
+            assert t["kind"] in kinds and 1 / len(kinds) - 1e-6 <= t["kind_score"] <= 1
+        else:  # a one-class model names no kind
+            assert t["kind"] == "target" and t["kind_score"] is None
         assert 0 <= t["box"][0] <= t["box"][2] <= 299 and 0 <= t["box"][1] <= t["box"][3] <= 63 * 3.125e-11
 
 

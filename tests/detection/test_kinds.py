@@ -234,3 +234,39 @@ def test_evaluation_averages_over_the_kinds_a_detector_names():
     assert m["by_kind"]["mAP@0.5"] == pytest.approx(0.5)  # the pipe called a rebar: pipe AP 0
     Stub.kinds = None
     assert "by_kind" not in evaluate_detector(Stub(), [(s, lab)])
+
+
+def test_a_detector_of_kinds_starts_one_of_some_of_them_with_their_own_rows():
+    sd = widen_to_kinds(build_model("frcnn_lean").state_dict(), KINDS)
+    torch.manual_seed(1)
+    sd = {k: (v + torch.randn_like(v) if "box_predictor" in k else v) for k, v in sd.items()}  # every row its own
+    out = widen_to_kinds(sd, ["pvc_pipe", "rebar"], from_kinds=KINDS)
+    w, ow = sd["roi_heads.box_predictor.cls_score.weight"], out["roi_heads.box_predictor.cls_score.weight"]
+    assert torch.equal(ow, w[[0, 3, 1]])  # background, pvc_pipe, rebar
+    assert torch.equal(out["roi_heads.box_predictor.cls_score.bias"], sd["roi_heads.box_predictor.cls_score.bias"][[0, 3, 1]])
+    bw = sd["roi_heads.box_predictor.bbox_pred.weight"]
+    assert torch.equal(out["roi_heads.box_predictor.bbox_pred.weight"], torch.cat([bw[0:4], bw[12:16], bw[4:8]]))
+    bb = sd["roi_heads.box_predictor.bbox_pred.bias"]
+    assert torch.equal(out["roi_heads.box_predictor.bbox_pred.bias"], torch.cat([bb[0:4], bb[12:16], bb[4:8]]))
+    model = build_model("frcnn_lean", kinds=["pvc_pipe", "rebar"])
+    model.load_state_dict(out)  # it fits
+    with pytest.raises(InvalidDataError) as err:
+        widen_to_kinds(sd, ["rebar", "gravel"], from_kinds=KINDS)
+    assert str(err.value) == ("the detector names rebar, steel_pipe, pvc_pipe, void, tank: it cannot start gravel")
+
+
+def test_training_from_a_detector_of_kinds_checks_the_kinds_first(tmp_path):
+    from gpr3d.detection.train import TrainConfig, train_detector
+    from gpr3d.detection.weights import save_weights
+
+    save_weights(build_model("frcnn_lean", kinds=["rebar", "void"]), "frcnn_lean", WindowConfig().to_dict(),
+                 tmp_path / "k.pt", kinds=["rebar", "void"])
+    cfg = TrainConfig(out=str(tmp_path / "run"), init=str(tmp_path / "k.pt"), kinds=["rebar", "tank"], steps=1, batch=2)
+    with pytest.raises(GPR3DError) as err:
+        train_detector(cfg, lambda i: None, progress=False, log=lambda *a: None)
+    assert str(err.value) == f"--init {tmp_path / 'k.pt'}: names rebar, void; it cannot start tank"
+    cfg = TrainConfig(out=str(tmp_path / "run2"), init=str(tmp_path / "k.pt"), steps=1, batch=2,
+                      window={**WindowConfig().to_dict(), "overlap": 0.25})
+    with pytest.raises(GPR3DError) as err:
+        train_detector(cfg, lambda i: None, progress=False, log=lambda *a: None)
+    assert str(err.value) == f"--init {tmp_path / 'k.pt'}: made for another window; it cannot start 'frcnn_lean'"

@@ -178,12 +178,14 @@ def __getattr__(name):  # KindRoIHeads is built on first use, so that importing 
     raise AttributeError(name)
 
 
-def widen_to_kinds(state_dict: dict, kinds) -> dict:
-    """A one-class Faster R-CNN state dict made into one of ``len(kinds)`` kinds that finds the same boxes.
+def widen_to_kinds(state_dict: dict, kinds, from_kinds=None) -> dict:
+    """A Faster R-CNN state dict made into one that names ``kinds``.
 
-    Each kind starts as a copy of ``hyperbola`` (its class row and box regression), its
-    logit lowered by ``log(len(kinds))``, so that ``1 - p(background)`` and every box are
-    those of the one-class model; training then tells the kinds apart.
+    From a one-class model (``from_kinds`` None): each kind starts as a copy of
+    ``hyperbola`` (its class row and box regression), its logit lowered by
+    ``log(len(kinds))``, so that ``1 - p(background)`` and every box are those of the
+    one-class model; training then tells the kinds apart. From a model of
+    ``from_kinds``: each kind keeps its own rows (``kinds`` must be among them).
     """
     import math
 
@@ -191,11 +193,22 @@ def widen_to_kinds(state_dict: dict, kinds) -> dict:
     out = dict(state_dict)
     k = len(kinds)
     w, b = state_dict["roi_heads.box_predictor.cls_score.weight"], state_dict["roi_heads.box_predictor.cls_score.bias"]
+    bw, bb = state_dict["roi_heads.box_predictor.bbox_pred.weight"], state_dict["roi_heads.box_predictor.bbox_pred.bias"]
+    if from_kinds:
+        missing = [x for x in kinds if x not in from_kinds]
+        if missing or w.shape[0] != len(from_kinds) + 1:
+            raise InvalidDataError(f"the detector names {', '.join(from_kinds)}: it cannot start "
+                                   f"{', '.join(missing) or 'these kinds'}")
+        rows = [0] + [list(from_kinds).index(x) + 1 for x in kinds]
+        box_rows = [4 * r + i for r in rows for i in range(4)]
+        out["roi_heads.box_predictor.cls_score.weight"], out["roi_heads.box_predictor.cls_score.bias"] = w[rows], b[rows]
+        out["roi_heads.box_predictor.bbox_pred.weight"] = bw[box_rows]
+        out["roi_heads.box_predictor.bbox_pred.bias"] = bb[box_rows]
+        return out
     if w.shape[0] != 2:
         raise InvalidDataError(f"only a one-class detector can be widened to kinds (this one has {w.shape[0] - 1})")
     out["roi_heads.box_predictor.cls_score.weight"] = torch.cat([w[:1]] + [w[1:2]] * k)
     out["roi_heads.box_predictor.cls_score.bias"] = torch.cat([b[:1]] + [b[1:2] - math.log(k)] * k)
-    bw, bb = state_dict["roi_heads.box_predictor.bbox_pred.weight"], state_dict["roi_heads.box_predictor.bbox_pred.bias"]
     out["roi_heads.box_predictor.bbox_pred.weight"] = torch.cat([bw[:4]] + [bw[4:8]] * k)
     out["roi_heads.box_predictor.bbox_pred.bias"] = torch.cat([bb[:4]] + [bb[4:8]] * k)
     return out

@@ -159,19 +159,22 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
         init, init_window, _ = load_weights(cfg.init)
         init_kinds = getattr(init, "gpr3d_kinds", None)
         kinds = kinds if kinds is not None else init_kinds
-        if init_window.to_dict() != cfg.window or (init_kinds and init_kinds != kinds):
-            raise GPR3DError(f"--init {cfg.init}: made for another window or other kinds; it cannot start "
-                             f"{cfg.model!r} with kinds {kinds}")
+        if init_window.to_dict() != cfg.window:
+            raise GPR3DError(f"--init {cfg.init}: made for another window; it cannot start {cfg.model!r}")
+        if init_kinds and not set(kinds) <= set(init_kinds):
+            raise GPR3DError(f"--init {cfg.init}: names {', '.join(init_kinds)}; it cannot start "
+                             f"{', '.join(k for k in kinds if k not in init_kinds)}")
     model = build_model(cfg.model, image_size=cfg.window["rows"], kinds=kinds)
     if init is not None:
         state = init.state_dict()
-        if kinds and not getattr(init, "gpr3d_kinds", None):
+        init_kinds = getattr(init, "gpr3d_kinds", None)
+        if kinds and init_kinds != kinds:
             from gpr3d.detection.models import widen_to_kinds
 
             try:
-                state = widen_to_kinds(state, kinds)
+                state = widen_to_kinds(state, kinds, from_kinds=init_kinds)
             except KeyError:
-                raise GPR3DError(f"--init {cfg.init}: only a Faster R-CNN can be widened to kinds") from None
+                raise GPR3DError(f"--init {cfg.init}: only a Faster R-CNN can be given kinds") from None
         try:
             if type(init) is not type(model):
                 raise RuntimeError
