@@ -171,6 +171,9 @@ def test_demo_end_to_end(tmp_path):
         cfg = json.loads((tmp_path / "d" / "reconstruction_masked" / "config.json").read_text())
         assert cfg["eps_r"] == pytest.approx(depth["focus"]["eps_r"])
         assert det["depth"]["real"]["eps_r_header"] == 6.0
+        pg = det["pgpr"]  # the real P-GPR B-scan against its label file (9 lines: 7 steel, 2 pipe)
+        assert (pg["image"], pg["n_labelled"]) == ("IECAS_0032.png", 9) and "detections_pgpr.png" in names
+        assert 0 <= pg["right_kind"] <= pg["found_iou50"] <= 9 and sum(pg["kinds"].values()) == pg["n_detections"]
     pose = summary["stages"]["pose"]  # the fused path beats chained odometry that a gap and gross errors break
     assert {"pose_fused.tum", "pose_vo_alone.tum", "pose_truth.tum", "pose_paths.png"} <= names
     assert pose["path_m"] > 12 and pose["vo_rejected"] >= pose["vo_outliers"] > 0
