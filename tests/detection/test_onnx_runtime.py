@@ -163,14 +163,23 @@ def test_export_writes_a_graph_with_its_names_metadata_and_pytorch_s_answer(tmp_
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.onnx"]  # nothing left beside it
     g = onnx.load(str(out))
     assert [i.name for i in g.graph.input] == ["image"]
-    assert [o.name for o in g.graph.output] == ["boxes", "labels", "scores"]
+    model, _, _ = load_weights()
+    kinds = model.gpr3d_kinds
+    assert [o.name for o in g.graph.output] == ["boxes", "labels", "scores"] + (["kind_scores"] if kinds else [])
     assert OPSET == 17 and {o.domain: o.version for o in g.opset_import}[""] == 17
     meta = json.loads({p.key: p.value for p in g.metadata_props}["gpr3d.detector"])
     _, window, prov = load_weights()
     assert meta == {"window": window.to_dict(), "provenance": prov, "source_weights": DEFAULT_WEIGHTS.name,
-                    "source_sha256": hashlib.sha256(DEFAULT_WEIGHTS.read_bytes()).hexdigest(), "opset": 17}
+                    "source_sha256": hashlib.sha256(DEFAULT_WEIGHTS.read_bytes()).hexdigest(), "opset": 17,
+                    **({"kinds": kinds} if kinds else {})}
     det = OnnxDetector.load(out)
-    assert det.window == window and det.provenance == prov
+    assert det.window == window and det.provenance == prov and det.kinds == kinds
+    # the graph names the kinds PyTorch names, with the same shares
+    im = np.random.default_rng(4).random((3, window.rows, window.traces), dtype=np.float32)
+    (_, s1, l1, k1), = det.predict_windows_kinds([im])
+    (_, s2, l2, k2), = Detector.load().predict_windows_kinds([im])
+    top1, top2 = np.argsort(-s1)[:5], np.argsort(-s2)[:5]
+    assert np.array_equal(l1[top1], l2[top2]) and np.abs(k1[top1] - k2[top2]).max() < 2e-3
     im = np.random.default_rng(3).random((3, window.rows, window.traces), dtype=np.float32)
     (b, s), = det.predict_windows([im])
     (b0, s0), = Detector.load().predict_windows([im])

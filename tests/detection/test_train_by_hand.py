@@ -44,8 +44,8 @@ class Items:
 
     made = []
 
-    def __init__(self, source, n, cfg=None, *, seed=0, flip=True):
-        Items.made.append({"source": source, "n": n, "cfg": cfg, "seed": seed})
+    def __init__(self, source, n, cfg=None, *, seed=0, flip=True, kinds=None):
+        Items.made.append({"source": source, "n": n, "cfg": cfg, "seed": seed, **({"kinds": kinds} if kinds else {})})
         self.n = n
 
     def __len__(self):
@@ -59,8 +59,8 @@ class Items:
 def stand_ins(monkeypatch):
     seen, built = [], []
 
-    def build(name, image_size=256):
-        built.append((name, image_size))
+    def build(name, image_size=256, kinds=None):
+        built.append((name, image_size) + ((kinds,) if kinds else ()))
         return Tiny(seen)
 
     Items.made = []

@@ -160,12 +160,14 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
         init_kinds = getattr(init, "gpr3d_kinds", None)
         kinds = kinds if kinds is not None else init_kinds
         if init_window.to_dict() != cfg.window:
-            raise GPR3DError(f"--init {cfg.init}: made for another window; it cannot start {cfg.model!r}")
+            raise GPR3DError(f"--init {cfg.init}: made for another model or window; it cannot start {cfg.model!r}")
         if init_kinds and not set(kinds) <= set(init_kinds):
             raise GPR3DError(f"--init {cfg.init}: names {', '.join(init_kinds)}; it cannot start "
                              f"{', '.join(k for k in kinds if k not in init_kinds)}")
     model = build_model(cfg.model, image_size=cfg.window["rows"], kinds=kinds)
     if init is not None:
+        if type(init) is not type(model):
+            raise GPR3DError(f"--init {cfg.init}: made for another model or window; it cannot start {cfg.model!r}")
         state = init.state_dict()
         init_kinds = getattr(init, "gpr3d_kinds", None)
         if kinds and init_kinds != kinds:
@@ -176,8 +178,6 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
             except KeyError:
                 raise GPR3DError(f"--init {cfg.init}: only a Faster R-CNN can be given kinds") from None
         try:
-            if type(init) is not type(model):
-                raise RuntimeError
             model.load_state_dict(state)
         except RuntimeError:
             raise GPR3DError(f"--init {cfg.init}: its weights do not fit {cfg.model!r}") from None

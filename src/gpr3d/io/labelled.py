@@ -7,8 +7,8 @@ reads it with :func:`gpr3d.io.yolo.read_yolo` or :func:`gpr3d.io.userlabels.read
 
 from __future__ import annotations
 
+from gpr3d.io import userlabels
 from gpr3d.io.coco import CATEGORIES
-from gpr3d.io.userlabels import read_user_labels
 from gpr3d.io.yolo import is_yolo, parse_kinds, read_yolo
 
 __all__ = ["read_labelled"]
@@ -44,7 +44,7 @@ def read_labelled(path, *, pixel_map=None, split: str = "train", names=None, kin
     if is_yolo(path):
         return read_yolo(path, split=split, names=names, kinds=kinds, pixel_map=pixel_map, frequency_hz=frequency_hz,
                          pattern=pattern)
-    records = read_user_labels(path, pixel_map=pixel_map)
+    records = userlabels.read_user_labels(path, pixel_map=pixel_map)  # looked up now (tests stand in for it)
     mapping = parse_kinds(kinds)
     if mapping:  # COCO/VOC category names mapped onto kinds as YOLO class names are
         for _, labels in records:
