@@ -36,10 +36,11 @@ PUBLISHED = [("Faster R-CNN (pretrained, published)", 0.917, 0.507, 0.968), ("YO
              ("RT-DETR-L (pretrained, published)", 0.509, 0.265, None)]
 
 
-def pgpr_records(folder, split: str = "val"):
+def pgpr_records(folder, split: str = "val", only: str | None = None):
+    """P-GPR's records of ``split`` (``"train,val"``: both), those named by the glob ``only`` alone if given."""
     from gpr3d.io.yolo import read_yolo
 
-    return read_yolo(Path(folder) / split, **PGPR)
+    return [r for part in split.split(",") for r in read_yolo(Path(folder) / part, pattern=only, **PGPR)]
 
 
 def load(spec):
@@ -122,30 +123,34 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("detectors", nargs="+", help="default, weights .pt/.onnx, or a training checkpoint.pt")
     p.add_argument("--pgpr", default=str(PGPR_DEFAULT), help="P-GPR folder (train/ and val/)")
-    p.add_argument("--split", default="val")
+    p.add_argument("--split", default="val", help="val (default), train, or train,val")
+    p.add_argument("--only", default=None, help="these pictures only (a glob, e.g. IECAS_* for one radar's)")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
+    p.add_argument("--name", default="pgpr.md", help="the result file's name in --out")
     p.add_argument("--worst", type=int, default=0, help="overlays of the K B-scans with the most missed labels "
                    "(first detector), into --figures")
     p.add_argument("--figures", default=str(ROOT / "docs" / "figures" / "pgpr"))
     args = p.parse_args(argv)
-    recs = pgpr_records(args.pgpr, args.split)
+    recs = pgpr_records(args.pgpr, args.split, args.only)
     devices = {dev: [r for r in recs if Path(r[1]["image"]).name.startswith(dev + "_")] for dev in ("AIR", "IECAS")}
+    devices = {d: v for d, v in devices.items() if v and len(v) < len(recs)}
     n_boxes = sum(len(r[1]["labels"]) for r in recs)
-    lines = [f"P-GPR {args.split}: {len(recs)} real 1.6 GHz B-scans, {n_boxes} labelled hyperbolas "
-             f"({', '.join(f'{d} {len(v)}' for d, v in devices.items())} B-scans); host CPU {cpu_name()}, "
+    what = f"{args.split}" + (f" {args.only}" if args.only else "")
+    lines = [f"P-GPR {what}: {len(recs)} real 1.6 GHz B-scans, {n_boxes} labelled hyperbolas "
+             f"({', '.join(f'{d} {len(v)}' for d, v in devices.items()) or 'one radar'}); host CPU {cpu_name()}, "
              "torch threads as set by the environment", "",
              "| detector | set, metric kind | mAP@0.5 | mAP@0.75 | mAP@[.5:.95] | AR@10 | AR@100 | recall@0.5 |",
              "|---|---|---|---|---|---|---|---|"]
     timing = []
     for spec in args.detectors:
         det, name = load(spec)
-        for what, sub in [(args.split, recs)] + [(f"{args.split} {d} only", v) for d, v in devices.items()]:
+        for part, sub in [(what, recs)] + [(f"{what} {d} only", v) for d, v in devices.items()]:
             m = evaluate(det, sub)
-            lines.append(_row(name, f"{what}, class-agnostic", m))
+            lines.append(_row(name, f"{part}, class-agnostic", m))
             if "by_kind" in m:
-                lines.append(_row(name, f"{what}, class-averaged ({', '.join(m['by_kind']['kinds'])})",
+                lines.append(_row(name, f"{part}, class-averaged ({', '.join(m['by_kind']['kinds'])})",
                                   m["by_kind"]))
-            if what == args.split:
+            if part == what:
                 timing.append(f"{name}: {m['s_per_window'] * 1e3:.0f} ms per window, {m['wall_s']:.0f} s for the set")
             print(lines[-1], flush=True)
         if args.worst and spec == args.detectors[0]:
@@ -154,7 +159,7 @@ def main(argv=None):
         lines.append(f"| {name} | P-GPR test, class-averaged | {m50:.3f} | - | {m:.3f} | - | - | "
                      f"{'-' if rec is None else f'{rec:.3f}'} |")
     lines += ["", "CPU time: " + "; ".join(timing)]
-    write_table(args.out, "pgpr.md", "\n".join(lines), "eval_pgpr.py", argv)
+    write_table(args.out, args.name, "\n".join(lines), "eval_pgpr.py", argv)
 
 
 if __name__ == "__main__":
