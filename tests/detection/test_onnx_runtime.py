@@ -176,10 +176,13 @@ def test_export_writes_a_graph_with_its_names_metadata_and_pytorch_s_answer(tmp_
     assert det.window == window and det.provenance == prov and det.kinds == kinds
     # the graph names the kinds PyTorch names, with the same shares
     im = np.random.default_rng(4).random((3, window.rows, window.traces), dtype=np.float32)
-    (_, s1, l1, k1), = det.predict_windows_kinds([im])
-    (_, s2, l2, k2), = Detector.load().predict_windows_kinds([im])
-    top1, top2 = np.argsort(-s1)[:5], np.argsort(-s2)[:5]
-    assert np.array_equal(l1[top1], l2[top2]) and np.abs(k1[top1] - k2[top2]).max() < 2e-3
+    (b1, s1, l1, k1), = det.predict_windows_kinds([im])
+    (b2, s2, l2, k2), = Detector.load().predict_windows_kinds([im])
+    # each of the ONNX graph's five best boxes against PyTorch's nearest (near-equal scores may come out in
+    # another order on another CPU, so boxes are paired by place, not rank; float16 weights in both: 2e-3)
+    for j in np.argsort(-s1)[:5]:
+        near = int(np.argmin(np.abs(b2 - b1[j]).max(axis=1)))
+        assert np.abs(b2[near] - b1[j]).max() < 0.1 and l2[near] == l1[j] and abs(k2[near] - k1[j]) < 2e-3
     im = np.random.default_rng(3).random((3, window.rows, window.traces), dtype=np.float32)
     (b, s), = det.predict_windows([im])
     (b0, s0), = Detector.load().predict_windows([im])
