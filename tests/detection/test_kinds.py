@@ -116,13 +116,55 @@ def test_kind_head_inference_in_full():
     assert r["scores"].tolist() == pytest.approx([0.9, 0.005], abs=1e-6)
 
 
+def test_kind_head_limits_small_boxes_overlap_and_training():
+    proposals = [torch.tensor([[10.0, 10, 50, 30], [12, 10, 52, 30], [100, 40, 100.005, 60], [150, 0, 170, 20],
+                               [200, 0, 200.5, 20]])]
+    probs = torch.tensor([[0.1, 0.5, 0.4], [0.2, 0.1, 0.7], [0.05, 0.5, 0.45], [0.3, 0.6, 0.1], [0.9, 0.05, 0.05]])
+    heads = _kind_heads(probs.log(), torch.zeros(5, 12))
+    (r,), _ = heads({}, proposals, [(256, 256)])
+    # RoI 2 is 0.005 px wide: under the 0.01 px that torchvision's head also drops (RoI 4, 0.5 px, stays);
+    # RoI 1 is suppressed by RoI 0
+    assert r["scores"].tolist() == pytest.approx([0.9, 0.7, 0.1], abs=1e-6) and r["labels"].tolist() == [1, 1, 1]
+    # a score equal to the threshold is not above it: at RoI 0's own score nothing is left; just under it, RoI 0
+    thresh = float(torch.softmax(probs.log(), -1)[0, 1:].sum())
+    (r,), _ = _kind_heads(probs.log(), torch.zeros(5, 12), score_thresh=thresh)({}, proposals, [(256, 256)])
+    assert r["scores"].tolist() == []
+    (r,), _ = _kind_heads(probs.log(), torch.zeros(5, 12), score_thresh=thresh - 1e-6)({}, proposals, [(256, 256)])
+    assert r["scores"].tolist() == pytest.approx([0.9], abs=1e-6)
+    proposals[0], probs = proposals[0][:4], probs[:4]
+    heads = _kind_heads(probs.log(), torch.zeros(4, 12), nms_thresh=0.95)  # IoU 38 / 42 is kept now
+    (r,), _ = heads({}, proposals, [(256, 256)])
+    assert r["scores"].tolist() == pytest.approx([0.9, 0.8, 0.7], abs=1e-6) and r["labels"].tolist() == [1, 2, 1]
+    heads = _kind_heads(probs.log(), torch.zeros(4, 12), detections_per_img=2)
+    (r,), _ = heads({}, proposals, [(256, 256)])
+    assert r["scores"].tolist() == pytest.approx([0.9, 0.7], abs=1e-6)
+    # two images: each gets its own RoIs' boxes
+    heads = _kind_heads(probs.log(), torch.zeros(4, 12))
+    (a, b), _ = heads({}, [proposals[0][:2], proposals[0][2:]], [(256, 256), (256, 256)])
+    assert a["scores"].tolist() == pytest.approx([0.9], abs=1e-6) and b["scores"].tolist() == pytest.approx([0.7], abs=1e-6)
+    torch.testing.assert_close(b["boxes"], proposals[0][3:], rtol=0, atol=1e-4)
+    # in training it is torchvision's head: the same losses from the same parts
+    from torchvision.models.detection.roi_heads import RoIHeads
+
+    model = build_model("frcnn_lean", kinds=["rebar", "pvc_pipe"]).train()
+    images, targets = [_window(3)], [{"boxes": torch.tensor([[40.0, 60, 120, 110]]), "labels": torch.tensor([2])}]
+    torch.manual_seed(5)
+    losses = model(images, targets)
+    model.roi_heads.__class__ = RoIHeads
+    torch.manual_seed(5)
+    plain = model(images, targets)
+    assert set(losses) == set(plain) and all(torch.equal(losses[k], plain[k]) for k in plain)
+
+
 def test_with_one_kind_the_head_is_torchvision_s():
     from torchvision.models.detection.roi_heads import RoIHeads
 
     model = build_model("frcnn_lean", kinds=["rebar"]).eval()
     plain = build_model("frcnn_lean").eval()
     plain.load_state_dict(model.state_dict())
-    assert type(plain.roi_heads) is RoIHeads and type(model.roi_heads).__name__ == "KindRoIHeads"
+    from gpr3d.detection.kindheads import KindRoIHeads
+
+    assert type(plain.roi_heads) is RoIHeads and type(model.roi_heads) is KindRoIHeads
     with torch.inference_mode():
         a, b = plain([_window(3)])[0], model([_window(3)])[0]
     assert torch.equal(a["boxes"], b["boxes"]) and torch.equal(a["labels"], b["labels"])
@@ -257,8 +299,11 @@ def test_a_detector_of_kinds_starts_one_of_some_of_them_with_their_own_rows():
     model = build_model("frcnn_lean", kinds=["pvc_pipe", "rebar"])
     model.load_state_dict(out)  # it fits
     with pytest.raises(InvalidDataError) as err:
-        widen_to_kinds(sd, ["rebar", "gravel"], from_kinds=KINDS)
-    assert str(err.value) == ("the detector names rebar, steel_pipe, pvc_pipe, void, tank: it cannot start gravel")
+        widen_to_kinds(sd, ["rebar", "gravel", "sand"], from_kinds=KINDS)
+    assert str(err.value) == "the detector names rebar, steel_pipe, pvc_pipe, void, tank: it cannot start gravel, sand"
+    with pytest.raises(InvalidDataError) as err:  # kinds it names, but a head of another size
+        widen_to_kinds(sd, ["rebar"], from_kinds=["rebar", "void"])
+    assert str(err.value) == "the detector names rebar, void: it cannot start these kinds"
 
 
 def test_training_from_a_detector_of_kinds_checks_the_kinds_first(tmp_path):

@@ -279,17 +279,20 @@ def _joint_case(monkeypatch, *, noise, dw=None, t0=None, model="cylinder"):
 @pytest.mark.parametrize("model", ["cylinder", "point"])
 def test_joint_fit_by_hand_exact_picks(monkeypatch, model):
     (fits, info), x, picks, targets, v, t0 = _joint_case(monkeypatch, noise=0.0, t0=2e-9, model=model)
-    assert info["n_targets"] == 3 and info["eps_r"] == pytest.approx(7.0, rel=1e-6)
+    # SciPy stops on its step tolerance (xtol 1e-8) on a near-flat valley where speed, depth and radius trade off
+    # (the picks are met to 1e-16 s there): SciPy 1.17 stops 1.3e-6 from eps_r 7 for rods, hence rel 1e-5 on eps_r,
+    # 1e-6 on the speed and 1e-7 on the apex time; a wrong path or offset is off by far more
+    assert info["n_targets"] == 3 and info["eps_r"] == pytest.approx(7.0, rel=1e-5)
     assert info["t0_s"] == 2e-9 and info["rms_s"] < 1e-15
     for (x0, top, r), fit, (tr, t) in zip(targets, fits, picks):
         r = r if model == "cylinder" else 0.0
         assert fit.ok and fit.model == model and fit.n_picks == tr.size
         assert fit.x0_m == pytest.approx(x0, abs=1e-7) and fit.depth_m == pytest.approx(top, abs=1e-6)
         assert fit.radius_m == pytest.approx(r, abs=1e-5) and fit.eps_r == info["eps_r"]
-        assert fit.v_m_s == pytest.approx(v, rel=1e-7) and fit.t0_s == 2e-9
+        assert fit.v_m_s == pytest.approx(v, rel=1e-6) and fit.t0_s == 2e-9
         assert fit.apex_trace == pytest.approx(x0 / 0.01, abs=1e-4)
         # at x0 the path goes straight down to the rod's top and back, h/2 to the side
-        assert fit.apex_time_s == pytest.approx(2e-9 + 2 * math.hypot(0.025, top) / v, rel=1e-9, abs=0)
+        assert fit.apex_time_s == pytest.approx(2e-9 + 2 * math.hypot(0.025, top) / v, rel=1e-7, abs=0)
         assert fit.rms_s < 1e-15
     bad = fits[3]
     assert not bad.ok and bad.reason == "fewer than 5 picks"

@@ -501,7 +501,7 @@ def cmd_dataset(args):
 
 def _reconstruct_defaults():
     """The library's reconstruction defaults (the CLI's defaults come from them, so the two cannot drift apart)."""
-    from gpr3d.migration.reconstruct import ReconstructConfig
+    from gpr3d.migration.config import ReconstructConfig
 
     return ReconstructConfig()
 
@@ -973,10 +973,23 @@ def cmd_demo(args):
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+class _Parser(argparse.ArgumentParser):
+    """An epilog given as a function is made when the help is shown (the steps' list imports all of processing)."""
+
+    def format_help(self):
+        if callable(self.epilog):
+            self.epilog = self.epilog()
+        return super().format_help()
+
+
+def _steps_help() -> str:
     from gpr3d.processing.steps import describe_steps
 
-    p = argparse.ArgumentParser(
+    return "processing steps, each NAME[:key=value[:key=value]] (SI units); known steps:\n" + describe_steps()
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(
         prog="gpr3d",
         description="Find and reconstruct buried objects from ground-penetrating radar.",
         epilog=EXAMPLES,
@@ -1047,10 +1060,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--format", default=None, help="force a reader")
     sp.add_argument("--json", action="store_true", help="print JSON instead of text")
 
-    steps_help = "processing steps, each NAME[:key=value[:key=value]] (SI units); known steps:\n" + describe_steps()
     sp = add("show", cmd_show, "draw a B-scan as PNG",
-             "example:\n  gpr3d show FILE____032.DZT --out b.png --steps time_zero dewow --axis depth --cmap hot\n\n"
-             + steps_help)
+             lambda: "example:\n  gpr3d show FILE____032.DZT --out b.png --steps time_zero dewow --axis depth --cmap hot"
+             "\n\n" + _steps_help())
     add_input(sp)
     add_track(sp)
     sp.add_argument("--out", required=True, help="PNG file to write")
@@ -1084,8 +1096,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--steps", nargs="*", default=[], metavar="STEP", help="processing first")
 
     sp = add("process", cmd_process, "process a radar file and write the result",
-             "example:\n  gpr3d process FILE____032.DZT --steps time_zero dewow remove_background "
-             "gain_tpow:power=1.5 --out p.h5\n\n" + steps_help)
+             lambda: "example:\n  gpr3d process FILE____032.DZT --steps time_zero dewow remove_background "
+             "gain_tpow:power=1.5 --out p.h5\n\n" + _steps_help())
     add_input(sp)
     add_track(sp)
     sp.add_argument("--steps", nargs="+", required=True, help="processing steps in order")

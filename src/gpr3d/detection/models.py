@@ -5,7 +5,7 @@ and finds hyperbolas: one class, ``hyperbola`` (label 1), or with ``kinds`` one 
 target kind (label ``k + 1`` for ``kinds[k]``). A Faster R-CNN with kinds scores each box
 by how likely it is a target of any kind (one minus the background probability) and
 names its most likely kind with that kind's share (``kind_scores``), so a hyperbola whose
-kind is in doubt is still found (``KindRoIHeads``, made on first use). Names (``MODELS``):
+kind is in doubt is still found (:class:`gpr3d.detection.kindheads.KindRoIHeads`). Names (``MODELS``):
 
 * ``frcnn_lean`` (the default): Faster R-CNN on a ResNet-18 cut after its third
   stage, a 128-channel FPN, anchors shaped for hyperbola boxes (wide and flat to
@@ -118,64 +118,10 @@ def build_model(name: str = "frcnn_lean", *, image_size: int = 256, kinds=None):
         model.transform.fixed_size = (image_size, image_size)
         _ = ssdlite
     if kinds and isinstance(model, det.FasterRCNN):
-        model.roi_heads.__class__ = __getattr__("KindRoIHeads")  # the same parts; only inference differs
+        from gpr3d.detection.kindheads import KindRoIHeads
+
+        model.roi_heads.__class__ = KindRoIHeads  # the same parts; only inference differs
     return model
-
-
-def _kind_roi_heads():
-    from torchvision.models.detection.roi_heads import RoIHeads
-
-    class _KindRoIHeads(RoIHeads):
-        """Faster R-CNN's box head, scoring boxes by target-or-not and naming the kind apart.
-
-        Training is torchvision's (softmax over background and every kind). At inference
-        each RoI gives one box: the regression of its most likely kind, scored by
-        ``1 - p(background)``, labelled with that kind, ``kind_scores`` its share
-        ``p(kind) / (1 - p(background))``; boxes are then suppressed across kinds (one
-        box a hyperbola). With one kind this is torchvision's own post-processing.
-        """
-
-        def forward(self, features, proposals, image_shapes, targets=None):
-            if self.training:
-                return super().forward(features, proposals, image_shapes, targets)
-            import torch
-            import torch.nn.functional as F
-            from torchvision.ops import boxes as box_ops
-
-            feats = self.box_head(self.box_roi_pool(features, proposals, image_shapes))
-            class_logits, box_regression = self.box_predictor(feats)
-            pred_boxes = self.box_coder.decode(box_regression, proposals)  # (N, classes, 4)
-            probs = F.softmax(class_logits, -1)
-            fg = probs[:, 1:]
-            score = fg.sum(dim=1)
-            best, kind = fg.max(dim=1)
-            label = kind + 1
-            box = pred_boxes[torch.arange(pred_boxes.shape[0], device=pred_boxes.device), label]
-            share = best / score.clamp_min(1e-12)
-            result = []
-            counts = [p.shape[0] for p in proposals]
-            for b, s, lab, sh, shape in zip(box.split(counts), score.split(counts), label.split(counts),
-                                            share.split(counts), image_shapes):
-                b = box_ops.clip_boxes_to_image(b, shape)
-                keep = torch.where(s > self.score_thresh)[0]
-                b, s, lab, sh = b[keep], s[keep], lab[keep], sh[keep]
-                keep = box_ops.remove_small_boxes(b, min_size=1e-2)
-                b, s, lab, sh = b[keep], s[keep], lab[keep], sh[keep]
-                keep = box_ops.nms(b, s, self.nms_thresh)[: self.detections_per_img]
-                result.append({"boxes": b[keep], "labels": lab[keep], "scores": s[keep], "kind_scores": sh[keep]})
-            return result, {}
-
-    _KindRoIHeads.__name__ = _KindRoIHeads.__qualname__ = "KindRoIHeads"
-    _KindRoIHeads.__module__ = __name__
-    return _KindRoIHeads
-
-
-def __getattr__(name):  # KindRoIHeads is built on first use, so that importing this module needs no torchvision
-    if name == "KindRoIHeads":
-        if "KindRoIHeads" not in globals():
-            globals()["KindRoIHeads"] = _kind_roi_heads()
-        return globals()["KindRoIHeads"]
-    raise AttributeError(name)
 
 
 def widen_to_kinds(state_dict: dict, kinds, from_kinds=None) -> dict:

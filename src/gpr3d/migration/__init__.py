@@ -1,6 +1,19 @@
-"""3D migration from arbitrary antenna poses, masking, the traditional grid method, target extraction."""
+"""3D migration from arbitrary antenna poses, masking, the traditional grid method, target extraction.
 
-from gpr3d.core.grid import Grid3D
-from gpr3d.migration.operator import BackProjection, antenna_positions, dot_test
+The names below are imported on first use: ``gpr3d.migration.config`` (what the command line
+reads its defaults from) then costs nothing of numba's or SciPy's start-up.
+"""
 
 __all__ = ["Grid3D", "BackProjection", "antenna_positions", "dot_test"]
+
+
+def __getattr__(name):
+    if name == "Grid3D":
+        from gpr3d.core.grid import Grid3D
+
+        return Grid3D
+    if name in ("BackProjection", "antenna_positions", "dot_test"):
+        from gpr3d.migration import operator
+
+        return getattr(operator, name)
+    raise AttributeError(f"module 'gpr3d.migration' has no attribute {name!r}")

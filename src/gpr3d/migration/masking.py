@@ -9,7 +9,6 @@ What the mask removes, migrated alone, is the noise map.
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import hilbert
 
 from gpr3d.core.errors import InvalidDataError
 
@@ -69,6 +68,8 @@ def image_envelope(image: np.ndarray, *, chunk_voxels: int = 4_000_000) -> np.nd
     Works on slabs of about ``chunk_voxels`` voxels, so the complex temporaries stay small
     (a 1e8-voxel image needs its own size again, not the 16x of one whole transform).
     """
+    from scipy.signal import hilbert  # here: scipy.signal takes seconds to import, and most callers never get here
+
     img = np.asarray(image, dtype=np.float32)
     out = np.empty_like(img)
     step = max(1, chunk_voxels // max(img.shape[1] * img.shape[2], 1))
