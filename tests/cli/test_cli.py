@@ -121,6 +121,27 @@ def test_help_has_examples():
     assert "time_zero" in r.stdout and "example:" in r.stdout
 
 
+def test_the_parser_is_built_without_processing_or_migration_and_its_help_lists_the_steps():
+    # the steps' list and the reconstruction defaults once imported SciPy's signal and stats and numba at every start
+    code = ("import sys; from gpr3d.cli.main import build_parser; p = build_parser(); "
+            "print(sorted(m for m in ('gpr3d.processing', 'gpr3d.migration.reconstruct', 'gpr3d.migration.operator', "
+            "'scipy.signal', 'numba') if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "[]"
+    for cmd in ("show", "process"):
+        out = run_cli(cmd, "--help").stdout
+        assert "known steps:" in out and "gain_tpow[:power,t_ref_s]" in out and "dewow" in out, cmd
+    # the package's names, imported on first use
+    import gpr3d.migration as mig
+    from gpr3d.core.grid import Grid3D
+    from gpr3d.migration.operator import BackProjection
+
+    assert mig.Grid3D is Grid3D and mig.BackProjection is BackProjection
+    with pytest.raises(AttributeError, match="has no attribute 'nosuch'"):
+        mig.nosuch
+
+
 def test_demo_end_to_end(tmp_path):
     r = run_cli("demo", "--out", tmp_path / "d")
     assert r.returncode == 0, r.stderr
