@@ -54,6 +54,7 @@ MODULES = {
     "processing.steps": None, "processing.cscan": None,
     "processing.picking": ["tests/processing"],
     "processing.image": ["tests/processing/test_image.py", "tests/detection/test_windows_by_hand.py"],
+    "processing.analytic": ["tests/processing/test_analytic.py"],
     "migration.operator": None,
     "migration.masking": ["tests/migration/test_masking.py"],
     "migration.velocity": ["tests/migration/test_velocity.py", "-k", "not oblique"],

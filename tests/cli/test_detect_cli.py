@@ -29,6 +29,23 @@ def test_detect_on_the_real_dzt_writes_the_contract(tmp_path):
     assert f"{len(d['targets'])} targets in 1040 traces" in r.stdout
 
 
+def test_detect_on_the_embedded_dzt_imports_neither_scipy_signal_nor_ndimage(tmp_path):
+    # they cost ~1.3 s of start-up; the detector's path uses gpr3d.processing.analytic instead
+    pytest.importorskip("onnxruntime")
+    out = tmp_path / "d.json"
+    code = ("import sys; from gpr3d.cli.main import main; "
+            f"rc = main(['detect', 'src/gpr3d/data/FILE____032.DZT', '--out', {str(out)!r}]); "
+            "print(rc, sorted(m for m in ('scipy.signal', 'scipy.ndimage', 'scipy.stats', 'torch') if m in sys.modules))")
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().splitlines()[-1] == "0 []"
+    d = json.loads(out.read_text())
+    assert d["n_traces"] == 1040 and d["targets"] and all("depth_m" in t for t in d["targets"])
+
+
 @pytest.mark.parametrize("args, msg", [
     (["--score", "2"], "--score must lie in 0..1"),
     (["--weights", "{junk}"], "not a readable weights file"),

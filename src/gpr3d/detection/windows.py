@@ -17,12 +17,11 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
-from scipy.signal import hilbert
 
 from gpr3d.core.deps import require
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.io.coco import BOX_PAD_PERIODS, PixelMap
+from gpr3d.processing.analytic import hilbert_envelope, running_mean
 from gpr3d.processing.image import network_view, record_scale, render_channels as render
 
 __all__ = ["WindowConfig", "Window", "prepare", "windows", "make_window", "record_scale", "rows_interval", "render",
@@ -220,12 +219,12 @@ def apex_of_box(processed: np.ndarray, box, s_per_row: float, *, frequency_hz: f
     trace = 0.5 * (i0 + i1)
     env = None
     if c1 >= c0 and r1 > r0:
-        env = np.abs(hilbert(processed[c0 : c1 + 1].astype(np.float64), axis=1))[:, r0 : r1 + 1]
+        env = hilbert_envelope(processed[c0 : c1 + 1].astype(np.float64), axis=1)[:, r0 : r1 + 1]
     if (left or right) and env is not None and env.max() > 0:
         top = env[:, : max(2, (env.shape[1] + 1) // 2)]
         strong = top >= 0.5 * top.max()
         first = np.where(strong.any(axis=1), np.argmax(strong, axis=1), top.shape[1] + 5).astype(float)
-        smooth = uniform_filter1d(first, max(1, min(5, first.size // 4 or 1)), mode="nearest")
+        smooth = running_mean(first, max(1, min(5, first.size // 4 or 1)))
         cand = np.nonzero(smooth <= smooth.min() + 0.5)[0]
         trace = float(c0 + cand[len(cand) // 2])
     if frequency_hz:

@@ -137,12 +137,12 @@ def _columns(rec: DepthRecord, left_m: float, width_m: float, size: int, smoothe
 
 def _smoothed(rec: DepthRecord, width_m: float, size: int) -> np.ndarray:
     """The traces box-filtered to the column width where several traces share a column (anti-aliasing)."""
-    from scipy.ndimage import uniform_filter1d
+    from gpr3d.processing.analytic import running_mean
 
     if rec.x_m.size < 2:
         return rec.proc
     per = (width_m / size) / max(float(np.median(np.diff(rec.x_m))), 1e-9)
-    return uniform_filter1d(rec.proc, int(round(per)), axis=0, mode="nearest") if per > 1.5 else rec.proc
+    return running_mean(rec.proc, int(round(per)), axis=0) if per > 1.5 else rec.proc
 
 
 def depth_window(rec: DepthRecord, centre_m: float, cfg: DepthConfig, *, smoothed: np.ndarray | None = None):

@@ -2,27 +2,33 @@
 
 Each is wrapped by a :class:`~gpr3d.core.survey.Survey` method (see
 :mod:`gpr3d.processing.steps`) that records the call in the survey's history.
+
+The names below are imported on first use, so that a module of this package that
+needs none of SciPy (``gpr3d.processing.image``, on the detector's path) does not
+pay for SciPy's signal and image packages when it is imported.
 """
 
-from gpr3d.processing.background import remove_background, remove_dc
-from gpr3d.processing.dewow import dewow
-from gpr3d.processing.envelope import envelope
-from gpr3d.processing.filters import bandpass
-from gpr3d.processing.picking import pick_peak
-from gpr3d.processing.gain import gain_agc, gain_curve_sec, gain_sec, gain_tpow
-from gpr3d.processing.resample import path_distance, resample_traces
-from gpr3d.processing.timezero import direct_wave_peak, estimate_time_zero, first_break, shift_traces
+#: where each public name lives
+_HOME = {
+    "remove_background": "background", "remove_dc": "background", "dewow": "dewow", "envelope": "envelope",
+    "bandpass": "filters", "pick_peak": "picking", "gain_agc": "gain", "gain_curve_sec": "gain", "gain_sec": "gain",
+    "gain_tpow": "gain", "path_distance": "resample", "resample_traces": "resample", "direct_wave_peak": "timezero",
+    "estimate_time_zero": "timezero", "first_break": "timezero", "shift_traces": "timezero", "STEPS": "steps",
+}
 
-__all__ = [
-    "remove_background", "remove_dc", "dewow", "envelope", "bandpass", "gain_agc", "gain_curve_sec",
-    "gain_sec", "gain_tpow", "path_distance", "resample_traces", "direct_wave_peak", "estimate_time_zero",
-    "first_break", "shift_traces", "pick_peak", "STEPS",
-]
+__all__ = list(_HOME)
 
 
 def __getattr__(name):
-    if name == "STEPS":
-        from gpr3d.processing.steps import STEPS
+    home = _HOME.get(name)
+    if home is None:
+        raise AttributeError(f"module 'gpr3d.processing' has no attribute {name!r}")
+    from importlib import import_module
 
-        return STEPS
-    raise AttributeError(name)
+    value = getattr(import_module(f"gpr3d.processing.{home}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_HOME))

@@ -10,10 +10,8 @@ rows resampled and equalised) and :func:`render_channels` its 3-channel image
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
-from scipy.signal import hilbert
-
 from gpr3d.core.errors import InvalidDataError
+from gpr3d.processing.analytic import hilbert_envelope, running_mean
 
 __all__ = ["bscan_image", "resample_rows", "normalise_window", "hot_rgb", "network_view", "render_channels",
            "record_scale"]
@@ -79,16 +77,16 @@ def network_view(survey, rows: int, *, dewow: bool = True, background: bool = Tr
         # remove the low-frequency wow: a running mean over about one period of the antenna
         f = survey.frequency_hz or 1.0 / (data.shape[1] * survey.dt_s / 20)
         w = int(np.clip(round(1.0 / (f * survey.dt_s)), 3, data.shape[1] // 2 | 1))
-        data = data - uniform_filter1d(data, w, axis=1, mode="nearest")
+        data = data - running_mean(data, w, axis=1)
     if background:
         data = data - data.mean(axis=0, keepdims=True)
     factor = data.shape[1] / rows
     if factor > 1.5:  # anti-alias before the time axis shrinks
-        data = uniform_filter1d(data, int(round(factor)), axis=1, mode="nearest")
+        data = running_mean(data, int(round(factor)), axis=1)
     out = resample_rows(data.astype(np.float32), rows).astype(np.float64)
     if equalise:
         rms = np.sqrt(np.mean(out**2, axis=0))
-        rms = uniform_filter1d(rms, max(3, rows // 16), mode="nearest")
+        rms = running_mean(rms, max(3, rows // 16))
         floor = 0.05 * float(np.max(rms)) if rms.size else 0.0
         out = out / np.maximum(rms, floor if floor > 0 else 1.0)
     return out.astype(np.float32)
@@ -97,7 +95,7 @@ def network_view(survey, rows: int, *, dewow: bool = True, background: bool = Tr
 def render_channels(block: np.ndarray, style: str = "channels", *, scale: float | None = None) -> np.ndarray:
     """Image ``(3, rows, cols)`` float32 in [0, 1] of a processed block ``(cols traces, rows)``."""
     x = normalise_window(np.asarray(block, dtype=np.float32).T, scale=scale)  # (rows, cols) in [-1, 1]
-    env = np.abs(hilbert(x, axis=0)).astype(np.float32)
+    env = hilbert_envelope(x, axis=0).astype(np.float32)
     if style == "hot":
         return np.ascontiguousarray(hot_rgb(np.clip(env, 0, 1)).transpose(2, 0, 1).astype(np.float32) / 255.0)
     rows = x.shape[0]
