@@ -1,5 +1,6 @@
 import shutil
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -431,3 +432,27 @@ def test_a_file_that_shrinks_while_read(tmp_path, monkeypatch):
     with pytest.raises(FormatError) as e:
         read_dzt(p)
     assert str(e.value) == "k.DZT: file shrank while being read"
+
+
+def test_a_channel_count_the_file_does_not_hold_is_refused(tmp_path):
+    # issue 31: the real one-channel DZT with its header's channel count set to 16 once read 16 "channels" whose
+    # headers were sample bytes (and convert wrote them out)
+    raw = bytearray((Path(gpr3d.__file__).parent / "data" / "FILE____032.DZT").read_bytes())
+    raw[52:54] = struct.pack("<H", 16)
+    p = tmp_path / "sixteen.DZT"
+    p.write_bytes(bytes(raw))
+    with pytest.raises(FormatError) as e:
+        read_dzt(p)
+    assert str(e.value).startswith("sixteen.DZT: header gives 16 channels, but bytes 1024..2047 hold no header of "
+                                   "channel 2 (")
+    assert str(e.value).endswith("): the file holds fewer channels, or is corrupt")
+    # the same file with its true count reads, and written two-channel files still do
+    raw[52:54] = struct.pack("<H", 1)
+    p.write_bytes(bytes(raw))
+    assert len(read_dzt(p)) == 1
+    two = write_dzt(tmp_path / "two.DZT", n_channels=2, n_traces=3, n_samples=8)
+    head = bytearray(two.read_bytes())
+    head[1024 + 6 : 1024 + 8] = struct.pack("<H", 7)  # channel 2's bits per sample: 7
+    two.write_bytes(bytes(head))
+    with pytest.raises(FormatError, match=r"bytes 1024\.\.2047 hold no header of channel 2 \(7 bits, 8 samples"):
+        read_dzt(two)

@@ -182,7 +182,16 @@ def _edit(path, fn):
      "s.h5: written with schema version 2; this gpr3d reads up to 1: upgrade gpr3d"),
     (lambda f: f.__delitem__("surveys"), "s.h5: holds no surveys"),
     (lambda f: f.__delitem__("surveys/0"), "s.h5: holds no surveys"),
-    (lambda f: f["surveys/0"].__delitem__("data"), "s.h5: survey 0 is incomplete or corrupt"),
+    (lambda f: f["surveys/0"].__delitem__("data"), "s.h5: survey 0 has no data set 'data'"),
+    (lambda f: (f["surveys/0"].__delitem__("data"), f["surveys/0"].create_dataset("data", data=np.ones((2, 3, 1)))),
+     "s.h5: survey 0: data is a 3-D float64 data set, not a 2-D array of numbers"),
+    (lambda f: (f["surveys/0"].__delitem__("data"), f["surveys/0"].create_dataset("data", data=np.array([[b"ab"]]))),
+     "s.h5: survey 0: data is a 2-D |S2 data set, not a 2-D array of numbers"),
+    (lambda f: f["surveys/0"].attrs.__delitem__("dt_s"), "s.h5: survey 0 has no dt_s attribute"),
+    (lambda f: f["surveys/0"].attrs.__setitem__("metadata_json", "[1, 2]"),
+     "s.h5: survey 0: its metadata_json holds a list, not an object"),
+    (lambda f: f["surveys/0"].attrs.__setitem__("history_json", "null"),
+     "s.h5: survey 0: its history_json holds null, not a list"),
     (lambda f: f["surveys/0"].attrs.__delitem__("metadata_json"), "s.h5: survey 0 is incomplete or corrupt"),
     (lambda f: f["surveys/0"].attrs.__setitem__("history_json", "{not json"), "s.h5: survey 0 is incomplete"),
     (lambda f: f["surveys/0"].attrs.__setitem__("dt_s", -1.0), "s.h5: survey 0: "),
@@ -222,3 +231,24 @@ def test_writing_nothing_is_refused(tmp_path):
     with pytest.raises(ValueError, match="^nothing to write: empty list of surveys$"):
         write_surveys([], tmp_path / "e.h5")
     assert not list(tmp_path.iterdir())
+
+
+def test_a_declared_size_is_checked_against_the_file_before_anything_is_read(tmp_path, monkeypatch):
+    from gpr3d.io import hdf5
+
+    p = tmp_path / "z.h5"
+    write_survey(Survey(data=np.zeros((256, 512), np.float32), dt_s=1e-10), p)  # 512 KiB of samples
+    _edit(p, lambda f: (f["surveys/0"].__delitem__("data"),
+                        f["surveys/0"].create_dataset("data", data=np.zeros((256, 512), np.float32),
+                                                      compression="gzip")))
+    size = p.stat().st_size
+    ratio = 256 * 512 * 4 / size
+    assert 1 < ratio < 64  # (gzip of zeros; the file's other parts count too)
+    monkeypatch.setattr(hdf5, "_MAX_UNCHECKED_BYTES", 1000)
+    assert read_surveys(p)[0].n_traces == 256  # compressed within the allowed ratio: read
+    monkeypatch.setattr(hdf5, "_MAX_DECLARED_RATIO", ratio * 0.99)
+    with pytest.raises(FormatError, match=rf"^z.h5: survey 0 declares a 256x512 data set \(0.000488 GiB\) in a "
+                                          rf"{size:,}-byte file: truncated or corrupt$"):
+        read_surveys(p)
+    monkeypatch.setattr(hdf5, "_MAX_UNCHECKED_BYTES", 256 * 512 * 4)  # small data sets are never refused
+    assert read_surveys(p)[0].n_traces == 256

@@ -180,7 +180,14 @@ def test_rd7_is_32_bit(tmp_path):
     ("SAMPLES:8\nFREQUENCY:1000\nDISTANCE INTERVAL:?\n", ["'DISTANCE INTERVAL' = '?'"]),
     ("SAMPLES:8\nFREQUENCY:1000\nTIME INTERVAL:?\n", ["'TIME INTERVAL' = '?'"]),
     ("SAMPLES:8\nFREQUENCY:1000\nANTENNA SEPARATION:wide\n", ["'ANTENNA SEPARATION' = 'wide'"]),
-    ("SAMPLES:8\nFREQUENCY:0.5\n", ["sample interval", "implausible"]),  # 2 us
+    ("SAMPLES:8\nFREQUENCY:0.5\n", ["sample interval from FREQUENCY is 2e-06 s, which no radar records"]),  # 2 us
+    # counts that are no counts, intervals no radar records (issue 31: once int(nan) tracebacks, or accepted)
+    ("SAMPLES:nan\nFREQUENCY:1000\n", ["header field SAMPLES = nan is not a whole number"]),
+    ("SAMPLES:inf\nFREQUENCY:1000\n", ["header field SAMPLES = inf is not a whole number"]),
+    ("SAMPLES:8\nFREQUENCY:1000\nLAST TRACE:inf\n", ["header field LAST TRACE = inf is not a whole number"]),
+    ("SAMPLES:8\nFREQUENCY:1000\nLAST TRACE:0\n", ["header field LAST TRACE = 0 is implausible"]),
+    ("SAMPLES:8\nTIMEWINDOW:1e-30\n", ["sample interval from TIMEWINDOW / SAMPLES is 1.25e-40 s"]),
+    ("SAMPLES:8\nFREQUENCY:1e20\n", ["sample interval from FREQUENCY is 1e-26 s"]),
     ("SAMPLES:8\nFREQUENCY:1000\nSTACKS:many\n", ["STACKS", "'many'"]),
 ])
 def test_header_errors_name_the_field(tmp_path, rad, needles):
@@ -207,6 +214,18 @@ def test_the_boundaries_of_the_plausible(tmp_path):
     assert s.shape == (3, 2) and s.dt_s == pytest.approx(1e-6)
     s = read_rd3(_pair(tmp_path, "SAMPLES:1000000\nFREQUENCY:1000\n", np.ones((1, 10**6)), name="long"))[0]
     assert s.shape == (1, 10**6)
+
+
+def test_samples_that_disagree_with_the_data_are_refused_not_sheared(tmp_path):
+    # 4 traces of 8 samples written, the header says 6 samples: once a warning and every trace misaligned
+    d = _pair(tmp_path, "SAMPLES:6\nFREQUENCY:1000\nLAST TRACE:4\n", np.ones((4, 8)))
+    with pytest.raises(FormatError, match=r"^line.rad: SAMPLES = 6 disagrees with the data: line.rd3 holds 4 traces "
+                                          r"\(LAST TRACE\) of 8 samples$"):
+        read_rd3(d)
+    # a file cut at a trace's end fits SAMPLES still: a shorter recording, read with a warning
+    d = _pair(tmp_path, "SAMPLES:4\nFREQUENCY:1000\nLAST TRACE:4\n", np.ones((2, 4)), name="cut")
+    with pytest.warns(TruncatedRecordingWarning, match="LAST TRACE says 4 traces, file holds 2"):
+        assert read_rd3(d)[0].shape == (2, 4)
 
 
 def test_last_trace_more_than_the_file_warns_and_reads_what_is_there(tmp_path):

@@ -1,8 +1,12 @@
 """Format detection and the read entry points: which reader answers, and what a file nobody reads is told."""
 
+import dataclasses
+import struct
+
 import numpy as np
 import pytest
 
+import gpr3d
 from gpr3d import Survey
 from gpr3d.core.errors import FormatError, UnknownFormatError
 from gpr3d.io import registry
@@ -49,8 +53,8 @@ def test_a_sidecar_is_pointed_at_its_data_file(tmp_path, name, data_file):
 def test_an_extension_that_lies_and_one_nobody_reads(tmp_path):
     p = tmp_path / "x.sgy"
     p.write_bytes(b"\0" * 100)
-    with pytest.raises(UnknownFormatError, match="^x.sgy: has a .sgy extension but is not a valid segy file "
-                                                 r"\(corrupt, truncated, or a missing sidecar header\)$"):
+    # one reader owns .sgy: its own reason, not "not a valid file"
+    with pytest.raises(UnknownFormatError, match=r"^x.sgy: is not a valid segy file: not a readable SEG-Y file \("):
         detect_format(p)
     p = tmp_path / "x.h5"
     p.write_bytes(b"\0" * 100)
@@ -100,3 +104,64 @@ def test_register_adds_and_replaces(tmp_path, monkeypatch):
     assert registry.detect_format(p) == "zzz" and registry.read(p).dt_s == 1e-10
     register(Format("zzz", "again", (".zzz",), lambda q: False, fmt.read))
     assert registry.FORMATS["zzz"].description == "again" and len(registry.FORMATS) == 7
+
+
+@pytest.mark.parametrize("where, value, reason", [
+    (6, struct.pack("<H", 7), "header gives 7 bits per sample (expected 8, 16 or 32)"),
+    (4, struct.pack("<H", 0), "header gives 0 samples per trace"),
+    (26, struct.pack("<f", float("nan")), "header field range (ns) = nan is not a positive number"),
+    (52, struct.pack("<H", 0), "header gives 0 channels (expected 1..16)"),
+])
+def test_a_dzt_its_detector_declines_gets_its_reader_s_reason(tmp_path, where, value, reason):
+    # issue 31: these were all "not a valid dzt file (corrupt, truncated, or a missing sidecar header)", and a DZT has
+    # no sidecar; the reason showed only with --format dzt
+    raw = bytearray(write_dzt(tmp_path / "a.DZT", n_traces=4, n_samples=16).read_bytes())
+    raw[where : where + len(value)] = value
+    p = tmp_path / "bad.DZT"
+    p.write_bytes(bytes(raw))
+    for call in (detect_format, read_all):
+        with pytest.raises(FormatError) as e:
+            call(p)
+        assert str(e.value).startswith(f"bad.DZT: is not a valid dzt file: {reason}")
+
+
+def test_paths_that_are_no_files_say_what_they_are(tmp_path):
+    import os
+
+    loop = tmp_path / "loop.DZT"
+    os.symlink(loop, loop)
+    with pytest.raises(FormatError, match=r"^loop.DZT: is a loop of symbolic links, not a file$"):
+        read_all(loop)
+    dangling = tmp_path / "gone.DZT"
+    os.symlink(tmp_path / "nothere.DZT", dangling)
+    with pytest.raises(FormatError, match=r"^gone.DZT: is a symbolic link to .*nothere.DZT, which does not exist$"):
+        read_all(dangling)
+    fifo = tmp_path / "pipe.DZT"
+    os.mkfifo(fifo)
+    with pytest.raises(FormatError, match=r"^pipe.DZT: is a named pipe \(FIFO\), not a regular file"):
+        read_all(fifo)  # (once "file is empty"; opening it would have waited for a writer)
+    with pytest.raises(FormatError, match=r"^nofile.DZT: no such file$"):
+        read_all(tmp_path / "nofile.DZT")
+    with pytest.raises(FormatError, match=r"^a.DZT: no such file$"):
+        read_all(tmp_path / "nodir" / "a.DZT")
+
+
+def test_what_makes_no_survey_is_named_by_its_file_and_memory_is_one_line(tmp_path, monkeypatch):
+    from gpr3d.io import registry
+
+    p = write_dzt(tmp_path / "m.DZT", n_traces=4, n_samples=16)
+
+    def survey_error(path, **kw):
+        raise gpr3d.InvalidDataError("data holds 3 NaN/inf samples")
+
+    def no_memory(path, **kw):
+        raise MemoryError
+
+    fmt = registry.FORMATS["dzt"]
+    monkeypatch.setitem(registry.FORMATS, "dzt", dataclasses.replace(fmt, read=survey_error))
+    with pytest.raises(FormatError, match=r"^m.DZT: data holds 3 NaN/inf samples$"):
+        read_all(p)
+    monkeypatch.setitem(registry.FORMATS, "dzt", dataclasses.replace(fmt, read=no_memory))
+    with pytest.raises(FormatError, match=rf"^m.DZT: reading it needs more memory than this machine has \(the file "
+                                          rf"is {p.stat().st_size:,} bytes; its header may claim far more"):
+        read_all(p)

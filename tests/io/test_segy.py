@@ -377,3 +377,18 @@ def test_is_segy_reads_little_endian_counts_unsigned(tmp_path):
     # the big-endian reading of these fields gives no known format: only the little-endian one can pass
     assert struct.unpack(">H", bytes(raw[3224:3226]))[0] not in (1, 2, 3, 5, 8, 10, 11, 12, 16)
     assert is_segy(p)
+
+
+def test_intervals_no_radar_records_are_refused_where_they_are_read(tmp_path):
+    # issue 31: a text header's "DT S 1e-40" once gave a 4e-42 s record that info, show and migrate went on with
+    p = tmp_path / "t.sgy"
+    _foreign(p, text="GPR DATA WRITTEN BY GPR3D DT S 1e-40")
+    with pytest.raises(gpr3d.GPR3DError) as e:
+        gpr3d.read(p)
+    assert str(e.value) == ("t.sgy: the sample interval from the textual header's DT S is 1e-40 s, which no radar "
+                            "records (expected 1e-14..1e-06 s)")
+    _foreign(p, rev=2, ext=1e-5, bin_interval=1)  # 1e-5 ps: under a hundredth of a picosecond
+    with pytest.raises(gpr3d.GPR3DError, match=r"from the extended sample interval field \(read as ps\) is 1e-17 s"):
+        gpr3d.read(p)
+    _foreign(p, text="GPR DATA WRITTEN BY GPR3D DT S 2.5e-11")  # the text's interval, when plausible, is the one read
+    assert gpr3d.read(p).dt_s == 2.5e-11

@@ -71,8 +71,10 @@ def _print_survey_info(path, surveys, as_json: bool):
             print(f"  eps_r (header)   : {r['eps_r']:.4g}")
         if r["date"]:
             print(f"  recorded         : {r['date']}")
-        if r["positions"]:
+        if r["positions"] and r["length_m"] is not None:
             print(f"  positions        : {r['positions']}; path length {r['length_m']:.4g} m")
+        elif r["positions"]:  # (no positions: the source says why, e.g. a gprMax file that kept no geometry)
+            print(f"  positions        : {r['positions']}")
         if r["history"]:
             print(f"  processing       : {', '.join(r['history'])}")
     return rows
@@ -85,10 +87,10 @@ def cmd_info(args):
     for path in args.files:
         try:
             surveys = read_all(path, format=args.format)
-        except GPR3DError as exc:
+        except (GPR3DError, MemoryError) as exc:
             if len(args.files) == 1:
                 raise
-            print(f"gpr3d: error: {exc}", file=sys.stderr)
+            print(f"gpr3d: error: {exc if isinstance(exc, GPR3DError) else f'{path}: out of memory'}", file=sys.stderr)
             failed += 1
             continue
         out.extend(_print_survey_info(path, surveys, args.json))
@@ -1391,6 +1393,10 @@ def main(argv=None) -> int:
         return 1
     except OSError as exc:  # e.g. an unwritable output folder
         print(f"gpr3d: error: {exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), file=sys.stderr)
+        return 1
+    except MemoryError:
+        print(f"gpr3d: error: {args.command}: out of memory (the input, or the grid asked for, is larger than this "
+              "machine's memory)", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("gpr3d: interrupted", file=sys.stderr)

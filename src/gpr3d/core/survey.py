@@ -107,11 +107,15 @@ class Survey:
         if not np.issubdtype(data.dtype, np.number) or np.iscomplexobj(data):
             raise InvalidDataError(f"data must be real numbers, got dtype {data.dtype}")
         data = np.ascontiguousarray(data, dtype=np.float32)
-        bad = np.count_nonzero(~np.isfinite(data))
+        rows = max(1, (1 << 22) // data.shape[1])  # blocks of ~4 M samples: no file-sized mask for a large record
+        bad = sum(int(np.count_nonzero(~np.isfinite(data[i : i + rows]))) for i in range(0, data.shape[0], rows))
         if bad:
             raise InvalidDataError(f"data holds {bad} NaN/inf samples")
         self.data = data
         self.dt_s = _optional_float("dt_s", self.dt_s, positive=True)
+        if self.dt_s < 1e-15:
+            raise InvalidDataError(f"dt_s = {self.dt_s:g} s is implausible for GPR (no radar or FDTD model samples "
+                                   "faster than 1e-15 s)")
         if self.dt_s > 1e-3:
             raise InvalidDataError(
                 f"dt_s = {self.dt_s} s is implausible for GPR (give the sample interval in seconds, e.g. 1e-10)"

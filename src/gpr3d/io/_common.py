@@ -14,14 +14,33 @@ from gpr3d.core.errors import FormatError, TruncatedRecordingWarning
 
 
 def check_file(path) -> Path:
-    """The path as a Path; FormatError if it is missing, a folder, or empty."""
+    """The path as a Path; FormatError if it is missing, a folder, no regular file, unreadable, or empty."""
+    import errno
+    import stat
+
     p = Path(path)
-    if not p.exists():
-        raise FormatError(p, "no such file")
-    if p.is_dir():
+    try:
+        st = p.stat()
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise FormatError(p, "is a loop of symbolic links, not a file") from None
+        if exc.errno == errno.EACCES:
+            raise FormatError(p, "cannot be read: permission denied on the path") from None
+        if p.is_symlink():
+            raise FormatError(p, f"is a symbolic link to {os.readlink(p)}, which does not exist") from None
+        if exc.errno in (errno.ENOENT, errno.ENOTDIR):
+            raise FormatError(p, "no such file") from None
+        raise FormatError(p, f"cannot be read ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(st.st_mode):
         raise FormatError(p, "is a folder, not a file")
-    if p.stat().st_size == 0:
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a named pipe (FIFO)" if stat.S_ISFIFO(st.st_mode) else "a socket" if stat.S_ISSOCK(st.st_mode)
+                else "a device")
+        raise FormatError(p, f"is {kind}, not a regular file: radar files are read from disk")
+    if st.st_size == 0:
         raise FormatError(p, "file is empty")
+    if not os.access(p, os.R_OK):
+        raise FormatError(p, "cannot be read: permission denied")
     return p
 
 
@@ -69,6 +88,33 @@ def finite_positive(path, name: str, value, *, allow_zero: bool = False) -> floa
     if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
         raise FormatError(path, f"header field {name} = {v!r} is not a positive number")
     return v
+
+
+#: the sample intervals a radar (or an FDTD model of one) produces: 0.01 ps (a gprMax grid of 0.01 mm cells) to
+#: 1 us (1 MHz sampling, below the lowest GPR antenna's band)
+SAMPLE_INTERVAL_RANGE_S = (1e-14, 1e-6)
+
+
+def header_count(path, name: str, value, *, lo: int = 1, hi: int = 10**9) -> int:
+    """A header's count field (traces, samples, channels) as int; FormatError unless a whole number in lo..hi."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise FormatError(path, f"header field {name} = {value!r} is not a number") from None
+    if not math.isfinite(v) or v != math.floor(v):
+        raise FormatError(path, f"header field {name} = {value!r} is not a whole number")
+    if not lo <= v <= hi:
+        raise FormatError(path, f"header field {name} = {v:.10g} is implausible (expected {lo}..{hi})")
+    return int(v)
+
+
+def sample_interval(path, dt_s: float, source: str) -> float:
+    """``dt_s`` if it is a sample interval a radar produces, else FormatError naming the header field(s) ``source``."""
+    lo, hi = SAMPLE_INTERVAL_RANGE_S
+    if not (math.isfinite(dt_s) and lo <= dt_s <= hi):
+        raise FormatError(path, f"the sample interval from {source} is {dt_s:.3g} s, which no radar records "
+                                f"(expected {lo:g}..{hi:g} s)")
+    return float(dt_s)
 
 
 def check_finite(path, data: np.ndarray) -> None:

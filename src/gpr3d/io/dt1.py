@@ -18,7 +18,8 @@ import numpy as np
 from gpr3d.core.errors import FormatError
 from gpr3d.core.survey import Survey
 from gpr3d.io._common import (
-    check_file, data_and_header, finite_positive, gps_positions, nmea_degrees, sidecar, warn_fewer_traces, whole_traces,
+    check_file, data_and_header, finite_positive, gps_positions, header_count, nmea_degrees, sample_interval, sidecar,
+    warn_fewer_traces, whole_traces,
 )
 
 __all__ = ["is_dt1", "read_dt1", "read_hd", "read_sns_gps"]
@@ -90,13 +91,10 @@ def read_dt1(path) -> list[Survey]:
     """Read a DT1/HD pair (give either file) as a one-element list of :class:`~gpr3d.core.survey.Survey`."""
     dt1, hd_path = data_and_header(path, (".dt1",), ".hd", "pulseEKKO")
     hd = read_hd(hd_path)
-    n_hd = int(_hd_number(hd_path, hd, "NUMBER OF TRACES"))
-    npts = int(_hd_number(hd_path, hd, "NUMBER OF PTS/TRC"))
+    n_hd = header_count(hd_path, "NUMBER OF TRACES", _hd_number(hd_path, hd, "NUMBER OF TRACES"), hi=10**8)
+    npts = header_count(hd_path, "NUMBER OF PTS/TRC", _hd_number(hd_path, hd, "NUMBER OF PTS/TRC"), lo=2, hi=10**6)
     window_ns = finite_positive(hd_path, "TOTAL TIME WINDOW", _hd_number(hd_path, hd, "TOTAL TIME WINDOW"))
-    if npts < 2 or npts > 1_000_000:
-        raise FormatError(hd_path, f"NUMBER OF PTS/TRC = {npts} is implausible")
-    if n_hd < 1:
-        raise FormatError(hd_path, f"NUMBER OF TRACES = {n_hd}: no traces")
+    dt_s = sample_interval(hd_path, window_ns * 1e-9 / npts, "TOTAL TIME WINDOW / NUMBER OF PTS/TRC")
     size = dt1.stat().st_size
     with open(dt1, "rb") as f:
         head = f.read(TRACE_HEADER_BYTES)
@@ -171,7 +169,7 @@ def read_dt1(path) -> list[Survey]:
     return [
         Survey(
             data=data,
-            dt_s=window_ns * 1e-9 / npts,
+            dt_s=dt_s,
             timestamps_s=timestamps,
             positions_xyz=positions,
             offset_m=(sep or 0.0) * unit,

@@ -97,6 +97,13 @@ def read_dzt_header(path) -> dict:
         raise FormatError(p, f"data offset {offset} lies inside the {nchan} channel header(s)")
     if offset > size:
         raise FormatError(p, f"data offset {offset} lies beyond the end of the file ({size} bytes)")
+    for ch in range(1, nchan):  # each channel has a header of its own: a channel count read from samples finds none
+        at = ch * HEADER_BYTES
+        (_, _, n_k, bits_k, _, _, _, _, _, range_k, _) = _MAIN.unpack(heads[at : at + 32])
+        if bits_k not in (8, 16, 32) or n_k < 2 or not (math.isfinite(range_k) and range_k > 0):
+            raise FormatError(p, f"header gives {nchan} channels, but bytes {at}..{at + HEADER_BYTES - 1} hold no header "
+                                 f"of channel {ch + 1} ({bits_k} bits, {n_k} samples, range {range_k:g} ns): the file "
+                                 "holds fewer channels, or is corrupt")
     eps_r, top, depth = struct.unpack("<3f", head[54:66])
     antennas = []
     for ch in range(nchan):
@@ -196,11 +203,24 @@ def read_dzt(path, *, gps: bool = True) -> list[Survey]:
     trace_bytes = nsamp * (bits // 8) * nchan
     n = whole_traces(p, hdr["file_bytes"] - hdr["data_offset"], trace_bytes, "trace")
     dtype = {8: "<u1", 16: "<u2", 32: "<i4"}[bits]
-    raw = np.fromfile(p, dtype=dtype, count=n * nsamp * nchan, offset=hdr["data_offset"])
-    if raw.size != n * nsamp * nchan:
-        raise FormatError(p, "file shrank while being read")
-    raw = raw.reshape(n, nchan, nsamp)
     binary_zero = {8: 128.0, 16: 32768.0, 32: 0.0}[bits]
+    # read block by block into each channel's float32 array: the samples cost those arrays and one block (the whole
+    # file read at once, then converted, once peaked at 3.7 times a 3 GiB file)
+    channels = [np.empty((n, nsamp), np.float32) for _ in range(nchan)]
+    mark_word = np.zeros(n, dtype)  # the second sample of the first channel
+    block = max(1, (32 << 20) // trace_bytes)
+    with open(p, "rb") as fh:
+        fh.seek(hdr["data_offset"])
+        for i in range(0, n, block):
+            k = min(block, n - i)
+            raw = np.fromfile(fh, dtype=dtype, count=k * nsamp * nchan)
+            if raw.size != k * nsamp * nchan:
+                raise FormatError(p, "file shrank while being read")
+            raw = raw.reshape(k, nchan, nsamp)
+            for ch in range(nchan):
+                np.subtract(raw[:, ch, :], np.float32(binary_zero), out=channels[ch][i : i + k], dtype=np.float32)
+            if nsamp > 2:
+                mark_word[i : i + k] = raw[:, 0, 1]
 
     dt = hdr["range_ns"] * 1e-9 / nsamp
     timestamps = np.arange(n) / hdr["scans_per_s"] if hdr["scans_per_s"] else None
@@ -226,12 +246,10 @@ def read_dzt(path, *, gps: bool = True) -> list[Survey]:
         pos_source = "survey wheel (header scans per metre), along world x"
 
     # the mark word (second sample) of the first channel: nonzero where the operator pressed the mark button
-    marks = np.nonzero(raw[:, 0, 1])[0].tolist() if nsamp > 2 else []
+    marks = np.nonzero(mark_word)[0].tolist()
     surveys = []
     for ch in range(nchan):
-        data = raw[:, ch, :].astype(np.float32)
-        if binary_zero:
-            data -= np.float32(binary_zero)
+        data = channels[ch]
         if nsamp > 2:
             data[:, :2] = data[:, 2:3]
         ant = hdr["antennas"][ch]  # (one name per channel header)

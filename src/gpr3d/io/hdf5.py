@@ -92,8 +92,10 @@ def _read_surveys(p) -> list[Survey]:
         if "surveys" not in f or not len(f["surveys"]):
             raise FormatError(p, "holds no surveys")
         out = []
+        size = p.stat().st_size
         for key in sorted(f["surveys"], key=int):
             g = f["surveys"][key]
+            _check_declared(p, key, g, size)
             try:
                 kwargs = {"data": g["data"][()]}
                 for name in _ARRAYS:
@@ -106,11 +108,38 @@ def _read_surveys(p) -> list[Survey]:
                 kwargs["history"] = json.loads(g.attrs["history_json"])
             except (KeyError, ValueError, OSError) as exc:
                 raise FormatError(p, f"survey {key} is incomplete or corrupt: {exc}") from None
+            json_names = {dict: "an object", list: "a list", str: "a string", int: "a number", float: "a number",
+                          bool: "true/false", type(None): "null"}
+            for name, want in (("metadata", dict), ("history", list)):
+                if not isinstance(kwargs[name], want):
+                    raise FormatError(p, f"survey {key}: its {name}_json holds {json_names[type(kwargs[name])]}, "
+                                         f"not {json_names[want]}")
             try:
                 out.append(Survey(**kwargs))
             except ValueError as exc:
                 raise FormatError(p, f"survey {key}: {exc}") from None
         return out
+
+
+#: a data set may declare this much more than the file's size (compression) before its claim is refused
+_MAX_DECLARED_RATIO = 64
+_MAX_UNCHECKED_BYTES = 256 << 20
+
+
+def _check_declared(p, key, g, file_bytes: int) -> None:
+    """What survey ``key`` declares, checked before anything is allocated: a 2-D numeric data set of no more bytes
+    than the file can hold (compressed), and its sample interval."""
+    if "data" not in g or not isinstance(g["data"], h5py.Dataset):
+        raise FormatError(p, f"survey {key} has no data set 'data'")
+    ds = g["data"]
+    if ds.ndim != 2 or ds.dtype.kind not in "iuf":
+        raise FormatError(p, f"survey {key}: data is a {ds.ndim}-D {ds.dtype} data set, not a 2-D array of numbers")
+    declared = int(ds.size) * ds.dtype.itemsize
+    if declared > _MAX_UNCHECKED_BYTES and declared > _MAX_DECLARED_RATIO * file_bytes:
+        raise FormatError(p, f"survey {key} declares a {'x'.join(map(str, ds.shape))} data set "
+                             f"({declared / 2**30:.3g} GiB) in a {file_bytes:,}-byte file: truncated or corrupt")
+    if "dt_s" not in g.attrs:
+        raise FormatError(p, f"survey {key} has no dt_s attribute (the sample interval, in seconds)")
 
 
 def read_survey(path, channel: int = 0) -> Survey:

@@ -21,7 +21,8 @@ import numpy as np
 from gpr3d.core.errors import FormatError
 from gpr3d.core.survey import Survey
 from gpr3d.io._common import (
-    check_file, data_and_header, finite_positive, gps_positions, sidecar, warn_fewer_traces, whole_traces,
+    check_file, data_and_header, finite_positive, gps_positions, header_count, sample_interval, sidecar,
+    warn_fewer_traces, whole_traces,
 )
 
 __all__ = ["is_rd3", "read_rd3", "read_rad", "read_cor"]
@@ -82,25 +83,30 @@ def read_rd3(path) -> list[Survey]:
     """Read a MALA ``.rd3``/``.rd7`` + ``.rad`` pair (give any of them) as a one-element list."""
     data_path, rad_path = data_and_header(path, (".rd3", ".rd7"), ".rad", "MALA")
     rad = read_rad(rad_path)
-    nsamp = int(_num(rad_path, rad, "SAMPLES"))
-    if not 2 <= nsamp <= 1_000_000:
-        raise FormatError(rad_path, f"SAMPLES = {nsamp} is implausible")
+    nsamp = header_count(rad_path, "SAMPLES", _num(rad_path, rad, "SAMPLES"), lo=2, hi=10**6)
     fs_mhz = _num(rad_path, rad, "FREQUENCY", required=False)
     window_hd = _num(rad_path, rad, "TIMEWINDOW", required=fs_mhz is None)
     if fs_mhz is not None:
         dt = 1e-6 / finite_positive(rad_path, "FREQUENCY", fs_mhz)
     else:
         dt = finite_positive(rad_path, "TIMEWINDOW", window_hd) * 1e-9 / nsamp
-    if dt > 1e-6:
-        raise FormatError(rad_path, f"sample interval {dt:g} s is implausible")
+    dt = sample_interval(rad_path, dt, "FREQUENCY" if fs_mhz is not None else "TIMEWINDOW / SAMPLES")
     nbytes = 2 if data_path.suffix.lower() == ".rd3" else 4
     size = data_path.stat().st_size
-    n = whole_traces(data_path, size, nsamp * nbytes, "trace")
     last = _num(rad_path, rad, "LAST TRACE", required=False)
-    if last is not None and int(last) != n:
-        if int(last) < n:
-            raise FormatError(data_path, f"file holds {n} traces but LAST TRACE says {int(last)}: header and data disagree")
-        warn_fewer_traces(data_path, int(last), n, "LAST TRACE")
+    if last is not None:
+        last = header_count(rad_path, "LAST TRACE", last, hi=10**8)
+        # no whole number of SAMPLES-long traces, but exactly LAST TRACE traces of another length: SAMPLES is
+        # wrong, and reading would shear every trace (a file cut short at a trace's end still reads)
+        per, rest = divmod(size, last * nbytes)
+        if size % (nsamp * nbytes) and rest == 0 and per >= 2:
+            raise FormatError(rad_path, f"SAMPLES = {nsamp} disagrees with the data: {data_path.name} holds "
+                                        f"{last} traces (LAST TRACE) of {per} samples")
+    n = whole_traces(data_path, size, nsamp * nbytes, "trace")
+    if last is not None and last != n:
+        if last < n:
+            raise FormatError(data_path, f"file holds {n} traces but LAST TRACE says {last}: header and data disagree")
+        warn_fewer_traces(data_path, last, n, "LAST TRACE")
     data = np.fromfile(data_path, dtype="<i2" if nbytes == 2 else "<i4", count=n * nsamp).reshape(n, nsamp)
     data = data.astype(np.float32)
 

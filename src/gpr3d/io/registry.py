@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from gpr3d.core.errors import FormatError, UnknownFormatError
+from gpr3d.core.errors import FormatError, GPR3DError, InvalidDataError, UnknownFormatError
 from gpr3d.io import dt1, dzt, gprmax, hdf5, rd3, segy
 from gpr3d.io._common import check_file
 
@@ -64,9 +64,19 @@ def detect_format(path) -> str:
         raise UnknownFormatError(p, f"its partner file {wanted} is missing ({vendor} keeps data and header in "
                                     "two files with one name): copy it beside this one")
     claimed = [f.name for f in FORMATS.values() if ext in f.extensions]
+    if len(claimed) == 1:
+        # one reader owns the extension: its own words say what is wrong (a DZT with 7 bits per sample says so,
+        # not "not a valid file")
+        try:
+            FORMATS[claimed[0]].read(p)
+        except FormatError as exc:
+            raise UnknownFormatError(p, f"is not a valid {claimed[0]} file: {exc.problem}") from None
+        except GPR3DError as exc:
+            raise UnknownFormatError(p, f"is not a valid {claimed[0]} file: {exc}") from None
+        return claimed[0]  # (its detector declined what its reader takes: read it so)
     if claimed:
         raise UnknownFormatError(p, f"has a {ext} extension but is not a valid {'/'.join(claimed)} file "
-                                    "(corrupt, truncated, or a missing sidecar header)")
+                                    "(corrupt or truncated)")
     known = ", ".join(sorted({e for f in FORMATS.values() for e in f.extensions}))
     raise UnknownFormatError(p, f"unrecognised file format (readers exist for {known})")
 
@@ -91,6 +101,14 @@ def read_all(path, *, format: str | None = None, **kwargs) -> list:
             option = str(exc).split()[-1]  # "read_dzt() got an unexpected keyword argument 'component'"
             raise FormatError(path, f"the {name} reader takes no option {option}") from None
         raise
+    except FormatError:
+        raise
+    except InvalidDataError as exc:  # what the file holds makes no survey (Survey's checks): name the file
+        raise FormatError(path, str(exc)) from None
+    except MemoryError:
+        size = Path(path).stat().st_size
+        raise FormatError(path, f"reading it needs more memory than this machine has (the file is {size:,} bytes; "
+                                "its header may claim far more data than it holds)") from None
 
 
 def read(path, *, format: str | None = None, channel: int = 0, **kwargs):

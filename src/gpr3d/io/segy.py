@@ -124,7 +124,7 @@ def read_segy(path, *, dt_unit: str = "auto") -> list:
     software write them, or nanoseconds where the textual header says so), ``"ps"``, ``"ns"`` or ``"us"``.
     """
     from gpr3d.core.survey import Survey
-    from gpr3d.io._common import check_file
+    from gpr3d.io._common import check_file, sample_interval
 
     segyio = require("segyio")
     units = {"ps": 1e-12, "ns": 1e-9, "us": 1e-6}
@@ -159,11 +159,11 @@ def read_segy(path, *, dt_unit: str = "auto") -> list:
                                               and not ours else "ps")
     dt_text = _text_value(text, "DT S") if ours else None
     if dt_text:
-        dt = dt_text
+        dt, source = dt_text, "the textual header's DT S"
     elif rev_major >= 2 and np.isfinite(ext) and ext > 0:
-        dt = ext * units[unit]
+        dt, source = ext * units[unit], f"the extended sample interval field (read as {unit})"
     elif interval > 0:
-        dt = interval * units[unit]
+        dt, source = interval * units[unit], f"the sample interval field (read as {unit})"
     else:
         raise FormatError(p, "gives no sample interval (binary and trace headers hold 0)")
     if not np.all(np.isfinite(data)):
@@ -171,6 +171,7 @@ def read_segy(path, *, dt_unit: str = "auto") -> list:
     if dt > 1e-6:
         raise FormatError(p, f"sample interval {dt:g} s (the field read as {unit}) is no GPR interval: a seismic "
                              "file, or its interval unit is not the default (gpr3d.read(..., dt_unit=...))")
+    dt = sample_interval(p, dt, source)
 
     def scaled(value, scalar):
         return value / -scalar if scalar < 0 else value * (scalar if scalar > 0 else 1)
