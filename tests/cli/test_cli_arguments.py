@@ -38,6 +38,7 @@ def files(tmp_path_factory):
     lines[6], lines[7] = lines[7], lines[6]  # two poses swapped: time runs backwards once
     (d / "back.tum").write_text("\n".join(lines) + "\n")
     (d / "empty_boxes.json").write_text("[]")
+    (d / "huge_box.json").write_text('{"targets": [{"box": [-1e7, -1, 1e7, 1], "score": 0.9}]}')
     (d / "plain.txt").write_text("not a folder")
     dt1 = REAL / "gpro_sns_100MHz_grid" / "XLINE15.DT1"
     if dt1.exists():  # (without the real data folder only that case is skipped)
@@ -105,6 +106,22 @@ def one_line_error(capsys, argv, *needles):
     (["convert", DZT, "{d}/c.h5", "--marks-every", "1", "--marks", "a,b"], ["--marks", "whole numbers"]),
     (["convert", DZT, "{d}/c.h5", "--marks-every", "1", "--marks", "9,3"], ["marks", "increasing"]),
     (["convert", DZT, "{d}/c.h5", "--marks-every", "1", "--track", "{d}/t.xyz"], ["--track or --marks-every"]),
+    # issue 31: values that once started hours of work, filled memory, or won silently
+    (["train", "detector", "--out", "{d}/t", "--steps", "0"], ["--steps must be a number of optimiser steps (1..1e+07)"]),
+    (["train", "detector", "--out", "{d}/t", "--batch", "0"], ["--batch must be a number of windows per step (1..4096)"]),
+    (["train", "depthnet", "--out", "{d}/t", "--steps", "-5"], ["--steps", "got -5"]),
+    (["train", "detector", "--out", "{d}/t", "--lr", "nan"], ["--lr must be a positive learning rate"]),
+    (["train", "detector", "--out", "{d}/t", "--labels-fraction", "1.5"], ["--labels-fraction", "0..1", "got 1.5"]),
+    (["pose", "simulate", "--out", "{d}/ps", "--duration", "1e9"], ["--duration must be seconds of motion (20..3600)"]),
+    (["pose", "simulate", "--out", "{d}/ps", "--duration", "nan"], ["--duration", "got nan"]),
+    (["cscan", "{d}/walk.h5", "--out", "{d}/c", "--fill", "-1"], ["--fill must be a distance in metres, 0 to 20 cells"]),
+    (["cscan", "{d}/walk.h5", "--out", "{d}/c", "--fill", "1e9"], ["--fill", "got 1e+09"]),
+    (["reconstruct", "{d}/walk.h5", "--eps-r", "6", "--out", "{d}/r", "--tile", "0.0001"],
+     ["--tile must be a tile side in metres, at least 10 voxels of --spacing 0.02 (0.2..100000), got 0.0001"]),
+    (["process", DZT, "--out", "{d}/p.h5", "--steps", "gain_tpow:power=1:power=2"], ["'power' given twice"]),
+    (["reconstruct", "{d}/walk.h5", "--eps-r", "6", "--out", "/sys/gpr3d_x"], ["--out /sys/gpr3d_x: cannot write in /sys"]),
+    (["detect", DZT, "--out", "/sys/gpr3d_x/d.json"], ["--out /sys/gpr3d_x/d.json: cannot write in /sys"]),
+    (["depth", DZT, "--boxes", "{d}/huge_box.json"], ["huge_box.json: box 0", "reaches far outside the data"]),
 ])
 def test_a_wrong_argument_is_one_line_naming_it_and_leaves_nothing(files, capsys, argv, needles):
     """Each case the issue lists (tracebacks, a hang, wrong results with no error, unhelpful messages)."""
@@ -242,3 +259,22 @@ def test_migrate_a_profile_and_draw_wiggles_and_an_ascan(tmp_path, capsys):
         assert main(["show", DZT, "--out", str(tmp_path / name), *extra]) == 0
         assert (tmp_path / name).stat().st_size > 5_000
     capsys.readouterr()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["detect", "x.DZT", "--out", "d.json", "--runtime", "nosuch"],
+     "gpr3d detect: error: argument --runtime: invalid choice: 'nosuch' (choose from 'auto', 'torch', 'onnx') "
+     "(usage: gpr3d detect --help)"),
+    (["simulate", "--seed", "abc", "--out", "s"],
+     "gpr3d simulate: error: argument --seed: invalid int value: 'abc' (usage: gpr3d simulate --help)"),
+    (["dataset", "nosuch", "a", "b"], "gpr3d dataset: error: argument action: invalid choice: 'nosuch'"),
+    (["grid"], "gpr3d grid: error: the following arguments are required: lines, --out (usage: gpr3d grid --help)"),
+    (["nosuch"], "gpr3d: error: argument COMMAND: invalid choice: 'nosuch'"),
+])
+def test_argparse_errors_are_one_line_without_the_usage(capsys, argv, message):
+    # issue 31: 4-11 lines of usage came before the one line that mattered
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(message), err

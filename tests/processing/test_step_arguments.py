@@ -40,6 +40,8 @@ def test_cli_text_is_parsed_and_typed(s, text, want):
 def test_parse_step_by_hand():
     assert parse_step("time_zero:method=peak:threshold=0.2") == ("time_zero", {"method": "peak", "threshold": 0.2})
     assert parse_step("dewow:window_s=a=b")[1] == {"window_s": "a=b"}  # split at the first '=' only
+    with pytest.raises(InvalidDataError, match=r"^step argument 'power' given twice in 'gain_tpow:power=1: power=2'$"):
+        parse_step("gain_tpow:power=1: power=2")
     assert parse_step("remove_dc:sample_range=[ ]")[1] == {"sample_range": []}
     assert parse_step("time_zero:shift=False")[1] == {"shift": False}
     assert parse_step("remove_dc:sample_range=[3")[1] == {"sample_range": "[3"}  # no closing bracket: not a list

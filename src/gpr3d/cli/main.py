@@ -17,6 +17,9 @@ from pathlib import Path
 from gpr3d import __version__
 from gpr3d.core.errors import GPR3DError
 
+#: the longest rig simulation `pose simulate` runs (memory grows with it: 1e9 s once took 23 GB in 50 s)
+MAX_SIMULATED_S = 3600.0
+
 EXAMPLES = """\
 examples:
   gpr3d demo                                   run the end-to-end demo on the embedded recording
@@ -206,11 +209,30 @@ def cmd_convert(args):
     return 0
 
 
+def _writable(path, what: str) -> None:
+    """Refuse (before any work, leaving nothing behind) an output whose folder cannot be made or written: a trial
+    folder is made and removed in the nearest folder that exists (permissions alone do not tell, e.g. for root)."""
+    import tempfile
+
+    target = Path(path).absolute()
+    base = target if target.is_dir() else target.parent
+    while not base.exists():
+        base = base.parent
+    if not base.is_dir():
+        raise GPR3DError(f"{what} {path}: {base} is a file, not a folder")
+    try:
+        Path(tempfile.mkdtemp(prefix=".gpr3d-write-test-", dir=base)).rmdir()
+    except OSError as exc:
+        raise GPR3DError(f"{what} {path}: cannot write in {base} ({exc.strerror or exc})") from None
+
+
 def _out_folder(path, command) -> Path:
-    """``--out`` of a command that writes a folder: refused (before any work) where it names a file."""
+    """``--out`` of a command that writes a folder: refused (before any work) where it names a file or cannot be
+    written."""
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise GPR3DError(f"--out {out} is a file; {command} writes a folder (give a new or existing folder)")
+    _writable(out, "--out")
     return out
 
 
@@ -266,6 +288,8 @@ def cmd_cscan(args):
         raise GPR3DError(f"--cell must be a positive size in metres, got {args.cell:g}")
     if not args.window_ns > 0:
         raise GPR3DError(f"--window-ns must be positive, got {args.window_ns:g}")
+    if args.fill is not None:  # (its smoothing kernel grows with it: 1e9 m once asked for 596 GiB)
+        _in_range(args.fill, "--fill", 0.0, 20 * args.cell, f"a distance in metres, 0 to 20 cells of --cell {args.cell:g}")
     eps = _eps_argument(args.eps_r)
     out = _out_folder(args.out, "cscan")
     s = _apply_steps(_read_channel(args), args.steps)
@@ -339,8 +363,7 @@ def cmd_pose(args):
         from gpr3d.core.trajectory import Trajectory
         from gpr3d.pose.rig import RigConfig, simulate_rig
 
-        if not args.duration >= 20:
-            raise GPR3DError(f"--duration must be at least 20 s, got {args.duration}")
+        _in_range(args.duration, "--duration", 20, MAX_SIMULATED_S, "seconds of motion")
         run = simulate_rig(RigConfig(duration_s=args.duration, vo_gap=(args.duration / 2, 2.0)), seed=args.seed)
         out.mkdir(parents=True, exist_ok=True)
         cfg = run.config
@@ -531,6 +554,10 @@ def cmd_reconstruct(args):
 
     if args.aperture < 0:
         raise GPR3DError(f"--aperture must be 0 (none) or a cone half-angle in (0, 90) degrees, got {args.aperture:g}")
+    if args.tile is not None and args.spacing > 0 and math.isfinite(args.spacing):
+        # a tile of a few voxels spends its time on its margins (0.0001 m once ran 41,000 one-voxel tiles)
+        _in_range(args.tile, "--tile", 10 * args.spacing, 1e5, f"a tile side in metres, at least 10 voxels of "
+                                                                f"--spacing {args.spacing:g}")
     settings = dict(spacing_m=args.spacing, max_depth_m=args.max_depth,
                     aperture_deg=None if args.aperture == 0 else args.aperture, threshold=args.threshold,
                     min_line_m=args.min_line, engine=args.engine, time_zero="none" if args.no_time_zero else "peak",
@@ -623,8 +650,11 @@ def _eps_argument(value):
 
 
 def _check_suffix(path, suffixes, what):
+    """An output file's name: its suffix, and a folder it can be written in (before any work)."""
     if path and Path(path).suffix.lower() not in suffixes:
         raise GPR3DError(f"{what} {path}: expected a {' or '.join(suffixes)} file")
+    if path:
+        _writable(path, what)
 
 
 def _detector(args):
@@ -737,6 +767,10 @@ def _checked_targets(path, targets, survey) -> list[dict]:
         raise GPR3DError(f"{path}: {exc}") from None
     out = []
     n, window = survey.n_traces, (survey.n_samples - 1) * survey.dt_s
+    for k, b in enumerate(boxes):  # a box reaching a whole record past an end was made for another record
+        if b[0] < -n or b[2] > 2 * n - 1 or b[1] < -window or b[3] > 2 * window:
+            raise GPR3DError(f"{path}: box {k} {list(b)} reaches far outside the data ({n} traces, "
+                             f"{window * 1e9:.4g} ns): is it a box of this record, in traces and seconds?")
     for t, b in zip(targets, boxes):  # boxes reaching past the record are cut to it
         t = dict(t, box=[max(b[0], 0.0), max(b[1], 0.0), min(b[2], n - 1.0), min(b[3], window)])
         a = (t.get("apex_trace"), t.get("apex_time_s"))
@@ -853,9 +887,34 @@ def cmd_train_depthnet(args):
     return 0
 
 
+def _in_range(value, flag: str, lo, hi, what: str) -> None:
+    """One line for a numeric option outside its plausible range (None: not given, nothing to check)."""
+    if value is None:
+        return
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise GPR3DError(f"{flag} must be {what} ({lo:g}..{hi:g}), got {value:g}")
+
+
+def _check_train_args(args) -> None:
+    """train's numbers, before any data or model is made (a 0 once meant 'the default': hours of training)."""
+    _in_range(args.steps, "--steps", 1, 10**7, "a number of optimiser steps")
+    _in_range(args.batch, "--batch", 1, 4096, "a number of windows per step")
+    _in_range(args.lr, "--lr", 1e-9, 10.0, "a positive learning rate")
+    _in_range(args.warmup, "--warmup", 0, 10**7, "a number of steps")
+    _in_range(args.workers, "--workers", 0, 256, "a number of data-loading processes")
+    _in_range(args.checkpoint_every, "--checkpoint-every", 1, 10**7, "a number of steps")
+    _in_range(args.max_seconds, "--max-seconds", 1e-3, 1e9, "a positive time in seconds")
+    _in_range(args.labels_fraction, "--labels-fraction", 0.0, 1.0, "a share of the windows")
+    _in_range(args.packed_fraction, "--packed-fraction", 0.0, 1.0, "a share of the windows")
+    _in_range(args.packed_holdout, "--packed-holdout", 0, 10**7, "a number of records")
+    _in_range(args.records, "--records", 1, 10**7, "a number of records")
+    _in_range(args.width, "--width", 1, 1024, "a number of channels")
+
+
 def cmd_train(args):
     from dataclasses import asdict
 
+    _check_train_args(args)
     if args.what == "depthnet":
         return cmd_train_depthnet(args)
 
@@ -982,6 +1041,10 @@ class _Parser(argparse.ArgumentParser):
         if callable(self.epilog):
             self.epilog = self.epilog()
         return super().format_help()
+
+    def error(self, message):
+        """One line: what is wrong, and where the usage is (argparse would print the whole usage first)."""
+        self.exit(2, f"{self.prog}: error: {message} (usage: {self.prog} --help)\n")
 
 
 def _steps_help() -> str:

@@ -310,6 +310,8 @@ def parse_step(spec: str) -> tuple[str, dict]:
         if "=" not in pair:
             raise InvalidDataError(f"bad step argument {pair!r} in {spec!r}: expected key=value")
         k, v = pair.split("=", 1)
+        if k.strip() in kwargs:  # (the last one once won silently)
+            raise InvalidDataError(f"step argument {k.strip()!r} given twice in {spec!r}")
         kwargs[k.strip()] = _parse_value(v.strip())
     if name not in STEPS:
         raise InvalidDataError(f"unknown processing step {name!r}; known: {', '.join(STEPS)}")
