@@ -71,8 +71,8 @@ CASES = {
     "rad last trace inf": (lambda t: _rad(t, "LAST TRACE:5", "LAST TRACE:inf"),
                            "ten.rad: header field LAST TRACE = inf is not a whole number"),
     "rad samples disagree": (lambda t: _rad(t, "SAMPLES:40", "SAMPLES:36"),
-                             "ten.rad: SAMPLES = 36 disagrees with the data: ten.rd3 holds 5 traces (LAST TRACE) of "
-                             "40 samples"),
+                             "ten.rad: SAMPLES = 36 does not fit ten.rd3 (400 bytes: no whole number of 36-sample "
+                             "traces, but 5 traces (LAST TRACE) of 40 samples): the header or the data is wrong"),
     "dzt 16 channels": (lambda t: _dzt_field(t, 52, struct.pack("<H", 16)),
                         "bad.DZT: is not a valid dzt file: header gives 16 channels, but bytes 1024..2047 hold no "
                         "header of channel 2"),

@@ -219,8 +219,9 @@ def test_the_boundaries_of_the_plausible(tmp_path):
 def test_samples_that_disagree_with_the_data_are_refused_not_sheared(tmp_path):
     # 4 traces of 8 samples written, the header says 6 samples: once a warning and every trace misaligned
     d = _pair(tmp_path, "SAMPLES:6\nFREQUENCY:1000\nLAST TRACE:4\n", np.ones((4, 8)))
-    with pytest.raises(FormatError, match=r"^line.rad: SAMPLES = 6 disagrees with the data: line.rd3 holds 4 traces "
-                                          r"\(LAST TRACE\) of 8 samples$"):
+    with pytest.raises(FormatError, match=r"^line.rad: SAMPLES = 6 does not fit line.rd3 \(64 bytes: no whole number "
+                                          r"of 6-sample traces, but 4 traces \(LAST TRACE\) of 8 samples\): the header "
+                                          r"or the data is wrong$"):
         read_rd3(d)
     # a file cut at a trace's end fits SAMPLES still: a shorter recording, read with a warning
     d = _pair(tmp_path, "SAMPLES:4\nFREQUENCY:1000\nLAST TRACE:4\n", np.ones((2, 4)), name="cut")

@@ -30,13 +30,21 @@ _ARRAYS = ("timestamps_s", "positions_xyz", "orientations_quat_wxyz")
 _SCALARS = ("dt_s", "t0_s", "offset_m", "frequency_hz", "eps_r")
 
 
+def _schema(f):
+    """The file's schema attribute as a string, or what it holds instead (an array, a number, None) as itself."""
+    v = f.attrs.get("schema")
+    if isinstance(v, bytes):
+        v = v.decode("latin-1")
+    return v if isinstance(v, str) or v is None else repr(v)
+
+
 def is_gpr3d_h5(path) -> bool:
     try:
         with open(path, "rb") as fh:
             if fh.read(8) != b"\x89HDF\r\n\x1a\n":
                 return False
         with h5py.File(path, "r") as f:
-            return f.attrs.get("schema") == SCHEMA
+            return _schema(f) == SCHEMA
     except Exception:  # noqa: BLE001 - detection never raises
         return False
 
@@ -84,8 +92,8 @@ def read_surveys(path) -> list[Survey]:
 
 def _read_surveys(p) -> list[Survey]:
     with h5py.File(p, "r") as f:
-        if f.attrs.get("schema") != SCHEMA:
-            raise FormatError(p, f"not a gpr3d survey file (schema attribute {f.attrs.get('schema')!r})")
+        if _schema(f) != SCHEMA:
+            raise FormatError(p, f"not a gpr3d survey file (schema attribute {_schema(f)!r})")
         version = int(f.attrs.get("schema_version", -1))
         if version > SCHEMA_VERSION:
             raise FormatError(p, f"written with schema version {version}; this gpr3d reads up to {SCHEMA_VERSION}: upgrade gpr3d")

@@ -100,8 +100,9 @@ def read_rd3(path) -> list[Survey]:
         # wrong, and reading would shear every trace (a file cut short at a trace's end still reads)
         per, rest = divmod(size, last * nbytes)
         if size % (nsamp * nbytes) and rest == 0 and per >= 2:
-            raise FormatError(rad_path, f"SAMPLES = {nsamp} disagrees with the data: {data_path.name} holds "
-                                        f"{last} traces (LAST TRACE) of {per} samples")
+            raise FormatError(rad_path, f"SAMPLES = {nsamp} does not fit {data_path.name} ({size:,} bytes: no whole "
+                                        f"number of {nsamp}-sample traces, but {last} traces (LAST TRACE) of {per} "
+                                        "samples): the header or the data is wrong")
     n = whole_traces(data_path, size, nsamp * nbytes, "trace")
     if last is not None and last != n:
         if last < n:
