@@ -41,7 +41,7 @@ MUTMUT = [sys.executable, "-m", "mutmut"]
 #: module (under gpr3d) -> the tests that judge it (default: its package's test folder)
 MODULES = {
     "io.dt1": None, "io.dzt": None, "io.rd3": None, "io.gprmax": None, "io.segy": None, "io.hdf5": None,
-    "io.volume": None, "io.detections": None, "io.coco": None, "io.atomic": None,
+    "io.volume": None, "io.detections": None, "io.coco": None, "io.atomic": None, "io.resultdir": ["tests/io/test_resultdir.py"],
     "io._common": None, "io.registry": None,
     # (the other tests of tests/io that reach the trajectory readers are slow: rosbag, inertial)
     "io.trajectory": ["tests/io/test_trajectory.py", "tests/io/test_track.py"],

@@ -99,7 +99,7 @@ def test_boxes_make_a_noise_map(pipe_survey, tmp_path):
     (["--spacing", "0"], "--spacing must be positive"),
     (["--boxes", "{box}"], "no 'targets' list"),
     (["--boxes", "{ns_box}"], "box 0 [10, 5, 40, 9] lies outside the data"),
-    (["--tile", "0"], "tile size must be a positive number of metres, got 0.0"),
+    (["--tile", "0"], "--tile must be a tile side in metres, at least 10 voxels of --spacing 0.02 (0.2..100000), got 0"),
     (["--workers", "-2"], "workers must be a whole number >= 0, got -2"),
     (["--scheduler", "localhost:8786"], "scheduler must be an address such as tcp://host:8786"),
 ])

@@ -295,9 +295,12 @@ def cmd_cscan(args):
     s = _apply_steps(_read_channel(args), args.steps)
     eps_r = s.eps_r if eps == "file" else eps
     cs = cscan(s, cell_m=args.cell, window_s=args.window_ns * 1e-9, eps_r=eps_r, fill_m=args.fill)
-    out.mkdir(parents=True, exist_ok=True)
-    write_cscan(out / "cscan.h5", cs)
-    save_cscan_sheet(out / "cscan.png", cs, title=f"{Path(args.input).name}: C-scans ({args.window_ns:g} ns slices)")
+    from gpr3d.io.resultdir import result_folder
+
+    with result_folder(out, command="cscan") as stage:  # the whole result, or the previous one: never a mix
+        write_cscan(stage / "cscan.h5", cs)
+        save_cscan_sheet(stage / "cscan.png", cs,
+                         title=f"{Path(args.input).name}: C-scans ({args.window_ns:g} ns slices)")
     print(f"wrote {out}/cscan.h5 and cscan.png: {cs.values.shape[0]} slices of {cs.values.shape[1]} x "
           f"{cs.values.shape[2]} cells of {args.cell:g} m")
     return 0
@@ -330,9 +333,11 @@ def cmd_migrate(args):
         eps = s.eps_r
     prof = migrate_profile(s, eps_r=float(eps), method=args.method, max_depth_m=args.max_depth,
                            spacing_m=args.spacing, trace_spacing_m=args.trace_spacing, air_gap_m=args.air_gap)
-    out.mkdir(parents=True, exist_ok=True)
-    write_profile(out / "profile.h5", prof)
-    save_profile_png(out / "profile.png", prof, title=f"{Path(args.input).name}: {args.method}, eps_r {eps:.3g}")
+    from gpr3d.io.resultdir import result_folder
+
+    with result_folder(out, command="migrate") as stage:
+        write_profile(stage / "profile.h5", prof)
+        save_profile_png(stage / "profile.png", prof, title=f"{Path(args.input).name}: {args.method}, eps_r {eps:.3g}")
     print(f"wrote {out}/profile.h5 and profile.png: {prof.image.shape[0]} x {prof.image.shape[1]} cells "
           f"({args.method}, eps_r {eps:.3g}, {prof.wall_s:.1f} s)")
     return 0
@@ -365,28 +370,27 @@ def cmd_pose(args):
 
         _in_range(args.duration, "--duration", 20, MAX_SIMULATED_S, "seconds of motion")
         run = simulate_rig(RigConfig(duration_s=args.duration, vo_gap=(args.duration / 2, 2.0)), seed=args.seed)
-        out.mkdir(parents=True, exist_ok=True)
+        from gpr3d.io.resultdir import result_folder
+
+        _writable(out, "--out")
         cfg = run.config
-        write_imu_csv(run.imu, out / "imu.csv")
         keep = run.vo.valid.copy()  # frames whose motion from the one before is known; lost ones are left out
         keep[0] = True
         Rc, pc = run.vo.chained()
         cam = Trajectory(run.vo.t_s[keep], pc[keep], Rotation.from_matrix(Rc[keep]).as_quat()[:, [3, 0, 1, 2]])
-        write_tum(cam, out / "odometry.tum")
-        write_wheel_csv(*run.wheel(), out / "wheel.csv")
-        write_tum(run.truth_trajectory(), out / "truth.tum")
-        write_rig(out / "rig.json", imu_T_camera=cfg.imu_T_camera, imu_T_antenna=cfg.imu_T_antenna,
-                  camera_time_offset_s=cfg.camera_time_offset_s)
         wrote = "imu.csv, odometry.tum (camera poses), wheel.csv, truth.tum (antenna) and rig.json"
-        if args.bag:
-            import shutil
+        with result_folder(out, command="pose simulate") as stage:
+            write_imu_csv(run.imu, stage / "imu.csv")
+            write_tum(cam, stage / "odometry.tum")
+            write_wheel_csv(*run.wheel(), stage / "wheel.csv")
+            write_tum(run.truth_trajectory(), stage / "truth.tum")
+            write_rig(stage / "rig.json", imu_T_camera=cfg.imu_T_camera, imu_T_antenna=cfg.imu_T_antenna,
+                      camera_time_offset_s=cfg.camera_time_offset_s)
+            if args.bag:
+                from gpr3d.io.rosbag import write_bag
 
-            from gpr3d.io.rosbag import write_bag
-
-            if (out / "bag").exists():
-                shutil.rmtree(out / "bag")
-            write_bag(out / "bag", imu=run.imu, trajectory=cam)
-            wrote += ", bag/ (ROS 2: /imu, /odometry)"
+                write_bag(stage / "bag", imu=run.imu, trajectory=cam)
+                wrote += ", bag/ (ROS 2: /imu, /odometry)"
         print(f"wrote {wrote} to {out}/: {run.path_length_m:.1f} m in {args.duration:g} s, odometry lost for 2 s at "
               f"{args.duration / 2:g} s ({int(keep.sum())} odometry frames)")
         return 0
@@ -611,17 +615,20 @@ def cmd_reconstruct(args):
     else:
         print(f"eps_r {cfg.eps_r:g} ({'the file header' if eps_given == 'file' else 'given'})")
     if args.mask == "detect":
-        from gpr3d.io.detections import write_detections
-
-        Path(args.out).mkdir(parents=True, exist_ok=True)
-        write_detections([found], Path(args.out) / "detections.json")
         boxes = [t["box"] for t in found["targets"]]
         print(f"detector: {len(boxes)} boxes in {survey.n_traces} traces ({found['wall_s']:.1f} s)")
         if not boxes:
             raise GPR3DError("the detector found no hyperbolas: nothing to migrate (try a lower --score)")
     result = reconstruct(survey, cfg, boxes=boxes, log=print)
     result.eps_r_source = f"estimated ({args.depth})" if estimate else ("file header" if eps_given == "file" else "given")
-    files = write_reconstruction(result, args.out, source=str(args.input))
+    from gpr3d.io.resultdir import result_folder
+
+    with result_folder(args.out, command="reconstruct") as stage:  # the whole result, or the previous one
+        if args.mask == "detect":
+            from gpr3d.io.detections import write_detections
+
+            write_detections([found], stage / "detections.json")
+        files = write_reconstruction(result, stage, source=str(args.input))
     g = result.grid
     rate = f" ({result.updates_per_s / 1e9:.2f} G voxel-trace updates/s)" if result.updates_per_s else ""
     how = "line by line (pseudo-3D)" if args.method == "pseudo3d" else "onto"

@@ -1,0 +1,80 @@
+"""Long commands killed at seeded random moments (issue 31): a folder holds the previous complete result or the new
+complete result, never a mix, and a re-run of the same line gives what an uninterrupted run gives."""
+
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from gpr3d import Survey
+from gpr3d.io.resultdir import check_result, open_result
+from gpr3d.io.trajectory import write_tum
+from gpr3d.simulation.forward import ForwardScene, Pipe, forward_model
+from gpr3d.simulation.paths import random_walk
+
+
+@pytest.fixture(scope="module")
+def line(tmp_path_factory):
+    d = tmp_path_factory.mktemp("kill")
+    walk = random_walk(900, area=((0, 0.8), (0, 0.8)), step_m=0.01, seed=4)
+    scene = ForwardScene(eps_r=6.0, pipes=[Pipe((0.1, 0.4, -0.33), (0.7, 0.4, -0.33), 0.03)])
+    data = forward_model(scene, walk.positions_xyz, walk.orientations_quat_wxyz, offset_m=0.08, frequency_hz=800e6,
+                         n_samples=192, time_window_s=12e-9, air_wave=1.0, ground_wave=0.5)
+    Survey(data=data, dt_s=12e-9 / 192, offset_m=0.08, frequency_hz=800e6, eps_r=6.0).save(d / "line.h5")
+    write_tum(walk, d / "walk.tum")
+    return d
+
+
+def _cmd(d, out, eps):
+    return [sys.executable, "-m", "gpr3d", "reconstruct", str(d / "line.h5"), "--poses", str(d / "walk.tum"),
+            "--out", str(out), "--max-depth", "0.6", "--eps-r", str(eps)]
+
+
+def _eps_of_result(out) -> float:
+    """eps_r of the result in ``out``, after checking that every file belongs to that one run."""
+    check_result(out)
+    cfg = json.loads((out / "config.json").read_text())["eps_r"]
+    with h5py.File(out / "volume.h5") as f:
+        vol = float(f.attrs["eps_r"])
+    assert cfg == vol, (cfg, vol)  # the volume and the config of one run
+    return cfg
+
+
+def test_reconstruct_killed_at_random_moments_leaves_one_whole_result(line, tmp_path):
+    out = tmp_path / "r"
+    assert subprocess.run(_cmd(line, out, 6), capture_output=True, text=True, timeout=900).returncode == 0
+    t0 = time.perf_counter()  # the second run, its kernels compiled: the span the kills are drawn in
+    r = subprocess.run(_cmd(line, out, 6), capture_output=True, text=True, timeout=900)
+    full = time.perf_counter() - t0
+    assert r.returncode == 0, r.stderr
+    assert _eps_of_result(out) == 6.0
+    rng = np.random.default_rng(31)
+    seen, before = [], 6.0
+    for k in range(5):  # each run asks for another eps_r: what is left tells which run's result it is
+        eps = 7.0 + k
+        at = float(rng.uniform(0.2, 1.05)) * full
+        p = subprocess.Popen(_cmd(line, out, eps), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(at)
+        p.send_signal(signal.SIGKILL)
+        p.wait(timeout=60)
+        open_result(out)  # what the next run (or a reader) does first
+        left = _eps_of_result(out)
+        assert left in (before, eps), (at, before, eps, left)
+        seen.append((round(at, 1), eps, left))
+        before = left
+        assert sorted(q.name for q in out.iterdir() if q.name.startswith(".")) == []
+    # the same line to the end: the result an uninterrupted run gives
+    r = subprocess.run(_cmd(line, out, 9), capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr
+    fresh = tmp_path / "fresh"
+    assert subprocess.run(_cmd(line, fresh, 9), capture_output=True, text=True, timeout=900).returncode == 0
+    assert _eps_of_result(out) == 9.0
+    with h5py.File(out / "volume.h5") as a, h5py.File(fresh / "volume.h5") as b:
+        np.testing.assert_allclose(a["envelope"][()], b["envelope"][()], rtol=1e-6, atol=1e-6 * np.abs(b["envelope"][()]).max())
+    assert json.loads((out / "targets.json").read_text()) == json.loads((fresh / "targets.json").read_text())
+    print("kills (s after the start, eps_r asked, eps_r left):", seen, f"full run {full:.1f} s")
