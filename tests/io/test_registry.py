@@ -165,3 +165,26 @@ def test_what_makes_no_survey_is_named_by_its_file_and_memory_is_one_line(tmp_pa
     with pytest.raises(FormatError, match=rf"^m.DZT: reading it needs more memory than this machine has \(the file "
                                           rf"is {p.stat().st_size:,} bytes; its header may claim far more"):
         read_all(p)
+
+
+def test_the_owner_of_an_extension_speaks_when_its_detector_declines(tmp_path, monkeypatch):
+    """The reader of the one format claiming an extension is asked: its FormatError's problem, another GPR3DError's
+    text, or (where the reader takes what its detector declined) that format."""
+    p = tmp_path / "odd.sgy"
+    p.write_bytes(b"\1" * 4000)
+    fmt = FORMATS["segy"]
+
+    def survey_error(path, **kw):
+        raise gpr3d.InvalidDataError("dt_s = 1e-20 s is implausible")
+
+    monkeypatch.setitem(FORMATS, "segy", dataclasses.replace(fmt, read=survey_error))
+    with pytest.raises(UnknownFormatError) as e:
+        detect_format(p)
+    assert str(e.value) == "odd.sgy: is not a valid segy file: dt_s = 1e-20 s is implausible"
+    monkeypatch.setitem(FORMATS, "segy", dataclasses.replace(fmt, read=lambda path, **kw: []))
+    assert detect_format(p) == "segy"
+    q = tmp_path / "x.h5"  # two formats claim .h5: neither reader is asked
+    q.write_bytes(b"\0" * 100)
+    with pytest.raises(UnknownFormatError) as e:
+        detect_format(q)
+    assert str(e.value) == "x.h5: has a .h5 extension but is not a valid gpr3d/gprmax file (corrupt or truncated)"

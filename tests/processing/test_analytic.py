@@ -32,6 +32,13 @@ def test_single_precision_stays_single_and_matches():
     np.testing.assert_allclose(got, hilbert(x, axis=0), rtol=0, atol=1e-5)
 
 
+def test_envelope_along_either_axis():
+    t = np.arange(128)
+    x = np.stack([np.cos(2 * np.pi * 9 * t / 128), 2 * np.cos(2 * np.pi * 20 * t / 128)])  # (2, 128)
+    np.testing.assert_allclose(hilbert_envelope(x.T, axis=0), [[1.0, 2.0]] * 128, rtol=1e-12)
+    np.testing.assert_allclose(hilbert_envelope(x, axis=1), np.abs(hilbert(x, axis=1)), atol=1e-12)
+
+
 def test_envelope_of_a_cosine_is_its_amplitude():
     # whole periods: the Hilbert transform of cos is sin exactly, so the envelope is flat
     t = np.arange(256)
@@ -51,9 +58,9 @@ def test_odd_length_has_no_nyquist_bin():
 def test_integers_are_read_as_float64_and_complex_refused():
     x = np.arange(12) % 5
     np.testing.assert_allclose(analytic(x), hilbert(x.astype(float)), atol=1e-12)
-    with pytest.raises(ValueError, match="real samples"):
+    with pytest.raises(ValueError, match="^the analytic signal is made from real samples$"):
         analytic(np.ones(4, complex))
-    with pytest.raises(ValueError, match="at least one sample"):
+    with pytest.raises(ValueError, match="^the analytic signal needs at least one sample along its axis$"):
         analytic(np.ones((3, 0)), axis=1)
 
 
@@ -85,6 +92,8 @@ def test_running_mean_types_and_limits():
     assert running_mean(x32, 3).dtype == np.float32
     assert running_mean(np.arange(6), 2).dtype == np.float64
     np.testing.assert_allclose(running_mean(np.arange(6), 2), uniform_filter1d(np.arange(6.0), 2, mode="nearest"))
-    assert running_mean(np.ones((2, 0)), 3, axis=1).shape == (2, 0)
+    empty = running_mean(np.ones((2, 0), np.float32), 3, axis=1)
+    assert empty.shape == (2, 0) and empty.dtype == np.float32
+    assert running_mean(np.ones((2, 0), np.int16), 3, axis=1).dtype == np.float64
     with pytest.raises(ValueError, match="at least 1, not 0"):
         running_mean(np.ones(4), 0)
