@@ -142,6 +142,7 @@ def test_the_parser_is_built_without_processing_or_migration_and_its_help_lists_
         mig.nosuch
 
 
+@pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
 def test_demo_end_to_end(tmp_path):
     r = run_cli("demo", "--out", tmp_path / "d")
     assert r.returncode == 0, r.stderr

@@ -40,6 +40,7 @@ def test_every_guide_command_parses(cmd):
         pytest.fail(f"the guide's {cmd!r} does not parse (exit {exc.code})")
 
 
+@pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
 def test_the_site_builds_without_a_warning(tmp_path):
     for mod in ("sphinx", "numpydoc", "myst_parser"):
         pytest.importorskip(mod)

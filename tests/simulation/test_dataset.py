@@ -24,6 +24,7 @@ def _done(out: Path) -> list[Path]:
     return sorted(p for p in d.iterdir() if p.name.isdigit()) if d.exists() else []
 
 
+@pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
 def test_killed_run_resumes_with_nothing_lost_or_duplicated(tmp_path):
     pytest.importorskip("gprMax")
     pytest.importorskip("distributed")
@@ -179,6 +180,7 @@ def test_survey_preset_sample_runs_following_models_and_cleans_up(tmp_path, monk
     assert simulate_sample(cfg, 0)["skipped"]  # a finished sample is not built again
 
 
+@pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
 def test_start_index_and_time_limit_build_part_of_a_set_and_resume(tmp_path):
     """--start builds start..n-1 only (two machines can share one set); --max-seconds stops with every finished
     sample kept and the rest left for the next run; together they give the samples of one straight run."""
