@@ -42,12 +42,13 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from scipy.ndimage import uniform_filter1d
 from scipy.optimize import least_squares
+from scipy.signal import hilbert
 
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.units import C0, velocity_from_eps_r
 from gpr3d.io.coco import BOX_PAD_PERIODS
-from gpr3d.processing.analytic import hilbert_envelope, running_mean
 
 #: where the direct wave's envelope peaks between the air wave (0) and the ground wave (1), for antennas on the
 #: ground: the median over 40 records of the gprMax training twin (0.616, spread 0.03 from 100 MHz to 1.7 GHz, eps_r
@@ -92,8 +93,8 @@ def _envelope(data: np.ndarray, dt_s: float, frequency_hz: float | None) -> np.n
     x = np.asarray(data, dtype=np.float64)
     if frequency_hz:
         w = int(np.clip(round(1.0 / (frequency_hz * dt_s)), 3, max(3, x.shape[1] // 2)))
-        x = x - running_mean(x, w, axis=1)
-    return hilbert_envelope(x, axis=1)
+        x = x - uniform_filter1d(x, w, axis=1, mode="nearest")
+    return np.abs(hilbert(x, axis=1))
 
 
 def _first_peak(e: np.ndarray, level: float = 0.5) -> tuple[float, float]:
@@ -118,8 +119,8 @@ def direct_wave_time(survey) -> tuple[float, float]:
     the same peak picked trace by trace.
     """
     data = np.asarray(survey.data, np.float64)
-    k, _ = _first_peak(hilbert_envelope(data.mean(axis=0)))
-    env = hilbert_envelope(data[:: max(1, data.shape[0] // 64)], axis=1)
+    k, _ = _first_peak(np.abs(hilbert(data.mean(axis=0))))
+    env = np.abs(hilbert(data[:: max(1, data.shape[0] // 64)], axis=1))
     per = np.array([_first_peak(e)[0] for e in env])
     return k * survey.dt_s, float(np.median(np.abs(per - k))) * survey.dt_s
 
