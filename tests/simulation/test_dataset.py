@@ -118,6 +118,14 @@ def test_pack_and_export_round_trip(tmp_path):
     c = coco_mod.COCO(str(tmp_path / "coco" / "coco.json"))
     assert len(c.imgs) == 3 and len(c.anns) == len(coco["annotations"])
     assert (tmp_path / "coco" / c.imgs[1]["file_name"]).exists()
+    # the command writes the same into a folder as a whole (manifest.json lists every image and coco.json)
+    from gpr3d.cli.main import main
+    from gpr3d.io.resultdir import check_result
+
+    assert main(["dataset", "export", str(tmp_path / "p.h5"), str(tmp_path / "cli"), "--image-height", "64"]) == 0
+    listed = set(check_result(tmp_path / "cli")["files"])
+    assert listed == {"coco.json"} | {im["file_name"] for im in coco["images"]}
+    assert json.loads((tmp_path / "cli" / "coco.json").read_text()) == coco
 
 
 def test_records_of_different_lengths_pack_and_read_back(tmp_path):

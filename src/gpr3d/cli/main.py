@@ -522,8 +522,12 @@ def cmd_dataset(args):
         info = pack_dataset(args.src, args.dst, n_samples=args.n_samples, regenerate=regen)
         print(f"packed {info['n']} samples into {info['file']} ({info['bytes'] / 1e6:.1f} MB)")
     else:
+        from gpr3d.io.resultdir import result_folder
+
         ds = PackedDataset(args.src)
-        coco = ds.export_coco(args.dst, image_height=args.image_height)
+        _out_folder(args.dst, "dataset export")
+        with result_folder(args.dst, command="dataset export") as stage:  # all the images and coco.json, or none
+            coco = ds.export_coco(stage, image_height=args.image_height)
         print(f"wrote {len(coco['images'])} images and {len(coco['annotations'])} boxes to {args.dst}/")
     return 0
 
