@@ -77,3 +77,47 @@ def test_reconstruct_killed_at_random_moments_leaves_one_whole_result(line, tmp_
         np.testing.assert_allclose(a["envelope"][()], b["envelope"][()], rtol=1e-6, atol=1e-6 * np.abs(b["envelope"][()]).max())
     assert json.loads((out / "targets.json").read_text()) == json.loads((fresh / "targets.json").read_text())
     print("kills (s after the start, eps_r asked, eps_r left):", seen, f"full run {full:.1f} s")
+
+
+def _train_cmd(out):
+    return [sys.executable, "-m", "gpr3d", "train", "detector", "--model", "ssdlite", "--steps", "10", "--batch", "2",
+            "--checkpoint-every", "2", "--warmup", "1", "--no-progress", "--out", str(out)]
+
+
+@pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
+def test_train_killed_at_random_moments_resumes_to_the_weights_of_an_unbroken_run(tmp_path):
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("torchvision")
+    ref, out = tmp_path / "ref", tmp_path / "run"
+    t0 = time.perf_counter()
+    r = subprocess.run(_train_cmd(ref), capture_output=True, text=True, timeout=900)
+    full = time.perf_counter() - t0
+    assert r.returncode == 0, r.stderr
+    rng = np.random.default_rng(7)
+    steps_seen = []
+    for _ in range(3):
+        # killed mid-training: once the log shows a drawn number of new steps, after a drawn fraction of a step more
+        log = out / "losses.csv"
+        base = len(log.read_text().splitlines()) if log.exists() else 1
+        until, extra = base + int(rng.integers(1, 3)), float(rng.uniform(0, 0.1))
+        p = subprocess.Popen(_train_cmd(out), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        while p.poll() is None and not (log.exists() and len(log.read_text().splitlines()) > until):
+            time.sleep(0.01)
+        time.sleep(extra)
+        p.send_signal(signal.SIGKILL)
+        p.wait(timeout=60)
+        ck = out / "checkpoint.pt"
+        if ck.exists():  # whatever the moment, the checkpoint on disk is a whole one
+            steps_seen.append(int(torch.load(ck, weights_only=True)["step"]))
+    r = subprocess.run(_train_cmd(out), capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr
+    a = torch.load(ref / "weights.pt", weights_only=True)
+    b = torch.load(out / "weights.pt", weights_only=True)
+    sa, sb = a["state_dict"], b["state_dict"]
+    assert sa.keys() == sb.keys()
+    for k in sa:
+        # (float16 weights: equal, or one rounding step apart where the sums' order differed)
+        assert torch.allclose(sa[k].float(), sb[k].float(), rtol=2e-3, atol=1e-4), k
+    log = (out / "losses.csv").read_text().splitlines()
+    assert [line.split(",")[0] for line in log[1:]] == [str(i) for i in range(1, 11)]  # each step logged once
+    print("train kills: checkpoint steps found", steps_seen, f"full run {full:.1f} s")

@@ -22,7 +22,7 @@ from gpr3d.core.errors import GPR3DError, InvalidDataError
 from gpr3d.core.training import optimiser_step, read_checkpoint, warmup_cosine
 from gpr3d.detection.models import MODELS, resolve_device
 from gpr3d.detection.windows import WindowConfig
-from gpr3d.io.atomic import atomic_path, atomic_write_text
+from gpr3d.io.atomic import atomic_path, atomic_write_text, resume_log
 
 __all__ = ["TrainConfig", "OPTIMISERS", "train_detector"]
 
@@ -216,11 +216,7 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
     sampler = list(range(step * cfg.batch, cfg.steps * cfg.batch))
     loader = torch.utils.data.DataLoader(ds, batch_size=cfg.batch, sampler=sampler, collate_fn=collate,
                                          num_workers=cfg.workers, persistent_workers=False)
-    log_path = out / "losses.csv"
-    new_log = not log_path.exists() or step == 0
-    logf = open(log_path, "w" if new_log else "a")
-    if new_log:
-        logf.write("step,lr,loss,wall_s,terms\n")
+    logf = resume_log(out / "losses.csv", step, "step,lr,loss,wall_s,terms")  # rows after the checkpoint dropped
     model.train()
     t0 = time.perf_counter()
     bar = tqdm(total=cfg.steps, initial=step, disable=not progress, desc=f"train {cfg.model}", unit="step")

@@ -41,7 +41,7 @@ from gpr3d.core.deps import require, resolve_device
 from gpr3d.core.training import optimiser_step, read_checkpoint, warmup_cosine
 from gpr3d.core.errors import FormatError, GPR3DError, InvalidDataError
 from gpr3d.core.units import C0
-from gpr3d.io.atomic import atomic_path, atomic_write_text
+from gpr3d.io.atomic import atomic_path, atomic_write_text, resume_log
 from gpr3d.io.weights import half_state_dict, read_weights_file
 
 __all__ = ["ARCHS", "DepthConfig", "DepthRecord", "prepare_depth_record", "depth_window", "window_targets_m", "crop_time",
@@ -416,9 +416,7 @@ def train_depthnet(cfg: DepthTrainConfig, records: list[DepthRecord], *, log=pri
     atomic_write_text(out / "config.json", json.dumps({"gpr3d": __version__, "config": asdict(cfg),
                                                        "n_records": len(records)}, indent=2))
     smoothed = {}
-    logf = open(out / "losses.csv", "a" if step else "w")
-    if not step:
-        logf.write("step,lr,loss,log_eps_mse,depth_mse_x100,wall_s\n")
+    logf = resume_log(out / "losses.csv", step, "step,lr,loss,log_eps_mse,depth_mse_x100,wall_s")
     t0 = time.perf_counter()
     bar = tqdm(total=cfg.steps, initial=step, disable=not progress, desc="train depthnet", unit="step")
 

@@ -7,7 +7,7 @@ import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_write_text"]
+__all__ = ["atomic_path", "atomic_write_text", "resume_log"]
 
 
 @contextlib.contextmanager
@@ -37,3 +37,22 @@ def atomic_write_text(path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
+
+
+def resume_log(path, step: int, header: str):
+    """Open a training run's CSV log (first column: the step) for appending from ``step``.
+
+    A new run (``step`` 0, or no log yet) starts the file with ``header``; a resumed one first drops the rows
+    after ``step`` (those written between the last checkpoint and a kill), atomically, so that each step is
+    logged once.
+    """
+    path = Path(path)
+    if step == 0 or not path.exists():
+        fh = open(path, "w")
+        fh.write(header.rstrip("\n") + "\n")
+        return fh
+    lines = path.read_text().splitlines()
+    kept = lines[:1] + [ln for ln in lines[1:] if ln.split(",", 1)[0].isdigit() and int(ln.split(",", 1)[0]) <= step]
+    if len(kept) != len(lines):
+        atomic_write_text(path, "\n".join(kept) + "\n")
+    return open(path, "a")
