@@ -121,3 +121,32 @@ def test_train_killed_at_random_moments_resumes_to_the_weights_of_an_unbroken_ru
     log = (out / "losses.csv").read_text().splitlines()
     assert [line.split(",")[0] for line in log[1:]] == [str(i) for i in range(1, 11)]  # each step logged once
     print("train kills: checkpoint steps found", steps_seen, f"full run {full:.1f} s")
+
+
+@pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
+def test_detect_killed_at_random_moments_leaves_the_old_or_the_new_file(tmp_path):
+    pytest.importorskip("onnxruntime")
+    import gpr3d
+
+    dzt = str(__import__("pathlib").Path(gpr3d.__file__).parent / "data" / "FILE____032.DZT")
+    ref, out = tmp_path / "ref.json", tmp_path / "det.json"
+    cmd = [sys.executable, "-m", "gpr3d", "detect", dzt, "--depth", "none"]
+    t0 = time.perf_counter()
+    assert subprocess.run([*cmd, "--out", str(ref)], capture_output=True, timeout=600).returncode == 0
+    full = time.perf_counter() - t0
+    old = {"input": "an earlier run", "targets": []}
+    out.write_text(json.dumps(old))
+    rng = np.random.default_rng(11)
+    left = []
+    for _ in range(3):
+        p = subprocess.Popen([*cmd, "--out", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(float(rng.uniform(0.3, 1.0)) * full)
+        p.send_signal(signal.SIGKILL)
+        p.wait(timeout=60)
+        got = json.loads(out.read_text())  # always a whole file
+        assert got == old or got["targets"] == json.loads(ref.read_text())["targets"]
+        left.append("old" if got == old else "new")
+    assert subprocess.run([*cmd, "--out", str(out)], capture_output=True, timeout=600).returncode == 0
+    assert json.loads(out.read_text())["targets"] == json.loads(ref.read_text())["targets"]
+    assert [q.name for q in tmp_path.iterdir() if q.name.startswith(".")] == []  # no partial file stays
+    print("detect kills left:", left, f"full run {full:.1f} s")

@@ -21,3 +21,26 @@ def test_a_resumed_log_drops_the_rows_after_its_checkpoint(tmp_path):
     with resume_log(q, 5, "step,loss") as fh:  # a resumed run whose log was removed: a new log
         fh.write("6,0.1\n")
     assert q.read_text() == "step,loss\n6,0.1\n"
+
+
+def test_a_killed_writer_s_temporary_file_is_removed_by_the_next_write(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    from gpr3d.io.atomic import atomic_path, atomic_write_text
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True).stdout.strip()  # a process id that has ended
+    stale = tmp_path / f".det.json.{dead}-x1y2.part"
+    stale.write_text("half")
+    live = tmp_path / f".det.json.{os.getppid()}-a1b2.part"  # a writer still running: left alone
+    live.write_text("writing")
+    other = tmp_path / f".other.json.{dead}-c3d4.part"  # another file's: not this write's business
+    other.write_text("half")
+    atomic_write_text(tmp_path / "det.json", "{}")
+    assert (tmp_path / "det.json").read_text() == "{}"
+    assert not stale.exists() and live.exists() and other.exists()
+    with atomic_path(tmp_path / "v.h5", suffix=".h5.part") as tmp:  # the writer's own name carries its pid
+        assert tmp.name.startswith(f".v.h5.{os.getpid()}-") and tmp.name.endswith(".h5.part")
+        tmp.write_text("x")

@@ -5,9 +5,31 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
+from glob import escape as glob_escape
 from pathlib import Path
 
 __all__ = ["atomic_path", "atomic_write_text", "resume_log"]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+def _remove_stale_parts(path: Path) -> None:
+    """Remove the temporary files that earlier writes of ``path`` left when their process was killed (each names
+    its writer's process id; a living writer's file is left alone)."""
+    prefix = f".{path.name}."
+    for p in path.parent.glob(f".{glob_escape(path.name)}.*-*.part*"):
+        pid = p.name[len(prefix):].split("-", 1)[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+            with contextlib.suppress(OSError):
+                p.unlink()
 
 
 @contextlib.contextmanager
@@ -18,7 +40,8 @@ def atomic_path(path, suffix: str | None = None):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or ".part", dir=path.parent)
+    _remove_stale_parts(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}-", suffix=suffix or ".part", dir=path.parent)
     os.close(fd)
     try:
         yield Path(tmp)
