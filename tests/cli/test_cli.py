@@ -76,7 +76,7 @@ def test_user_errors_are_one_line_without_traceback(tmp_path):
     for args, msg in [
         (("process", good, "--steps", "wiggle", "--out", tmp_path / "x.h5"), "unknown processing step 'wiggle'"),
         (("process", good, "--steps", "bandpass:fmin_hz=9e9", "--out", tmp_path / "x.h5"), "Nyquist"),
-        (("convert", good, tmp_path / "x.xyz"), "unknown output type"),
+        (("convert", good, tmp_path / "x.xyz"), "x.xyz: expected a .h5 or .hdf5 or .sgy or .segy or .png file"),
         (("show", good, "--out", tmp_path / "x.png", "--axis", "depth"), "needs --eps-r"),
         (("info", tmp_path / "missing.DZT"), "no such file"),
         (("info", good, "--format", "dzt"), "not a DZT file"),

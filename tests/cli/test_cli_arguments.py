@@ -122,6 +122,11 @@ def one_line_error(capsys, argv, *needles):
     (["reconstruct", "{d}/walk.h5", "--eps-r", "6", "--out", "/sys/gpr3d_x"], ["--out /sys/gpr3d_x: cannot write in /sys"]),
     (["detect", DZT, "--out", "/sys/gpr3d_x/d.json"], ["--out /sys/gpr3d_x/d.json: cannot write in /sys"]),
     (["depth", DZT, "--boxes", "{d}/huge_box.json"], ["huge_box.json: box 0", "reaches far outside the data"]),
+    (["process", DZT, "--out", "/sys/gpr3d_x/p.h5", "--steps", "dewow"], ["--out /sys/gpr3d_x/p.h5: cannot write"]),
+    (["convert", DZT, "{d}/c.txt"], ["output ", "c.txt: expected a .h5 or .hdf5 or .sgy or .segy or .png file"]),
+    (["train", "detector", "--out", "/sys/gpr3d_t"], ["--out /sys/gpr3d_t: cannot write in /sys"]),
+    (["simulate", "--engine", "forward", "--n", "1", "--out", "/sys/gpr3d_s"], ["--out /sys/gpr3d_s: cannot write"]),
+    (["depth", DZT, "--out", "{d}/d.txt"], ["--out", "d.txt: expected a .json file"]),
 ])
 def test_a_wrong_argument_is_one_line_naming_it_and_leaves_nothing(files, capsys, argv, needles):
     """Each case the issue lists (tracebacks, a hang, wrong results with no error, unhelpful messages)."""

@@ -195,7 +195,11 @@ def _write(survey, out: str):
         raise GPR3DError(f"{out}: unknown output type {suffix!r} (use .h5, .sgy/.segy or .png)")
 
 
+_SURVEY_OUT = (".h5", ".hdf5", ".sgy", ".segy", ".png")
+
+
 def cmd_process(args):
+    _check_suffix(args.out, _SURVEY_OUT, "--out")  # before the work
     s = _apply_steps(_read_channel(args), args.steps)
     _write(s, args.out)
     print(f"wrote {args.out}: {s}")
@@ -203,6 +207,7 @@ def cmd_process(args):
 
 
 def cmd_convert(args):
+    _check_suffix(args.out, _SURVEY_OUT, "output")
     s = _read_channel(args)
     _write(s, args.out)
     print(f"wrote {args.out}: {s}")
@@ -346,6 +351,7 @@ def cmd_migrate(args):
 def cmd_simulate(args):
     from gpr3d.simulation.dataset import SimulateConfig, build_dataset
 
+    _writable(args.out, "--out")
     cfg = SimulateConfig(out=args.out, n=args.n, seed=args.seed, engine=args.engine, workers=args.workers,
                          scheduler=args.scheduler, image_height=args.image_height, preset=args.preset,
                          host=args.host, start=args.start, max_seconds=args.max_seconds)
@@ -798,6 +804,7 @@ def cmd_depth(args):
 
     if args.trace_spacing is not None and not args.trace_spacing > 0:
         raise GPR3DError(f"--trace-spacing must be a positive number of metres, got {args.trace_spacing}")
+    _check_suffix(args.out, (".json",), "--out")
     _check_radius(args, args.method)
     det = _detector(args) if not args.boxes else None
     depthnet = _depthnet(args) if args.method in ("hybrid", "net") else None
@@ -920,6 +927,7 @@ def _check_train_args(args) -> None:
     _in_range(args.packed_holdout, "--packed-holdout", 0, 10**7, "a number of records")
     _in_range(args.records, "--records", 1, 10**7, "a number of records")
     _in_range(args.width, "--width", 1, 1024, "a number of channels")
+    _writable(args.out, "--out")
 
 
 def cmd_train(args):
