@@ -277,6 +277,13 @@ def test_a_receiver_without_position_or_steps_has_no_positions(tmp_path):
     ({"gprMax": "4", "Iterations": 6, "dt": 0.0}, {"rx1": {"Ez": np.ones(6)}}, "gprMax dt = 0.0 is not a positive"),
     ({"gprMax": "4", "Iterations": 6, "dt": float("nan")}, {"rx1": {"Ez": np.ones(6)}}, "gprMax dt = nan"),
     ({"gprMax": "4", "Iterations": 6, "dt": 1e-12}, {}, "gprMax output holds no receivers"),
+    # issue 31's fuzzing: once int(inf), an OverflowError
+    ({"gprMax": "4", "Iterations": float("inf"), "dt": 1e-12}, {"rx1": {"Ez": np.ones(6)}},
+     "header field Iterations = inf is not a whole number"),
+    ({"gprMax": "4", "Iterations": 6.5, "dt": 1e-12}, {"rx1": {"Ez": np.ones(6)}},
+     "header field Iterations = 6.5 is not a whole number"),
+    ({"gprMax": "4", "Iterations": 1, "dt": 1e-12}, {"rx1": {"Ez": np.ones(1)}},
+     "header field Iterations = 1 is implausible (expected 2..1000000000)"),
     ({"gprMax": "4", "Iterations": 7, "dt": 1e-12}, {"rx1": {"Ez": np.ones((6, 2))}},
      "rx1/Ez has shape (6, 2), expected (7, n_traces)"),
     ({"gprMax": "4", "Iterations": 6, "dt": 1e-12}, {"rx1": {"Ez": np.ones((6, 2, 2))}}, "rx1/Ez has shape (6, 2, 2)"),

@@ -102,7 +102,8 @@ def header_count(path, name: str, value, *, lo: int = 1, hi: int = 10**9) -> int
     except (TypeError, ValueError):
         raise FormatError(path, f"header field {name} = {value!r} is not a number") from None
     if not math.isfinite(v) or v != math.floor(v):
-        raise FormatError(path, f"header field {name} = {value!r} is not a whole number")
+        shown = repr(value) if isinstance(value, str) else f"{v:.10g}"
+        raise FormatError(path, f"header field {name} = {shown} is not a whole number")
     if not lo <= v <= hi:
         raise FormatError(path, f"header field {name} = {v:.10g} is implausible (expected {lo}..{hi})")
     return int(v)

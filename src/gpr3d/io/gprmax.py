@@ -25,7 +25,7 @@ import numpy as np
 from gpr3d.core.errors import FormatError
 from gpr3d.core.poses import quat_from_yaw
 from gpr3d.core.survey import Survey
-from gpr3d.io._common import check_file, check_hdf5_survives, hdf5_errors
+from gpr3d.io._common import check_file, check_hdf5_survives, hdf5_errors, header_count
 
 __all__ = ["is_gprmax", "read_gprmax", "read_gprmax_waveform", "gprmax_to_world", "COMPONENTS"]
 
@@ -115,9 +115,10 @@ def _read_gprmax(p, component):
                                  "rxs/rxN/<component>): not a gprMax output")
         try:
             dt = float(f.attrs["dt"])
-            iterations = int(f.attrs["Iterations"])
+            iterations = f.attrs["Iterations"]
         except (KeyError, TypeError, ValueError):
             raise FormatError(p, "gprMax output lacks the 'dt' or 'Iterations' attribute") from None
+        iterations = header_count(p, "Iterations", iterations, lo=2, hi=10**9)
         if not (math.isfinite(dt) and dt > 0):
             raise FormatError(p, f"gprMax dt = {dt!r} is not a positive number")
         dl = _attr_vec(f, "dx_dy_dz", (1, 1, 1))
