@@ -456,3 +456,32 @@ def test_a_channel_count_the_file_does_not_hold_is_refused(tmp_path):
     two.write_bytes(bytes(head))
     with pytest.raises(FormatError, match=r"bytes 1024\.\.2047 hold no header of channel 2 \(7 bits, 8 samples"):
         read_dzt(two)
+
+
+@pytest.mark.parametrize("at, value, ok", [
+    (4, struct.pack("<H", 1), False), (4, struct.pack("<H", 2), True),  # channel 2's samples: 1 refused, 2 taken
+    (26, struct.pack("<f", float("nan")), False), (26, struct.pack("<f", 0.0), False),
+    (26, struct.pack("<f", 0.5), True),  # its range: positive and finite, any size
+    (6, struct.pack("<H", 16), True), (6, struct.pack("<H", 12), False),
+])
+def test_what_a_channel_header_must_hold(tmp_path, at, value, ok):
+    p = write_dzt(tmp_path / "two.DZT", n_channels=2, n_traces=3, n_samples=8)
+    raw = bytearray(p.read_bytes())
+    raw[1024 + at : 1024 + at + len(value)] = value
+    p.write_bytes(bytes(raw))
+    if ok:
+        assert len(read_dzt(p)) == 2
+    else:
+        with pytest.raises(FormatError, match=r"hold no header of channel 2"):
+            read_dzt(p)
+
+
+def test_a_dzt_of_many_blocks_reads_as_one(tmp_path):
+    """Traces of 4 MiB (16 channels of 65,535 32-bit samples): the reader's 32 MiB blocks hold 7 of them, so 9 traces
+    take two blocks, the second a part one; every sample as written, the marks of both blocks."""
+    p = write_dzt(tmp_path / "big.DZT", n_traces=9, n_samples=65535, n_channels=16, bits=32)
+    surveys = read_dzt(p)
+    want = expected_values(9, 65535, 16, 32)
+    for ch in (0, 7, 15):
+        np.testing.assert_array_equal(surveys[ch].data[:, 2:], want[ch][:, 2:].astype(np.float32))
+    assert surveys[0].metadata["marks"] == np.nonzero(want[0][:, 1])[0].tolist()

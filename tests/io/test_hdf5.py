@@ -252,3 +252,25 @@ def test_a_declared_size_is_checked_against_the_file_before_anything_is_read(tmp
         read_surveys(p)
     monkeypatch.setattr(hdf5, "_MAX_UNCHECKED_BYTES", 256 * 512 * 4)  # small data sets are never refused
     assert read_surveys(p)[0].n_traces == 256
+
+
+@pytest.mark.parametrize("text, said", [('"text"', "a string"), ("5", "a number"), ("2.5", "a number"),
+                                        ("true", "true/false"), ("{}", "an object")])
+def test_every_json_kind_in_the_wrong_place_is_named(tmp_path, text, said):
+    p = tmp_path / "s.h5"
+    write_survey(Survey(data=np.ones((2, 3), np.float32), dt_s=1e-10), p)
+    _edit(p, lambda f: f["surveys/0"].attrs.__setitem__("history_json", text))
+    with pytest.raises(FormatError) as e:
+        read_surveys(p)
+    assert str(e.value) == f"s.h5: survey 0: its history_json holds {said}, not a list"
+
+
+def test_the_schema_attribute_as_bytes_or_as_an_array(tmp_path):
+    p = tmp_path / "s.h5"
+    write_survey(Survey(data=np.ones((2, 3), np.float32), dt_s=1e-10), p)
+    _edit(p, lambda f: f.attrs.__setitem__("schema", np.bytes_(b"gpr3d.survey")))  # written by another HDF5 tool
+    assert read_surveys(p)[0].n_traces == 2
+    _edit(p, lambda f: f.attrs.__setitem__("schema", np.zeros(3)))
+    with pytest.raises(FormatError) as e:
+        read_surveys(p)
+    assert str(e.value) == "s.h5: not a gpr3d survey file (schema attribute 'array([0., 0., 0.])')"
