@@ -99,8 +99,9 @@ def header_count(path, name: str, value, *, lo: int = 1, hi: int = 10**9) -> int
     """A header's count field (traces, samples, channels) as int; FormatError unless a whole number in lo..hi."""
     try:
         v = float(value)
-    except (TypeError, ValueError):
-        raise FormatError(path, f"header field {name} = {value!r} is not a number") from None
+    except (TypeError, ValueError):  # (an array's repr spans lines: one line, cut short)
+        shown = " ".join(repr(value).split())
+        raise FormatError(path, f"header field {name} = {shown[:60]} is not a number") from None
     if not math.isfinite(v) or v != math.floor(v):
         shown = repr(value) if isinstance(value, str) else f"{v:.10g}"
         raise FormatError(path, f"header field {name} = {shown} is not a whole number")
