@@ -284,6 +284,8 @@ def test_a_receiver_without_position_or_steps_has_no_positions(tmp_path):
      "header field Iterations = 6.5 is not a whole number"),
     ({"gprMax": "4", "Iterations": 1, "dt": 1e-12}, {"rx1": {"Ez": np.ones(1)}},
      "header field Iterations = 1 is implausible (expected 2..1000000000)"),
+    ({"gprMax": "4", "Iterations": np.ones((2, 2)), "dt": 1e-12}, {"rx1": {"Ez": np.ones(6)}},
+     "header field Iterations = array([[1., 1.], [1., 1.]]) is not a number"),
     ({"gprMax": "4", "Iterations": 7, "dt": 1e-12}, {"rx1": {"Ez": np.ones((6, 2))}},
      "rx1/Ez has shape (6, 2), expected (7, n_traces)"),
     ({"gprMax": "4", "Iterations": 6, "dt": 1e-12}, {"rx1": {"Ez": np.ones((6, 2, 2))}}, "rx1/Ez has shape (6, 2, 2)"),
