@@ -180,6 +180,8 @@ def _edit(path, fn):
     (lambda f: f.attrs.__delitem__("schema"), "s.h5: not a gpr3d survey file (schema attribute None)"),
     (lambda f: f.attrs.__setitem__("schema_version", 2),
      "s.h5: written with schema version 2; this gpr3d reads up to 1: upgrade gpr3d"),
+    (lambda f: f.attrs.__setitem__("schema_version", float("inf")),  # (the fuzzer's: once an OverflowError)
+     "s.h5: header field schema_version = inf is not a whole number"),
     (lambda f: f.__delitem__("surveys"), "s.h5: holds no surveys"),
     (lambda f: f.__delitem__("surveys/0"), "s.h5: holds no surveys"),
     (lambda f: f["surveys/0"].__delitem__("data"), "s.h5: survey 0 has no data set 'data'"),

@@ -19,7 +19,7 @@ import h5py
 
 from gpr3d.core.errors import FormatError
 from gpr3d.core.survey import Survey
-from gpr3d.io._common import check_file, check_hdf5_survives, hdf5_errors
+from gpr3d.io._common import check_file, check_hdf5_survives, hdf5_errors, header_count
 from gpr3d.io.atomic import atomic_path
 
 __all__ = ["SCHEMA", "SCHEMA_VERSION", "write_survey", "write_surveys", "read_surveys", "read_survey", "is_gpr3d_h5"]
@@ -94,7 +94,7 @@ def _read_surveys(p) -> list[Survey]:
     with h5py.File(p, "r") as f:
         if _schema(f) != SCHEMA:
             raise FormatError(p, f"not a gpr3d survey file (schema attribute {_schema(f)!r})")
-        version = int(f.attrs.get("schema_version", -1))
+        version = header_count(p, "schema_version", f.attrs.get("schema_version", -1), lo=-1, hi=10**6)
         if version > SCHEMA_VERSION:
             raise FormatError(p, f"written with schema version {version}; this gpr3d reads up to {SCHEMA_VERSION}: upgrade gpr3d")
         if "surveys" not in f or not len(f["surveys"]):
