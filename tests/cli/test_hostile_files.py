@@ -22,20 +22,20 @@ from tests.io.test_gprmax import BASE, _file
 DZT = Path(gpr3d.__file__).parent / "data" / "FILE____032.DZT"
 
 
+def _header_edited(data, header_suffix, old, new):
+    """A made data/header pair whose text header has ``old`` replaced by ``new``; the data file's path."""
+    header = data.with_suffix(header_suffix)
+    assert old in header.read_text()
+    header.write_text(header.read_text().replace(old, new))
+    return data
+
+
 def _hd(tmp_path, old, new):
-    p = write_dt1(tmp_path / "line")
-    hd = p.with_suffix(".HD")
-    assert old in hd.read_text()
-    hd.write_text(hd.read_text().replace(old, new))
-    return p
+    return _header_edited(write_dt1(tmp_path / "line"), ".HD", old, new)
 
 
 def _rad(tmp_path, old, new):
-    p = write_rd3(tmp_path / "ten")
-    rad = p.with_suffix(".rad")
-    assert old in rad.read_text()
-    rad.write_text(rad.read_text().replace(old, new))
-    return p
+    return _header_edited(write_rd3(tmp_path / "ten"), ".rad", old, new)
 
 
 def _dzt_field(tmp_path, at, value):

@@ -44,3 +44,15 @@ def test_a_killed_writer_s_temporary_file_is_removed_by_the_next_write(tmp_path)
     with atomic_path(tmp_path / "v.h5", suffix=".h5.part") as tmp:  # the writer's own name carries its pid
         assert tmp.name.startswith(f".v.h5.{os.getpid()}-") and tmp.name.endswith(".h5.part")
         tmp.write_text("x")
+
+
+def test_file_sha256_is_hashlib_s_of_the_bytes(tmp_path):
+    import hashlib
+
+    from gpr3d.io.atomic import file_sha256
+
+    data = bytes(range(256)) * 9000  # over two 1 MiB blocks
+    (tmp_path / "b").write_bytes(data)
+    assert file_sha256(tmp_path / "b") == hashlib.sha256(data).hexdigest()
+    (tmp_path / "e").write_bytes(b"")
+    assert file_sha256(tmp_path / "e") == hashlib.sha256(b"").hexdigest()

@@ -7,6 +7,7 @@ import pytest
 
 from gpr3d.core.errors import FormatError
 from gpr3d.io import resultdir
+from gpr3d.io.atomic import file_sha256
 from gpr3d.io.resultdir import JOURNAL, MANIFEST, check_result, open_result, result_folder
 
 
@@ -100,7 +101,7 @@ def test_a_kill_at_any_step_of_the_commit_is_finished_by_the_next_opening(tmp_pa
 def _check_without_opening(out):
     m = json.loads((out / MANIFEST).read_text())
     for rel, digest in m["files"].items():
-        if not (out / rel).exists() or resultdir._sha256(out / rel) != digest:
+        if not (out / rel).exists() or file_sha256(out / rel) != digest:
             raise FormatError(out, "mixed")
 
 

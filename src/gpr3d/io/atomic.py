@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import tempfile
 from glob import escape as glob_escape
 from pathlib import Path
 
-__all__ = ["atomic_path", "atomic_write_text", "resume_log"]
+__all__ = ["atomic_path", "atomic_write_text", "resume_log", "file_sha256"]
 
 
 def _alive(pid: int) -> bool:
@@ -79,3 +80,12 @@ def resume_log(path, step: int, header: str):
     if len(kept) != len(lines):
         atomic_write_text(path, "\n".join(kept) + "\n")
     return open(path, "a")
+
+
+def file_sha256(path) -> str:
+    """SHA-256 of a file's bytes (hex), read in 1 MiB blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

@@ -17,7 +17,6 @@ listed (a user's own) are never touched. :func:`check_result` compares the files
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import json
 import os
 import shutil
@@ -25,21 +24,13 @@ import tempfile
 from pathlib import Path
 
 from gpr3d.core.errors import FormatError
-from gpr3d.io.atomic import atomic_write_text
+from gpr3d.io.atomic import atomic_write_text, file_sha256
 
 __all__ = ["result_folder", "open_result", "check_result", "MANIFEST", "JOURNAL"]
 
 MANIFEST = "manifest.json"
 JOURNAL = ".gpr3d-commit.json"
 _STAGE_PREFIX = ".gpr3d-staging-"
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _files(folder: Path) -> list[str]:
@@ -101,7 +92,7 @@ def result_folder(out, *, command: str = ""):
     stage = Path(tempfile.mkdtemp(prefix=_STAGE_PREFIX, dir=out))
     try:
         yield stage
-        files = {rel: _sha256(stage / rel) for rel in _files(stage)}
+        files = {rel: file_sha256(stage / rel) for rel in _files(stage)}
         if MANIFEST in files or JOURNAL in files:
             raise FormatError(out, f"a result may not hold its own {MANIFEST}")
         atomic_write_text(out / JOURNAL, json.dumps({"command": command, "stage": stage.name, "files": files},
@@ -120,6 +111,6 @@ def check_result(out) -> dict:
         p = out / rel
         if not p.is_file():
             raise FormatError(out, f"holds no {rel}, which its manifest lists: an incomplete result")
-        if _sha256(p) != digest:
+        if file_sha256(p) != digest:
             raise FormatError(p, "differs from the result's manifest (changed after the run, or from another run)")
     return manifest

@@ -21,7 +21,6 @@ cluster behind a ``tcp://`` scheduler address.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import re
@@ -36,7 +35,7 @@ import numpy as np
 from gpr3d import __version__
 from gpr3d.core.deps import require
 from gpr3d.core.errors import GPR3DError
-from gpr3d.io.atomic import atomic_write_text
+from gpr3d.io.atomic import atomic_write_text, file_sha256
 from gpr3d.processing.image import bscan_image  # re-exported: the image.png rendering
 
 __all__ = ["SimulateConfig", "simulate_sample", "build_dataset", "write_manifest", "bscan_image", "PRESETS"]
@@ -87,14 +86,6 @@ def _scene_for(cfg_dict: dict, index: int):
             t.radius_m = min(t.radius_m, scene.depth_m / 8)
         scene.stones, scene.rough_surface_m = [], 0.0
     return scene
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def simulate_sample(cfg_dict: dict, index: int) -> dict:
@@ -177,7 +168,7 @@ def write_manifest(out, cfg: SimulateConfig | None = None) -> dict:
         if missing:
             raise GPR3DError(f"{d}: sample folder lacks {missing}; delete it and run again")
         lab = json.loads((d / "labels.json").read_text())
-        entries.append({"index": index, "files": {f: _sha256(d / f) for f in SAMPLE_FILES},
+        entries.append({"index": index, "files": {f: file_sha256(d / f) for f in SAMPLE_FILES},
                         "n_targets": len(lab["labels"]), "eps_r": lab["eps_r"]})
         coco_in.append({"id": index + 1, "file_name": f"samples/{index:06d}/image.png",
                         "n_traces": lab["n_traces"], "n_samples": lab["n_samples"], "dt_s": lab["dt_s"],
