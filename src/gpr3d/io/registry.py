@@ -107,8 +107,8 @@ def read_all(path, *, format: str | None = None, **kwargs) -> list:
         raise FormatError(path, str(exc)) from None
     except MemoryError:
         size = Path(path).stat().st_size
-        raise FormatError(path, f"reading it needs more memory than is available (the file is {size:,} bytes; its "
-                                "samples are kept as float32, up to 4 bytes each)") from None
+        raise FormatError(path, f"reading it needs more memory than this machine has (the file is {size:,} bytes; "
+                                "its header may claim far more data than it holds)") from None
 
 
 def read(path, *, format: str | None = None, channel: int = 0, **kwargs):
