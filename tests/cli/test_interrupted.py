@@ -140,7 +140,7 @@ def test_detect_killed_at_random_moments_leaves_the_old_or_the_new_file(tmp_path
     left = []
     for _ in range(3):
         p = subprocess.Popen([*cmd, "--out", str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        time.sleep(float(rng.uniform(0.3, 1.0)) * full)
+        time.sleep(float(rng.uniform(0.3, 1.3)) * full)
         p.send_signal(signal.SIGKILL)
         p.wait(timeout=60)
         got = json.loads(out.read_text())  # always a whole file
@@ -150,3 +150,162 @@ def test_detect_killed_at_random_moments_leaves_the_old_or_the_new_file(tmp_path
     assert json.loads(out.read_text())["targets"] == json.loads(ref.read_text())["targets"]
     assert [q.name for q in tmp_path.iterdir() if q.name.startswith(".")] == []  # no partial file stays
     print("detect kills left:", left, f"full run {full:.1f} s")
+
+
+def _sim_cmd(out, n=10):
+    return [sys.executable, "-m", "gpr3d", "simulate", "--engine", "forward", "--preset", "tiny", "--n", str(n),
+            "--workers", "1", "--seed", "3", "--out", str(out), "--no-progress"]
+
+
+def _samples(out) -> dict:
+    """Each finished sample's B-scan, labels and scene (what a resumed set must share with an unbroken one)."""
+    import gpr3d
+
+    got = {}
+    d = out / "samples"
+    for p in sorted(d.iterdir()) if d.exists() else []:
+        if not p.name.isdigit():
+            continue
+        assert sorted(q.name for q in p.iterdir()) == ["bscan.h5", "image.png", "labels.json", "scene.json"], p
+        got[p.name] = (gpr3d.read(p / "bscan.h5").data, json.loads((p / "labels.json").read_text())["labels"],
+                       (p / "scene.json").read_text())
+    return got
+
+
+@pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
+def test_simulate_killed_at_random_moments_resumes_to_the_set_of_an_unbroken_run(tmp_path):
+    pytest.importorskip("distributed")
+    import os
+
+    ref, out = tmp_path / "ref", tmp_path / "run"
+    t0 = time.perf_counter()
+    r = subprocess.run(_sim_cmd(ref, 40), capture_output=True, text=True, timeout=600)
+    full = time.perf_counter() - t0
+    assert r.returncode == 0, r.stderr
+    want = _samples(ref)
+    assert len(want) == 40
+    rng = np.random.default_rng(5)
+    seen = []
+    for _ in range(3):
+        # killed mid-build: once a drawn number of new samples is on disk, after a drawn fraction of a sample more
+        base = len(_samples(out))
+        # (a forward-model sample takes some 0.05 s once its kernels are compiled)
+        until, extra = base + int(rng.integers(2, 10)), float(rng.uniform(0, 0.1))
+        p = subprocess.Popen(_sim_cmd(out, 40), start_new_session=True, stdout=subprocess.DEVNULL,
+                             stderr=subprocess.DEVNULL)
+        d = out / "samples"
+        while p.poll() is None and not (d.exists() and sum(q.name.isdigit() for q in d.iterdir()) >= until):
+            time.sleep(0.02)
+        time.sleep(extra)
+        try:
+            os.killpg(p.pid, signal.SIGKILL)  # the job and its Dask worker, at a drawn moment
+        except ProcessLookupError:
+            pass
+        p.wait(timeout=60)
+        got = _samples(out)  # every sample folder on disk is a whole one, and the unbroken run's
+        for k, (data, labels, scene) in got.items():
+            np.testing.assert_array_equal(data, want[k][0])
+            assert (labels, scene) == want[k][1:], k
+        seen.append((until - base, round(extra, 2), len(got)))
+    r = subprocess.run(_sim_cmd(out, 40), capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    got = _samples(out)
+    assert got.keys() == want.keys()
+    for k, (data, labels, scene) in got.items():
+        np.testing.assert_array_equal(data, want[k][0])
+        assert (labels, scene) == want[k][1:], k
+    assert [q.name for q in (out / "samples").iterdir() if not q.name.isdigit()] == []  # no half-built sample
+    m = json.loads((out / "manifest.json").read_text())
+    assert [e["index"] for e in m["samples"]] == list(range(40))
+    assert 0 < seen[0][2] < 40, seen  # the first kill came mid-build
+    print("simulate kills (new samples waited for, s more, samples whole on disk):", seen, f"full run {full:.1f} s")
+
+
+def _fuse_cmd(d, out):
+    return [sys.executable, "-m", "gpr3d", "pose", "fuse", "--imu", str(d / "imu.csv"), "--odometry",
+            str(d / "odometry.tum"), "--wheel", str(d / "wheel.csv"), "--rig", str(d / "rig.json"), "--out", str(out)]
+
+
+@pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
+def test_pose_simulate_and_fuse_killed_at_random_moments_leave_the_old_or_the_new_result(tmp_path):
+    rig = tmp_path / "rig"
+    sim = [sys.executable, "-m", "gpr3d", "pose", "simulate", "--duration", "40", "--out", str(rig)]
+    t0 = time.perf_counter()
+    r = subprocess.run([*sim, "--seed", "1"], capture_output=True, text=True, timeout=600)
+    full_sim = time.perf_counter() - t0
+    assert r.returncode == 0, r.stderr
+    first = (rig / "imu.csv").read_text()
+    rng = np.random.default_rng(13)
+    left = []
+    for seed in (2, 3):  # another seed each time: the file's content tells which run it came from
+        p = subprocess.Popen([*sim, "--seed", str(seed)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(float(rng.uniform(0.3, 1.0)) * full_sim)
+        p.send_signal(signal.SIGKILL)
+        p.wait(timeout=60)
+        open_result(rig)
+        check_result(rig)  # every file of one run, with the hashes its manifest gives
+        left.append("old" if (rig / "imu.csv").read_text() == first else "new")
+    r = subprocess.run([*sim, "--seed", "1"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert (rig / "imu.csv").read_text() == first  # the same line again: the same recordings
+    check_result(rig)
+
+    ref, out = tmp_path / "ref.tum", tmp_path / "fused.tum"
+    t0 = time.perf_counter()
+    r = subprocess.run(_fuse_cmd(rig, ref), capture_output=True, text=True, timeout=600)
+    full = time.perf_counter() - t0
+    assert r.returncode == 0, r.stderr
+    old = "# t tx ty tz qx qy qz qw\n0.0 0 0 0 0 0 0 1\n"
+    out.write_text(old)
+    for _ in range(3):
+        p = subprocess.Popen(_fuse_cmd(rig, out), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(float(rng.uniform(0.3, 1.05)) * full)
+        p.send_signal(signal.SIGKILL)
+        p.wait(timeout=60)
+        got = out.read_text()
+        assert got in (old, ref.read_text())  # a whole file: the earlier one or the new one
+        left.append("old" if got == old else "new")
+    r = subprocess.run(_fuse_cmd(rig, out), capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert out.read_text() == ref.read_text()
+    assert [q.name for q in tmp_path.iterdir() if q.name.startswith(".")] == []
+    assert [q.name for q in rig.iterdir() if q.name.startswith(".")] == []
+    print("pose simulate then fuse kills left:", left, f"full runs {full_sim:.1f} s, {full:.1f} s")
+
+
+@pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
+def test_dataset_pack_killed_at_random_moments_leaves_the_old_or_the_new_file(tmp_path):
+    pytest.importorskip("distributed")
+    src = tmp_path / "ds"
+    r = subprocess.run(_sim_cmd(src, n=6), capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    pack = [sys.executable, "-m", "gpr3d", "dataset", "pack", str(src)]
+    ref, out = tmp_path / "ref.h5", tmp_path / "packed.h5"
+    t0 = time.perf_counter()
+    r = subprocess.run([*pack, str(ref)], capture_output=True, text=True, timeout=600)
+    full = time.perf_counter() - t0
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run([*pack, str(out), "--n-samples", "64"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr  # an earlier, other pack in its place
+
+    def rows(path):
+        with h5py.File(path) as f:
+            return f["data"].shape[-1]
+
+    rng = np.random.default_rng(17)
+    left = []
+    for _ in range(3):
+        p = subprocess.Popen([*pack, str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(float(rng.uniform(0.3, 1.3)) * full)
+        p.send_signal(signal.SIGKILL)
+        p.wait(timeout=60)
+        n = rows(out)  # a whole HDF5 file, the earlier pack (64 rows) or the new one
+        assert n in (64, rows(ref))
+        left.append("old" if n == 64 else "new")
+    r = subprocess.run([*pack, str(out)], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    with h5py.File(out) as a, h5py.File(ref) as b:
+        np.testing.assert_array_equal(a["data"][()], b["data"][()])
+        assert a["labels_json"][()].tolist() == b["labels_json"][()].tolist()
+    assert [q.name for q in tmp_path.iterdir() if q.name.startswith(".")] == []  # no partial file stays
+    print("dataset pack kills left:", left, f"full run {full:.1f} s")
