@@ -45,17 +45,14 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def host_eps_r(files) -> tuple[float, list[float]]:
     """The median over the lines of the hybrid eps_r estimate (``gpr3d depth``'s), and each line's."""
-    from gpr3d.cli.main import _add_depths, _depthnet, _detector
+    from gpr3d.pipeline import add_depths, load_models
 
-    class Args:
-        weights, score, device, runtime, depthnet = None, 0.5, "cpu", "auto", None
-
-    det, net = _detector(Args), _depthnet(Args)
+    det, net = load_models(depth="hybrid")
     per_line = []
     for f in files:
         s = gpr3d.read(f)
         found = det.detect(s, score_threshold=0.5, input_name=str(f))
-        _add_depths(s, found, "hybrid", net, None)
+        add_depths(s, found, "hybrid", net, None)
         if "permittivity" in found and np.isfinite(found["permittivity"]["eps_r"]):
             per_line.append(float(found["permittivity"]["eps_r"]))
     return float(np.median(per_line)), per_line
