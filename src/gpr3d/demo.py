@@ -659,6 +659,18 @@ def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=prin
     # 7. visual-inertial pose of a random-motion cart ---------------------------------------
     summary["stages"]["pose"] = _pose_stage(out, log)
 
+    # the report: the masked reconstruction of the random-motion survey on one page to open in a browser
+    if (out / "reconstruction_masked" / "targets.json").exists():
+        from gpr3d.pipeline.report import write_report
+
+        t = time.perf_counter()
+        page = write_report(out, survey=out / "random_walk_survey.h5", detections=out / "detections.json",
+                            reconstruction=out / "reconstruction_masked", out=out / "report.html",
+                            title="gpr3d demo: random-motion survey, detection-masked 3D reconstruction")
+        summary["report"] = str(page.relative_to(out))
+        log(f"      report: {page} ({time.perf_counter() - t:.1f} s; B-scan with boxes, depth slices, noise map, "
+            "3D view: open it in a browser)")
+
     summary["total_s"] = time.perf_counter() - t_start
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=2, default=float))
     log(f"wrote {len(list(out.iterdir()))} files to {out}/ in {summary['total_s']:.1f} s")

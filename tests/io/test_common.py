@@ -8,8 +8,17 @@ import pytest
 
 from gpr3d.core.errors import FormatError, GPR3DError, TruncatedRecordingWarning
 from gpr3d.io._common import (
-    check_file, check_finite, data_and_header, finite_positive, gps_positions, hdf5_errors, local_metres,
-    nmea_degrees, sidecar, warn_fewer_traces, whole_traces,
+    check_file,
+    check_finite,
+    data_and_header,
+    finite_positive,
+    gps_positions,
+    hdf5_errors,
+    local_metres,
+    nmea_degrees,
+    sidecar,
+    warn_fewer_traces,
+    whole_traces,
 )
 
 
@@ -218,11 +227,7 @@ def test_datasets_over_the_limit_are_not_read(tmp_path, monkeypatch):
         _common.check_hdf5_survives(p, max_bytes=80)  # exactly the limit: read
 
 
-@needs_fork
-def test_a_walk_that_hangs_is_ended_and_the_file_read_as_usual(tmp_path, monkeypatch):
-    p = _h5(tmp_path / "w.h5")
-    monkeypatch.setattr(_common, "_HDF5_SURVIVED", {})
-    monkeypatch.setattr(_common, "_walk_hdf5", lambda *_a: time.sleep(30))
+def _counting_fork(monkeypatch):
     children = []
     real_fork = os.fork
 
@@ -233,13 +238,66 @@ def test_a_walk_that_hangs_is_ended_and_the_file_read_as_usual(tmp_path, monkeyp
         return pid
 
     monkeypatch.setattr(_common.os, "fork", fork)
+    return children
+
+
+@needs_fork
+def test_a_walk_that_does_not_finish_is_one_line_and_its_child_is_ended(tmp_path, monkeypatch):
+    """A damaged file can loop libhdf5 for ever (the reader fuzzer found three): refused, not read after all."""
+    p = _h5(tmp_path / "w.h5")
+    monkeypatch.setattr(_common, "_HDF5_SURVIVED", {})
+    monkeypatch.setattr(_common, "_walk_hdf5", lambda *_a: time.sleep(30))
+    children = _counting_fork(monkeypatch)
     t = time.monotonic()
-    _common.check_hdf5_survives(p, timeout_s=0.3)
+    with pytest.raises(FormatError, match=r"w.h5: HDF5 content is corrupt: the HDF5 library did not finish reading "
+                                          r"its structure within 0 s"):
+        _common.check_hdf5_survives(p, timeout_s=0.3)
     assert time.monotonic() - t < 5 and not _common._HDF5_SURVIVED  # not remembered as walked
     # and the child is gone: killed and reaped, no zombie left
     assert len(children) == 1
     with pytest.raises(ChildProcessError):
         os.waitpid(children[0], os.WNOHANG)
+
+
+@needs_fork
+def test_a_wait_cut_short_ends_the_child_too(tmp_path, monkeypatch):
+    """An alarm or Ctrl-C while the parent waits: the child is killed, not left walking (it once ran for hours)."""
+    import signal
+
+    class Cut(Exception):
+        pass
+
+    def cut(*_a):
+        raise Cut
+
+    p = _h5(tmp_path / "w.h5")
+    monkeypatch.setattr(_common, "_HDF5_SURVIVED", {})
+    monkeypatch.setattr(_common, "_walk_hdf5", lambda *_a: time.sleep(30))
+    children = _counting_fork(monkeypatch)
+    old = signal.signal(signal.SIGALRM, cut)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.3)  # (a fork's child has no timer of its parent's)
+        with pytest.raises(Cut):
+            _common.check_hdf5_survives(p, timeout_s=30)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+    assert len(children) == 1
+    with pytest.raises(ChildProcessError):
+        os.waitpid(children[0], os.WNOHANG)
+
+
+@needs_fork
+def test_the_walk_is_given_time_by_the_data_it_reads(tmp_path, monkeypatch):
+    p = _h5(tmp_path / "w.h5")
+    monkeypatch.setattr(_common, "_HDF5_SURVIVED", {})
+    monkeypatch.setattr(_common, "_walk_hdf5", lambda *_a: time.sleep(30))
+    monkeypatch.setattr(_common, "HDF5_WALK_BASE_S", 0.5)
+    monkeypatch.setattr(_common, "HDF5_WALK_BYTES_PER_S", p.stat().st_size / 1.0)  # the file's bytes: 1 s more
+    t = time.monotonic()
+    with pytest.raises(FormatError, match="within 2 s"):  # 0.5 + 1.0 s, rounded
+        _common.check_hdf5_survives(p)
+    assert 1.4 < time.monotonic() - t < 6
 
 
 @needs_fork

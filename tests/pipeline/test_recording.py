@@ -7,8 +7,7 @@ import gpr3d
 from gpr3d import Survey
 from gpr3d.core.errors import GPR3DError, InvalidDataError
 from gpr3d.io.trajectory import Trajectory, write_tum
-from gpr3d.pipeline import (SURVEY_SUFFIXES, apply_steps, attach_trajectory, place_traces, read_recording,
-                            write_survey)
+from gpr3d.pipeline import SURVEY_SUFFIXES, apply_steps, attach_trajectory, place_traces, read_recording, write_survey
 
 DZT = __import__("pathlib").Path(gpr3d.__file__).parent / "data" / "FILE____032.DZT"
 

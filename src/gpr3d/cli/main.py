@@ -18,7 +18,7 @@ from gpr3d.core.errors import GPR3DError
 
 #: the commands' modules, in the order ``gpr3d --help`` lists them
 COMMANDS = ["info", "show", "migrate", "process", "convert", "grid", "cscan", "simulate", "pose", "dataset",
-            "reconstruct", "detect", "depth", "train", "evaluate", "demo"]
+            "reconstruct", "detect", "depth", "run", "train", "evaluate", "demo"]
 
 EXAMPLES = """\
 examples:

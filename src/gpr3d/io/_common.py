@@ -174,13 +174,21 @@ def _walk_hdf5(path: str, max_bytes: int) -> None:
         f.visititems(visit)
 
 
-def check_hdf5_survives(path, *, max_bytes: int = 256 * 2**20, timeout_s: float = 60.0) -> None:
-    """Walk an HDF5 file in a forked child before this process opens it, and raise :class:`FormatError` if the
-    HDF5 library crashes there (a corrupt file can make libhdf5 segfault, which no ``except`` catches).
+#: the pre-check's time: this much for the library to walk a file's structure, plus its data at the slowest disk
+#: speed a reader should wait for (a walk that takes longer is the library caught in a loop a damaged file set)
+HDF5_WALK_BASE_S, HDF5_WALK_BYTES_PER_S = 10.0, 10e6
 
-    Errors the child meets are left for the reader (it reports them by name); a child that does not finish
-    within ``timeout_s`` is ended and the file read as usual. Each file (path, size, mtime) is walked once per
-    process; not on systems without ``fork``, nor with ``GPR3D_HDF5_PRECHECK=0``."""
+
+def check_hdf5_survives(path, *, max_bytes: int = 256 * 2**20, timeout_s: float | None = None) -> None:
+    """Walk an HDF5 file in a forked child before this process opens it, and raise :class:`FormatError` if the
+    HDF5 library crashes there (a corrupt file can make libhdf5 segfault, which no ``except`` catches) or does not
+    finish (a damaged file can send it round a loop for ever, where no signal reaches Python either).
+
+    Errors the child meets are left for the reader (it reports them by name). The child is given ``timeout_s``
+    (default :data:`HDF5_WALK_BASE_S` plus the data it reads at :data:`HDF5_WALK_BYTES_PER_S`); it is ended when the
+    time is up, and whenever the wait is cut short (an interrupt, an alarm), so none is left behind. Each file
+    (path, size, mtime) is walked once per process; not on systems without ``fork``, nor with
+    ``GPR3D_HDF5_PRECHECK=0``."""
     if not hasattr(os, "fork") or os.environ.get("GPR3D_HDF5_PRECHECK", "1") == "0":
         return
     p = Path(path)
@@ -197,6 +205,8 @@ def check_hdf5_survives(path, *, max_bytes: int = 256 * 2**20, timeout_s: float 
     import signal
     import time
 
+    if timeout_s is None:
+        timeout_s = HDF5_WALK_BASE_S + min(st.st_size, max_bytes) / HDF5_WALK_BYTES_PER_S
     pid = os.fork()
     if pid == 0:  # the child: walk, then leave without running any of the parent's exit handlers
         try:
@@ -209,15 +219,23 @@ def check_hdf5_survives(path, *, max_bytes: int = 256 * 2**20, timeout_s: float 
             pass
         os._exit(0)
     deadline = time.monotonic() + timeout_s
-    while True:
-        done, status = os.waitpid(pid, os.WNOHANG)
-        if done:
-            break
-        if time.monotonic() > deadline:
-            os.kill(pid, signal.SIGKILL)
-            os.waitpid(pid, 0)
-            return
-        time.sleep(0.002)
+    reaped = False
+    try:
+        while True:
+            done, status = os.waitpid(pid, os.WNOHANG)
+            if done:
+                reaped = True
+                break
+            if time.monotonic() > deadline:
+                raise FormatError(p, f"HDF5 content is corrupt: the HDF5 library did not finish reading its "
+                                     f"structure within {timeout_s:.0f} s (a damaged file can loop it for ever)")
+            time.sleep(0.002)
+    finally:
+        if not reaped:  # the time is up, or the wait was cut short: end the child, leave no process behind
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+            with contextlib.suppress(ChildProcessError):
+                os.waitpid(pid, 0)
     if os.WIFSIGNALED(status):
         sig = os.WTERMSIG(status)
         name = signal.Signals(sig).name if sig in signal.Signals._value2member_map_ else str(sig)

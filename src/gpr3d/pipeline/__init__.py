@@ -3,7 +3,7 @@
     read_recording -> attach_trajectory (or fuse_recordings) -> apply_steps -> load_models -> detect -> add_depths
     -> reconstruct_recording -> write_reconstruction_folder
 
-Each stage takes and returns plain objects (a :class:`~gpr3d.Survey`, a detection result dict, a reconstruction), so
+Each stage takes and returns plain objects (a :class:`~gpr3d.core.survey.Survey`, a detection result dict, a reconstruction), so
 a stage can be stopped at, looked into or replaced. The ``gpr3d`` commands are thin wrappers over these.
 """
 
@@ -17,6 +17,7 @@ _WHERE = {
     "load_models": "targets", "add_depths": "targets", "targets_from_file": "targets", "read_targets": "targets",
     "ReconstructionRun": "reconstruction", "reconstruct_recording": "reconstruction",
     "write_reconstruction_folder": "reconstruction", "FusedPoses": "poses", "fuse_recordings": "poses",
+    "RunConfig": "run", "run_pipeline": "run", "write_report": "report",
 }
 
 __all__ = sorted(_WHERE)

@@ -22,13 +22,13 @@ class ReconstructionRun:
 def reconstruct_recording(survey, cfg, *, eps_r=None, boxes_file=None, mask: str = "none", detector=None,
                           depthnet=None, depth: str = "hybrid", trace_spacing_m: float | None = None,
                           radius_m: float | None = None, score: float = 0.5, input_name: str = "the survey",
-                          log=print) -> ReconstructionRun:
+                          eps_r_source: str | None = None, log=print) -> ReconstructionRun:
     """Migrate a survey that has antenna positions and extract its targets.
 
     Parameters
     ----------
     survey : Survey
-        With ``positions_xyz`` (one pose per trace: :func:`~gpr3d.pipeline.attach_trajectory`).
+        With ``positions_xyz`` (one pose per trace: :func:`~gpr3d.pipeline.recording.attach_trajectory`).
     cfg : ReconstructConfig
         The migration's settings; its ``eps_r`` is replaced as ``eps_r`` says.
     eps_r : float, "file" or None
@@ -38,16 +38,18 @@ def reconstruct_recording(survey, cfg, *, eps_r=None, boxes_file=None, mask: str
     mask : {"none", "detect"}
         ``detect``: run ``detector`` and migrate only inside its boxes.
     detector, depthnet
-        As :func:`~gpr3d.pipeline.load_models` gives them (the detector: for ``mask="detect"`` or to estimate eps_r
+        As :func:`~gpr3d.pipeline.targets.load_models` gives them (the detector: for ``mask="detect"`` or to estimate eps_r
         without ``boxes_file``; DepthNet for ``depth`` hybrid or net).
     depth : {"hybrid", "net", "fit"}
         How eps_r is estimated when ``eps_r`` is None.
     trace_spacing_m, radius_m
-        As :func:`~gpr3d.pipeline.add_depths`.
+        As :func:`~gpr3d.pipeline.targets.add_depths`.
     score : float
         The detector's score threshold.
     input_name : str
         The recording's name in messages and outputs.
+    eps_r_source : str, optional
+        Where a given ``eps_r`` came from (e.g. ``"estimated (hybrid)"`` by an earlier stage; default ``"given"``).
     log : callable
         Progress lines (``print``).
 
@@ -98,14 +100,15 @@ def reconstruct_recording(survey, cfg, *, eps_r=None, boxes_file=None, mask: str
         log(f"eps_r {p['eps_r']:.2f} +- {p['sigma_eps_r']:.2f} estimated from the data ({depth}"
             f"{': ' + parts if parts else ''}){header}")
     else:
-        log(f"eps_r {cfg.eps_r:g} ({'the file header' if eps_r == 'file' else 'given'})")
+        log(f"eps_r {cfg.eps_r:g} ({'the file header' if eps_r == 'file' else eps_r_source or 'given'})")
     if mask == "detect":
         boxes = [t["box"] for t in found["targets"]]
         log(f"detector: {len(boxes)} boxes in {survey.n_traces} traces ({found['wall_s']:.1f} s)")
         if not boxes:
             raise GPR3DError("the detector found no hyperbolas: nothing to migrate (try a lower --score)")
     result = reconstruct(survey, cfg, boxes=boxes, log=log)
-    result.eps_r_source = f"estimated ({depth})" if estimate else ("file header" if eps_r == "file" else "given")
+    result.eps_r_source = (f"estimated ({depth})" if estimate else "file header" if eps_r == "file"
+                           else eps_r_source or "given")
     return ReconstructionRun(result=result, found=found, mask=mask)
 
 
