@@ -12,7 +12,8 @@ inserted or removed, binary header fields set to extremes, text header numbers r
 
 - **read**: a survey comes back (warnings allowed: a truncated recording reads what it holds);
 - **refused**: a :class:`gpr3d.GPR3DError` (one line naming the file);
-- **escape**: anything else (another exception, a hang past ``--timeout-s``, a process killed), a defect.
+- **escape**: anything else (another exception, a hang past ``--timeout-s``, a process killed, a child process a
+  reader leaves running), a defect.
 
 Every case is made from ``(seed, reader, index)`` alone, so an escape is reproduced with ``--reader R --only I``.
 Memory is capped (``--memory-gb``, the address space of this process) so that a header's claim of a huge array
@@ -256,8 +257,24 @@ def make_case(rng, base: tuple[dict[str, bytes], str], folder: Path) -> tuple[Pa
     return folder / main, f"{target}: {how}"
 
 
+def _left_behind() -> str:
+    """A process a reader started and left running (a pre-check's child once walked a looping file for 25 min)."""
+    try:
+        os.waitpid(-1, os.WNOHANG)
+    except ChildProcessError:
+        return ""
+    return "; and a child process left running"
+
+
 def run_case(path: Path, timeout_s: float, names=()) -> tuple[str, str]:
     """("read" | "refused" | "escape", detail)."""
+    outcome = _run_case(path, timeout_s, names)
+    if outcome[0] != "escape" and _left_behind():
+        return "escape", "a child process left running after the read"
+    return outcome
+
+
+def _run_case(path: Path, timeout_s: float, names=()) -> tuple[str, str]:
     signal.signal(signal.SIGALRM, _alarm)
     signal.setitimer(signal.ITIMER_REAL, timeout_s)
     try:
@@ -272,7 +289,7 @@ def run_case(path: Path, timeout_s: float, names=()) -> tuple[str, str]:
             return "escape", f"a refusal that is not one line naming the file: {msg[:200]!r}"
         return "refused", msg
     except _Timeout:
-        return "escape", f"no answer within {timeout_s:g} s"
+        return "escape", f"no answer within {timeout_s:g} s" + _left_behind()
     except BaseException as exc:  # noqa: BLE001 - every other outcome is what this counts
         tb = traceback.extract_tb(exc.__traceback__)
         where = next((f"{Path(fr.filename).name}:{fr.lineno}" for fr in reversed(tb) if "gpr3d" in fr.filename), "?")

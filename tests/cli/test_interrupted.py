@@ -309,3 +309,45 @@ def test_dataset_pack_killed_at_random_moments_leaves_the_old_or_the_new_file(tm
         assert a["labels_json"][()].tolist() == b["labels_json"][()].tolist()
     assert [q.name for q in tmp_path.iterdir() if q.name.startswith(".")] == []  # no partial file stays
     print("dataset pack kills left:", left, f"full run {full:.1f} s")
+
+
+def _run_cmd(d, out):
+    return [sys.executable, "-m", "gpr3d", "run", str(d / "line.h5"), "--poses", str(d / "walk.tum"), "--eps-r",
+            "file", "--max-depth", "0.6", "--out", str(out)]
+
+
+@pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
+def test_run_killed_at_random_moments_keeps_whole_stages_and_finishes_as_an_unbroken_run(line, tmp_path):
+    pytest.importorskip("onnxruntime")
+    from gpr3d.pipeline.run import STAGES, _Journal
+
+    ref, out = tmp_path / "ref", tmp_path / "run"
+    t0 = time.perf_counter()
+    r = subprocess.run(_run_cmd(line, ref), capture_output=True, text=True, timeout=900)
+    full = time.perf_counter() - t0
+    assert r.returncode == 0, r.stderr
+    rng = np.random.default_rng(23)
+    seen = []
+    for _ in range(3):
+        at = float(rng.uniform(0.15, 1.1)) * full
+        p = subprocess.Popen(_run_cmd(line, out), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(at)
+        p.send_signal(signal.SIGKILL)
+        p.wait(timeout=60)
+        j = _Journal(out)
+        for stage, rec in j.stages.items():  # every stage the journal names is whole on disk: its files' hashes
+            assert j.done(stage, rec["key"]), (at, stage)
+        if (out / "reconstruction").exists():
+            open_result(out / "reconstruction")
+        seen.append((round(at, 1), [s for s in STAGES if s in j.stages]))
+    r = subprocess.run(_run_cmd(line, out), capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr
+    kept = r.stdout.count("kept from an earlier run")
+    got = json.loads((out / "reconstruction" / "targets.json").read_text())
+    assert got == json.loads((ref / "reconstruction" / "targets.json").read_text())
+    assert json.loads((out / "detections.json").read_text())["targets"] == \
+        json.loads((ref / "detections.json").read_text())["targets"]
+    check_result(out / "reconstruction")
+    assert [q.name for q in out.iterdir() if q.name.startswith(".")] == []
+    print("run kills (s after the start, stages whole on disk):", seen, f"; the re-run kept {kept} stage(s);",
+          f"full run {full:.1f} s")

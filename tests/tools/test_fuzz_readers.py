@@ -97,3 +97,30 @@ def test_what_counts_as_an_escape(fz, tmp_path, monkeypatch):
 
     monkeypatch.setattr(gpr3d, "read_all", slow)
     assert fz.run_case(p, 0.2) == ("escape", "no answer within 0.2 s")
+
+
+def test_a_reader_that_leaves_a_child_running_escapes(fz, tmp_path, monkeypatch):
+    import os
+    import signal
+    import time
+
+    kids = []
+
+    def read_and_leave(path):  # a reader that forks a walker and returns without ending it
+        pid = os.fork()
+        if pid == 0:
+            time.sleep(30)
+            os._exit(0)
+        kids.append(pid)
+
+    monkeypatch.setattr(fz.gpr3d, "read_all", read_and_leave)
+    f = tmp_path / "x.bin"
+    f.write_bytes(b"x")
+    try:
+        assert fz.run_case(f, 5.0) == ("escape", "a child process left running after the read")
+    finally:
+        for pid in kids:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+    monkeypatch.setattr(fz.gpr3d, "read_all", lambda path: None)
+    assert fz.run_case(f, 5.0) == ("read", "")  # and none left: a clean read

@@ -207,6 +207,7 @@ def check_hdf5_survives(path, *, max_bytes: int = 256 * 2**20, timeout_s: float 
 
     if timeout_s is None:
         timeout_s = HDF5_WALK_BASE_S + min(st.st_size, max_bytes) / HDF5_WALK_BYTES_PER_S
+    parent = os.getpid()
     pid = os.fork()
     if pid == 0:  # the child: walk, then leave without running any of the parent's exit handlers
         try:
@@ -231,7 +232,9 @@ def check_hdf5_survives(path, *, max_bytes: int = 256 * 2**20, timeout_s: float 
                                      f"structure within {timeout_s:.0f} s (a damaged file can loop it for ever)")
             time.sleep(0.002)
     finally:
-        if not reaped:  # the time is up, or the wait was cut short: end the child, leave no process behind
+        # the time is up, or the wait was cut short: end the child, leave no process behind (only ever from the
+        # parent, and only its own child: never a process group)
+        if not reaped and os.getpid() == parent and pid > 0:
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
             with contextlib.suppress(ChildProcessError):
