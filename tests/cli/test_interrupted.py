@@ -311,9 +311,9 @@ def test_dataset_pack_killed_at_random_moments_leaves_the_old_or_the_new_file(tm
     print("dataset pack kills left:", left, f"full run {full:.1f} s")
 
 
-def _run_cmd(d, out):
+def _run_cmd(d, out, score=0.5):
     return [sys.executable, "-m", "gpr3d", "run", str(d / "line.h5"), "--poses", str(d / "walk.tum"), "--eps-r",
-            "file", "--max-depth", "0.6", "--out", str(out)]
+            "file", "--max-depth", "0.6", "--score", str(score), "--out", str(out)]
 
 
 @pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
@@ -328,18 +328,20 @@ def test_run_killed_at_random_moments_keeps_whole_stages_and_finishes_as_an_unbr
     assert r.returncode == 0, r.stderr
     rng = np.random.default_rng(23)
     seen = []
-    for _ in range(3):
-        at = float(rng.uniform(0.15, 1.1)) * full
-        p = subprocess.Popen(_run_cmd(line, out), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    for score in (0.45, 0.55, 0.6):  # another threshold each time: detection and what follows it are made again
+        at = float(rng.uniform(0.1, 1.0)) * full
+        p = subprocess.Popen(_run_cmd(line, out, score), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         time.sleep(at)
         p.send_signal(signal.SIGKILL)
         p.wait(timeout=60)
         j = _Journal(out)
         for stage, rec in j.stages.items():  # every stage the journal names is whole on disk: its files' hashes
             assert j.done(stage, rec["key"]), (at, stage)
+        done = [s for s in STAGES if s in j.stages]
+        assert done == list(STAGES)[: len(done)], done  # a stage is recorded only after the ones before it
         if (out / "reconstruction").exists():
             open_result(out / "reconstruction")
-        seen.append((round(at, 1), [s for s in STAGES if s in j.stages]))
+        seen.append((score, round(at, 1), done))
     r = subprocess.run(_run_cmd(line, out), capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stderr
     kept = r.stdout.count("kept from an earlier run")
@@ -349,5 +351,5 @@ def test_run_killed_at_random_moments_keeps_whole_stages_and_finishes_as_an_unbr
         json.loads((ref / "detections.json").read_text())["targets"]
     check_result(out / "reconstruction")
     assert [q.name for q in out.iterdir() if q.name.startswith(".")] == []
-    print("run kills (s after the start, stages whole on disk):", seen, f"; the re-run kept {kept} stage(s);",
+    print("run kills (--score, s after the start, stages whole on disk):", seen, f"; the re-run kept {kept} stage(s);",
           f"full run {full:.1f} s")
