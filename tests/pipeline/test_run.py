@@ -43,6 +43,7 @@ def done_run(walk_files, tmp_path_factory):
     return cfg, out, summary, log
 
 
+@pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
 def test_the_whole_road_then_a_rerun_that_keeps_what_is_done(walk_files, done_run, tmp_path):
     import shutil
 
@@ -130,6 +131,7 @@ def _fetched(page: str) -> list:
     return got
 
 
+@pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
 def test_the_report_lists_the_targets_of_targets_json_and_each_section(done_run):
     _, out, summary, _ = done_run
     page = (out / "report.html").read_text()
