@@ -11,23 +11,13 @@ import h5py
 import numpy as np
 import pytest
 
-from gpr3d import Survey
 from gpr3d.io.resultdir import check_result, open_result
-from gpr3d.io.trajectory import write_tum
-from gpr3d.simulation.forward import ForwardScene, Pipe, forward_model
-from gpr3d.simulation.paths import random_walk
+from tests.conftest import pipe_walk_files
 
 
 @pytest.fixture(scope="module")
 def line(tmp_path_factory):
-    d = tmp_path_factory.mktemp("kill")
-    walk = random_walk(900, area=((0, 0.8), (0, 0.8)), step_m=0.01, seed=4)
-    scene = ForwardScene(eps_r=6.0, pipes=[Pipe((0.1, 0.4, -0.33), (0.7, 0.4, -0.33), 0.03)])
-    data = forward_model(scene, walk.positions_xyz, walk.orientations_quat_wxyz, offset_m=0.08, frequency_hz=800e6,
-                         n_samples=192, time_window_s=12e-9, air_wave=1.0, ground_wave=0.5)
-    Survey(data=data, dt_s=12e-9 / 192, offset_m=0.08, frequency_hz=800e6, eps_r=6.0).save(d / "line.h5")
-    write_tum(walk, d / "walk.tum")
-    return d
+    return pipe_walk_files(tmp_path_factory.mktemp("kill"), 900)
 
 
 def _cmd(d, out, eps):
