@@ -257,21 +257,32 @@ def make_case(rng, base: tuple[dict[str, bytes], str], folder: Path) -> tuple[Pa
     return folder / main, f"{target}: {how}"
 
 
-def _left_behind() -> str:
-    """A process a reader started and left running (a pre-check's child once walked a looping file for 25 min)."""
-    try:
-        os.waitpid(-1, os.WNOHANG)
-    except ChildProcessError:
-        return ""
-    return "; and a child process left running"
+def _children() -> set:
+    """This process's living children (Linux: from /proc; elsewhere none are seen)."""
+    me, kids = os.getpid(), set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if fields[0] != "Z" and int(fields[1]) == me:  # (state, ppid) after the command's name
+            kids.add(int(stat.parent.name))
+    return kids
+
+
+def _left_behind(before: set) -> str:
+    """A process the read started and left running (a pre-check's child once walked a looping file for 25 min)."""
+    return "; and a child process left running" if _children() - before else ""
 
 
 def run_case(path: Path, timeout_s: float, names=()) -> tuple[str, str]:
     """("read" | "refused" | "escape", detail)."""
+    before = _children()
     outcome = _run_case(path, timeout_s, names)
-    if outcome[0] != "escape" and _left_behind():
+    left = _left_behind(before)
+    if left and outcome[0] != "escape":
         return "escape", "a child process left running after the read"
-    return outcome
+    return outcome[0], outcome[1] + (left if outcome[0] == "escape" else "")
 
 
 def _run_case(path: Path, timeout_s: float, names=()) -> tuple[str, str]:
@@ -289,7 +300,7 @@ def _run_case(path: Path, timeout_s: float, names=()) -> tuple[str, str]:
             return "escape", f"a refusal that is not one line naming the file: {msg[:200]!r}"
         return "refused", msg
     except _Timeout:
-        return "escape", f"no answer within {timeout_s:g} s" + _left_behind()
+        return "escape", f"no answer within {timeout_s:g} s"
     except BaseException as exc:  # noqa: BLE001 - every other outcome is what this counts
         tb = traceback.extract_tb(exc.__traceback__)
         where = next((f"{Path(fr.filename).name}:{fr.lineno}" for fr in reversed(tb) if "gpr3d" in fr.filename), "?")
