@@ -252,7 +252,8 @@ def test_a_walk_that_does_not_finish_is_one_line_and_its_child_is_ended(tmp_path
     with pytest.raises(FormatError, match=r"w.h5: HDF5 content is corrupt: the HDF5 library did not finish reading "
                                           r"its structure within 0 s"):
         _common.check_hdf5_survives(p, timeout_s=0.3)
-    assert time.monotonic() - t < 5 and not _common._HDF5_SURVIVED  # not remembered as walked
+    # (ended long before the child's 30 s: the bound holds on a loaded machine too)
+    assert time.monotonic() - t < 25 and not _common._HDF5_SURVIVED  # not remembered as walked
     # and the child is gone: killed and reaped, no zombie left
     assert len(children) == 1
     with pytest.raises(ChildProcessError):
@@ -297,7 +298,7 @@ def test_the_walk_is_given_time_by_the_data_it_reads(tmp_path, monkeypatch):
     t = time.monotonic()
     with pytest.raises(FormatError, match="within 2 s"):  # 0.5 + 1.0 s, rounded
         _common.check_hdf5_survives(p)
-    assert 1.4 < time.monotonic() - t < 6
+    assert 1.4 < time.monotonic() - t < 25  # not before its time; long before the child's 30 s
 
 
 @needs_fork

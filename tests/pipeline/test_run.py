@@ -89,6 +89,7 @@ def test_wrong_settings_are_one_line_before_any_work(walk_files, tmp_path):
                     ({"trace_spacing_m": -1.0}, "--trace-spacing must be"),
                     ({"score": 2.0}, "--score must lie in 0..1"),
                     ({"depth": "guess"}, "--depth must be"),
+                    ({"poses": str(d / "walk.tum"), "trace_spacing_m": 0.01}, "leave it out with --poses"),
                     ({"poses": str(d / "nosuch.tum")}, "nosuch.tum: no such file"),
                     ({"input": str(d / "nosuch.h5")}, "nosuch.h5: no such file")):
         with pytest.raises(GPR3DError, match=msg):

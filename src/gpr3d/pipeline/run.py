@@ -96,10 +96,11 @@ class _Journal:
         except OSError:
             return False
 
-    def record(self, stage: str, key: str, wall_s: float) -> None:
+    def record(self, stage: str, key: str, wall_s: float, line: str) -> None:
         from gpr3d.io.atomic import atomic_write_text
 
-        self.stages[stage] = {"key": key, "files": _files_sha(self.out, STAGES[stage]), "wall_s": round(wall_s, 3)}
+        self.stages[stage] = {"key": key, "files": _files_sha(self.out, STAGES[stage]), "wall_s": round(wall_s, 3),
+                              "line": line}
         for later in list(STAGES)[list(STAGES).index(stage) + 1:]:
             self.stages.pop(later, None)  # what came after was made from the old result
         atomic_write_text(self.path, json.dumps({"version": 1, "stages": self.stages}, indent=1))
@@ -112,6 +113,9 @@ def check_run_config(cfg: RunConfig) -> None:
     sources = [n for n in ("poses", "imu", "track") if getattr(cfg, n)]
     if len(sources) > 1:
         raise GPR3DError(f"give one of --poses, --imu, --track (each places the traces), not {' and '.join(sources)}")
+    if cfg.trace_spacing_m is not None and (cfg.poses or cfg.imu):
+        raise GPR3DError(f"--trace-spacing places the traces on a straight line: leave it out with "
+                         f"--{'poses' if cfg.poses else 'imu'} (or give --track with it)")
     if (cfg.odometry or cfg.wheel or cfg.rig) and not cfg.imu:
         raise GPR3DError("--odometry, --wheel and --rig are fused with an IMU recording: give --imu")
     if cfg.trace_spacing_m is not None and not (math.isfinite(cfg.trace_spacing_m) and 0 < cfg.trace_spacing_m <= 10):
@@ -127,10 +131,20 @@ def check_run_config(cfg: RunConfig) -> None:
 
 
 def _survey_stage(cfg: RunConfig, out: Path, log):
-    from gpr3d.pipeline.recording import attach_trajectory, read_recording
+    from gpr3d.pipeline.recording import attach_trajectory, place_traces, read_recording
 
-    s = read_recording(cfg.input, format=cfg.format, channel=cfg.channel, track=cfg.track)
-    if cfg.poses:
+    s = read_recording(cfg.input, format=cfg.format, channel=cfg.channel)
+    how = s.metadata.get("positions_source") or "the file's positions"
+    if cfg.trace_spacing_m is not None:  # (a straight line; a --track then bends it along the surveyed points)
+        x = cfg.trace_spacing_m * np.arange(s.n_traces)
+        s = s.replace(positions_xyz=np.c_[x, np.zeros_like(x), np.zeros_like(x)])
+        s.metadata["positions_source"] = f"a straight line, {cfg.trace_spacing_m:g} m between traces"
+        how = f"a straight line of {cfg.trace_spacing_m:g} m trace spacing"
+    if cfg.track:
+        s = place_traces(s, track=cfg.track)
+        how = f"the track {Path(cfg.track).name}" + (f" at {cfg.trace_spacing_m:g} m spacing"
+                                                     if cfg.trace_spacing_m is not None else "")
+    elif cfg.poses:
         s = attach_trajectory(s, cfg.poses, source=str(cfg.input))
         how = f"poses from {Path(cfg.poses).name}"
     elif cfg.imu:
@@ -143,15 +157,6 @@ def _survey_stage(cfg: RunConfig, out: Path, log):
         fused = fuse_recordings(imu=cfg.imu, odometry=cfg.odometry, wheel=cfg.wheel, rig=cfg.rig, log=log)
         s = attach_poses(s, fused.trajectory, by="time")
         how = f"poses fused from {Path(cfg.imu).name}" + (f" and {Path(cfg.odometry).name}" if cfg.odometry else "")
-    elif cfg.trace_spacing_m is not None:
-        x = cfg.trace_spacing_m * np.arange(s.n_traces)
-        s = s.replace(positions_xyz=np.c_[x, np.zeros_like(x), np.zeros_like(x)])
-        s.metadata["positions_source"] = f"a straight line, {cfg.trace_spacing_m:g} m between traces"
-        how = f"a straight line of {cfg.trace_spacing_m:g} m trace spacing"
-    elif cfg.track:
-        how = f"the track {Path(cfg.track).name}"
-    else:
-        how = s.metadata.get("positions_source") or "the file's positions"
     if s.positions_xyz is None:
         raise GPR3DError(f"{cfg.input} holds no trace positions: give --poses, --imu, --track or --trace-spacing")
     s.save(out / "survey.h5")
@@ -244,9 +249,7 @@ def run_pipeline(cfg: RunConfig, *, log=print) -> dict:
         t0 = time.perf_counter()
         line = fn(cfg, out, log)
         wall = time.perf_counter() - t0
-        journal.record(stage, keys[stage], wall)
-        journal.stages[stage]["line"] = line
-        atomic_write_text(journal.path, json.dumps({"version": 1, "stages": journal.stages}, indent=1))
+        journal.record(stage, keys[stage], wall, line)
         lines[stage] = {"kept": False, "line": line, "wall_s": wall}
         log(f"[{k}/{len(work)}] {stage}: {line} ({wall:.1f} s)")
     targets = json.loads((out / "reconstruction" / "targets.json").read_text())
