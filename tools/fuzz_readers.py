@@ -389,7 +389,7 @@ def main(argv=None) -> int:
     text = table(rows, args.seed, command.strip())
     print(text)
     if args.out:
-        from gpr3d.io.atomic import atomic_write_text
+        from gpr3d.core.atomic import atomic_write_text
 
         atomic_write_text(args.out, text)
     return 1 if any(r["escape"] for r in rows) else 0

@@ -15,7 +15,8 @@ mutant's diff. The exit code is 1 when a module run now scores below ``--fail-un
     python tools/mutation.py                                # all of MODULES (long: see the report's times)
 
 The guard (``--guard``, run by ``tests/tools/test_mutation_guard.py``) reads the stored results, each with the
-commit it was measured at, and re-runs the modules that have changed since theirs: a scored module cannot land
+commit it was measured at, and re-runs the modules whose code has changed since theirs (their syntax trees,
+docstrings left out, which mutmut never mutates): a scored module cannot land
 with a score below ``--fail-under``. Its report goes to ``build/mutation/guard.md``; the stored results stay.
 It is bounded (``--budget-s``, 300 s by the stored run times): beyond that it fails and names the command whose
 results, committed, make the guard cheap again.
@@ -24,6 +25,7 @@ results, committed, make the guard cheap again.
 from __future__ import annotations
 
 import argparse
+import ast
 import json
 import os
 import platform
@@ -41,7 +43,9 @@ MUTMUT = [sys.executable, "-m", "mutmut"]
 #: module (under gpr3d) -> the tests that judge it (default: its package's test folder)
 MODULES = {
     "io.dt1": None, "io.dzt": None, "io.rd3": None, "io.gprmax": None, "io.segy": None, "io.hdf5": None,
-    "io.volume": None, "io.detections": None, "io.coco": None, "io.atomic": None, "io.resultdir": ["tests/io/test_resultdir.py"],
+    "core.atomic": ["tests/core/test_atomic.py", "tests/io/test_detections.py", "tests/io/test_resultdir.py"],
+    "core.training": ["tests/core/test_training.py"],
+    "io.volume": None, "io.detections": None, "io.coco": None, "io.resultdir": ["tests/io/test_resultdir.py"],
     "io._common": None, "io.registry": None,
     # (the other tests of tests/io that reach the trajectory readers are slow: rosbag, inertial)
     "io.trajectory": ["tests/io/test_trajectory.py", "tests/io/test_track.py"],
@@ -230,6 +234,26 @@ def changed_modules(base: str) -> list[str]:
     return [n for n in names if n in MODULES]
 
 
+def code_of(text: str) -> str:
+    """A module's code as the mutants see it: its syntax tree without the docstrings (comments and layout are not
+    in the tree either). mutmut leaves docstrings alone, so a change to them alone cannot change a result."""
+    tree = ast.parse(text)
+    for node in ast.walk(tree):
+        if (isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body
+                and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)
+                and isinstance(node.body[0].value.value, str)):
+            node.body = node.body[1:] or [ast.Pass()]
+    return ast.dump(tree)
+
+
+def code_changed(module: str, commit: str) -> bool:
+    """Whether ``module``'s code (:func:`code_of`) in the working tree differs from its code at ``commit``."""
+    r = subprocess.run(["git", "show", f"{commit}:{source_of(module)}"], cwd=ROOT, capture_output=True, text=True)
+    if r.returncode != 0:  # (new since the commit, or not in this checkout)
+        return True
+    return code_of(r.stdout) != code_of((ROOT / source_of(module)).read_text(encoding="utf-8"))
+
+
 def head_commit() -> str | None:
     r = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True)
     return r.stdout.strip() if r.returncode == 0 else None
@@ -375,8 +399,8 @@ def main(argv=None) -> int:
         mods = []
         for module, commit in listed.items():
             try:
-                if commit and module in changed_modules(commit):
-                    mods.append(module)
+                if commit and module in changed_modules(commit) and code_changed(module, commit):
+                    mods.append(module)  # (a change to docstrings or comments alone is not re-run)
             except subprocess.CalledProcessError:
                 print(f"{module}: commit {commit[:10]} is not in this checkout: not compared")
         args.out = str(ROOT / "build" / "mutation" / "guard.md")

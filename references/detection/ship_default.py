@@ -15,13 +15,12 @@ import argparse
 import hashlib
 import json
 import shutil
-from pathlib import Path
 
+from gpr3d.core.atomic import atomic_write_text
 from gpr3d.detection.evaluate import evaluate_detector
 from gpr3d.detection.infer import Detector
 from gpr3d.detection.ort import export_onnx
 from gpr3d.detection.weights import DEFAULT_WEIGHTS, load_weights
-from gpr3d.io.atomic import atomic_write_text
 from gpr3d.simulation.surveys import survey_sample
 
 

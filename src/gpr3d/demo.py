@@ -60,8 +60,8 @@ from pathlib import Path
 import numpy as np
 
 from gpr3d import __version__
+from gpr3d.core.atomic import atomic_write_text
 from gpr3d.core.units import velocity_from_eps_r
-from gpr3d.io.atomic import atomic_write_text
 
 __all__ = ["DemoConfig", "run_demo"]
 
@@ -266,7 +266,8 @@ def _reconstruction_stage(out: Path, log) -> dict:
     from gpr3d.core.survey import Survey
     from gpr3d.io.trajectory import read_tum
     from gpr3d.migration.metrics import evaluate_targets, truth_lines_from_pipes
-    from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct, write_reconstruction
+    from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct
+    from gpr3d.pipeline.reconstruction import write_result
 
     survey = Survey.load(out / "random_walk_survey.h5")
     true = read_tum(out / "random_walk_truth.tum")
@@ -280,7 +281,7 @@ def _reconstruction_stage(out: Path, log) -> dict:
         result = reconstruct(s, ReconstructConfig(spacing_m=0.02, max_depth_m=0.8))
         wall = time.perf_counter() - t
         if folder:
-            write_reconstruction(result, out / folder, source="random_walk_survey.h5")
+            write_result(result, out / folder, source="random_walk_survey.h5")
         ev = _named(evaluate_targets(result.targets, truth_lines_from_pipes(pipes)))
         rows[key] = {"wall_s": wall, "n_targets": len(result.targets), "false_targets": ev["false_targets"],
                      "false_lines": ev["false_lines"], "false_points": ev["false_points"], "false": ev["false"],
@@ -342,7 +343,8 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
     from gpr3d.io.detections import write_detections
     from gpr3d.io.registry import read
     from gpr3d.migration.metrics import evaluate_targets, truth_lines_from_pipes
-    from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct, write_reconstruction
+    from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct
+    from gpr3d.pipeline.reconstruction import write_result
     from gpr3d.viz.bscan import save_bscan_png
 
     det = load_detector()  # ONNX Runtime when installed, else PyTorch
@@ -391,7 +393,7 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
     t = time.perf_counter()
     result = reconstruct(survey, ReconstructConfig(eps_r=eps_est, spacing_m=0.02, max_depth_m=0.8), boxes=boxes)
     wall = time.perf_counter() - t
-    write_reconstruction(result, out / "reconstruction_masked", source="random_walk_survey.h5")
+    write_result(result, out / "reconstruction_masked", source="random_walk_survey.h5")
     names = ["L leg along x", "L leg along y", "diagonal pipe", "rebar at x=0.2", "rebar at x=1.85"]
     ev = _named(evaluate_targets(result.targets, truth_lines_from_pipes(demo_scene().pipes)))
     for name, r in zip(names, ev["truth"]):

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from gpr3d import InvalidDataError, Survey
+from gpr3d import GPR3DError, InvalidDataError, Survey
 from gpr3d.core.poses import quat_from_yaw
 from gpr3d.core.units import C0
 
@@ -74,3 +74,32 @@ def test_distance_and_headings():
     s = make(n=4, positions_xyz=pos).with_headings(np.pi / 2)
     np.testing.assert_allclose(s.distances_m, [0, 3, 7, 7])
     np.testing.assert_allclose(s.headings_rad, np.pi / 2)
+
+
+def test_the_methods_reach_io_and_processing_through_the_plugins(tmp_path, monkeypatch):
+    """core imports neither io nor processing: gpr3d/__init__ names them, resolved on first use."""
+    import gpr3d.core.survey as cs
+    from gpr3d.core.survey import PLUGINS, register_plugin
+
+    calls = []
+    monkeypatch.setitem(PLUGINS, "save", lambda survey, path: calls.append(("save", survey.n_traces, path)))
+    monkeypatch.setitem(PLUGINS, "step", "gpr3d.processing.dewow:dewow")  # resolved by name when first called
+    s = Survey(data=np.ones((3, 8), np.float32), dt_s=1e-10)
+    s.save(tmp_path / "a.h5")
+    assert calls == [("save", 3, tmp_path / "a.h5")] and not (tmp_path / "a.h5").exists()
+    from gpr3d.processing.dewow import dewow
+
+    assert cs._plugin("step") is dewow and PLUGINS["step"] is dewow  # (imported once, then kept)
+    monkeypatch.delitem(PLUGINS, "load")
+    with pytest.raises(GPR3DError, match="no Survey 'load' plug-in"):
+        Survey.load(tmp_path / "a.h5")
+    with pytest.raises(ValueError, match="unknown Survey plug-in role 'write'"):
+        register_plugin("write", print)
+    with pytest.raises(ValueError, match="name it 'package.module:function'"):
+        register_plugin("save", "gpr3d.io.hdf5.write_survey")
+    # what gpr3d registers: HDF5 and the processing steps
+    monkeypatch.undo()
+    from gpr3d.io.hdf5 import read_survey
+    from gpr3d.processing.steps import run_step
+
+    assert cs._plugin("load") is read_survey and cs._plugin("step") is run_step

@@ -7,8 +7,8 @@ import stat
 import numpy as np
 import pytest
 
+from gpr3d.core.atomic import atomic_path, atomic_write_text
 from gpr3d.core.errors import FormatError
-from gpr3d.io.atomic import atomic_path, atomic_write_text
 from gpr3d.io.detections import read_boxes, read_detections, write_detections
 
 ONE = {"input": "line.DZT", "n_traces": 40, "dt_s": 1e-10, "channel": 0,

@@ -5,10 +5,16 @@ import os
 
 import pytest
 
+from gpr3d.core.atomic import file_sha256
 from gpr3d.core.errors import FormatError
 from gpr3d.io import resultdir
-from gpr3d.io.atomic import file_sha256
-from gpr3d.io.resultdir import JOURNAL, MANIFEST, check_result, open_result, result_folder
+from gpr3d.io.resultdir import (
+    JOURNAL,
+    MANIFEST,
+    check_result,
+    open_result,
+    result_folder,
+)
 
 
 def _write(folder, files):

@@ -36,7 +36,13 @@ def test_the_pipe_comes_out_where_it_lies_and_the_folder_holds_one_run(pipe, tmp
     p = np.asarray(best.points_xyz)
     assert np.allclose(p[:, 1], 0.4, atol=0.04) and np.allclose(p[:, 2], 0.30, atol=0.04)  # top at 0.33 - 0.03
     files = write_reconstruction_folder(run, tmp_path / "out", source="pipe.h5")
-    assert "targets.json" in files and "volume.h5" in files
+    # the migration's data and the figures drawn above it, each figure a picture with something on it
+    assert {"config.json", "targets.json", "volume.h5", "volume.vti", "top.png", "front.png", "view3d.png"} <= set(files)
+    from PIL import Image
+
+    for name in ("top.png", "front.png", "view3d.png"):
+        px = np.asarray(Image.open(tmp_path / "out" / name).convert("L"), float)
+        assert px.shape[0] > 200 and px.std() > 10, name
     from gpr3d.io.resultdir import check_result
 
     check_result(tmp_path / "out")  # every file named, with its hash

@@ -131,3 +131,23 @@ def test_survivors_listed_later_as_equivalent_leave_the_score():
     assert row["survived"] == 2  # the stored result itself is left as measured
     assert tool.reclassify(row, {}) is row and tool.reclassify({"module": "m", "error": "x"}, eq) == {"module": "m",
                                                                                                       "error": "x"}
+
+
+def test_the_guard_looks_at_the_code_not_the_docstrings():
+    tool = _tool()
+    a = '"""Mod."""\nimport os\n\n\ndef f(x):\n    """Doc."""\n    return x + 1  # one\n\n\nclass C:\n    """C."""\n'
+    b = ('"""Another text, longer,\nover two lines."""\nimport os\n\n\ndef f(x):\n    """Parameters\n    ----------\n'
+         '    x : int\n    """\n\n    return x + 1  # two\n\n\nclass C:\n    """Other."""\n')
+    assert tool.code_of(a) == tool.code_of(b)
+    for code in ("return x + 2", "return x - 1", "return (x + 1)  or 0"):
+        assert tool.code_of(a) != tool.code_of(a.replace("return x + 1", code)), code
+    assert tool.code_of(a) != tool.code_of(a.replace("import os", "import sys"))
+    # a string that is not a docstring is code
+    assert tool.code_of(a) != tool.code_of(a.replace('    return x + 1', '    y = "s"\n    return x + 1'))
+    head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
+    if head:
+        committed = subprocess.run(["git", "show", f"HEAD:{tool.source_of('processing.dewow')}"], cwd=ROOT,
+                                   capture_output=True, text=True).stdout
+        now = (ROOT / tool.source_of("processing.dewow")).read_text(encoding="utf-8")
+        assert tool.code_changed("processing.dewow", head) is (tool.code_of(committed) != tool.code_of(now))
+        assert tool.code_changed("processing.dewow", "0" * 40) is True  # (a commit not here: re-run)

@@ -49,3 +49,26 @@ def test_envelope_is_the_analytic_amplitude_not_the_rectified_trace():
         assert ax.images[0].colorbar.ax.get_ylabel() == "envelope"
     finally:
         plt.close(fig)
+
+
+def test_a_label_preview_draws_the_visible_labels_only(tmp_path, monkeypatch):
+    import matplotlib.image as mpimg
+
+    import gpr3d.viz.bscan as vb
+
+    s = point_targets_bscan([[0.5, 0.3]])
+    labels = {"eps_r": 6.0, "labels": [
+        {"box": [40, 3e-9, 60, 8e-9], "apex_trace": 50, "apex_time_s": 4e-9, "kind": "rebar", "depth_m": 0.3,
+         "visible": True},
+        {"box": [1, 1e-9, 5, 2e-9], "apex_trace": 3, "apex_time_s": 1.5e-9, "kind": "pipe", "depth_m": 0.1,
+         "visible": False}]}
+    vb.save_label_preview(s, labels, tmp_path / "p.png")
+    img = mpimg.imread(tmp_path / "p.png")
+    assert img.shape[0] > 300 and np.std(img[..., :3]) > 0.05
+    seen = {}
+    monkeypatch.setattr(vb, "save_bscan_png", lambda survey, path, **kw: seen.update(kw, data=survey.data))
+    vb.save_label_preview(s, labels, tmp_path / "q.png")
+    assert seen["boxes"] == [[40, 3e-9, 60, 8e-9]] and seen["apexes"] == [(50, 4e-9)]
+    assert seen["title"] == "labels (box, + apex): rebar 30 cm; eps_r 6"
+    # drawn with the mean trace removed
+    np.testing.assert_allclose(seen["data"], s.data - s.data.mean(axis=0, keepdims=True), atol=1e-5 * np.abs(s.data).max())

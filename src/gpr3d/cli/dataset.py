@@ -23,7 +23,8 @@ def add_arguments(sp):
 
 
 def run(args):
-    from gpr3d.simulation.packed import PackedDataset, load_sample, pack_dataset, save_label_preview
+    from gpr3d.simulation.packed import PackedDataset, load_sample, pack_dataset
+    from gpr3d.viz.bscan import save_label_preview
 
     if args.action == "preview":
         _check_suffix(args.dst, (".png",), "dataset preview's output (dst)")

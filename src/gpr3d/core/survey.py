@@ -19,18 +19,59 @@ from __future__ import annotations
 
 import copy as _copy
 import datetime as _dt
+import importlib
 import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 
-from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.errors import GPR3DError, InvalidDataError
 from gpr3d.core.jsonutil import jsonable as _jsonable
 from gpr3d.core.poses import normalize_quat, quat_from_yaw, yaw_from_quat
 from gpr3d.core.units import twt_to_depth
 
-__all__ = ["Survey"]
+__all__ = ["Survey", "register_plugin", "PLUGINS"]
+
+#: What :meth:`Survey.save`, :meth:`Survey.load` and :meth:`Survey.apply` call, by role: ``"save"``
+#: ``(survey, path)``, ``"load"`` ``(path) -> Survey`` and ``"step"`` ``(survey, name, **kwargs) -> Survey``. The
+#: packages above ``core`` fill it (``gpr3d/__init__.py``: HDF5 from :mod:`gpr3d.io.hdf5`, the steps of
+#: :mod:`gpr3d.processing.steps`), so the data model needs neither; each entry is a callable or a
+#: ``"module:function"`` name imported on first use (as entry points are), which keeps ``import gpr3d`` light.
+PLUGINS: dict = {}
+_ROLES = ("save", "load", "step")
+
+
+def register_plugin(role: str, func) -> None:
+    """Name what a :class:`Survey` method calls for ``role`` (one of ``"save"``, ``"load"``, ``"step"``).
+
+    Parameters
+    ----------
+    role : str
+        ``"save"``, ``"load"`` or ``"step"`` (see :data:`PLUGINS`).
+    func : callable or str
+        The function, or its ``"package.module:function"`` name, imported when first called.
+
+    Raises
+    ------
+    ValueError
+        For another role, or a name without ``":"``.
+    """
+    if role not in _ROLES:
+        raise ValueError(f"unknown Survey plug-in role {role!r}; known: {', '.join(_ROLES)}")
+    if isinstance(func, str) and func.count(":") != 1:
+        raise ValueError(f"plug-in {func!r}: name it 'package.module:function'")
+    PLUGINS[role] = func
+
+
+def _plugin(role: str):
+    func = PLUGINS.get(role)
+    if func is None:
+        raise GPR3DError(f"no Survey {role!r} plug-in is registered (gpr3d registers its own on import)")
+    if isinstance(func, str):
+        module, name = func.split(":")
+        func = PLUGINS[role] = getattr(importlib.import_module(module), name)
+    return func
 
 _PER_TRACE = ("timestamps_s", "positions_xyz", "orientations_quat_wxyz")
 
@@ -295,10 +336,8 @@ class Survey:
         return out
 
     def apply(self, step: str, **kwargs) -> "Survey":
-        """Run a named processing step (see :data:`gpr3d.processing.steps.STEPS`)."""
-        from gpr3d.processing.steps import run_step
-
-        return run_step(self, step, **kwargs)
+        """Run a named processing step (see :data:`gpr3d.processing.steps.STEPS`), through the ``"step"`` plug-in."""
+        return _plugin("step")(self, step, **kwargs)
 
     def time_zero(self, **kwargs) -> "Survey":
         """Estimate time zero and (by default) cut the samples before it; see :func:`gpr3d.processing.timezero.estimate_time_zero`."""
@@ -342,14 +381,10 @@ class Survey:
 
     # ------------------------------------------------------------------ files
     def save(self, path) -> None:
-        """Write the survey losslessly to gpr3d's HDF5 schema (atomically)."""
-        from gpr3d.io.hdf5 import write_survey
-
-        write_survey(self, path)
+        """Write the survey losslessly to gpr3d's HDF5 schema (atomically), through the ``"save"`` plug-in."""
+        _plugin("save")(self, path)
 
     @classmethod
     def load(cls, path) -> "Survey":
-        """Read a survey written by :meth:`save`."""
-        from gpr3d.io.hdf5 import read_survey
-
-        return read_survey(path)
+        """Read a survey written by :meth:`save`, through the ``"load"`` plug-in."""
+        return _plugin("load")(path)

@@ -21,11 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
+from gpr3d.core.atomic import atomic_path
 from gpr3d.core.deps import require
 from gpr3d.core.errors import FormatError
 from gpr3d.detection.infer import Detector
 from gpr3d.detection.windows import WindowConfig
-from gpr3d.io.atomic import atomic_path
 from gpr3d.io.onnxweights import finish_export
 
 __all__ = ["export_onnx", "OnnxDetector", "onnx_nms", "DEFAULT_ONNX", "OPSET"]

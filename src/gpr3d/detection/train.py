@@ -10,19 +10,14 @@ refused, so two runs never mix). At the end the weights are exported with
 
 from __future__ import annotations
 
-import json
-import os
-import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from gpr3d import __version__
 from gpr3d.core.deps import require
 from gpr3d.core.errors import GPR3DError, InvalidDataError
-from gpr3d.core.training import optimiser_step, read_checkpoint, warmup_cosine
+from gpr3d.core.training import TrainingRun, warmup_cosine
 from gpr3d.detection.models import MODELS, resolve_device
 from gpr3d.detection.windows import WindowConfig
-from gpr3d.io.atomic import atomic_path, atomic_write_text, resume_log
 
 __all__ = ["TrainConfig", "OPTIMISERS", "train_detector"]
 
@@ -139,7 +134,6 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
     ``max_seconds`` stops early (checkpoint saved; running again continues).
     """
     torch = require("torch")
-    from tqdm import tqdm
 
     from gpr3d.detection.data import WindowDataset, collate
     from gpr3d.detection.models import build_model, count_parameters
@@ -147,7 +141,6 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
     device = resolve_device(cfg.device)
-    ckpt_path = out / "checkpoint.pt"
     cfg_dict = asdict(cfg)
     same = {k: v for k, v in cfg_dict.items() if k not in ("device", "workers", "checkpoint_every", "out")}
     torch.manual_seed(cfg.seed)
@@ -200,61 +193,26 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
         source = MixedSource(source, user, cfg.labels_fraction)
     opt = _optimiser(cfg, [p for p in model.parameters() if p.requires_grad])
     sched = torch.optim.lr_scheduler.LambdaLR(opt, warmup_cosine(cfg.warmup, cfg.steps))
-    step = 0
-    if ckpt_path.exists():
-        ck = read_checkpoint(ckpt_path, device)
-        if ck.get("resume_key") != same:
-            raise GPR3DError(f"{ckpt_path}: made with other settings; use another --out or delete the checkpoint")
-        model.load_state_dict(ck["model"])
-        opt.load_state_dict(ck["optimizer"])
-        sched.load_state_dict(ck["scheduler"])
-        step = int(ck["step"])
-        log(f"resuming from step {step} of {cfg.steps}")
-    atomic_write_text(out / "config.json", json.dumps({"gpr3d": __version__, "config": cfg_dict}, indent=2))
+    # records are drawn fresh and never repeat: the run is one epoch of steps * batch windows
+    run = TrainingRun(out, model, opt, sched, steps=cfg.steps, resume_key=same, config={"config": cfg_dict},
+                      columns="step,lr,loss,wall_s,terms", checkpoint_every=cfg.checkpoint_every, device=device,
+                      desc=f"train {cfg.model}", log=log, progress=progress, max_seconds=max_seconds,
+                      extra_state=lambda k: {"epoch": 0, "windows_seen": k * cfg.batch, "config": cfg_dict})
     ds = WindowDataset(source, cfg.steps * cfg.batch, WindowConfig(**cfg.window), seed=cfg.data_seed, kinds=kinds)
     # item k of the whole run is drawn in order; resuming skips what was already seen
-    sampler = list(range(step * cfg.batch, cfg.steps * cfg.batch))
+    sampler = list(range(run.step * cfg.batch, cfg.steps * cfg.batch))
     loader = torch.utils.data.DataLoader(ds, batch_size=cfg.batch, sampler=sampler, collate_fn=collate,
                                          num_workers=cfg.workers, persistent_workers=False)
-    logf = resume_log(out / "losses.csv", step, "step,lr,loss,wall_s,terms")  # rows after the checkpoint dropped
-    model.train()
-    t0 = time.perf_counter()
-    bar = tqdm(total=cfg.steps, initial=step, disable=not progress, desc=f"train {cfg.model}", unit="step")
 
-    def save():
-        state = {"model": model.state_dict(), "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
-                 # records are drawn fresh and never repeat: the run is one epoch of steps * batch windows
-                 "step": step, "epoch": 0, "windows_seen": step * cfg.batch, "config": cfg_dict, "resume_key": same,
-                 "gpr3d": __version__}
-        with atomic_path(ckpt_path, suffix=".pt.part") as tmp:
-            torch.save(state, tmp)
+    def step_fn(batch):
+        images, targets = batch
+        images = [im.to(device, non_blocking=True) for im in images]
+        targets = [{k: v.to(device) for k, v in t.items()} for t in targets]
+        losses = model(images, targets)
+        loss = sum(losses.values())
+        terms = ";".join(f"{k}={float(v.detach()):.5f}" for k, v in losses.items())
+        return loss, {"terms": terms}, {"loss": f"{float(loss.detach()):.3f}"}
 
-    try:
-        for images, targets in loader:
-            images = [im.to(device, non_blocking=True) for im in images]
-            targets = [{k: v.to(device) for k, v in t.items()} for t in targets]
-            losses = model(images, targets)
-            loss = sum(losses.values())
-            optimiser_step(model, opt, sched, loss, step)
-            step += 1
-            terms = ";".join(f"{k}={float(v.detach()):.5f}" for k, v in losses.items())
-            logf.write(f"{step},{opt.param_groups[0]['lr']:.3g},{float(loss.detach()):.5f},"
-                       f"{time.perf_counter() - t0:.1f},{terms}\n")
-            bar.update(1)
-            bar.set_postfix(loss=f"{float(loss.detach()):.3f}")
-            late = max_seconds is not None and time.perf_counter() - t0 > max_seconds
-            if step % cfg.checkpoint_every == 0 or step == cfg.steps or late:
-                logf.flush()
-                os.fsync(logf.fileno())
-                save()
-            if late:
-                log(f"stopped after {max_seconds:.0f} s at step {step}; run again to continue")
-                break
-    finally:
-        bar.close()
-        logf.close()
-    if step and not ckpt_path.exists():
-        save()
-    wall = time.perf_counter() - t0
-    return {"steps": step, "wall_s": wall, "parameters": count_parameters(model), "model": model, "kinds": kinds,
-            "checkpoint": str(ckpt_path)}
+    run.run(loader, step_fn)
+    return {"steps": run.step, "wall_s": run.wall_s, "parameters": count_parameters(model), "model": model,
+            "kinds": kinds, "checkpoint": str(run.checkpoint)}

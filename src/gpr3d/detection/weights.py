@@ -13,9 +13,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from gpr3d.core.atomic import atomic_path
 from gpr3d.core.deps import require
 from gpr3d.core.errors import FormatError
-from gpr3d.io.atomic import atomic_path
 from gpr3d.io.weights import half_state_dict, read_weights_file
 
 __all__ = ["save_weights", "load_weights", "DEFAULT_WEIGHTS"]

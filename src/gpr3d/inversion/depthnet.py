@@ -30,18 +30,16 @@ from __future__ import annotations
 
 import json
 import math
-import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from gpr3d import __version__
+from gpr3d.core.atomic import atomic_path
 from gpr3d.core.deps import require, resolve_device
-from gpr3d.core.training import optimiser_step, read_checkpoint, warmup_cosine
 from gpr3d.core.errors import FormatError, GPR3DError, InvalidDataError
+from gpr3d.core.training import TrainingRun, warmup_cosine
 from gpr3d.core.units import C0
-from gpr3d.io.atomic import atomic_path, atomic_write_text, resume_log
 from gpr3d.io.weights import half_state_dict, read_weights_file
 
 __all__ = ["ARCHS", "DepthConfig", "DepthRecord", "prepare_depth_record", "depth_window", "window_targets_m", "crop_time",
@@ -377,7 +375,6 @@ def train_depthnet(cfg: DepthTrainConfig, records: list[DepthRecord], *, log=pri
                    max_seconds: float | None = None, validation: list[DepthRecord] | None = None) -> dict:
     """Train DepthNet on windows of ``records`` (with truth); checkpointed and resumable in ``cfg.out``."""
     torch = require("torch")
-    from tqdm import tqdm
 
     records = [r for r in records if math.isfinite(r.eps_r)]
     if not records:
@@ -401,67 +398,39 @@ def train_depthnet(cfg: DepthTrainConfig, records: list[DepthRecord], *, log=pri
     else:
         opt = torch.optim.SGD(model.parameters(), lr=lr, momentum=0.9, weight_decay=5e-5)
     sched = torch.optim.lr_scheduler.LambdaLR(opt, warmup_cosine(min(100, max(cfg.steps // 10, 1)), cfg.steps))
-    ckpt = out / "checkpoint.pt"
     key = {k: v for k, v in asdict(cfg).items() if k not in ("out", "device", "checkpoint_every")}
-    step = 0
-    if ckpt.exists():
-        ck = read_checkpoint(ckpt, device)
-        if ck.get("resume_key") != key:
-            raise GPR3DError(f"{ckpt}: made with other settings; use another --out or delete the checkpoint")
-        model.load_state_dict(ck["model"])
-        opt.load_state_dict(ck["optimizer"])
-        sched.load_state_dict(ck["scheduler"])
-        step = int(ck["step"])
-        log(f"resuming from step {step} of {cfg.steps}")
-    atomic_write_text(out / "config.json", json.dumps({"gpr3d": __version__, "config": asdict(cfg),
-                                                       "n_records": len(records)}, indent=2))
+    run = TrainingRun(out, model, opt, sched, steps=cfg.steps, resume_key=key,
+                      config={"config": asdict(cfg), "n_records": len(records)},
+                      columns="step,lr,loss,log_eps_mse,depth_mse_x100,wall_s", checkpoint_every=cfg.checkpoint_every,
+                      device=device, desc="train depthnet", what="DepthNet training", log=log, progress=progress,
+                      max_seconds=max_seconds)
     smoothed = {}
-    logf = resume_log(out / "losses.csv", step, "step,lr,loss,log_eps_mse,depth_mse_x100,wall_s")
-    t0 = time.perf_counter()
-    bar = tqdm(total=cfg.steps, initial=step, disable=not progress, desc="train depthnet", unit="step")
 
-    def save():
-        state = {"model": model.state_dict(), "optimizer": opt.state_dict(), "scheduler": sched.state_dict(),
-                 "step": step, "resume_key": key, "gpr3d": __version__}
-        with atomic_path(ckpt, suffix=".pt.part") as tmp:
-            torch.save(state, tmp)
+    def batch(step):  # step k's windows, drawn from its own seed: a resumed run draws what an unbroken one would
+        rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, step, 0xD3]))
+        items = []
+        for _ in range(cfg.batch):
+            k = int(rng.integers(len(records)))
+            rec = records[k]
+            if k not in smoothed:
+                smoothed[k] = _smoothed(rec, net_cfg.alpha * rec.depth_scale_m, net_cfg.size)
+            items.append(_training_item(rec, net_cfg, rng, smoothed[k]))
+        return items
 
-    model.train()
-    try:
-        while step < cfg.steps:
-            rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, step, 0xD3]))
-            items = []
-            for _ in range(cfg.batch):
-                k = int(rng.integers(len(records)))
-                rec = records[k]
-                if k not in smoothed:
-                    smoothed[k] = _smoothed(rec, net_cfg.alpha * rec.depth_scale_m, net_cfg.size)
-                items.append(_training_item(rec, net_cfg, rng, smoothed[k]))
-            images = torch.from_numpy(np.stack([it[0] for it in items])).to(device)
-            rois = torch.from_numpy(_rois([it[1] for it in items])).to(device)
-            tq = torch.from_numpy(np.concatenate([it[2] for it in items]).astype(np.float32)).to(device)
-            direct = torch.tensor([it[3] for it in items], dtype=torch.float32, device=device)
-            teps = torch.tensor([it[4] for it in items], dtype=torch.float32, device=device)
-            eps, q = model(images, rois, direct)
-            loss, le, ld = _loss(eps, q[:-1], teps, tq, cfg)
-            optimiser_step(model, opt, sched, loss, step, what="DepthNet training")
-            step += 1
-            logf.write(f"{step},{opt.param_groups[0]['lr']:.3g},{float(loss.detach()):.5f},{le:.5f},{ld:.5f},"
-                       f"{time.perf_counter() - t0:.1f}\n")
-            bar.update(1)
-            bar.set_postfix(eps=f"{le:.3f}", depth=f"{ld:.3f}")
-            late = max_seconds is not None and time.perf_counter() - t0 > max_seconds
-            if step % cfg.checkpoint_every == 0 or step == cfg.steps or late:
-                logf.flush()
-                save()
-            if late:
-                log(f"stopped after {max_seconds:.0f} s at step {step}; run again to continue")
-                break
-    finally:
-        bar.close()
-        logf.close()
+    def step_fn(items):
+        images = torch.from_numpy(np.stack([it[0] for it in items])).to(device)
+        rois = torch.from_numpy(_rois([it[1] for it in items])).to(device)
+        tq = torch.from_numpy(np.concatenate([it[2] for it in items]).astype(np.float32)).to(device)
+        direct = torch.tensor([it[3] for it in items], dtype=torch.float32, device=device)
+        teps = torch.tensor([it[4] for it in items], dtype=torch.float32, device=device)
+        eps, q = model(images, rois, direct)
+        loss, le, ld = _loss(eps, q[:-1], teps, tq, cfg)
+        return (loss, {"log_eps_mse": f"{le:.5f}", "depth_mse_x100": f"{ld:.5f}"},
+                {"eps": f"{le:.3f}", "depth": f"{ld:.3f}"})
+
+    run.run((batch(k) for k in range(run.step, cfg.steps)), step_fn)
     model.eval()
-    return {"steps": step, "wall_s": time.perf_counter() - t0, "model": model, "net": net_cfg,
+    return {"steps": run.step, "wall_s": run.wall_s, "model": model, "net": net_cfg,
             "parameters": int(sum(p.numel() for p in model.parameters()))}
 
 

@@ -19,9 +19,9 @@ import json
 import math
 from pathlib import Path
 
+from gpr3d.core.atomic import atomic_write_text
 from gpr3d.core.errors import FormatError
 from gpr3d.core.jsonutil import jsonable
-from gpr3d.io.atomic import atomic_write_text
 
 __all__ = ["read_detections", "write_detections", "read_boxes"]
 

@@ -17,10 +17,10 @@ import json
 
 import h5py
 
+from gpr3d.core.atomic import atomic_path
 from gpr3d.core.errors import FormatError
 from gpr3d.core.survey import Survey
 from gpr3d.io._common import check_file, check_hdf5_survives, hdf5_errors, header_count
-from gpr3d.io.atomic import atomic_path
 
 __all__ = ["SCHEMA", "SCHEMA_VERSION", "write_survey", "write_surveys", "read_surveys", "read_survey", "is_gpr3d_h5"]
 

@@ -19,10 +19,10 @@ import json
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from gpr3d.core.atomic import atomic_write_text
 from gpr3d.core.errors import FormatError, InvalidDataError
 from gpr3d.core.trajectory import Trajectory
 from gpr3d.io._common import check_file
-from gpr3d.io.atomic import atomic_write_text
 
 __all__ = ["read_imu_csv", "write_imu_csv", "read_wheel_csv", "write_wheel_csv", "read_rig", "write_rig",
            "relative_from_camera_poses"]

@@ -23,8 +23,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
+from gpr3d.core.atomic import atomic_write_text, file_sha256
 from gpr3d.core.errors import FormatError
-from gpr3d.io.atomic import atomic_write_text, file_sha256
 
 __all__ = ["result_folder", "open_result", "check_result", "MANIFEST", "JOURNAL"]
 

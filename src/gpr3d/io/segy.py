@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
+from gpr3d.core.atomic import atomic_path
 from gpr3d.core.deps import require
 from gpr3d.core.errors import FormatError, InvalidDataError
-from gpr3d.io.atomic import atomic_path
 
 __all__ = ["write_segy", "read_segy", "is_segy"]
 

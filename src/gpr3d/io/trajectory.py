@@ -12,10 +12,10 @@ import io as _io
 
 import numpy as np
 
+from gpr3d.core.atomic import atomic_write_text
 from gpr3d.core.errors import FormatError, InvalidDataError
 from gpr3d.core.trajectory import Trajectory
 from gpr3d.io._common import check_file
-from gpr3d.io.atomic import atomic_write_text
 
 __all__ = ["Trajectory", "read_tum", "write_tum", "read_csv_trajectory", "read_trajectory", "read_xyz_track",
            "attach_poses", "attach_track", "read_track", "apply_track"]

@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 
 from gpr3d import __version__
+from gpr3d.core.atomic import atomic_path
 from gpr3d.core.errors import FormatError
 from gpr3d.core.grid import Grid3D
 from gpr3d.io._common import check_file, check_hdf5_survives, hdf5_errors
-from gpr3d.io.atomic import atomic_path
 
 __all__ = ["SCHEMA", "SCHEMA_VERSION", "Volume", "read_volume", "write_volume", "write_vti"]
 

@@ -19,14 +19,18 @@ from pathlib import Path
 import numpy as np
 
 from gpr3d import __version__
+from gpr3d.core.atomic import atomic_write_text
 from gpr3d.core.errors import GeometryWarning, InvalidDataError
-from gpr3d.core.units import C0, velocity_from_eps_r
-from gpr3d.io.atomic import atomic_write_text
 from gpr3d.core.grid import Grid3D
+from gpr3d.core.units import C0, velocity_from_eps_r
 from gpr3d.migration.config import ReconstructConfig
 from gpr3d.migration.masking import box_mask, check_boxes, image_envelope
 from gpr3d.migration.operator import BackProjection, antenna_positions
-from gpr3d.migration.targets import extract_profile_targets, extract_targets, targets_to_json
+from gpr3d.migration.targets import (
+    extract_profile_targets,
+    extract_targets,
+    targets_to_json,
+)
 
 __all__ = ["ProfileFrame", "Reconstruction", "ReconstructConfig", "check_site_settings", "reconstruct",
            "write_reconstruction"]
@@ -349,11 +353,10 @@ def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s) -> "Reconstruction"
 
 
 def write_reconstruction(result: "Reconstruction", out_dir, *, source: str = "") -> list[str]:
-    """Write a :class:`Reconstruction` into ``out_dir`` (atomically, file by file): ``volume.h5``
-    (:func:`gpr3d.io.volume.write_volume`), ``volume.vti``, ``targets.json``, ``config.json`` and the figures of
-    :func:`gpr3d.viz.volume.reconstruction_figures`."""
+    """Write a :class:`Reconstruction`'s data into ``out_dir`` (atomically, file by file): ``volume.h5``
+    (:func:`gpr3d.io.volume.write_volume`), ``volume.vti``, ``targets.json`` and ``config.json``. Its figures are
+    drawn above the migration, by :func:`gpr3d.pipeline.reconstruction.write_result`."""
     from gpr3d.io.volume import write_volume, write_vti
-    from gpr3d.viz.volume import reconstruction_figures
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -370,5 +373,4 @@ def write_reconstruction(result: "Reconstruction", out_dir, *, source: str = "")
                                                        "frame": None if result.frame is None
                                                        else result.frame.to_dict(),
                                                        "timings_s": result.timings_s}, indent=1))
-    reconstruction_figures(result, out)
     return sorted(p.name for p in out.iterdir())

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from gpr3d.core.atomic import atomic_write_text
 from gpr3d.core.errors import InvalidDataError
-from gpr3d.io.atomic import atomic_write_text
 from gpr3d.migration.operator import BackProjection
 
 __all__ = ["DEFAULT_TILE_M", "SiteResult", "Tile", "check_settings", "migrate_site", "plan_tiles", "tile_traces"]

@@ -7,7 +7,7 @@ from dataclasses import dataclass, replace
 
 from gpr3d.core.errors import GPR3DError
 
-__all__ = ["ReconstructionRun", "reconstruct_recording", "write_reconstruction_folder"]
+__all__ = ["ReconstructionRun", "reconstruct_recording", "write_result", "write_reconstruction_folder"]
 
 
 @dataclass
@@ -122,11 +122,39 @@ def write_reconstruction_folder(run: ReconstructionRun, out, *, source: str, com
         The files written.
     """
     from gpr3d.io.resultdir import result_folder
-    from gpr3d.migration.reconstruct import write_reconstruction
 
     with result_folder(out, command=command) as stage:  # the whole result, or the previous one
         if run.mask == "detect":
             from gpr3d.io.detections import write_detections
 
             write_detections([run.found], stage / "detections.json")
-        return write_reconstruction(run.result, stage, source=source)
+        return write_result(run.result, stage, source=source)
+
+
+def write_result(result, out, *, source: str = "") -> list:
+    """A reconstruction's data and its figures, written into the folder ``out`` file by file (each atomically).
+
+    Parameters
+    ----------
+    result : Reconstruction
+        What :func:`~gpr3d.migration.reconstruct.reconstruct` gave back.
+    out : str or Path
+        The folder (made with its parents where missing).
+    source : str
+        The recording's name, kept in ``volume.h5`` and ``config.json``.
+
+    Returns
+    -------
+    list of str
+        The names of the files in ``out``: ``volume.h5``, ``volume.vti``, ``targets.json``, ``config.json``
+        (:func:`~gpr3d.migration.reconstruct.write_reconstruction`) and the figures of
+        :func:`~gpr3d.viz.volume.reconstruction_figures` (``top.png``, ``front.png``, ``view3d.png``).
+    """
+    from pathlib import Path
+
+    from gpr3d.migration.reconstruct import write_reconstruction
+    from gpr3d.viz.volume import reconstruction_figures
+
+    write_reconstruction(result, out, source=source)
+    reconstruction_figures(result, out)
+    return sorted(p.name for p in Path(out).iterdir())

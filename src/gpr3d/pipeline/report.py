@@ -176,7 +176,7 @@ def write_report(folder, *, out=None, survey=None, detections=None, reconstructi
     """
     import gpr3d
     from gpr3d import __version__
-    from gpr3d.io.atomic import atomic_write_text
+    from gpr3d.core.atomic import atomic_write_text
 
     go, make_subplots, get_plotlyjs = _plotly()
     folder = Path(folder)

@@ -56,7 +56,7 @@ class RunConfig:
 
 
 def _sha(path) -> str | None:
-    from gpr3d.io.atomic import file_sha256
+    from gpr3d.core.atomic import file_sha256
 
     return None if path is None else file_sha256(path)
 
@@ -66,7 +66,7 @@ def _key(*parts) -> str:
 
 
 def _files_sha(out: Path, names) -> dict:
-    from gpr3d.io.atomic import file_sha256
+    from gpr3d.core.atomic import file_sha256
 
     got = {}
     for n in names:
@@ -97,7 +97,7 @@ class _Journal:
             return False
 
     def record(self, stage: str, key: str, wall_s: float, line: str) -> None:
-        from gpr3d.io.atomic import atomic_write_text
+        from gpr3d.core.atomic import atomic_write_text
 
         self.stages[stage] = {"key": key, "files": _files_sha(self.out, STAGES[stage]), "wall_s": round(wall_s, 3),
                               "line": line}
@@ -185,7 +185,10 @@ def _reconstruction_stage(cfg: RunConfig, out: Path, log):
     import gpr3d
     from gpr3d.io.detections import read_detections
     from gpr3d.migration.reconstruct import ReconstructConfig
-    from gpr3d.pipeline.reconstruction import reconstruct_recording, write_reconstruction_folder
+    from gpr3d.pipeline.reconstruction import (
+        reconstruct_recording,
+        write_reconstruction_folder,
+    )
 
     s = gpr3d.read(out / "survey.h5")
     found = read_detections(out / "detections.json")[0]
@@ -223,7 +226,7 @@ def run_pipeline(cfg: RunConfig, *, log=print) -> dict:
     GPR3DError
         A wrong setting (before any work), or a stage that cannot go on (one line).
     """
-    from gpr3d.io.atomic import atomic_write_text
+    from gpr3d.core.atomic import atomic_write_text
 
     check_run_config(cfg)
     out = Path(cfg.out)

@@ -33,9 +33,9 @@ from pathlib import Path
 import numpy as np
 
 from gpr3d import __version__
+from gpr3d.core.atomic import atomic_write_text, file_sha256
 from gpr3d.core.deps import require
 from gpr3d.core.errors import GPR3DError
-from gpr3d.io.atomic import atomic_write_text, file_sha256
 from gpr3d.processing.image import bscan_image  # re-exported: the image.png rendering
 
 __all__ = ["SimulateConfig", "simulate_sample", "build_dataset", "write_manifest", "bscan_image", "PRESETS"]

@@ -27,12 +27,13 @@ import h5py
 import numpy as np
 
 from gpr3d import __version__
+from gpr3d.core.atomic import atomic_path, atomic_write_text
 from gpr3d.core.errors import GPR3DError
-from gpr3d.io.atomic import atomic_path, atomic_write_text
-from gpr3d.io.packed import SCHEMA, PackedDataset as _PackedReader
+from gpr3d.io.packed import SCHEMA
+from gpr3d.io.packed import PackedDataset as _PackedReader
 from gpr3d.processing.image import resample_rows
 
-__all__ = ["pack_dataset", "PackedDataset", "load_sample", "save_label_preview"]
+__all__ = ["pack_dataset", "PackedDataset", "load_sample"]
 
 
 def pack_dataset(folder, out, *, n_samples: int = 512, regenerate: str = "") -> dict:
@@ -128,14 +129,3 @@ def load_sample(source, index: int):
     if not hits.size:
         raise GPR3DError(f"{source}: no sample {index}")
     return ds[int(hits[0])]
-
-
-def save_label_preview(survey, labels: dict, path, *, title: str | None = None) -> None:
-    """The B-scan (mean trace removed) with every label's box and apex drawn on it."""
-    from gpr3d.viz.bscan import save_bscan_png
-
-    labs = [lab for lab in labels["labels"] if lab["visible"]]
-    kinds = ", ".join(f"{lab['kind']} {lab['depth_m'] * 100:.0f} cm" for lab in labs)
-    save_bscan_png(survey.remove_background(), path, cmap="seismic", boxes=[lab["box"] for lab in labs],
-                   apexes=[(lab["apex_trace"], lab["apex_time_s"]) for lab in labs],
-                   title=title or f"labels (box, + apex): {kinds}; eps_r {labels.get('eps_r', survey.eps_r):.3g}")

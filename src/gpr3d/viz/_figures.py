@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from gpr3d.io.atomic import atomic_path
+from gpr3d.core.atomic import atomic_path
 
 __all__ = ["pyplot", "save_figure"]
 

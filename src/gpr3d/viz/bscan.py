@@ -6,7 +6,8 @@ import numpy as np
 
 from gpr3d.viz._figures import plot_to_png, pyplot
 
-__all__ = ["plot_bscan", "save_bscan_png", "check_plot_args", "save_profile_png", "plot_wiggles", "plot_ascan"]
+__all__ = ["plot_bscan", "save_bscan_png", "check_plot_args", "save_profile_png", "plot_wiggles", "plot_ascan",
+           "save_label_preview"]
 
 
 def check_plot_args(*, cmap=None, clip_percentile=None, axis=None) -> None:
@@ -195,3 +196,25 @@ def plot_ascan(survey, trace: int, ax=None, *, envelope: bool = True, title=None
         ax.legend(loc="upper right")
     ax.set(xlabel="two-way time (ns)", ylabel="amplitude", title=title or f"trace {int(trace)}")
     return ax
+
+
+def save_label_preview(survey, labels: dict, path, *, title: str | None = None) -> None:
+    """A labelled sample's B-scan (mean trace removed) with every visible label's box and apex drawn on it.
+
+    Parameters
+    ----------
+    survey : Survey
+        The sample's B-scan.
+    labels : dict
+        Its ``labels.json`` (:func:`gpr3d.simulation.packed.load_sample`): ``labels`` with ``box``, ``apex_trace``,
+        ``apex_time_s``, ``kind``, ``depth_m`` and ``visible``.
+    path : str or Path
+        The PNG written.
+    title : str, optional
+        Instead of the kinds and depths of the labels.
+    """
+    labs = [lab for lab in labels["labels"] if lab["visible"]]
+    kinds = ", ".join(f"{lab['kind']} {lab['depth_m'] * 100:.0f} cm" for lab in labs)
+    save_bscan_png(survey.remove_background(), path, cmap="seismic", boxes=[lab["box"] for lab in labs],
+                   apexes=[(lab["apex_trace"], lab["apex_time_s"]) for lab in labs],
+                   title=title or f"labels (box, + apex): {kinds}; eps_r {labels.get('eps_r', survey.eps_r):.3g}")

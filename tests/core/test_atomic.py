@@ -2,7 +2,7 @@
 
 
 def test_a_resumed_log_drops_the_rows_after_its_checkpoint(tmp_path):
-    from gpr3d.io.atomic import resume_log
+    from gpr3d.core.atomic import resume_log
 
     p = tmp_path / "losses.csv"
     with resume_log(p, 0, "step,loss\n") as fh:  # a new run: the header, once
@@ -28,7 +28,7 @@ def test_a_killed_writer_s_temporary_file_is_removed_by_the_next_write(tmp_path)
     import subprocess
     import sys
 
-    from gpr3d.io.atomic import atomic_path, atomic_write_text
+    from gpr3d.core.atomic import atomic_path, atomic_write_text
 
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
                           text=True).stdout.strip()  # a process id that has ended
@@ -54,7 +54,7 @@ def test_a_killed_writer_s_temporary_file_is_removed_by_the_next_write(tmp_path)
 def test_file_sha256_is_hashlib_s_of_the_bytes(tmp_path):
     import hashlib
 
-    from gpr3d.io.atomic import file_sha256
+    from gpr3d.core.atomic import file_sha256
 
     data = bytes(range(256)) * 9000  # over two 1 MiB blocks
     (tmp_path / "b").write_bytes(data)
@@ -64,7 +64,7 @@ def test_file_sha256_is_hashlib_s_of_the_bytes(tmp_path):
 
 
 def test_resume_log_by_hand_at_its_edges(tmp_path):
-    from gpr3d.io.atomic import resume_log
+    from gpr3d.core.atomic import resume_log
 
     p = tmp_path / "l.csv"
     with resume_log(p, 0, "step,loss,terms \n") as fh:  # the header as given, one newline
@@ -81,7 +81,7 @@ def test_stale_parts_edges(tmp_path, monkeypatch):
     import sys
     from pathlib import Path
 
-    from gpr3d.io.atomic import atomic_write_text
+    from gpr3d.core.atomic import atomic_write_text
 
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
                           text=True).stdout.strip()
