@@ -161,9 +161,10 @@ def demo_scene():
     )
 
 
-def _survey_poses(cfg: DemoConfig, log):
+def _survey_poses(cfg: DemoConfig, log, rig_dir=None):
     """The cart's true antenna poses at its survey wheel's traces, and the poses the visual-inertial fusion
-    estimates for them (what a user has), in the site frame."""
+    estimates for them (what a user has), in the site frame; the sensors' recordings written into ``rig_dir``
+    (what ``gpr3d run --imu`` fuses)."""
     import numpy as np
 
     from gpr3d.pose.eskf import fuse
@@ -176,6 +177,10 @@ def _survey_poses(cfg: DemoConfig, log):
                     stops=max(3, int(cfg.walk_seconds // 60)), vo_keyframe_m=0.1,
                     imu_T_antenna=np.array([[1.0, 0, 0, -0.3], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]))
     run = simulate_rig(rig, seed=cfg.walk_seed)
+    if rig_dir is not None:
+        from gpr3d.pipeline.poses import write_rig_recordings
+
+        write_rig_recordings(run, rig_dir)
     truth = run.truth_trajectory()
     trig = trajectory_triggers(truth, cfg.trace_spacing_m)
     t = time.perf_counter()
@@ -203,7 +208,7 @@ def _random_motion_stage(out: Path, cfg: DemoConfig, log) -> dict:
     from gpr3d.viz.maps import save_survey_map_png
 
     scene = demo_scene()
-    true, est, pose = _survey_poses(cfg, log)
+    true, est, pose = _survey_poses(cfg, log, rig_dir=out / "rig")
     f, n_samples, window = 500e6, 512, 40e-9
     kw = dict(offset_m=0.1, frequency_hz=f, n_samples=n_samples, time_window_s=window, air_wave=1.0,
               ground_wave=0.5, clutter=30, noise=0.002, seed=cfg.walk_seed)
@@ -242,10 +247,13 @@ def _random_motion_stage(out: Path, cfg: DemoConfig, log) -> dict:
         f"{pose['fuse_s']:.1f} s): error at the traces mean "
         f"{pose['antenna_error_mean_m'] * 100:.1f} cm, max {pose['antenna_error_max_m'] * 100:.1f} cm"
         + (f", APE {pose['fused_ape_m'] * 100:.1f} cm" if "fused_ape_m" in pose else ""))
+    log(f"      the cart's recordings in {out / 'rig'}/ (imu.csv, odometry.tum, wheel.csv, rig.json): "
+        f"gpr3d run {out / 'random_walk_survey.h5'} --imu {out / 'rig' / 'imu.csv'} ... fuses them itself")
     return {"n_traces": survey.n_traces, "n_samples": n_samples, "forward_s": t_fwd, "ascans_per_s": rate,
             "path_m": path, "poses": pose,
             "files": ["random_walk_survey.h5", "random_walk.tum", "random_walk_truth.tum", "random_walk_map.png",
-                      "random_walk_bscan.png"]}
+                      "random_walk_bscan.png", "rig/imu.csv", "rig/odometry.tum", "rig/wheel.csv", "rig/rig.json",
+                      "rig/truth.tum"]}
 
 
 def _named(ev: dict) -> dict:

@@ -114,6 +114,8 @@ def one_line_error(capsys, argv, *needles):
     (["train", "detector", "--out", "{d}/t", "--labels-fraction", "1.5"], ["--labels-fraction must lie in 0..1"]),
     (["pose", "simulate", "--out", "{d}/ps", "--duration", "1e9"], ["--duration must be seconds of motion (20..3600)"]),
     (["pose", "simulate", "--out", "{d}/ps", "--duration", "nan"], ["--duration", "got nan"]),
+    (["pose", "fuse", "--imu", "{d}/walk.tum", "--at", "{d}/noposes.h5", "--out", "{d}/f.tum"],
+     ["--at", "noposes.h5", "its traces have no times"]),
     (["cscan", "{d}/walk.h5", "--out", "{d}/c", "--fill", "-1"], ["--fill must be a distance in metres, 0 to 20 cells"]),
     (["cscan", "{d}/walk.h5", "--out", "{d}/c", "--fill", "1e9"], ["--fill", "got 1e+09"]),
     (["reconstruct", "{d}/walk.h5", "--eps-r", "6", "--out", "{d}/r", "--tile", "0.0001"],

@@ -56,3 +56,43 @@ def test_the_site_builds_without_a_warning(tmp_path):
     assert "Grid surveys, C-scans and 3D" in guide and 'href="api/core.html#gpr3d.core.survey.Survey"' in guide
     conventions = (tmp_path / "html" / "CONVENTIONS.html").read_text(encoding="utf-8")
     assert "targets.json" in conventions
+
+
+README = DOCS.parent / "README.md"
+
+
+def test_the_readme_opens_with_the_two_commands_and_stays_short():
+    text = README.read_text(encoding="utf-8")
+    block = re.search(r"```bash\n(.*?)```", text, flags=re.S).group(1).strip().splitlines()
+    ci = (DOCS.parent / ".ci" / "run").read_text(encoding="utf-8").strip().splitlines()[-1]
+    assert len(block) == 2 and block[0].endswith("gpr3d demo") and block[1] == ci
+    assert len(text.splitlines()) <= 150
+    for link in re.findall(r"\]\(([^)#]+)\)", text):  # every relative link names a file of the checkout
+        if not link.startswith("http"):
+            assert (DOCS.parent / link).exists(), link
+    # the quick start's commands parse with the real CLI
+    for cmd in re.findall(r"```bash\n(.*?)```", text, flags=re.S)[1].replace("\\\n", " ").splitlines():
+        cmd = cmd.split("  #")[0].strip()
+        if cmd.startswith("gpr3d "):
+            from gpr3d.cli.main import build_parser
+
+            build_parser().parse_args(shlex.split(cmd)[1:])
+
+
+@pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
+def test_the_readme_s_python_quick_start_runs_on_the_embedded_recording(tmp_path, monkeypatch):
+    pytest.importorskip("onnxruntime")
+    import json
+    import shutil
+
+    import gpr3d
+
+    code = re.search(r"```python\n(.*?)```", README.read_text(encoding="utf-8"), flags=re.S).group(1)
+    shutil.copy(Path(gpr3d.__file__).parent / "data" / "FILE____032.DZT", tmp_path)
+    monkeypatch.chdir(tmp_path)
+    scope = {}
+    exec(compile(code, "README.md", "exec"), scope)
+    assert scope["found"]["targets"] and 3 < scope["found"]["permittivity"]["eps_r"] < 12
+    names = [t["name"] for t in json.loads((tmp_path / "rec" / "targets.json").read_text())["targets"]]
+    assert names and names == [f"T{i + 1}" for i in range(len(names))]
+    assert {"volume.h5", "top.png", "view3d.png"} <= {p.name for p in (tmp_path / "rec").iterdir()}

@@ -33,7 +33,7 @@ def done_run(walk_files, tmp_path_factory):
 
 
 @pytest.mark.slow  # (run by .ci/run's second command: pytest -m slow)
-def test_the_whole_road_then_a_rerun_that_keeps_what_is_done(walk_files, done_run, tmp_path):
+def test_the_whole_road_then_a_rerun_that_keeps_what_is_done(walk_files, done_run, tmp_path, capsys):
     import shutil
 
     d = walk_files
@@ -62,8 +62,11 @@ def test_the_whole_road_then_a_rerun_that_keeps_what_is_done(walk_files, done_ru
     # the same line again: nothing is made again
     before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
     log2 = []
-    again = run_pipeline(cfg, log=log2.append)
+    capsys.readouterr()
+    again = run_pipeline(cfg, log=log2.append, progress=True)
     assert all(v["kept"] for v in again["stages"].values()), log2
+    bar = capsys.readouterr().err  # the bar over the stages, named after the one running
+    assert "gpr3d run: survey" in bar and "gpr3d run: reconstruction" in bar and "3/3" in bar, bar
     assert again["targets"] == summary["targets"]
     assert (out / "survey.h5").stat().st_mtime_ns == before["survey.h5"]
 

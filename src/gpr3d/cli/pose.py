@@ -54,6 +54,9 @@ def add_arguments(sp):
                     help="estimate the camera-IMU time offset from the turns (gyro vs odometry) and use it")
     sp.add_argument("--flat-ground", type=float, default=None, metavar="SIGMA_M",
                     help="the ground is flat: hold the IMU at its start height within this (m)")
+    sp.add_argument("--at", default=None, metavar="SURVEY",
+                    help="fuse: write the poses at this recording's trace times, one per trace in trace order "
+                         "(what reconstruct --poses takes)")
     sp.add_argument("--truth", default=None, help="a true antenna trajectory to report the APE against (evo)")
     sp.add_argument("--figure", default=None, help="PNG plan view of the path")
     sp.add_argument("--duration", type=float, default=90.0, help="simulate: seconds of motion (90)")
@@ -61,18 +64,11 @@ def add_arguments(sp):
 
 
 def run(args):
-    from gpr3d.io.inertial import (
-        write_imu_csv,
-        write_rig,
-        write_wheel_csv,
-    )
     from gpr3d.io.trajectory import read_trajectory, write_tum
+    from gpr3d.pipeline.poses import write_rig_recordings
 
     out = Path(args.out)
     if args.action == "simulate":
-        from scipy.spatial.transform import Rotation
-
-        from gpr3d.core.trajectory import Trajectory
         from gpr3d.pose.rig import RigConfig, simulate_rig
 
         _in_range(args.duration, "--duration", 20, MAX_SIMULATED_S, "seconds of motion")
@@ -80,26 +76,16 @@ def run(args):
         from gpr3d.io.resultdir import result_folder
 
         _writable(out, "--out")
-        cfg = run.config
-        keep = run.vo.valid.copy()  # frames whose motion from the one before is known; lost ones are left out
-        keep[0] = True
-        Rc, pc = run.vo.chained()
-        cam = Trajectory(run.vo.t_s[keep], pc[keep], Rotation.from_matrix(Rc[keep]).as_quat()[:, [3, 0, 1, 2]])
         wrote = "imu.csv, odometry.tum (camera poses), wheel.csv, truth.tum (antenna) and rig.json"
         with result_folder(out, command="pose simulate") as stage:
-            write_imu_csv(run.imu, stage / "imu.csv")
-            write_tum(cam, stage / "odometry.tum")
-            write_wheel_csv(*run.wheel(), stage / "wheel.csv")
-            write_tum(run.truth_trajectory(), stage / "truth.tum")
-            write_rig(stage / "rig.json", imu_T_camera=cfg.imu_T_camera, imu_T_antenna=cfg.imu_T_antenna,
-                      camera_time_offset_s=cfg.camera_time_offset_s)
+            write_rig_recordings(run, stage)
             if args.bag:
                 from gpr3d.io.rosbag import write_bag
 
-                write_bag(stage / "bag", imu=run.imu, trajectory=cam)
+                write_bag(stage / "bag", imu=run.imu, trajectory=read_trajectory(stage / "odometry.tum"))
                 wrote += ", bag/ (ROS 2: /imu, /odometry)"
         print(f"wrote {wrote} to {out}/: {run.path_length_m:.1f} m in {args.duration:g} s, odometry lost for 2 s at "
-              f"{args.duration / 2:g} s ({int(keep.sum())} odometry frames)")
+              f"{args.duration / 2:g} s ({len(read_trajectory(out / 'odometry.tum'))} odometry frames)")
         return 0
     if args.bag is True:
         raise GPR3DError("pose fuse --bag needs the bag's path")
@@ -129,8 +115,15 @@ def run(args):
         raise GPR3DError(f"--keyframe must be a distance in metres between 0 (frame to frame) and 5, got {args.keyframe}")
     if args.loops and not args.colour_topic:
         raise GPR3DError("--loops registers revisited RGB-D frames: give --bag with --colour-topic and --depth-topic")
-    from gpr3d.pipeline.poses import fuse_recordings
+    from gpr3d.pipeline.poses import fuse_recordings, poses_at_traces
 
+    at = None
+    if args.at:  # (read first: a recording without trace times is refused before the fusion)
+        from gpr3d.pipeline.recording import read_recording
+
+        at = read_recording(args.at)
+        if at.timestamps_s is None:
+            raise GPR3DError(f"--at {args.at}: its traces have no times to place the fused poses at")
     fused = fuse_recordings(imu=args.imu, bag=args.bag, odometry=args.odometry, wheel=args.wheel, rig=args.rig,
                             imu_topic=args.imu_topic, odometry_topic=args.odometry_topic,
                             colour_topic=args.colour_topic, depth_topic=args.depth_topic,
@@ -139,8 +132,10 @@ def run(args):
                             estimate_offset=args.estimate_offset, loops=args.loops, log=print)
     res, source = fused.result, fused.source
     traj = res.antenna_trajectory()
+    if at is not None:
+        traj = poses_at_traces(traj, at, source=args.at)
     write_tum(traj, out)
-    msg = (f"wrote {out}: {len(traj)} antenna poses; odometry frames used {int(res.vo_used.sum())}, gated out "
+    msg = (f"wrote {out}: {len(traj)} antenna poses{' (one per trace of ' + args.at + ')' if at is not None else ''}; odometry frames used {int(res.vo_used.sum())}, gated out "
            f"{int(res.vo_rejected.sum())}; zero-velocity updates {res.zupt_count}")
     if args.truth:
         from gpr3d.pose.metrics import ape

@@ -145,7 +145,7 @@ class TrainingRun:
             torch.save(state, tmp)
 
     def run(self, batches, step_fn) -> "TrainingRun":
-        """Train from :attr:`step` to ``steps``: for each item of ``batches``, ``step_fn(batch)`` gives
+        """Train from ``step`` to ``steps``: for each item of ``batches``, ``step_fn(batch)`` gives
         ``(loss, fields, postfix)`` (the loss tensor, the log's other columns as text, what the progress bar
         shows); the optimiser steps, the row is logged, the checkpoint written every ``checkpoint_every`` steps.
 
@@ -160,7 +160,7 @@ class TrainingRun:
         Returns
         -------
         TrainingRun
-            ``self``, with :attr:`step` and :attr:`wall_s` set.
+            ``self``, with ``step`` and ``wall_s`` set.
         """
         from tqdm import tqdm
 

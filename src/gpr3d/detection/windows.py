@@ -31,7 +31,28 @@ __all__ = ["WindowConfig", "Window", "prepare", "windows", "make_window", "recor
 
 @dataclass
 class WindowConfig:
-    """How a record becomes detector windows."""
+    """How a record becomes detector windows.
+
+    Attributes
+    ----------
+    traces : int
+        Traces per window (one image column each), 16..4096.
+    rows : int
+        Image rows (the record's whole time window, resampled), 32..2048.
+    overlap : float
+        Fraction of a window shared with the next, 0..0.9.
+    style : {"channels", "hot"}
+        ``channels``: signed, envelope and gained channels; ``hot``: the reference paper's colouring.
+    dewow, background : bool
+        Remove the wow and the mean trace before rendering.
+    equalise : bool
+        Divide each row by its RMS across the record (deep echoes as bright as shallow ones).
+
+    Raises
+    ------
+    InvalidDataError
+        A value outside its range, in one line naming it.
+    """
 
     traces: int = 256  #: traces per window (one image column each)
     rows: int = 256  #: image rows (the record's whole time window, resampled)

@@ -65,7 +65,31 @@ EPS_RANGE = (1.0, 81.0)
 
 @dataclass
 class HyperbolaFit:
-    """One hyperbola's fit. Times from the first recorded sample; lengths in m along the profile / below the surface."""
+    """One hyperbola's fit. Times from the first recorded sample; lengths in m along the profile / below the surface.
+
+    Attributes
+    ----------
+    ok : bool
+        Whether the fit converged to a physical answer; ``reason`` says why not.
+    reason : str
+        Why the fit was refused ("" when ``ok``).
+    model : str
+        ``"point"`` or ``"cylinder"``: the scatterer fitted.
+    x0_m, depth_m, radius_m : float
+        The apex's place along the profile, the depth of the target's top, and the radius (0 for a point).
+    v_m_s, eps_r : float
+        The host's wave speed and the relative permittivity it gives (``(c / v) ** 2``).
+    sigma_x0_m, sigma_depth_m, sigma_eps_r : float
+        One-sigma uncertainties from the fit's covariance.
+    t0_s : float
+        The time zero used.
+    apex_trace, apex_time_s : float
+        The apex as a fractional trace index and its arrival time.
+    rms_s : float
+        RMS misfit of the picks kept.
+    n_picks : int
+        Picks kept after the robust loss.
+    """
 
     ok: bool
     reason: str = ""
@@ -318,18 +342,44 @@ def fit_hyperbola(x_m, t_s, *, t0_s: float | None = None, direct_wave_s: float |
                   traces=None, radius_m: float | None = None) -> HyperbolaFit:
     """Fit the picks ``(x_m, t_s)`` of one hyperbola (see the module docstring).
 
-    Time zero: ``t0_s`` when known, else from the direct wave's envelope peak
-    ``direct_wave_s`` (:func:`time_zero`, solved with the speed); one of them is needed.
+    Time zero: ``t0_s`` when known, else from the direct wave's envelope peak ``direct_wave_s``
+    (:func:`time_zero`, solved with the speed); one of them is needed.
 
-    ``radius_m``: the target's radius when known (a rebar's size from the drawings):
-    the cylinder of that radius is fitted (``x0``, centre depth and speed free). One
-    hyperbola of limited aperture cannot tell the radius from the speed (a point fit
-    reads a cylinder's hyperbola flatter, ``eps_r`` low by about ``radius / (depth +
-    radius)``; the free cylinder trades radius for speed within picking error), so a
-    known radius is what makes ``eps_r`` accurate for a single target.
+    One hyperbola of limited aperture cannot tell the radius from the speed (a point fit reads a cylinder's
+    hyperbola flatter, ``eps_r`` low by about ``radius / (depth + radius)``; the free cylinder trades radius for
+    speed within picking error), so a known radius is what makes ``eps_r`` accurate for a single target.
 
-    ``frequency_hz`` sets the robust loss's scale (a quarter period; else a tenth of
-    the picks' time spread). ``traces`` (the picks' trace indices) give ``apex_trace``.
+    Parameters
+    ----------
+    x_m, t_s : array_like
+        The picks: positions along the profile (m) and arrival times from the first sample (s); non-finite
+        pairs are dropped.
+    t0_s : float, optional
+        Time zero, when known.
+    direct_wave_s : float, optional
+        The direct wave's envelope peak, when time zero is not known.
+    offset_m : float
+        Transmitter-receiver offset.
+    frequency_hz : float, optional
+        Sets the robust loss's scale (a quarter period; else a tenth of the picks' time spread).
+    model : {"auto", "point", "cylinder"}
+        The scatterer; ``auto`` fits both and keeps the better.
+    traces : array_like, optional
+        The picks' trace indices: they give ``apex_trace``.
+    radius_m : float, optional
+        The target's radius when known (a rebar's size from the drawings): the cylinder of that radius is fitted
+        (``x0``, centre depth and speed free).
+
+    Returns
+    -------
+    HyperbolaFit
+        ``ok`` False, with its ``reason``, where the picks cannot be fitted (too few, no curvature, unphysical).
+
+    Raises
+    ------
+    InvalidDataError
+        An unknown model, both or neither of ``t0_s`` and ``direct_wave_s``, a bad radius, or a radius with the
+        point model.
     """
     if model not in MODELS:
         raise InvalidDataError(f"unknown hyperbola model {model!r}; choose one of {', '.join(MODELS)}")
@@ -443,13 +493,32 @@ def fit_boxes(survey, boxes, *, apexes=None, trace_spacing_m: float | None = Non
               model: str = "auto", remove_background: bool = True, radius_m=None) -> list[HyperbolaFit]:
     """:func:`fit_hyperbola` for every box ``[trace_start, t_start_s, trace_end, t_end_s]`` of ``survey``.
 
-    ``apexes``: ``(trace, time_s)`` per box where the tracking starts (the detector's
-    apexes; default: found in the box). Time zero comes from the direct wave unless
-    ``t0_s`` is given; positions from the file unless ``trace_spacing_m`` is given.
-    Before picking, the median of the traces outside every box (the direct wave and
-    flat layers, no hyperbola) is removed, when at least a tenth of the traces (8 or
-    more) lie outside the boxes. ``radius_m``: the targets' known radius (m), one for
-    all or one per box (None where unknown); see :func:`fit_hyperbola`.
+    Before picking, the median of the traces outside every box (the direct wave and flat layers, no hyperbola) is
+    removed, when at least a tenth of the traces (8 or more) lie outside the boxes.
+
+    Parameters
+    ----------
+    survey : Survey
+        The B-scan.
+    boxes : list of sequence
+        ``[trace_start, t_start_s, trace_end, t_end_s]`` per hyperbola (times from the first sample).
+    apexes : list of (trace, time_s), optional
+        Where the tracking starts in each box (the detector's apexes; default: found in the box).
+    trace_spacing_m : float, optional
+        The spacing of the traces, instead of the file's positions.
+    t0_s : float, optional
+        Time zero; default: from the direct wave.
+    model : {"auto", "point", "cylinder"}
+        As in :func:`fit_hyperbola` (``cylinder`` where a radius is known).
+    remove_background : bool
+        Remove the median of the traces outside the boxes before picking.
+    radius_m : float or list, optional
+        The targets' known radius (m), one for all or one per box (None where unknown).
+
+    Returns
+    -------
+    list of HyperbolaFit
+        One per box, in order.
     """
     radii = _radii(radius_m, len(boxes))
     x, dw, picks = _record_picks(survey, boxes, apexes, trace_spacing_m, t0_s, remove_background)
@@ -592,11 +661,19 @@ def _record_envelope(survey, boxes, remove_background: bool = True) -> np.ndarra
 
 
 def combine_permittivity(fits) -> tuple[float, float, int]:
-    """One eps_r for a record from its hyperbolas: ``(eps_r, sigma, n used)``.
+    """One eps_r for a record from its hyperbolas: the inverse-variance weighted mean of the fits that converged with
+    a finite, positive uncertainty, after dropping those more than 3 sigma from the weighted median (a hyperbola
+    distorted by a neighbour).
 
-    The inverse-variance weighted mean of the fits that converged with a finite,
-    positive uncertainty, after dropping those more than 3 sigma from the weighted
-    median (a hyperbola distorted by a neighbour); ``(nan, nan, 0)`` when none.
+    Parameters
+    ----------
+    fits : iterable of HyperbolaFit
+        The record's fits.
+
+    Returns
+    -------
+    tuple of (float, float, int)
+        ``(eps_r, sigma, number of fits used)``; ``(nan, nan, 0)`` when none can be used.
     """
     e = np.array([f.eps_r for f in fits if f.ok and math.isfinite(f.sigma_eps_r) and f.sigma_eps_r > 0])
     s = np.array([f.sigma_eps_r for f in fits if f.ok and math.isfinite(f.sigma_eps_r) and f.sigma_eps_r > 0])

@@ -32,7 +32,13 @@ FORMATS: dict[str, Format] = {}
 
 
 def register(fmt: Format) -> None:
-    """Add (or replace) a format plugin."""
+    """Add (or replace) a format plug-in.
+
+    Parameters
+    ----------
+    fmt : Format
+        Its name, description, extensions, ``is_format(path) -> bool`` and ``read(path, **kw) -> list[Survey]``.
+    """
     FORMATS[fmt.name] = fmt
 
 
@@ -46,7 +52,26 @@ register(Format("segy", "SEG-Y rev 1/2 (as GPR software writes it)", (".sgy", ".
 
 
 def detect_format(path) -> str:
-    """Name of the registered format that recognises ``path``; UnknownFormatError otherwise."""
+    """Name of the registered format that recognises ``path`` (content first, then extension and partner files).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to look at.
+
+    Returns
+    -------
+    str
+        A key of ``FORMATS``.
+
+    Raises
+    ------
+    UnknownFormatError
+        No reader recognises the file; the message says why (a sidecar, a missing partner file, a corrupt file of a
+        known extension, or an unknown extension with the ones that are read).
+    FormatError
+        The file is missing, empty or unreadable.
+    """
     p = check_file(path)
     for name, fmt in FORMATS.items():
         if fmt.is_format(p):
@@ -84,8 +109,25 @@ def detect_format(path) -> str:
 def read_all(path, *, format: str | None = None, **kwargs) -> list:
     """Read every channel of a radar file as a list of :class:`~gpr3d.core.survey.Survey`.
 
-    ``format`` forces a reader (``dzt``, ``dt1``, ``rd3``, ``gprmax``, ``gpr3d``);
-    extra keyword arguments go to that reader (e.g. ``component="Ey"`` for gprMax).
+    Parameters
+    ----------
+    path : str or Path
+        The recording (DZT, DT1/HD, RD3/RD7 + RAD, SEG-Y, gprMax output or gpr3d HDF5).
+    format : str, optional
+        Force a reader (``dzt``, ``dt1``, ``rd3``, ``segy``, ``gprmax``, ``gpr3d``) instead of detecting it.
+    **kwargs
+        Options of that reader (e.g. ``component="Ey"`` for gprMax).
+
+    Returns
+    -------
+    list of Survey
+        One survey per channel, in the file's order.
+
+    Raises
+    ------
+    FormatError
+        The file is missing, truncated, corrupt or not of a known format, or a reader option is unknown; the
+        message names the file and the problem in one line.
     """
     from gpr3d.io._common import check_hdf5_survives
 
@@ -112,7 +154,29 @@ def read_all(path, *, format: str | None = None, **kwargs) -> list:
 
 
 def read(path, *, format: str | None = None, channel: int = 0, **kwargs):
-    """Read one channel (default the first) of a radar file as a :class:`~gpr3d.core.survey.Survey`."""
+    """Read one channel (default the first) of a radar file as a :class:`~gpr3d.core.survey.Survey`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The recording; see :func:`read_all`.
+    format : str, optional
+        Force a reader instead of detecting it.
+    channel : int
+        Which channel of a multi-channel file.
+    **kwargs
+        Options of the reader.
+
+    Returns
+    -------
+    Survey
+        The channel, with the file's header values and provenance.
+
+    Raises
+    ------
+    FormatError
+        As :func:`read_all`, and for a channel the file does not have.
+    """
     surveys = read_all(path, format=format, **kwargs)
     if not 0 <= channel < len(surveys):
         raise FormatError(path, f"has {len(surveys)} channel(s); channel {channel} does not exist")

@@ -42,7 +42,24 @@ __all__ = ["BackProjection", "antenna_positions", "effective_slowness", "dot_tes
 
 
 def antenna_positions(positions_xyz, orientations_quat_wxyz=None, offset_m: float = 0.0, headings_rad=None):
-    """Transmitter and receiver positions ``(n, 3)`` each: ``-/+ offset/2`` along the antenna x axis."""
+    """Transmitter and receiver positions of each trace: ``-/+ offset/2`` along the antenna's x axis.
+
+    Parameters
+    ----------
+    positions_xyz : array_like, (n, 3)
+        The antenna's centre per trace (world, m).
+    orientations_quat_wxyz : array_like, (n, 4), optional
+        The antenna's orientation per trace; default: from ``headings_rad`` (or none: x along world x).
+    offset_m : float
+        Transmitter-receiver offset.
+    headings_rad : float or array_like, optional
+        Yaw per trace (or one for all), where no orientations are given.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``(tx, rx)``, each ``(n, 3)`` float64, C-contiguous.
+    """
     p = np.asarray(positions_xyz, dtype=np.float64).reshape(-1, 3)
     if orientations_quat_wxyz is None:
         yaw = np.zeros(len(p)) if headings_rad is None else np.broadcast_to(np.asarray(headings_rad, float), (len(p),))
@@ -89,6 +106,12 @@ class BackProjection:
     obliquity, spreading : weights ``cos(theta)`` and ``r``
     air_gap_m : the antennas' height above the ground (m): one number or one per trace (0: ground-coupled)
     engine : ``"numba"`` or ``"numpy"``
+
+    Raises
+    ------
+    InvalidDataError
+        Positions that are not ``(n_traces, 3)`` each, an unknown engine, an air gap of the wrong shape, or a
+        velocity that cannot be used.
     """
 
     def __init__(self, grid: Grid3D, tx, rx, *, dt_s: float, n_samples: int, t0_s: float = 0.0, eps_r=None,
@@ -302,7 +325,21 @@ class BackProjection:
 
 
 def dot_test(op: BackProjection, *, seed: int = 0) -> tuple[float, float]:
-    """``(<F m, d>, <m, F^H d>)`` for random ``m``, ``d``: equal for an exact adjoint pair."""
+    """The dot-product test of an operator: ``(<F m, d>, <m, F^H d>)`` for random ``m`` and ``d``, equal (to rounding)
+    for an exact adjoint pair.
+
+    Parameters
+    ----------
+    op : BackProjection
+        The operator (``forward`` and ``adjoint``).
+    seed : int
+        Seeds the random model and data.
+
+    Returns
+    -------
+    tuple of (float, float)
+        The two inner products, in float64.
+    """
     rng = np.random.default_rng(seed)
     m = rng.standard_normal(op.grid.shape).astype(np.float32)
     d = rng.standard_normal((op.n_traces, op.n_samples)).astype(np.float32)

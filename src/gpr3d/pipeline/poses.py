@@ -7,12 +7,22 @@ from dataclasses import dataclass
 
 from gpr3d.core.errors import GPR3DError
 
-__all__ = ["FusedPoses", "fuse_recordings"]
+__all__ = ["FusedPoses", "fuse_recordings", "poses_at_traces", "write_rig_recordings"]
 
 
 @dataclass
 class FusedPoses:
-    """What :func:`fuse_recordings` gives back."""
+    """What :func:`fuse_recordings` gives back.
+
+    Attributes
+    ----------
+    result : FusionResult
+        The filter's :class:`~gpr3d.pose.eskf.FusionResult` (frames, covariances, counts).
+    trajectory : Trajectory
+        The antenna's :class:`~gpr3d.core.trajectory.Trajectory`.
+    source : str
+        The IMU file or bag it came from.
+    """
 
     result: object  #: the filter's :class:`~gpr3d.pose.eskf.FusionResult` (frames, covariances, counts)
     trajectory: object  #: the antenna's :class:`~gpr3d.core.trajectory.Trajectory`
@@ -134,3 +144,80 @@ def fuse_recordings(*, imu=None, bag=None, odometry=None, wheel=None, rig=None, 
         log(f"loop closures: {lrep['closures']} registered of {lrep['candidates']} revisits; "
             f"{grep_.get('used', 0)} used, {grep_.get('gated', 0)} + {grep_.get('rejected', 0)} left out as wrong")
     return FusedPoses(result=res, trajectory=res.antenna_trajectory(), source=str(source))
+
+
+def poses_at_traces(trajectory, survey, *, source: str = "the survey"):
+    """A trajectory's poses at a recording's trace times: one pose per trace, in trace order (positions
+    interpolated linearly, orientations by slerp), as ``gpr3d reconstruct --poses`` takes them.
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        Poses on the clock of the survey's trace times (the fused antenna trajectory).
+    survey : Survey
+        The recording whose ``timestamps_s`` the poses are wanted at.
+    source : str
+        The survey's name in a message.
+
+    Returns
+    -------
+    Trajectory
+        ``survey.n_traces`` poses at the trace times.
+
+    Raises
+    ------
+    GPR3DError
+        A survey without trace times, or traces outside the trajectory's time span.
+    """
+    from gpr3d.core.trajectory import Trajectory
+    from gpr3d.io.trajectory import attach_poses
+
+    if survey.timestamps_s is None:
+        raise GPR3DError(f"{source}: its traces have no times to place the poses at")
+    try:
+        s = attach_poses(survey, trajectory, by="time")
+    except GPR3DError as exc:
+        raise GPR3DError(f"{source}: {exc}") from None
+    return Trajectory(s.timestamps_s, s.positions_xyz, s.orientations_quat_wxyz)
+
+
+def write_rig_recordings(run, folder) -> list:
+    """Write what a cart's sensors recorded in a run of the synthetic rig, in the files :func:`fuse_recordings`
+    (and ``gpr3d pose fuse``, ``gpr3d run --imu``) read: ``imu.csv``, ``odometry.tum`` (the camera's poses, the
+    frames whose motion was lost left out), ``wheel.csv``, ``rig.json`` (mounts and camera latency) and
+    ``truth.tum`` (the antenna's true poses, to compare).
+
+    Parameters
+    ----------
+    run : RigRun
+        What :func:`gpr3d.pose.rig.simulate_rig` gave back.
+    folder : str or Path
+        Where the files go (each written atomically; the folder is made where missing).
+
+    Returns
+    -------
+    list of str
+        The names of the files written.
+    """
+    from pathlib import Path
+
+    from scipy.spatial.transform import Rotation
+
+    from gpr3d.core.trajectory import Trajectory
+    from gpr3d.io.inertial import write_imu_csv, write_rig, write_wheel_csv
+    from gpr3d.io.trajectory import write_tum
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    cfg = run.config
+    keep = run.vo.valid.copy()  # frames whose motion from the one before is known; lost ones are left out
+    keep[0] = True
+    Rc, pc = run.vo.chained()
+    cam = Trajectory(run.vo.t_s[keep], pc[keep], Rotation.from_matrix(Rc[keep]).as_quat()[:, [3, 0, 1, 2]])
+    write_imu_csv(run.imu, folder / "imu.csv")
+    write_tum(cam, folder / "odometry.tum")
+    write_wheel_csv(*run.wheel(), folder / "wheel.csv")
+    write_tum(run.truth_trajectory(), folder / "truth.tum")
+    write_rig(folder / "rig.json", imu_T_camera=cfg.imu_T_camera, imu_T_antenna=cfg.imu_T_antenna,
+              camera_time_offset_s=cfg.camera_time_offset_s)
+    return ["imu.csv", "odometry.tum", "wheel.csv", "truth.tum", "rig.json"]

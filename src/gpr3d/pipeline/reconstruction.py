@@ -12,7 +12,17 @@ __all__ = ["ReconstructionRun", "reconstruct_recording", "write_result", "write_
 
 @dataclass
 class ReconstructionRun:
-    """What :func:`reconstruct_recording` gives back."""
+    """What :func:`reconstruct_recording` gives back.
+
+    Attributes
+    ----------
+    result : Reconstruction
+        The :class:`~gpr3d.migration.reconstruct.Reconstruction` (volume, targets, timings).
+    found : dict or None
+        The detections (with depths where eps_r was estimated), or None.
+    mask : str
+        ``"none"`` (the whole record, or the boxes of a file) or ``"detect"``.
+    """
 
     result: object  #: the :class:`~gpr3d.migration.reconstruct.Reconstruction` (volume, targets, timings)
     found: dict | None  #: the detections (with depths where eps_r was estimated), or None
@@ -115,6 +125,17 @@ def reconstruct_recording(survey, cfg, *, eps_r=None, boxes_file=None, mask: str
 def write_reconstruction_folder(run: ReconstructionRun, out, *, source: str, command: str = "reconstruct") -> list:
     """Write a reconstruction into the folder ``out`` as one whole (:func:`~gpr3d.io.resultdir.result_folder`):
     the volume, targets, figures, VTI, and the detections where the detector made the mask.
+
+    Parameters
+    ----------
+    run : ReconstructionRun
+        What :func:`reconstruct_recording` gave back.
+    out : str or Path
+        The folder: replaced as a whole, or left as it was if the writing is interrupted.
+    source : str
+        The recording's name, kept in the files.
+    command : str
+        The command named in the folder's manifest.
 
     Returns
     -------

@@ -104,6 +104,13 @@ def read_recording(path, *, format: str | None = None, channel: int = 0, track=N
 def write_survey(survey, out) -> None:
     """Write a survey by the suffix of ``out``: ``.h5`` (gpr3d HDF5), ``.sgy``/``.segy`` (SEG-Y) or ``.png``.
 
+    Parameters
+    ----------
+    survey : Survey
+        What is written (atomically).
+    out : str or Path
+        The file; its suffix chooses the writer.
+
     Raises
     ------
     GPR3DError
@@ -126,6 +133,20 @@ def write_survey(survey, out) -> None:
 
 def attach_trajectory(survey, poses, *, source: str = "the survey"):
     """The survey with one antenna pose per trace from a trajectory file (TUM, EuRoC or CSV), in trace order.
+
+    Parameters
+    ----------
+    survey : Survey
+        The recording.
+    poses : str or Path
+        The trajectory file: one pose per trace, matched by index.
+    source : str
+        The survey's name in a message.
+
+    Returns
+    -------
+    Survey
+        A copy with ``positions_xyz`` and ``orientations_quat_wxyz`` set.
 
     Raises
     ------

@@ -149,13 +149,13 @@ def _survey_stage(cfg: RunConfig, out: Path, log):
         how = f"poses from {Path(cfg.poses).name}"
     elif cfg.imu:
         from gpr3d.io.trajectory import attach_poses
-        from gpr3d.pipeline.poses import fuse_recordings
+        from gpr3d.pipeline.poses import fuse_recordings, poses_at_traces
 
         if s.timestamps_s is None:
             raise GPR3DError(f"{cfg.input} has no trace times: the fused poses cannot be given to its traces "
                              "(give --poses, one per trace)")
         fused = fuse_recordings(imu=cfg.imu, odometry=cfg.odometry, wheel=cfg.wheel, rig=cfg.rig, log=log)
-        s = attach_poses(s, fused.trajectory, by="time")
+        s = attach_poses(s, poses_at_traces(fused.trajectory, s, source=str(cfg.input)), by="index")
         how = f"poses fused from {Path(cfg.imu).name}" + (f" and {Path(cfg.odometry).name}" if cfg.odometry else "")
     if s.positions_xyz is None:
         raise GPR3DError(f"{cfg.input} holds no trace positions: give --poses, --imu, --track or --trace-spacing")
@@ -207,7 +207,7 @@ def _reconstruction_stage(cfg: RunConfig, out: Path, log):
     return f"{len(run.result.targets)} targets, eps_r {run.result.eps_r:.2f} ({run.result.eps_r_source})"
 
 
-def run_pipeline(cfg: RunConfig, *, log=print) -> dict:
+def run_pipeline(cfg: RunConfig, *, log=print, progress: bool | None = None) -> dict:
     """Run (or finish) the whole road for one recording; see the module's text for the folder it fills.
 
     Parameters
@@ -215,6 +215,9 @@ def run_pipeline(cfg: RunConfig, *, log=print) -> dict:
     cfg : RunConfig
     log : callable
         Progress lines, one per stage.
+    progress : bool, optional
+        A progress bar over the stages on stderr, named after the one running (None: where stderr is a
+        terminal). The lines of ``log`` come either way.
 
     Returns
     -------
@@ -244,17 +247,26 @@ def run_pipeline(cfg: RunConfig, *, log=print) -> dict:
     keys["reconstruction"] = _key("reconstruction", keys["detections"], {k: settings[k] for k in ("eps_r", "reconstruct")})
     work = {"survey": _survey_stage, "detections": _detections_stage, "reconstruction": _reconstruction_stage}
     lines = {}
-    for k, (stage, fn) in enumerate(work.items(), 1):
-        if journal.done(stage, keys[stage]):
-            lines[stage] = {"kept": True, "line": journal.stages[stage].get("line", "")}
-            log(f"[{k}/{len(work)}] {stage}: kept from an earlier run ({lines[stage]['line']})")
-            continue
-        t0 = time.perf_counter()
-        line = fn(cfg, out, log)
-        wall = time.perf_counter() - t0
-        journal.record(stage, keys[stage], wall, line)
-        lines[stage] = {"kept": False, "line": line, "wall_s": wall}
-        log(f"[{k}/{len(work)}] {stage}: {line} ({wall:.1f} s)")
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(work), unit="stage", disable=None if progress is None else not progress, leave=False)
+    try:
+        for k, (stage, fn) in enumerate(work.items(), 1):
+            bar.set_description(f"gpr3d run: {stage}")
+            if journal.done(stage, keys[stage]):
+                lines[stage] = {"kept": True, "line": journal.stages[stage].get("line", "")}
+                log(f"[{k}/{len(work)}] {stage}: kept from an earlier run ({lines[stage]['line']})")
+                bar.update(1)
+                continue
+            t0 = time.perf_counter()
+            line = fn(cfg, out, log)
+            wall = time.perf_counter() - t0
+            journal.record(stage, keys[stage], wall, line)
+            lines[stage] = {"kept": False, "line": line, "wall_s": wall}
+            log(f"[{k}/{len(work)}] {stage}: {line} ({wall:.1f} s)")
+            bar.update(1)
+    finally:
+        bar.close()
     targets = json.loads((out / "reconstruction" / "targets.json").read_text())
     summary = {"input": str(cfg.input), "stages": lines, "targets": targets.get("targets", [])}
     from gpr3d.pipeline.report import write_report

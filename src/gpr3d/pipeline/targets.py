@@ -130,6 +130,22 @@ def targets_from_file(path, targets, survey) -> list[dict]:
 def read_targets(path, survey, *, channel: int = 0, input_name=None) -> dict:
     """A detections file (``gpr3d detect`` output) as a detection result for ``survey``, its boxes checked.
 
+    Parameters
+    ----------
+    path : str or Path
+        The detections file (``detections.json``).
+    survey : Survey
+        The record the boxes must lie in.
+    channel : int
+        Which channel of the file.
+    input_name : str, optional
+        The record's name in the result (default: ``path``).
+
+    Returns
+    -------
+    dict
+        ``{"input": name, "targets": [...]}``, each target with its ``box`` in traces and seconds.
+
     Raises
     ------
     GPR3DError

@@ -359,12 +359,32 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
          wheel: tuple | None = None, smooth: bool = False) -> FusionResult:
     """Fuse IMU samples with visual odometry (or none: IMU alone) into poses at every IMU sample.
 
-    ``smooth``: after the filter's forward pass, a Rauch-Tung-Striebel pass backwards over every update (the
-    fixed-interval smoother: each pose then rests on the data after it too, as offline GPR processing
-    allows); the IMU-rate poses between updates take the corrections interpolated in time.
+    Parameters
+    ----------
+    imu : ImuSamples
+        The IMU's times, specific forces and angular rates (body frame).
+    vo : RelativePoses or None
+        Visual odometry: relative poses between camera frames on the IMU clock, with their covariances.
+    cfg : EskfConfig, optional
+        The filter's noise, initial state and extrinsics (default: :class:`EskfConfig` ()).
+    wheel : tuple of (array_like, array_like), optional
+        ``(t_s, distance_m)``, a survey wheel's forward distance on the IMU clock (non-decreasing); its travel
+        between odometry frames is applied at every frame, through gaps in odometry too.
+    smooth : bool
+        After the filter's forward pass, a Rauch-Tung-Striebel pass backwards over every update (the
+        fixed-interval smoother: each pose then rests on the data after it too, as offline GPR processing allows);
+        the IMU-rate poses between updates take the corrections interpolated in time.
 
-    ``wheel``: ``(t_s, distance_m)``, a survey wheel's forward distance on the IMU clock (non-decreasing);
-    its travel between odometry frames is applied at every frame, through gaps in odometry too.
+    Returns
+    -------
+    FusionResult
+        Poses, velocities and biases at every IMU sample, and the covariance at every frame.
+
+    Raises
+    ------
+    InvalidDataError
+        A wheel record whose times and distances differ in length, are not increasing, hold NaN, or whose
+        distance decreases.
     """
     cfg = cfg or EskfConfig()
     if wheel is not None:

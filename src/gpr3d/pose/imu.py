@@ -36,7 +36,24 @@ def so3_log(R) -> np.ndarray:
 @dataclass
 class ImuNoise:
     """Continuous-time IMU noise figures (the defaults: a Bosch BMI055, the D435i's IMU, from its datasheet:
-    accelerometer 150 ug/sqrt(Hz), gyroscope 0.014 deg/s/sqrt(Hz); bias random walks of a consumer MEMS part)."""
+    accelerometer 150 ug/sqrt(Hz), gyroscope 0.014 deg/s/sqrt(Hz); bias random walks of a consumer MEMS part).
+
+    Attributes
+    ----------
+    accel_noise : float
+        Accelerometer white noise, m/s^2/sqrt(Hz).
+    gyro_noise : float
+        Gyroscope white noise, rad/s/sqrt(Hz).
+    accel_bias_walk : float
+        Accelerometer bias random walk, m/s^3/sqrt(Hz).
+    gyro_bias_walk : float
+        Gyroscope bias random walk, rad/s^2/sqrt(Hz).
+
+    Raises
+    ------
+    InvalidDataError
+        A figure that is not a positive number.
+    """
 
     accel_noise: float = 150e-6 * GRAVITY  #: m/s^2/sqrt(Hz)
     gyro_noise: float = np.deg2rad(0.014)  #: rad/s/sqrt(Hz)

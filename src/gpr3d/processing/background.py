@@ -9,7 +9,25 @@ __all__ = ["remove_dc", "remove_background"]
 
 
 def remove_dc(data: np.ndarray, *, sample_range: tuple[int, int] | None = None) -> np.ndarray:
-    """Subtract each trace's mean (over all samples, or ``sample_range = (start, stop)``)."""
+    """Subtract each trace's mean (over all samples, or over ``sample_range``).
+
+    Parameters
+    ----------
+    data : (n_traces, n_samples) array
+        The B-scan.
+    sample_range : tuple of (int, int), optional
+        ``(start, stop)``: the samples the mean is taken over (e.g. the pre-trigger samples).
+
+    Returns
+    -------
+    ndarray
+        ``(n_traces, n_samples)`` float32.
+
+    Raises
+    ------
+    ValueError
+        A range that selects no samples.
+    """
     x = np.asarray(data, dtype=np.float32)
     part = x if sample_range is None else x[:, slice(*sample_range)]
     if part.shape[1] == 0:
@@ -25,9 +43,22 @@ def remove_background(
     Parameters
     ----------
     data : (n_traces, n_samples) array
-    method : ``"mean"`` or ``"median"`` over traces.
-    window_traces : if given, a centred moving window of that many traces is used
-        instead of the whole survey (keeps slowly varying layers); edges repeat.
+        The B-scan.
+    method : {"mean", "median"}
+        The background over traces.
+    window_traces : int, optional
+        A centred moving window of that many traces (>= 2) instead of the whole survey (keeps slowly varying
+        layers); the edges repeat.
+
+    Returns
+    -------
+    ndarray
+        ``(n_traces, n_samples)`` float32, the background subtracted.
+
+    Raises
+    ------
+    ValueError
+        An unknown method, or a window of fewer than two traces.
     """
     x = np.asarray(data, dtype=np.float32)
     if method not in ("mean", "median"):

@@ -11,15 +11,27 @@ __all__ = ["dewow"]
 def dewow(data: np.ndarray, dt_s: float, window_s: float) -> np.ndarray:
     """Subtract a centred running mean of length ``window_s`` (s) from every trace.
 
-    A window of about one period of the antenna's centre frequency removes the
-    wow and keeps the reflections. Near the trace ends the window is padded by
-    repeating the edge sample.
+    A window of about one period of the antenna's centre frequency removes the wow and keeps the reflections. Near
+    the trace ends the window is padded by repeating the edge sample.
 
     Parameters
     ----------
     data : (n_traces, n_samples) array
-    dt_s : sample interval (s)
-    window_s : window length (s); rounded to an odd number of samples >= 3.
+        The B-scan.
+    dt_s : float
+        Sample interval (s).
+    window_s : float
+        Window length (s); rounded to an odd number of samples >= 3.
+
+    Returns
+    -------
+    ndarray
+        ``(n_traces, n_samples)`` float32.
+
+    Raises
+    ------
+    ValueError
+        A window shorter than two samples.
     """
     n = int(round(window_s / dt_s))
     if n < 2:

@@ -9,5 +9,16 @@ __all__ = ["envelope"]
 
 
 def envelope(data: np.ndarray) -> np.ndarray:
-    """Magnitude of the analytic signal of each trace (Hilbert transform along time)."""
+    """Magnitude of the analytic signal of each trace (Hilbert transform along time).
+
+    Parameters
+    ----------
+    data : (n_traces, n_samples) array
+        The B-scan.
+
+    Returns
+    -------
+    ndarray
+        ``(n_traces, n_samples)`` float32, >= 0.
+    """
     return np.abs(hilbert(np.asarray(data, dtype=np.float64), axis=1)).astype(np.float32)

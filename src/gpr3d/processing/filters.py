@@ -18,8 +18,28 @@ def bandpass(
 ) -> np.ndarray:
     """Zero-phase Butterworth filter along time (forward-backward, so the order doubles).
 
-    Give both corners for a band-pass, only ``fmin_hz`` for a high-pass, only
-    ``fmax_hz`` for a low-pass.
+    Give both corners for a band-pass, only ``fmin_hz`` for a high-pass, only ``fmax_hz`` for a low-pass.
+
+    Parameters
+    ----------
+    data : (n_traces, n_samples) array
+        The B-scan.
+    dt_s : float
+        Sample interval (s).
+    fmin_hz, fmax_hz : float, optional
+        The corners (Hz), between the lowest frequency the trace length resolves and Nyquist.
+    order : int
+        The Butterworth order of each pass.
+
+    Returns
+    -------
+    ndarray
+        ``(n_traces, n_samples)`` float32.
+
+    Raises
+    ------
+    ValueError
+        No corner, a corner outside the resolvable band, ``fmin_hz >= fmax_hz``, or traces too short for the order.
     """
     fs = 1.0 / dt_s
     nyq = fs / 2

@@ -23,8 +23,29 @@ def gain_curve_sec(
 ) -> np.ndarray:
     """Gain ``g(t) = (t'/t_ref)^power * exp(alpha * t')`` with ``t' = max(t - t0, 0)``.
 
-    Where ``t' < t_ref`` the power term is held at 1 so early samples are never
-    attenuated. ``max_gain`` caps the curve.
+    Where ``t' < t_ref`` the power term is held at 1 so early samples are never attenuated.
+
+    Parameters
+    ----------
+    n_samples : int
+        Samples per trace.
+    dt_s : float
+        Sample interval (s).
+    alpha_per_s : float
+        Exponential rate (1/s).
+    power : float
+        Spreading exponent.
+    t0_s : float
+        Time zero (s after the first sample).
+    t_ref_s : float
+        Reference time of the power term (s).
+    max_gain : float, optional
+        Caps the curve.
+
+    Returns
+    -------
+    ndarray
+        ``(n_samples,)`` float64 gain per sample.
     """
     t = np.arange(n_samples) * dt_s - t0_s
     tp = np.maximum(t, 0.0)
@@ -37,7 +58,26 @@ def gain_curve_sec(
 def gain_tpow(
     data: np.ndarray, dt_s: float, *, power: float = 1.0, t0_s: float = 0.0, t_ref_s: float = 1e-9
 ) -> np.ndarray:
-    """Multiply every trace by ``((t - t0) / t_ref)^power`` (geometric spreading)."""
+    """Multiply every trace by ``((t - t0) / t_ref)^power`` (geometric spreading).
+
+    Parameters
+    ----------
+    data : (n_traces, n_samples) array
+        The B-scan.
+    dt_s : float
+        Sample interval (s).
+    power : float
+        The exponent.
+    t0_s : float
+        Time zero (s after the first sample).
+    t_ref_s : float
+        Reference time (s): the gain is held at 1 before it.
+
+    Returns
+    -------
+    ndarray
+        ``(n_traces, n_samples)`` float32.
+    """
     g = gain_curve_sec(np.shape(data)[1], dt_s, power=power, t0_s=t0_s, t_ref_s=t_ref_s)
     return (np.asarray(data, dtype=np.float32) * g[None, :]).astype(np.float32)
 
@@ -54,9 +94,22 @@ def gain_sec(
 ) -> np.ndarray:
     """Spreading and exponential compensation: :func:`gain_curve_sec` applied to every trace.
 
-    ``alpha_per_s`` is the amplitude attenuation rate in time (1/s). In a medium
-    with attenuation ``a`` (Np/m) and speed ``v`` the wave travels ``v t'`` metres
-    in two-way time ``t'``, so ``alpha = a * v``.
+    ``alpha_per_s`` is the amplitude attenuation rate in time (1/s). In a medium with attenuation ``a`` (Np/m) and
+    speed ``v`` the wave travels ``v t'`` metres in two-way time ``t'``, so ``alpha = a * v``.
+
+    Parameters
+    ----------
+    data : (n_traces, n_samples) array
+        The B-scan.
+    dt_s : float
+        Sample interval (s).
+    alpha_per_s, power, t0_s, t_ref_s, max_gain : float
+        The curve's parameters (see :func:`gain_curve_sec`).
+
+    Returns
+    -------
+    ndarray
+        ``(n_traces, n_samples)`` float32.
     """
     g = gain_curve_sec(
         np.shape(data)[1], dt_s, alpha_per_s=alpha_per_s, power=power, t0_s=t0_s,
@@ -68,7 +121,21 @@ def gain_sec(
 def gain_agc(data: np.ndarray, dt_s: float, *, window_s: float, eps: float = 1e-3) -> np.ndarray:
     """Automatic gain control: divide by the RMS amplitude in a centred sliding window.
 
-    ``eps`` (relative to the whole survey's RMS) keeps silent stretches from blowing up.
+    Parameters
+    ----------
+    data : (n_traces, n_samples) array
+        The B-scan.
+    dt_s : float
+        Sample interval (s).
+    window_s : float
+        The window's length (s).
+    eps : float
+        Added to the window's RMS, relative to the whole survey's RMS: keeps silent stretches from blowing up.
+
+    Returns
+    -------
+    ndarray
+        ``(n_traces, n_samples)`` float32.
     """
     n = max(int(round(window_s / dt_s)), 1)
     x = np.asarray(data, dtype=np.float64)

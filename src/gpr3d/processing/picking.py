@@ -11,7 +11,24 @@ def pick_peak(data: np.ndarray, dt_s: float, trace: int, t_guess_s: float, half_
     """Largest value of ``data[trace]`` within ``t_guess_s +- half_window_s`` (times from the first sample).
 
     Use it on an envelope. The peak is refined by a parabola through its neighbours.
-    Returns ``(time_s, value)``; ``(nan, nan)`` when the window lies outside the record.
+
+    Parameters
+    ----------
+    data : (n_traces, n_samples) array
+        The B-scan (an envelope).
+    dt_s : float
+        Sample interval (s).
+    trace : int
+        The trace searched.
+    t_guess_s : float
+        The window's centre (s from the first sample).
+    half_window_s : float
+        Half the window's length (s).
+
+    Returns
+    -------
+    tuple of (float, float)
+        ``(time_s, value)``; ``(nan, nan)`` when the window lies outside the record.
     """
     row = np.asarray(data[trace], dtype=np.float64)
     k0 = max(int(np.floor((t_guess_s - half_window_s) / dt_s)), 0)

@@ -8,7 +8,18 @@ __all__ = ["path_distance", "resample_traces"]
 
 
 def path_distance(positions_xyz: np.ndarray) -> np.ndarray:
-    """Cumulative distance (m) along a polyline of positions ``(n, 3)``."""
+    """Cumulative distance (m) along a polyline of positions.
+
+    Parameters
+    ----------
+    positions_xyz : (n, 3) array
+        The path's points.
+
+    Returns
+    -------
+    ndarray
+        ``(n,)`` float64, starting at 0.
+    """
     p = np.asarray(positions_xyz, dtype=float)
     return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
 
@@ -18,16 +29,34 @@ def resample_traces(
 ):
     """Interpolate traces to a constant spacing along the path.
 
-    Traces recorded while the antenna stood still (steps below ``min_step_m``,
-    default ``spacing_m / 100``) are merged by keeping the first of each run.
-    New traces are linear blends of the two recorded neighbours along the path.
+    Traces recorded while the antenna stood still (steps below ``min_step_m``) are merged by keeping the first of
+    each run. New traces are linear blends of the two recorded neighbours along the path.
+
+    Parameters
+    ----------
+    data : (n_traces, n_samples) array
+        The B-scan.
+    positions_xyz : (n_traces, 3) array
+        The antenna's position per trace.
+    spacing_m : float
+        The new spacing (m), > 0.
+    min_step_m : float, optional
+        Steps below it count as standing still (default ``spacing_m / 100``).
 
     Returns
     -------
     data_new : (m, n_samples) float32
-    distance_new : (m,) path distance of each new trace (m)
-    source_index : (m,) fractional index into the input traces, for
-        interpolating any other per-trace quantity (positions, times, poses).
+        The resampled traces.
+    distance_new : (m,) ndarray
+        Path distance of each new trace (m).
+    source_index : (m,) ndarray
+        Fractional index into the input traces, for interpolating any other per-trace quantity (positions, times,
+        poses).
+
+    Raises
+    ------
+    ValueError
+        A spacing that is not positive, or a path shorter than one spacing.
     """
     if not spacing_m > 0:
         raise ValueError(f"spacing_m must be > 0, got {spacing_m}")

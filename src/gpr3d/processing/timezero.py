@@ -10,18 +10,25 @@ __all__ = ["first_break", "direct_wave_peak", "estimate_time_zero", "shift_trace
 def first_break(data: np.ndarray, threshold: float = 0.1) -> np.ndarray:
     """First-break sample index of each trace (fractional).
 
-    The first sample whose absolute amplitude reaches ``threshold`` times the
-    trace's maximum absolute amplitude, refined by linear interpolation on the
-    rising edge.
+    The first sample whose absolute amplitude reaches ``threshold`` times the trace's maximum absolute amplitude,
+    refined by linear interpolation on the rising edge.
 
     Parameters
     ----------
     data : (n_traces, n_samples) array
-    threshold : float in (0, 1]
+        The B-scan.
+    threshold : float
+        In (0, 1].
 
     Returns
     -------
-    (n_traces,) float array of sample indices.
+    ndarray
+        ``(n_traces,)`` float array of sample indices.
+
+    Raises
+    ------
+    ValueError
+        A threshold outside (0, 1].
     """
     if not 0 < threshold <= 1:
         raise ValueError(f"threshold must be in (0, 1], got {threshold}")
@@ -43,9 +50,27 @@ def direct_wave_peak(data: np.ndarray, search_samples: int | None = None, rel: f
     """Sample index (fractional, parabolic refinement) of each trace's direct-wave peak.
 
     The peak is the **first** one of the absolute amplitude that reaches ``rel`` times the trace's largest (the
-    default ``rel = 1``: the largest itself; a smaller ``rel`` skips echoes of shallow reflectors that outshine
-    the direct wave, but can land on a side lobe of the direct wave itself). ``search_samples`` limits the search to the first
-    samples of each trace, where the direct (air/ground) wave is.
+    default ``rel = 1``: the largest itself; a smaller ``rel`` skips echoes of shallow reflectors that outshine the
+    direct wave, but can land on a side lobe of the direct wave itself).
+
+    Parameters
+    ----------
+    data : (n_traces, n_samples) array
+        The B-scan.
+    search_samples : int, optional
+        Search only the first samples of each trace, where the direct (air/ground) wave is.
+    rel : float
+        In (0, 1]: see above.
+
+    Returns
+    -------
+    ndarray
+        ``(n_traces,)`` float64 sample indices.
+
+    Raises
+    ------
+    ValueError
+        ``rel`` outside (0, 1].
     """
     if not 0 < rel <= 1:
         raise ValueError(f"rel must be in (0, 1], got {rel}")
@@ -81,12 +106,36 @@ def estimate_time_zero(
 ):
     """Time zero (s after the first sample) of a B-scan.
 
-    ``method="first_break"`` uses :func:`first_break`; ``"peak"`` the direct-wave peak
-    (:func:`direct_wave_peak`). With ``per_trace=False`` one value is returned (a float): for ``"first_break"``
-    the median over traces, for ``"peak"`` the peak of the **mean trace**. The direct wave is the same in every
-    trace and adds up; reflections move from trace to trace and average out. (The median of per-trace peaks
-    fails where a shallow reflector outshines the direct wave in half the traces: a rebar mat under 6 cm of
-    concrete put time zero on the bars' echo, 1.3 ns late.) Otherwise one value per trace.
+    ``method="first_break"`` uses :func:`first_break`; ``"peak"`` the direct-wave peak (:func:`direct_wave_peak`).
+    With ``per_trace=False`` one value is returned: for ``"first_break"`` the median over traces, for ``"peak"`` the
+    peak of the **mean trace**. The direct wave is the same in every trace and adds up; reflections move from trace
+    to trace and average out. (The median of per-trace peaks fails where a shallow reflector outshines the direct
+    wave in half the traces: a rebar mat under 6 cm of concrete put time zero on the bars' echo, 1.3 ns late.)
+
+    Parameters
+    ----------
+    data : (n_traces, n_samples) array
+        The B-scan.
+    dt_s : float
+        Sample interval (s).
+    method : {"first_break", "peak"}
+        See above.
+    threshold : float
+        The first break's level, relative to each trace's largest amplitude.
+    search_s : float, optional
+        Search only this long from the first sample (s).
+    per_trace : bool
+        One value per trace instead of one for the B-scan.
+
+    Returns
+    -------
+    float or ndarray
+        Time zero (s), or ``(n_traces,)`` of them with ``per_trace``.
+
+    Raises
+    ------
+    ValueError
+        An unknown method.
     """
     if method == "first_break":
         idx = first_break(data, threshold)
@@ -103,9 +152,25 @@ def estimate_time_zero(
 def shift_traces(data: np.ndarray, shift_samples) -> np.ndarray:
     """Move each trace earlier by ``shift_samples`` (fractional, linear interpolation).
 
-    Samples that would come from beyond the end of a trace are not invented: the
-    output is cut to the longest length that every trace can fill, i.e.
-    ``floor(n_samples - 1 - max(shift)) + 1`` samples.
+    Samples that would come from beyond the end of a trace are not invented: the output is cut to the longest
+    length that every trace can fill, i.e. ``floor(n_samples - 1 - max(shift)) + 1`` samples.
+
+    Parameters
+    ----------
+    data : (n_traces, n_samples) array
+        The B-scan.
+    shift_samples : float or array_like
+        One shift for all traces, or one per trace (samples, >= 0).
+
+    Returns
+    -------
+    ndarray
+        ``(n_traces, m)`` float32, ``m`` as above.
+
+    Raises
+    ------
+    ValueError
+        A negative shift, or one that leaves nothing.
     """
     x = np.asarray(data, dtype=np.float32)
     n_tr, n_s = x.shape

@@ -43,20 +43,48 @@ def plot_bscan(
     box_labels=None,
     truth_boxes=None,
 ):
-    """Draw ``survey`` as an image on ``ax`` (created if None); returns the axes.
+    """Draw ``survey`` as an image on ``ax`` (created if None).
 
     Parameters
     ----------
-    axis : ``"time"`` (two-way time below time zero, ns) or ``"depth"`` (m, with
-        ``eps_r`` or the survey's hint; a second axis shows the time).
-    cmap : any matplotlib colour map; ``"hot"`` matches the reference paper's
-        figures (it shows absolute amplitude).
-    envelope : draw the envelope (the analytic signal's magnitude along time) instead of the amplitude.
-    clip_percentile : colour limits at this percentile of the absolute amplitude.
-    boxes : iterable of ``(trace_start, t_start_s, trace_end, t_end_s)`` to outline.
-    apexes : iterable of ``(trace, t_s)`` (times from the first sample) to mark with a cross.
-    box_labels : a text per box (e.g. its kind and score), written above it.
-    truth_boxes : boxes like ``boxes`` drawn dashed in yellow (the labels, to compare).
+    survey : Survey
+        The B-scan.
+    ax : matplotlib.axes.Axes, optional
+        Where to draw; default: a new figure's axes.
+    axis : {"time", "depth"}
+        ``time``: two-way time below time zero (ns); ``depth``: m, with ``eps_r`` or the survey's hint (a second
+        axis shows the time).
+    eps_r : float, optional
+        The permittivity of the depth axis (default: the survey's).
+    cmap : str
+        Any matplotlib colour map; ``"hot"`` matches the reference paper's figures (it shows absolute amplitude).
+    clip_percentile : float
+        Colour limits at this percentile of the absolute amplitude.
+    envelope : bool
+        Draw the envelope (the analytic signal's magnitude along time) instead of the amplitude.
+    boxes : iterable, optional
+        ``(trace_start, t_start_s, trace_end, t_end_s)`` to outline.
+    apexes : iterable, optional
+        ``(trace, t_s)`` (times from the first sample) to mark with a cross.
+    title : str, optional
+        The axes' title.
+    box_labels : list of str, optional
+        A text per box (e.g. its kind and score), written above it.
+    truth_boxes : iterable, optional
+        Boxes like ``boxes`` drawn dashed in yellow (the labels, to compare).
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        The axes drawn on.
+
+    Raises
+    ------
+    ValueError
+        An unknown axis.
+    InvalidDataError
+        A colour map, clip or axis that cannot be used (before anything is drawn), a depth axis without eps_r, or
+        another number of box labels than boxes.
     """
     check_plot_args(cmap=cmap, clip_percentile=clip_percentile, axis=axis)
     plt = pyplot()
@@ -125,7 +153,19 @@ def plot_bscan(
 
 
 def save_bscan_png(survey, path, *, dpi: int = 120, **kwargs) -> None:
-    """Render :func:`plot_bscan` to a PNG file atomically."""
+    """Render :func:`plot_bscan` to a PNG file atomically.
+
+    Parameters
+    ----------
+    survey : Survey
+        The B-scan.
+    path : str or Path
+        The PNG written (nothing is left there if drawing fails).
+    dpi : int
+        Resolution.
+    **kwargs
+        Options of :func:`plot_bscan`.
+    """
     plot_to_png(path, plot_bscan, survey, figsize=(8, 4.5), dpi=dpi, **kwargs)
 
 
