@@ -44,7 +44,8 @@ MUTMUT = [sys.executable, "-m", "mutmut"]
 MODULES = {
     "io.dt1": None, "io.dzt": None, "io.rd3": None, "io.gprmax": None, "io.segy": None, "io.hdf5": None,
     "core.atomic": ["tests/core/test_atomic.py", "tests/io/test_detections.py", "tests/io/test_resultdir.py"],
-    "core.training": ["tests/core/test_training.py"],
+    "core.training": ["tests/core/test_training.py", "tests/detection/test_train_by_hand.py",
+                      "tests/inversion/test_depthnet_by_hand.py"],  # (the engine under both models' loops)
     "io.volume": None, "io.detections": None, "io.coco": None, "io.resultdir": ["tests/io/test_resultdir.py"],
     "io._common": None, "io.registry": None,
     # (the other tests of tests/io that reach the trajectory readers are slow: rosbag, inertial)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from gpr3d.detection.ort import DEFAULT_ONNX, NMS_ONNX, _nms_graph, export_onnx
+from gpr3d.detection.ort import DEFAULT_ONNX, NMS_ONNX, nms_graph, export_onnx
 
 
 def main(argv=None):
@@ -22,7 +22,7 @@ def main(argv=None):
     args = p.parse_args(argv)
     import onnx
 
-    onnx.save(_nms_graph(), str(NMS_ONNX))
+    onnx.save(nms_graph(), str(NMS_ONNX))
     print(json.dumps(export_onnx(args.weights, args.out)))
 
 

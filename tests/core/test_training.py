@@ -124,3 +124,69 @@ def test_other_settings_are_refused_and_a_time_limit_stops_with_a_checkpoint(tmp
         run.run(bad, _step_fn(model))
     assert torch.load(run.checkpoint, weights_only=True)["step"] == 2
     assert len((tmp_path / "n" / "losses.csv").read_text().splitlines()) == 4
+
+
+def test_the_schedule_s_and_step_s_defaults():
+    torch = pytest.importorskip("torch")
+    f = warmup_cosine(2, 12)  # the default floor: 2 % of the rate at the end
+    assert f(12) == pytest.approx(0.02) and f(7) == pytest.approx(0.02 + 0.98 * 0.5)
+    g = warmup_cosine(3, 4)  # one step after the warm-up: the cosine runs over that one step
+    assert g(3) == pytest.approx(1.0) and g(4) == pytest.approx(0.02)
+    # gradients are clipped to a norm of 10 by default: a loss of 100 * w . (3, 4) has a gradient of norm 500
+    model = torch.nn.Linear(2, 1, bias=False)
+    torch.nn.init.constant_(model.weight, 0.0)
+    opt = torch.optim.SGD(model.parameters(), lr=1.0)
+    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: 1.0)
+    optimiser_step(model, opt, sched, (model(torch.tensor([[3.0, 4.0]])) * 100).sum(), 0)
+    assert model.weight.detach().tolist()[0] == pytest.approx([-6.0, -8.0], rel=1e-5)  # 10 * (3, 4) / 5
+    with pytest.raises(GPR3DError, match="^training diverged at step 4 "):
+        optimiser_step(model, opt, sched, torch.tensor(float("inf"), requires_grad=True), 4)
+
+
+def test_a_checkpoint_that_is_not_plain_tensors_is_refused_in_one_line(tmp_path):
+    torch = pytest.importorskip("torch")
+    from gpr3d.core.training import read_checkpoint
+
+    p = tmp_path / "checkpoint.pt"
+    torch.save({"step": 3, "f": _Unpicklable()}, p)  # an object: loading it would run code
+    with pytest.raises(GPR3DError, match=r"checkpoint.pt: cannot read the checkpoint \(UnpicklingError\); "
+                                         r"delete it to restart$"):
+        read_checkpoint(p, "cpu")
+    torch.save({"step": 3, "w": torch.ones(2)}, p)
+    assert read_checkpoint(p, "cpu")["step"] == 3
+
+
+class _Unpicklable:
+    pass
+
+
+def test_the_loop_s_clock_bar_and_files(tmp_path, monkeypatch, capsys):
+    """On a clock that moves half a second a reading: the log's wall times, the time limit and wall_s exactly; the
+    default bar on stderr; the folder made with its parents; the version in every file."""
+    torch = pytest.importorskip("torch")
+    import json
+
+    from gpr3d import __version__
+    from gpr3d.core import training
+    from gpr3d.core.training import TrainingRun
+    from tests.conftest import StepClock
+
+    monkeypatch.setattr(training, "time", StepClock())
+    model = torch.nn.Linear(2, 1, bias=False)
+    opt = torch.optim.SGD(model.parameters(), lr=0.1)
+    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: 1.0)
+    out = tmp_path / "a" / "b" / "run"
+    run = TrainingRun(out, model, opt, sched, steps=6, resume_key={}, config={"n": 1}, columns="step,wall_s,loss",
+                      checkpoint_every=100, max_seconds=1.0)
+    assert run.checkpoint == out / "checkpoint.pt" and run.step == 0 and run.wall_s == 0.0
+    assert (out / "config.json").read_text() == json.dumps({"gpr3d": __version__, "n": 1}, indent=2)
+    assert run.run(_batches(torch, 0, 6), _step_fn(model)) is run
+    # readings: 1000 (start), then one a step (1000.5, 1001.0 ... for the row; the next for the limit)
+    rows = (out / "losses.csv").read_text().splitlines()[1:]
+    assert [r.split(",")[1] for r in rows] == ["0.5", "1.5"]
+    assert run.step == 2 and run.wall_s == pytest.approx(2.5)  # late at step 2 (2.0 s > 1 s; at step 1 1.0 s is not)
+    ck = torch.load(run.checkpoint, weights_only=True)
+    assert ck["step"] == 2 and ck["gpr3d"] == __version__ and set(ck) == {
+        "model", "optimizer", "scheduler", "step", "resume_key", "gpr3d"}
+    err = capsys.readouterr().err  # the bar (the default), named and counted in steps
+    assert "train:" in err and "2/6" in err and "step" in err

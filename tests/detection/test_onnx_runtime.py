@@ -38,7 +38,7 @@ def test_the_nms_graph_builder_makes_the_shipped_graph_and_it_runs_as_torchvisio
 
     from gpr3d.detection import ort as gort
 
-    built = gort._nms_graph()
+    built = gort.nms_graph()
     onnx.checker.check_model(built)
     shipped = onnx.load(str(gort.NMS_ONNX))
     assert built.graph == shipped.graph and list(built.opset_import) == list(shipped.opset_import)

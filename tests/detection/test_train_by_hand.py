@@ -100,6 +100,7 @@ def test_a_whole_run_sees_each_item_once_in_order_and_logs_every_step(tmp_path, 
     assert torch.equal(seen[0][2], torch.randn(2))  # the model was made right after seeding with cfg.seed
     assert res["steps"] == 5 and res["parameters"] == 2 and res["checkpoint"] == str(tmp_path / "run/checkpoint.pt")
     assert 0 < res["wall_s"] < 600 and isinstance(res["model"], Tiny)
+    assert res["kinds"] is None and res["model"].gpr3d_kinds is None  # (one class: what gpr3d train saves with)
     lines = (tmp_path / "run" / "losses.csv").read_text().splitlines()
     assert lines[0] == "step,lr,loss,wall_s,terms"
     assert len(lines) == 6

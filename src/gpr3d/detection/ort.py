@@ -28,7 +28,7 @@ from gpr3d.detection.infer import Detector
 from gpr3d.detection.windows import WindowConfig
 from gpr3d.io.onnxweights import finish_export
 
-__all__ = ["export_onnx", "OnnxDetector", "onnx_nms", "DEFAULT_ONNX", "OPSET"]
+__all__ = ["export_onnx", "OnnxDetector", "onnx_nms", "nms_graph", "DEFAULT_ONNX", "NMS_ONNX", "OPSET"]
 
 DEFAULT_ONNX = Path(__file__).with_name("default_detector.onnx")
 OPSET = 17
@@ -76,7 +76,7 @@ def export_onnx(weights=None, out=DEFAULT_ONNX) -> dict:
     return {"file": str(out), "bytes": Path(out).stat().st_size, "max_abs_diff": diff}
 
 
-def _nms_graph():
+def nms_graph():
     """A one-node ONNX graph: NonMaxSuppression over one class (boxes (1, N, 4), scores (1, 1, N))."""
     from onnx import TensorProto, helper
 
