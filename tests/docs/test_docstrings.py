@@ -31,37 +31,31 @@ def _own_source(obj):
         return None
 
 
-def _raises(func) -> bool:
-    """Whether the function's own body (not a nested function's) has a ``raise`` that is not a re-raise."""
+def _own_nodes(func):
+    """The nodes of a function's own body (not those of a function or class defined in it), and its tree."""
     tree = _own_source(func)
     if tree is None:
-        return False
-    body = tree.body[0]
-    stack = list(body.body)
+        return None, []
+    stack, nodes = list(tree.body[0].body), []
     while stack:
         node = stack.pop()
-        if isinstance(node, ast.Raise) and node.exc is not None:
-            return True
+        nodes.append(node)
         if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda, ast.ClassDef)):
             stack.extend(ast.iter_child_nodes(node))
-    return False
+    return tree.body[0], nodes
+
+
+def _raises(func) -> bool:
+    """Whether the function's own body has a ``raise`` that is not a bare re-raise."""
+    return any(isinstance(n, ast.Raise) and n.exc is not None for n in _own_nodes(func)[1])
 
 
 def _returns(func) -> bool:
-    tree = _own_source(func)
-    if tree is None:
-        return False
-    body = tree.body[0]
-    if body.returns is not None:
-        return not (isinstance(body.returns, ast.Constant) and body.returns.value is None)
-    stack = list(body.body)
-    while stack:
-        node = stack.pop()
-        if isinstance(node, ast.Return) and node.value is not None:
-            return True
-        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda, ast.ClassDef)):
-            stack.extend(ast.iter_child_nodes(node))
-    return False
+    """Whether the function gives something back: its annotation (not ``None``), or a ``return`` of a value."""
+    top, nodes = _own_nodes(func)
+    if top is not None and top.returns is not None:
+        return not (isinstance(top.returns, ast.Constant) and top.returns.value is None)
+    return any(isinstance(n, ast.Return) and n.value is not None for n in nodes)
 
 
 def _needs(obj):

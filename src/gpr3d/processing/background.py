@@ -21,7 +21,7 @@ def remove_dc(data: np.ndarray, *, sample_range: tuple[int, int] | None = None) 
     Returns
     -------
     ndarray
-        ``(n_traces, n_samples)`` float32.
+        The traces less their means, float32, as ``data``.
 
     Raises
     ------
@@ -53,7 +53,7 @@ def remove_background(
     Returns
     -------
     ndarray
-        ``(n_traces, n_samples)`` float32, the background subtracted.
+        The traces less the background trace, float32, as ``data``.
 
     Raises
     ------

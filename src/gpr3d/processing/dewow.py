@@ -16,17 +16,15 @@ def dewow(data: np.ndarray, dt_s: float, window_s: float) -> np.ndarray:
 
     Parameters
     ----------
-    data : (n_traces, n_samples) array
-        The B-scan.
-    dt_s : float
-        Sample interval (s).
+    data, dt_s : (n_traces, n_samples) array, float
+        The B-scan and its sample interval (s).
     window_s : float
         Window length (s); rounded to an odd number of samples >= 3.
 
     Returns
     -------
     ndarray
-        ``(n_traces, n_samples)`` float32.
+        The dewowed traces, float32, as ``data``.
 
     Raises
     ------

@@ -19,6 +19,6 @@ def envelope(data: np.ndarray) -> np.ndarray:
     Returns
     -------
     ndarray
-        ``(n_traces, n_samples)`` float32, >= 0.
+        The envelope, float32, >= 0, as ``data``.
     """
     return np.abs(hilbert(np.asarray(data, dtype=np.float64), axis=1)).astype(np.float32)

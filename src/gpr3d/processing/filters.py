@@ -22,10 +22,8 @@ def bandpass(
 
     Parameters
     ----------
-    data : (n_traces, n_samples) array
-        The B-scan.
-    dt_s : float
-        Sample interval (s).
+    data, dt_s : (n_traces, n_samples) array, float
+        The B-scan and its sample interval (s).
     fmin_hz, fmax_hz : float, optional
         The corners (Hz), between the lowest frequency the trace length resolves and Nyquist.
     order : int
@@ -34,7 +32,7 @@ def bandpass(
     Returns
     -------
     ndarray
-        ``(n_traces, n_samples)`` float32.
+        The filtered traces, float32, as ``data``.
 
     Raises
     ------

@@ -62,10 +62,8 @@ def gain_tpow(
 
     Parameters
     ----------
-    data : (n_traces, n_samples) array
-        The B-scan.
-    dt_s : float
-        Sample interval (s).
+    data, dt_s : (n_traces, n_samples) array, float
+        The B-scan and its sample interval (s).
     power : float
         The exponent.
     t0_s : float
@@ -76,7 +74,7 @@ def gain_tpow(
     Returns
     -------
     ndarray
-        ``(n_traces, n_samples)`` float32.
+        The traces times the gain, float32, as ``data``.
     """
     g = gain_curve_sec(np.shape(data)[1], dt_s, power=power, t0_s=t0_s, t_ref_s=t_ref_s)
     return (np.asarray(data, dtype=np.float32) * g[None, :]).astype(np.float32)
@@ -99,17 +97,15 @@ def gain_sec(
 
     Parameters
     ----------
-    data : (n_traces, n_samples) array
-        The B-scan.
-    dt_s : float
-        Sample interval (s).
+    data, dt_s : (n_traces, n_samples) array, float
+        The B-scan and its sample interval (s).
     alpha_per_s, power, t0_s, t_ref_s, max_gain : float
         The curve's parameters (see :func:`gain_curve_sec`).
 
     Returns
     -------
     ndarray
-        ``(n_traces, n_samples)`` float32.
+        The compensated traces, float32, as ``data``.
     """
     g = gain_curve_sec(
         np.shape(data)[1], dt_s, alpha_per_s=alpha_per_s, power=power, t0_s=t0_s,
@@ -123,10 +119,8 @@ def gain_agc(data: np.ndarray, dt_s: float, *, window_s: float, eps: float = 1e-
 
     Parameters
     ----------
-    data : (n_traces, n_samples) array
-        The B-scan.
-    dt_s : float
-        Sample interval (s).
+    data, dt_s : (n_traces, n_samples) array, float
+        The B-scan and its sample interval (s).
     window_s : float
         The window's length (s).
     eps : float
@@ -135,7 +129,7 @@ def gain_agc(data: np.ndarray, dt_s: float, *, window_s: float, eps: float = 1e-
     Returns
     -------
     ndarray
-        ``(n_traces, n_samples)`` float32.
+        The gained traces, float32, as ``data``.
     """
     n = max(int(round(window_s / dt_s)), 1)
     x = np.asarray(data, dtype=np.float64)

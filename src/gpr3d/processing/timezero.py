@@ -114,10 +114,8 @@ def estimate_time_zero(
 
     Parameters
     ----------
-    data : (n_traces, n_samples) array
-        The B-scan.
-    dt_s : float
-        Sample interval (s).
+    data, dt_s : (n_traces, n_samples) array, float
+        The B-scan and its sample interval (s).
     method : {"first_break", "peak"}
         See above.
     threshold : float
