@@ -59,7 +59,8 @@ def add_arguments(sp):
     sp.add_argument("--air-gap", type=float, default=rc.air_gap_m,
                     help="the antennas' height above the ground (m) when held a wavelength or more above it (an "
                          f"air-launched antenna: the rays refract at the surface; default {rc.air_gap_m:g})")
-    sp.add_argument("--engine", choices=("numba", "numpy"), default=rc.engine, help="migration kernel")
+    sp.add_argument("--engine", choices=("numba", "numpy", "torch"), default=None,
+                    help=f"migration kernel (default {rc.engine}; torch with --device cuda: the GPU)")
     sp.add_argument("--mask", choices=("none", "detect"), default="none",
                     help="detect: run the detector on the trace sequence and migrate only its boxes")
     sp.add_argument("--tile", type=float, default=rc.tile_m,
@@ -97,9 +98,10 @@ def run(args):
         # a tile of a few voxels spends its time on its margins (0.0001 m once ran 41,000 one-voxel tiles)
         _in_range(args.tile, "--tile", 10 * args.spacing, 1e5, f"a tile side in metres, at least 10 voxels of "
                                                                 f"--spacing {args.spacing:g}")
+    engine = _migration_engine(args.engine, args.device)
     settings = dict(spacing_m=args.spacing, max_depth_m=args.max_depth,
                     aperture_deg=None if args.aperture == 0 else args.aperture, threshold=args.threshold,
-                    min_line_m=args.min_line, engine=args.engine, time_zero="none" if args.no_time_zero else "peak",
+                    min_line_m=args.min_line, engine=engine, time_zero="none" if args.no_time_zero else "peak",
                     min_target_depth_m=args.min_depth, method=args.method, air_gap_m=args.air_gap)
     check_config(ReconstructConfig(**settings, **site), names=_RECONSTRUCT_FLAGS)  # one line, before any work
     eps_given = _eps_argument(args.eps_r)
@@ -135,3 +137,16 @@ def run(args):
         print(f"  {target_name(i):>4} {t.kind:5s} depth {t.depth_m:.2f} m  score {t.score:.2f}  {pts}")
     print(f"wrote {', '.join(files)} to {args.out}/")
     return 0
+
+
+def _migration_engine(engine, device: str) -> str:
+    """The back projection's engine from ``--engine`` and ``--device``: on a GPU (``--device cuda``) the torch
+    engine there, checked now (one line where there is no such device)."""
+    if device in (None, "cpu"):
+        return engine or "numba"
+    if engine not in (None, "torch"):
+        raise GPR3DError(f"--device {device} migrates with the torch engine: leave out --engine {engine}")
+    from gpr3d.migration.operator import check_engine
+
+    check_engine(f"torch:{device}")
+    return f"torch:{device}"

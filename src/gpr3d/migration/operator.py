@@ -38,7 +38,36 @@ from gpr3d.core.raypath import S_AIR, air_ground_times
 from gpr3d.core.units import C0
 from gpr3d.core.grid import Grid3D
 
-__all__ = ["BackProjection", "antenna_positions", "effective_slowness", "dot_test"]
+__all__ = ["BackProjection", "antenna_positions", "check_engine", "effective_slowness", "dot_test"]
+
+
+def check_engine(engine: str) -> tuple:
+    """A back projection engine's name checked, its device too, before any work.
+
+    Parameters
+    ----------
+    engine : str
+        ``"numba"``, ``"numpy"``, ``"torch"`` (PyTorch on the CPU), ``"torch:cuda"`` or ``"torch:cuda:N"``.
+
+    Returns
+    -------
+    tuple of (str, str or None)
+        The engine (``"numba"``, ``"numpy"`` or ``"torch"``) and, for torch, its device (``"cpu"``, ``"cuda:0"``).
+
+    Raises
+    ------
+    InvalidDataError
+        An unknown engine, a device for another engine than torch, or a device that is not here.
+    """
+    base, _, device = str(engine).partition(":")
+    if base not in BackProjection._ENGINES or (device and base != "torch"):
+        raise InvalidDataError(f"engine must be one of {', '.join(map(repr, BackProjection._ENGINES))} (or "
+                               f"'torch:cuda', 'torch:cuda:N'), got {engine!r}")
+    if base != "torch":
+        return base, None
+    from gpr3d.migration._torch import check_device
+
+    return base, check_device(device or "cpu")
 
 
 def antenna_positions(positions_xyz, orientations_quat_wxyz=None, offset_m: float = 0.0, headings_rad=None):
@@ -105,7 +134,8 @@ class BackProjection:
     aperture_deg : beam half-angle from the vertical (None: no limit)
     obliquity, spreading : weights ``cos(theta)`` and ``r``
     air_gap_m : the antennas' height above the ground (m): one number or one per trace (0: ground-coupled)
-    engine : ``"numba"`` or ``"numpy"``
+    engine : ``"numba"``, ``"numpy"``, or ``"torch"`` (PyTorch on the CPU; ``"torch:cuda"``, ``"torch:cuda:N"`` on
+        a GPU)
 
     Raises
     ------
@@ -122,8 +152,7 @@ class BackProjection:
         self.rx = np.ascontiguousarray(rx, dtype=np.float64)
         if self.tx.shape != self.rx.shape or self.tx.ndim != 2 or self.tx.shape[1] != 3:
             raise InvalidDataError("tx and rx must both be (n_traces, 3)")
-        if engine not in self._ENGINES:
-            raise InvalidDataError(f"engine must be one of {', '.join(map(repr, self._ENGINES))}, got {engine!r}")
+        base, device = check_engine(engine)
         gap = np.asarray(air_gap_m, dtype=np.float64)
         if gap.ndim > 1 or (gap.ndim == 1 and gap.shape != (self.tx.shape[0],)):
             raise InvalidDataError(f"air_gap_m must be one number or one per trace ({self.tx.shape[0]}), got shape "
@@ -131,6 +160,11 @@ class BackProjection:
         if not np.all(np.isfinite(gap)) or np.any(gap < 0):
             raise InvalidDataError("air_gap_m must be finite and >= 0 (the antennas' height above the ground, m)")
         self.air_gap = np.ascontiguousarray(np.broadcast_to(gap, (self.tx.shape[0],)))
+        self.torch_device = device
+        if base == "torch":
+            if np.any(self.air_gap > 0):
+                raise InvalidDataError("the torch engine has no air gap (rays refracted at the surface): use "
+                                       "engine 'numba' for an antenna above the ground")
         self.dt = float(dt_s)
         self.n_samples = int(n_samples)
         self.t0 = float(t0_s)
@@ -138,7 +172,7 @@ class BackProjection:
         self.tan_ap = 0.0 if aperture_deg is None else math.tan(math.radians(aperture_deg))
         self.obliquity = bool(obliquity)
         self.spreading = bool(spreading)
-        self.engine = engine
+        self.engine = base
         # the numba engine's adjoint uses the explicit-SIMD kernel where it compiles; GPR3D_SIMD=0 turns it off
         self.simd = os.environ.get("GPR3D_SIMD", "1") != "0"
         # how the SIMD loop reads traces: None = by the CPU (:func:`._kernels.read_path`), True = hardware gathers,
@@ -298,8 +332,20 @@ class BackProjection:
         forward(image, *self._kernel_args(), out)
         return np.ascontiguousarray(out[:, : self.n_samples])
 
-    #: engine name -> (adjoint, forward): the numba kernels, or the numpy reference
-    _ENGINES = {"numba": (_adjoint_numba, _forward_numba), "numpy": (_adjoint_numpy_engine, _forward_numpy)}
+    def _adjoint_torch(self, data, xs, ys, with_fold):
+        from gpr3d.migration import _torch
+
+        return _torch.adjoint(self, data, xs, ys), None
+
+    def _forward_torch(self, image):
+        from gpr3d.migration import _torch
+
+        return _torch.forward(self, image)
+
+    #: engine name -> (adjoint, forward): the numba kernels, the numpy reference, or PyTorch (the GPU path:
+    #: ``"torch:cuda"``)
+    _ENGINES = {"numba": (_adjoint_numba, _forward_numba), "numpy": (_adjoint_numpy_engine, _forward_numpy),
+                "torch": (_adjoint_torch, _forward_torch)}
 
     def with_traces(self, idx) -> "BackProjection":
         """The same operator (grid, velocity, aperture, weights, kernel choices) for the traces ``idx`` only."""

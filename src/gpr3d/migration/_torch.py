@@ -1,0 +1,109 @@
+"""The back projection written once more in PyTorch: the GPU path (CUDA where there is one), the same operator as
+the numba kernels and the numpy reference of :class:`~gpr3d.migration.operator.BackProjection` (travel times,
+linear interpolation between samples, zero past the record, aperture, obliquity and spreading weights), traces
+taken in batches so that a batch's voxels fit in the device's memory. It is chosen with ``engine="torch"`` (the
+CPU) or ``"torch:cuda"`` / ``"torch:cuda:N"``; an air gap (rays refracted at the surface) stays with the numba
+engine."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gpr3d.core.deps import require
+from gpr3d.core.errors import InvalidDataError
+
+#: voxel-trace pairs held at once (a batch of traces times the columns asked for): about 1 GB of float32
+#: intermediates
+PAIRS_PER_BATCH = 16_000_000
+
+
+def check_device(device: str) -> str:
+    """The torch device named by ``engine="torch:DEVICE"``, checked: one line when it is not there."""
+    torch = require("torch")
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, ValueError):
+        raise InvalidDataError(f"engine 'torch:{device}': {device!r} is not a torch device (cpu, cuda, cuda:N)") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise InvalidDataError(f"engine 'torch:{device}': no CUDA device is available here (use 'torch' or 'numba')")
+    if dev.type not in ("cpu", "cuda"):
+        raise InvalidDataError(f"engine 'torch:{device}': only cpu and cuda devices are supported")
+    return str(dev)
+
+
+def _geometry(op, xs, ys, j0, j1, torch, dev):
+    """Sample positions ``u`` (B, nx, ny, nd) and weights ``w`` of traces ``j0:j1`` over the columns ``xs, ys``:
+    float32, as the GPU runs them (the aperture's first depth per column in float64, so that a voxel on the
+    cone's edge falls on the side the numba kernels put it)."""
+    f32, f64 = torch.float32, torch.float64
+
+    def col(a, k):
+        return a[:, k][:, None, None, None]
+
+    X = torch.as_tensor(xs, dtype=f64, device=dev)[None, :, None, None]
+    Y = torch.as_tensor(ys, dtype=f64, device=dev)[None, None, :, None]
+    tx = torch.as_tensor(op.tx[j0:j1], dtype=f64, device=dev)
+    rx = torch.as_tensor(op.rx[j0:j1], dtype=f64, device=dev)
+    ha2 = ((X - col(tx, 0)) ** 2 + (Y - col(tx, 1)) ** 2).to(f32)  # (B, nx, ny, 1)
+    hb2 = ((X - col(rx, 0)) ** 2 + (Y - col(rx, 1)) ** 2).to(f32)
+    D = torch.as_tensor(op.depth, dtype=f32, device=dev)[None, None, None, :]
+    za, zb = D + col(tx, 2).to(f32), D + col(rx, 2).to(f32)
+    ra, rb = torch.sqrt(ha2 + za ** 2), torch.sqrt(hb2 + zb ** 2)
+    slow = torch.as_tensor(op.slow, dtype=f32, device=dev)[None, None, None, :]
+    u = (op.t0 + (ra + rb) * slow) / op.dt
+    w = torch.ones_like(u)
+    if op.obliquity:
+        w = w * 0.5 * (za / torch.clamp(ra, min=1e-12) + zb / torch.clamp(rb, min=1e-12))
+    if op.spreading:
+        w = w * 0.5 * (ra + rb)
+    if op.tan_ap > 0:
+        hm = torch.sqrt((X - 0.5 * (col(tx, 0) + col(rx, 0))) ** 2 + (Y - 0.5 * (col(tx, 1) + col(rx, 1))) ** 2)
+        kmin = torch.ceil((hm / op.tan_ap - float(op.depth[0])) / op.grid.dd - 1e-12).to(f32)
+        k = torch.arange(len(op.depth), dtype=f32, device=dev)[None, None, None, :]
+        w = torch.where(k >= kmin, w, torch.zeros((), dtype=f32, device=dev))
+    u = torch.clamp(u, 0.0, float(op.n_samples))  # past the end: the zero padding
+    return u, w
+
+
+def _batches(op, n_columns):
+    step = max(1, PAIRS_PER_BATCH // max(1, n_columns * op.grid.nd))
+    return [(j, min(j + step, op.n_traces)) for j in range(0, op.n_traces, step)]
+
+
+def adjoint(op, data, xs, ys) -> np.ndarray:
+    """Migration of ``data`` (n_traces, n_samples) onto the columns ``xs, ys`` of ``op``'s grid: (nx, ny, nd)."""
+    torch = require("torch")
+    dev = torch.device(op.torch_device)
+    padded = np.zeros((op.n_traces, op.n_samples + 2), dtype=np.float32)
+    padded[:, : op.n_samples] = data
+    rows = torch.as_tensor(padded, device=dev)
+    img = torch.zeros((len(xs), len(ys), op.grid.nd), dtype=torch.float32, device=dev)
+    for j0, j1 in _batches(op, len(xs) * len(ys)):
+        u, w = _geometry(op, xs, ys, j0, j1, torch, dev)
+        i0 = torch.floor(u).to(torch.int64)
+        f = u - i0
+        r = rows[j0:j1].reshape(j1 - j0, -1)
+        flat = i0.reshape(j1 - j0, -1)
+        a = torch.gather(r, 1, flat).reshape(u.shape)
+        b = torch.gather(r, 1, flat + 1).reshape(u.shape)
+        img += (w * (a + f * (b - a))).sum(dim=0)
+    return img.cpu().numpy()
+
+
+def forward(op, image) -> np.ndarray:
+    """Demigration of ``image`` (nx, ny, nd) into data (n_traces, n_samples), the adjoint of :func:`adjoint`."""
+    torch = require("torch")
+    dev = torch.device(op.torch_device)
+    m = torch.as_tensor(np.asarray(image, dtype=np.float32), device=dev)
+    out = torch.zeros((op.n_traces, op.n_samples + 2), dtype=torch.float32, device=dev)
+    for j0, j1 in _batches(op, op.grid.nx * op.grid.ny):
+        u, w = _geometry(op, op.x, op.y, j0, j1, torch, dev)
+        i0 = torch.floor(u).to(torch.int64)
+        f = u - i0
+        val = (w * m[None]).reshape(j1 - j0, -1)
+        flat, f = i0.reshape(j1 - j0, -1), f.reshape(j1 - j0, -1)
+        block = torch.zeros((j1 - j0, op.n_samples + 2), dtype=torch.float32, device=dev)
+        block.scatter_add_(1, flat, (1 - f) * val)
+        block.scatter_add_(1, flat + 1, f * val)
+        out[j0:j1] = block
+    return out[:, : op.n_samples].cpu().numpy()
