@@ -215,3 +215,16 @@ def add_input(sp):
     sp.add_argument("input", help="radar file (DZT, DT1/HD, RD3/RAD, gprMax .h5/.out, gpr3d .h5)")
     sp.add_argument("--channel", type=int, default=0, help="channel of a multi-channel file (default 0)")
     sp.add_argument("--format", default=None, help="force a reader: dzt, dt1, rd3, gprmax, gpr3d")
+
+
+def _migration_engine(engine, device: str) -> str:
+    """The back projection's engine from ``--engine`` and ``--device``: on a GPU (``--device cuda``) the torch
+    engine there, checked now (one line where there is no such device)."""
+    if device in (None, "cpu"):
+        return engine or "numba"
+    if engine not in (None, "torch"):
+        raise GPR3DError(f"--device {device} migrates with the torch engine: leave out --engine {engine}")
+    from gpr3d.migration.operator import check_engine
+
+    check_engine(f"torch:{device}")
+    return f"torch:{device}"

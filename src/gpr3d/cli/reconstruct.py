@@ -9,6 +9,7 @@ from gpr3d.cli._common import (
     _check_radius,
     _eps_argument,
     _in_range,
+    _migration_engine,
     _out_folder,
     _reconstruct_defaults,
     add_depth_args,
@@ -138,15 +139,3 @@ def run(args):
     print(f"wrote {', '.join(files)} to {args.out}/")
     return 0
 
-
-def _migration_engine(engine, device: str) -> str:
-    """The back projection's engine from ``--engine`` and ``--device``: on a GPU (``--device cuda``) the torch
-    engine there, checked now (one line where there is no such device)."""
-    if device in (None, "cpu"):
-        return engine or "numba"
-    if engine not in (None, "torch"):
-        raise GPR3DError(f"--device {device} migrates with the torch engine: leave out --engine {engine}")
-    from gpr3d.migration.operator import check_engine
-
-    check_engine(f"torch:{device}")
-    return f"torch:{device}"

@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
-from gpr3d.cli._common import _eps_argument, _out_folder, _reconstruct_defaults, add_detector_args
+from gpr3d.cli._common import (
+    _eps_argument,
+    _migration_engine,
+    _out_folder,
+    _reconstruct_defaults,
+    add_detector_args,
+)
 
 NAME = "run"
 HELP = "the whole system on one recording: poses, detection, depths, 3D migration, targets and a report (resumable)"
@@ -47,6 +53,8 @@ def run(args):
 
     eps = _eps_argument(args.eps_r)
     settings = {"spacing_m": args.spacing, "max_depth_m": args.max_depth}
+    if args.device != "cpu":  # (the networks and the migration on the GPU)
+        settings["engine"] = _migration_engine(None, args.device)
     check_config(ReconstructConfig(**settings), names={"spacing_m": "--spacing", "max_depth_m": "--max-depth"})
     _out_folder(args.out, "run")
     cfg = RunConfig(input=args.input, out=args.out, format=args.format, channel=args.channel, poses=args.poses,
