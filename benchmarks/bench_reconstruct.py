@@ -24,7 +24,10 @@ Effective updates per second = traces x grid voxels / seconds (the figure the is
 speed-up over the plain kernel; every image is compared with the plain one (largest difference relative to its
 peak).
 
-    python benchmarks/bench_reconstruct.py [--traces 8000] [--threads 2] [--repeat 2]
+* with ``--torch``: the PyTorch engine (``engine="torch"``, the GPU path), on the CPU and, where there is one,
+  on a CUDA GPU (every trace against every voxel: no tiles).
+
+    python benchmarks/bench_reconstruct.py [--traces 8000] [--threads 2] [--repeat 2] [--torch]
 """
 
 from __future__ import annotations
@@ -124,6 +127,8 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
+    ap.add_argument("--torch", action="store_true",
+                    help="add the PyTorch engine's rows (the CPU here, and CUDA where there is a GPU)")
     args = ap.parse_args(argv)
     if args.traces < 100 or args.repeat < 1 or args.threads < 1:
         ap.error("--traces must be >= 100, --repeat and --threads >= 1")
@@ -159,6 +164,18 @@ def main(argv=None):
         w, img = timed(lambda: op.adjoint(s.data), args.repeat)
         rows.append((f"gpr3d adjoint, {name}", w, float(np.abs(img - ref).max()) / peak))
         print(rows[-1], flush=True)
+    if args.torch:  # the GPU path: every trace against every voxel of the grid, in batches
+        import torch
+
+        for engine in ("torch",) + (("torch:cuda",) if torch.cuda.is_available() else ()):
+            op_t = BackProjection(g, tx, rx, dt_s=s.dt_s, n_samples=s.n_samples, t0_s=s.t0_s, eps_r=EPS,
+                                  aperture_deg=50, obliquity=True, spreading=True, engine=engine)
+            where = "the CPU" if engine == "torch" else torch.cuda.get_device_name()
+            w, img = timed(lambda: op_t.adjoint(s.data), args.repeat)
+            rows.append((f"gpr3d adjoint, PyTorch engine on {where} ({torch.get_num_threads()} threads)"
+                         if engine == "torch" else f"gpr3d adjoint, PyTorch engine on {where}", w,
+                         float(np.abs(img - ref).max()) / peak))
+            print(rows[-1], flush=True)
     for tiled in (True, False):
         os.environ["GPR3D_TILED"] = "1" if tiled else "0"
         w, res = timed(lambda: reconstruct(s, cfg), args.repeat)

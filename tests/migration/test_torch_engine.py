@@ -39,7 +39,8 @@ def test_layers_a_window_the_fold_and_small_batches(monkeypatch):
         op.slow = effective_slowness(GRID.depth, layers=[(0.0, 4.0), (0.2, 9.0)])
     d = RNG.standard_normal((25, 200)).astype(np.float32)
     whole = ref.adjoint(d)
-    monkeypatch.setattr(_torch, "PAIRS_PER_BATCH", 3 * 21 * 21 * 25)  # three traces a batch: 9 batches
+    monkeypatch.setattr(_torch, "PAIRS_PER_BATCH", 3 * 21 * 21 * 25)  # a few traces a batch, windows of columns
+    assert len(_torch._plan(tc, tc.x, tc.y)) > 5
     np.testing.assert_allclose(tc.adjoint(d), whole, atol=1e-4 * np.abs(whole).max())
     part = tc.adjoint(d, window=(3, 11, 5, 21))
     np.testing.assert_allclose(part, whole[3:11, 5:21], atol=1e-4 * np.abs(whole).max())
@@ -112,3 +113,31 @@ def test_the_engine_names_and_the_command_line_s_device():
     with contextlib.redirect_stderr(err):
         rc = main(["reconstruct", "x.h5", "--eps-r", "6", "--device", "cuda:0", "--engine", "numba", "--out", "r"])
     assert rc == 1 and "--device cuda:0 migrates with the torch engine: leave out --engine numba" in err.getvalue()
+
+
+def test_the_batches_take_every_trace_once_with_the_columns_their_cones_reach(monkeypatch):
+    from gpr3d.core.grid import Grid3D
+    from gpr3d.migration import _torch
+    from gpr3d.migration.operator import BackProjection, antenna_positions
+
+    rng = np.random.default_rng(5)
+    pos = np.c_[rng.uniform(0, 3, 60), rng.uniform(0, 3, 60), np.zeros(60)]
+    tx, rx = antenna_positions(pos, headings_rad=rng.uniform(-3, 3, 60), offset_m=0.1)
+    grid = Grid3D(0, 0, 0.04, 0.05, 0.05, 0.02, 61, 61, 12)
+    kw = dict(dt_s=0.1e-9, n_samples=120, eps_r=6.0, aperture_deg=30, obliquity=True)
+    ref, tc = BackProjection(grid, tx, rx, **kw, engine="numpy"), BackProjection(grid, tx, rx, **kw, engine="torch")
+    monkeypatch.setattr(_torch, "PAIRS_PER_BATCH", 40_000)  # batches of cones, some spread out and split
+    plan = _torch._plan(tc, tc.x, tc.y)
+    assert sorted(np.concatenate([p[0] for p in plan]).tolist()) == list(range(60))
+    mid = 0.5 * (tx[:, :2] + rx[:, :2])
+    for idx, ix0, ix1, iy0, iy1 in plan:  # every column a cone reaches lies in its batch's window
+        for j in idx:
+            near_x = np.nonzero(np.abs(grid.x - mid[j, 0]) <= tc.reach_m)[0]
+            near_y = np.nonzero(np.abs(grid.y - mid[j, 1]) <= tc.reach_m)[0]
+            assert ix0 <= near_x.min() and near_x.max() < ix1 and iy0 <= near_y.min() and near_y.max() < iy1
+    d = rng.standard_normal((60, 120)).astype(np.float32)
+    ia = ref.adjoint(d)
+    np.testing.assert_allclose(tc.adjoint(d), ia, atol=1e-4 * np.abs(ia).max())
+    m = rng.standard_normal(grid.shape).astype(np.float32)
+    fa = ref.forward(m)
+    np.testing.assert_allclose(tc.forward(m), fa, atol=1e-4 * np.abs(fa).max())

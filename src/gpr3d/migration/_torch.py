@@ -7,6 +7,8 @@ engine."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from gpr3d.core.deps import require
@@ -31,8 +33,8 @@ def check_device(device: str) -> str:
     return str(dev)
 
 
-def _geometry(op, xs, ys, j0, j1, torch, dev):
-    """Sample positions ``u`` (B, nx, ny, nd) and weights ``w`` of traces ``j0:j1`` over the columns ``xs, ys``:
+def _geometry(op, xs, ys, idx, torch, dev):
+    """Sample positions ``u`` (B, nx, ny, nd) and weights ``w`` of the traces ``idx`` over the columns ``xs, ys``:
     float32, as the GPU runs them (the aperture's first depth per column in float64, so that a voxel on the
     cone's edge falls on the side the numba kernels put it)."""
     f32, f64 = torch.float32, torch.float64
@@ -42,8 +44,8 @@ def _geometry(op, xs, ys, j0, j1, torch, dev):
 
     X = torch.as_tensor(xs, dtype=f64, device=dev)[None, :, None, None]
     Y = torch.as_tensor(ys, dtype=f64, device=dev)[None, None, :, None]
-    tx = torch.as_tensor(op.tx[j0:j1], dtype=f64, device=dev)
-    rx = torch.as_tensor(op.rx[j0:j1], dtype=f64, device=dev)
+    tx = torch.as_tensor(op.tx[idx], dtype=f64, device=dev)
+    rx = torch.as_tensor(op.rx[idx], dtype=f64, device=dev)
     ha2 = ((X - col(tx, 0)) ** 2 + (Y - col(tx, 1)) ** 2).to(f32)  # (B, nx, ny, 1)
     hb2 = ((X - col(rx, 0)) ** 2 + (Y - col(rx, 1)) ** 2).to(f32)
     D = torch.as_tensor(op.depth, dtype=f32, device=dev)[None, None, None, :]
@@ -65,9 +67,32 @@ def _geometry(op, xs, ys, j0, j1, torch, dev):
     return u, w
 
 
-def _batches(op, n_columns):
-    step = max(1, PAIRS_PER_BATCH // max(1, n_columns * op.grid.nd))
-    return [(j, min(j + step, op.n_traces)) for j in range(0, op.n_traces, step)]
+def _plan(op, xs, ys):
+    """Batches of traces, each with the window of columns ``(ix0, ix1, iy0, iy1)`` of ``xs, ys`` its cones reach:
+    with an aperture the traces are taken in the order of their midpoints' bins, so that a batch's cones lie
+    together and only their columns are computed (a voxel outside every cone of a batch gets nothing from it);
+    without one, every batch takes every column."""
+    nx, ny, nd = len(xs), len(ys), op.grid.nd
+    reach = op.reach_m
+    if not math.isfinite(reach):
+        step = max(1, PAIRS_PER_BATCH // max(1, nx * ny * nd))
+        return [(np.arange(j, min(j + step, op.n_traces)), 0, nx, 0, ny) for j in range(0, op.n_traces, step)]
+    mid = 0.5 * (op.tx[:, :2] + op.rx[:, :2])
+    b = max(reach, op.grid.dx, op.grid.dy)
+    order = np.lexsort((mid[:, 1], np.floor(mid[:, 0] / b)))
+    cone = min(nx, int(2 * reach / op.grid.dx) + 2) * min(ny, int(2 * reach / op.grid.dy) + 2)
+    step = max(1, PAIRS_PER_BATCH // max(1, cone * nd))
+    out, todo = [], [order[j:j + step] for j in range(0, len(order), step)]
+    while todo:
+        idx = todo.pop()
+        lo, hi = mid[idx].min(axis=0) - reach, mid[idx].max(axis=0) + reach
+        ix0, ix1 = int(np.searchsorted(xs, lo[0], "left")), int(np.searchsorted(xs, hi[0], "right"))
+        iy0, iy1 = int(np.searchsorted(ys, lo[1], "left")), int(np.searchsorted(ys, hi[1], "right"))
+        if len(idx) > 1 and len(idx) * (ix1 - ix0) * (iy1 - iy0) * nd > 2 * PAIRS_PER_BATCH:
+            todo += [idx[: len(idx) // 2], idx[len(idx) // 2:]]  # spread out: two batches of tighter windows
+        elif ix1 > ix0 and iy1 > iy0:
+            out.append((idx, ix0, ix1, iy0, iy1))
+    return out
 
 
 def adjoint(op, data, xs, ys) -> np.ndarray:
@@ -78,15 +103,15 @@ def adjoint(op, data, xs, ys) -> np.ndarray:
     padded[:, : op.n_samples] = data
     rows = torch.as_tensor(padded, device=dev)
     img = torch.zeros((len(xs), len(ys), op.grid.nd), dtype=torch.float32, device=dev)
-    for j0, j1 in _batches(op, len(xs) * len(ys)):
-        u, w = _geometry(op, xs, ys, j0, j1, torch, dev)
+    for idx, ix0, ix1, iy0, iy1 in _plan(op, xs, ys):
+        u, w = _geometry(op, xs[ix0:ix1], ys[iy0:iy1], idx, torch, dev)
         i0 = torch.floor(u).to(torch.int64)
         f = u - i0
-        r = rows[j0:j1].reshape(j1 - j0, -1)
-        flat = i0.reshape(j1 - j0, -1)
+        r = rows[torch.as_tensor(idx, device=dev)]
+        flat = i0.reshape(len(idx), -1)
         a = torch.gather(r, 1, flat).reshape(u.shape)
         b = torch.gather(r, 1, flat + 1).reshape(u.shape)
-        img += (w * (a + f * (b - a))).sum(dim=0)
+        img[ix0:ix1, iy0:iy1] += (w * (a + f * (b - a))).sum(dim=0)
     return img.cpu().numpy()
 
 
@@ -96,14 +121,14 @@ def forward(op, image) -> np.ndarray:
     dev = torch.device(op.torch_device)
     m = torch.as_tensor(np.asarray(image, dtype=np.float32), device=dev)
     out = torch.zeros((op.n_traces, op.n_samples + 2), dtype=torch.float32, device=dev)
-    for j0, j1 in _batches(op, op.grid.nx * op.grid.ny):
-        u, w = _geometry(op, op.x, op.y, j0, j1, torch, dev)
+    for idx, ix0, ix1, iy0, iy1 in _plan(op, op.x, op.y):
+        u, w = _geometry(op, op.x[ix0:ix1], op.y[iy0:iy1], idx, torch, dev)
         i0 = torch.floor(u).to(torch.int64)
         f = u - i0
-        val = (w * m[None]).reshape(j1 - j0, -1)
-        flat, f = i0.reshape(j1 - j0, -1), f.reshape(j1 - j0, -1)
-        block = torch.zeros((j1 - j0, op.n_samples + 2), dtype=torch.float32, device=dev)
+        val = (w * m[None, ix0:ix1, iy0:iy1]).reshape(len(idx), -1)
+        flat, f = i0.reshape(len(idx), -1), f.reshape(len(idx), -1)
+        block = torch.zeros((len(idx), op.n_samples + 2), dtype=torch.float32, device=dev)
         block.scatter_add_(1, flat, (1 - f) * val)
         block.scatter_add_(1, flat + 1, f * val)
-        out[j0:j1] = block
+        out[torch.as_tensor(idx, device=dev)] = block
     return out[:, : op.n_samples].cpu().numpy()
