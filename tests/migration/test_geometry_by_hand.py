@@ -168,7 +168,7 @@ def test_the_operator_refuses_what_it_cannot_use():
         BackProjection(g, one, np.zeros((2, 3)), **kw)
     with pytest.raises(InvalidDataError, match=r"^tx and rx must both be \(n_traces, 3\)$"):
         BackProjection(g, np.zeros((1, 2)), np.zeros((1, 2)), **kw)
-    with pytest.raises(InvalidDataError, match="^engine must be one of 'numba', 'numpy', got 'cuda'$"):
+    with pytest.raises(InvalidDataError, match=r"^engine must be one of 'numba', 'numpy', 'torch' \(or 'torch:cuda', 'torch:cuda:N'\), got 'cuda'$"):
         BackProjection(g, one, one, engine="cuda", **kw)
     with pytest.raises(InvalidDataError, match=r"^air_gap_m must be one number or one per trace \(1\), got shape \(2,\)$"):
         BackProjection(g, one, one, air_gap_m=[0.1, 0.2], **kw)
