@@ -249,7 +249,8 @@ def run_pipeline(cfg: RunConfig, *, log=print, progress: bool | None = None) -> 
     lines = {}
     from tqdm import tqdm
 
-    bar = tqdm(total=len(work), unit="stage", disable=None if progress is None else not progress, leave=False)
+    bar = tqdm(total=len(work), unit="stage", disable=None if progress is None else not progress, leave=False,
+               mininterval=0)  # (three updates: each one drawn, a stage kept in a millisecond too)
     try:
         for k, (stage, fn) in enumerate(work.items(), 1):
             bar.set_description(f"gpr3d run: {stage}")
