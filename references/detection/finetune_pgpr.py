@@ -55,11 +55,14 @@ def main(argv=None):
                    help="packed gprMax datasets mixed into the synthetic share (FILE:N holds out its last N), e.g. "
                         "the stage-3 mix datasets/gprmax400.h5:60 and datasets/gprmax_survey_train.h5:40 four times")
     p.add_argument("--packed-fraction", type=float, default=0.6, help="share of the non-P-GPR windows from --packed")
+    p.add_argument("--augment", action="store_true",
+                   help="stretch the windows along the traces, change their gain and noise (gpr3d.detection.augment)")
     args = p.parse_args(argv)
     cfg = TrainConfig(out=args.out, init=args.init, kinds=list(CATEGORIES), steps=args.steps, batch=args.batch,
                       lr=args.lr, warmup=50, labels=str(Path(args.pgpr) / args.split), labels_fraction=args.real,
                       freeze=args.freeze, checkpoint_every=50, labels_pattern=args.only,
-                      packed=args.packed or None, packed_fraction=args.packed_fraction, **PGPR)
+                      packed=args.packed or None, packed_fraction=args.packed_fraction,
+                      augment=args.augment or None, **PGPR)
     res = train_detector(cfg, SurveySource(cfg.data_seed), progress=False, max_seconds=args.max_seconds)
     if res["steps"] < cfg.steps:
         print(f"step {res['steps']} of {cfg.steps}; run the same line again to continue")
@@ -71,7 +74,8 @@ def main(argv=None):
                              "data": f"{args.real:.0%} P-GPR {args.split} windows"
                                      + (f" ({args.only})" if args.only else "") + "; of the rest, "
                                      + (f"{args.packed_fraction:.0%} packed gprMax records ({' '.join(args.packed)}), "
-                                        if args.packed else "") + f"the others survey_sample(seed={cfg.data_seed}, i)",
+                                        if args.packed else "") + f"the others survey_sample(seed={cfg.data_seed}, i)"
+                                     + (f"; augmented {cfg.augment}" if cfg.augment else ""),
                              "steps_done": res["steps"]})
     print(json.dumps({"weights": str(weights), "steps": res["steps"], "wall_s": res["wall_s"]}))
     return 0

@@ -90,6 +90,8 @@ def test_eval_detector_on_a_yolo_dataset_matches_the_library(tmp_path):
     (["train", "detector", "--out", "{d}/t", "--kinds", "rebar,tube"], "--kinds must name distinct target kinds"),
     (["train", "detector", "--out", "{d}/t", "--kinds", "rebar,rebar"], "--kinds must name distinct target kinds"),
     (["train", "detector", "--out", "{d}/t", "--freeze", "7"], "--freeze must be an integer in 0..4"),
+    (["train", "depthnet", "--out", "{d}/t", "--augment"],
+     "--augment is for the detector; DepthNet trains on its records as they are"),
     (["train", "detector", "--out", "{d}/t", "--labels", "{ds}", "--pixel-map", PM, "--labels-frequency", "-3"],
      "frequency -3.0 Hz is not a GPR antenna's"),
 ])

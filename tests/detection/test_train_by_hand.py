@@ -45,8 +45,9 @@ class Items:
 
     made = []
 
-    def __init__(self, source, n, cfg=None, *, seed=0, flip=True, kinds=None):
-        Items.made.append({"source": source, "n": n, "cfg": cfg, "seed": seed, **({"kinds": kinds} if kinds else {})})
+    def __init__(self, source, n, cfg=None, *, seed=0, flip=True, kinds=None, augment=None):
+        Items.made.append({"source": source, "n": n, "cfg": cfg, "seed": seed, **({"kinds": kinds} if kinds else {}),
+                           **({"augment": augment} if augment is not None else {})})
         self.n = n
 
     def __len__(self):
@@ -385,6 +386,28 @@ def test_train_config_edges_that_are_allowed(tmp_path):
             d.checkpoint_every, d.packed_fraction, d.packed_holdout, d.labels_fraction) == (
         "frcnn_lean", 3000, 8, None, "adamw", 200, 0, 1000, 0, 100, 0.2, 60, 0.5)
     assert d.window == WindowConfig().to_dict()
+
+
+def test_augment_is_named_in_the_config_and_reaches_the_windows(tmp_path, stand_ins):
+    from gpr3d.detection.augment import Augment
+
+    assert TrainConfig(out="x").augment is None and TrainConfig(out="x", augment=False).augment is None
+    assert TrainConfig(out="x", augment=True).augment == {"stretch": [0.7, 1.4], "gain": [0.6, 1.8], "noise": 0.15}
+    assert TrainConfig(out="x", augment={"noise": 0.3, "stretch": (0.9, 1.1)}).augment == {
+        "stretch": [0.9, 1.1], "gain": [0.6, 1.8], "noise": 0.3}
+    for bad, msg in (({"blur": 1}, r"^--augment takes stretch, gain and noise, got \['blur'\]$"),
+                     ({"noise": 2.0}, "^augment noise must lie in 0..1, got 2.0$"),
+                     ("yes", "^--augment must be on, off or a dict of ranges, got 'yes'$")):
+        with pytest.raises(InvalidDataError, match=msg):
+            TrainConfig(out="x", augment=bad)
+    cfg = cfg_for(tmp_path, augment={"gain": [0.5, 2.0]})
+    train_detector(cfg, "src", progress=False, log=quiet)
+    assert Items.made[-1]["augment"] == Augment(gain=(0.5, 2.0))
+    train_detector(cfg_for(tmp_path, out=str(tmp_path / "plain")), "src", progress=False, log=quiet)
+    assert "augment" not in Items.made[-1]
+    # a run with other ranges is another run: its checkpoint is not resumed from
+    with pytest.raises(GPR3DError):
+        train_detector(cfg_for(tmp_path, augment=True), "src", progress=False, log=quiet)
 
 
 def test_a_run_times_its_steps_and_stops_when_late(tmp_path, stand_ins, monkeypatch, step_clock):

@@ -98,10 +98,11 @@ def test_fine_tuning_on_a_yolo_set_with_kinds_names_them_in_the_weights_and_in_d
     r = run_cli("train", "detector", "--init", "default", "--kinds", "rebar,pvc_pipe", "--labels", root,
                 "--class-names", "steel,pipe", "--class-kinds", "pipe=pvc_pipe", "--pixel-map", PM,
                 "--labels-fraction", "1", "--freeze", "2", "--steps", "2", "--batch", "2", "--warmup", "1",
-                "--out", out, "--no-progress")
+                "--augment", "--out", out, "--no-progress")
     assert r.returncode == 0, r.stderr
     model, _, prov = load_weights(out / "weights.pt")
     assert model.gpr3d_kinds == ["rebar", "pvc_pipe"] and prov["config"]["freeze"] == 2
+    assert prov["config"]["augment"] == {"stretch": [0.7, 1.4], "gain": [0.6, 1.8], "noise": 0.15}
     old, _, _ = load_weights()
     # the frozen stem did not move; the widened head did
     assert torch.equal(model.backbone.body.conv1.weight, old.backbone.body.conv1.weight)

@@ -36,6 +36,8 @@ def cmd_train_depthnet(args):
 
     if args.records < 1:
         raise GPR3DError(f"--records must be at least 1, got {args.records}")
+    if args.augment:
+        raise GPR3DError("--augment is for the detector; DepthNet trains on its records as they are")
     if args.init == "default":
         raise GPR3DError("--init default: the package ships DepthNet as ONNX; start from its PyTorch twin, "
                          "references/depthnet/default_depthnet.pt")
@@ -147,6 +149,9 @@ def add_arguments(sp):
                          "--packed-holdout), e.g. datasets/gprmax400.h5 datasets/gprmax_survey_train.h5:0")
     sp.add_argument("--packed-fraction", type=float, default=0.2, help="share of windows from --packed (0.2)")
     sp.add_argument("--packed-holdout", type=int, default=60, help="last records of --packed kept out (60)")
+    sp.add_argument("--augment", action="store_true",
+                    help="detector: stretch the training windows along the traces (0.7-1.4x), change their gain "
+                         "(0.6-1.8x) and add noise (up to 0.15 of the amplitude)")
     sp.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -171,7 +176,8 @@ def run(args):
                       packed=args.packed, packed_fraction=args.packed_fraction, packed_holdout=args.packed_holdout,
                       labels=args.labels, labels_fraction=args.labels_fraction, pixel_map=args.pixel_map,
                       labels_names=_names_list(args.class_names), labels_kinds=args.class_kinds,
-                      labels_frequency_hz=args.labels_frequency, kinds=_names_list(args.kinds), freeze=args.freeze)
+                      labels_frequency_hz=args.labels_frequency, kinds=_names_list(args.kinds), freeze=args.freeze,
+                      augment=args.augment or None)
     if cfg.packed:  # a wrong packed file (or hold-out) fails in one line before any model is built
         from gpr3d.detection.data import PackedSource
 

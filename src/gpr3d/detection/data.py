@@ -17,14 +17,22 @@ __all__ = ["random_window", "WindowDataset", "collate", "PackedSource", "MixedSo
 
 
 def random_window(survey, labels: dict, cfg: WindowConfig, rng: np.random.Generator, *, flip: bool = True,
-                  target_bias: float = 0.8, return_kinds: bool = False):
+                  target_bias: float = 0.8, return_kinds: bool = False, augment=None):
     """One training window of a record: ``(image (3, rows, traces), boxes (k, 4) px)``.
 
     With probability ``target_bias`` the window is placed over a labelled apex
     (anywhere in it); otherwise anywhere. ``flip`` mirrors half of the windows
-    left-right (hyperbolas are symmetric). ``return_kinds``: a third item, the boxes' kinds.
+    left-right (hyperbolas are symmetric). ``augment`` (an
+    :class:`~gpr3d.detection.augment.Augment`): the record is stretched along its traces,
+    its gain and noise changed first (:func:`~gpr3d.detection.augment.augment_record`).
+    ``return_kinds``: a third item, the boxes' kinds.
     """
     proc = prepare(survey, cfg)
+    scale = record_scale(proc)
+    if augment is not None:
+        from gpr3d.detection.augment import augment_record
+
+        proc, labels, scale = augment_record(proc, labels, scale, rng, augment)
     n = proc.shape[0]
     vis = [lab for lab in labels["labels"] if lab.get("visible", True)]
     hi = max(n - cfg.traces, 0)
@@ -33,7 +41,7 @@ def random_window(survey, labels: dict, cfg: WindowConfig, rng: np.random.Genera
         s0 = int(np.clip(round(a - rng.uniform(0.1, 0.9) * cfg.traces), 0, hi))
     else:
         s0 = int(rng.integers(0, hi + 1))
-    win = make_window(proc, s0, cfg, rows_interval(survey, cfg), record_scale(proc))
+    win = make_window(proc, s0, cfg, rows_interval(survey, cfg), scale)
     boxes, kinds = window_targets(labels["labels"], win, return_kinds=True)
     image = win.image
     if flip and rng.random() < 0.5:
@@ -70,9 +78,10 @@ class WindowDataset:
     """
 
     def __init__(self, source, n: int, cfg: WindowConfig | None = None, *, seed: int = 0, flip: bool = True,
-                 kinds=None):
+                 kinds=None, augment=None):
         self.source, self.n, self.cfg, self.seed, self.flip = source, int(n), cfg or WindowConfig(), seed, flip
         self.kinds = list(kinds) if kinds else None  #: the network's kinds (None: one class)
+        self.augment = augment  #: an Augment drawn on every window, or None
 
     def __len__(self) -> int:
         return self.n
@@ -82,7 +91,8 @@ class WindowDataset:
 
         survey, labels = self.source(int(i))
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, int(i), 77]))
-        image, boxes, kinds = random_window(survey, labels, self.cfg, rng, flip=self.flip, return_kinds=True)
+        image, boxes, kinds = random_window(survey, labels, self.cfg, rng, flip=self.flip, return_kinds=True,
+                                            augment=self.augment)
         target = {"boxes": torch.from_numpy(boxes), "labels": torch.from_numpy(kind_labels(kinds, self.kinds))}
         return torch.from_numpy(image), target
 

@@ -59,6 +59,9 @@ class TrainConfig:
     #: target kinds the detector names (None: one class, or those of --init); a one-class --init is widened
     kinds: list | None = None
     freeze: int = 0  #: backbone stages kept fixed: 0 none, 1 the stem, 2 the stem and layer1, ...
+    #: training windows stretched along the traces, their gain and noise changed (gpr3d.detection.augment):
+    #: None: none; True: the default ranges; a dict: Augment's fields
+    augment: dict | bool | None = None
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -92,6 +95,21 @@ class TrainConfig:
             if bad or not self.kinds or len(set(self.kinds)) != len(self.kinds):
                 raise InvalidDataError(f"--kinds must name distinct target kinds ({', '.join(CATEGORIES)}), "
                                        f"got {self.kinds!r}")
+        if self.augment is True:
+            from gpr3d.detection.augment import Augment
+
+            self.augment = Augment().to_dict()
+        elif isinstance(self.augment, dict):
+            from gpr3d.detection.augment import Augment
+
+            try:
+                self.augment = Augment(**self.augment).to_dict()
+            except TypeError:
+                raise InvalidDataError(f"--augment takes stretch, gain and noise, got {sorted(self.augment)}") from None
+        elif self.augment not in (None, False):
+            raise InvalidDataError(f"--augment must be on, off or a dict of ranges, got {self.augment!r}")
+        else:
+            self.augment = None
         if self.init == "default":
             from gpr3d.detection.weights import DEFAULT_WEIGHTS
 
@@ -198,7 +216,13 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
                       columns="step,lr,loss,wall_s,terms", checkpoint_every=cfg.checkpoint_every, device=device,
                       desc=f"train {cfg.model}", log=log, progress=progress, max_seconds=max_seconds,
                       extra_state=lambda k: {"epoch": 0, "windows_seen": k * cfg.batch, "config": cfg_dict})
-    ds = WindowDataset(source, cfg.steps * cfg.batch, WindowConfig(**cfg.window), seed=cfg.data_seed, kinds=kinds)
+    augment = None
+    if cfg.augment:
+        from gpr3d.detection.augment import Augment
+
+        augment = Augment(**cfg.augment)
+    ds = WindowDataset(source, cfg.steps * cfg.batch, WindowConfig(**cfg.window), seed=cfg.data_seed, kinds=kinds,
+                       augment=augment)
     # item k of the whole run is drawn in order; resuming skips what was already seen
     sampler = list(range(run.step * cfg.batch, cfg.steps * cfg.batch))
     loader = torch.utils.data.DataLoader(ds, batch_size=cfg.batch, sampler=sampler, collate_fn=collate,
