@@ -98,6 +98,11 @@ def plain_back_projection(data, tx, rx, x, y, depth, t0, dt, slow, tan_ap, out):
 
 def survey(n_traces: int, seed: int = 0):
     """A cart's random path over 4 m x 4 m, a trace every 2 cm, forward-modelled over the L-pipe scene."""
+    return simulate(cart_path(n_traces, seed), scene())
+
+
+def cart_path(n_traces: int, seed: int = 0):
+    """The antenna's poses of ``n_traces`` traces, one every 2 cm of a cart's random path over 4 m x 4 m."""
     dur = 30.0
     while True:
         run = simulate_rig(RigConfig(duration_s=dur, area=((0.0, 4.0), (0.0, 4.0)), turn_rate_rad_s=1.0,
@@ -107,8 +112,7 @@ def survey(n_traces: int, seed: int = 0):
         if trig.size >= n_traces:
             break
         dur *= 1.5 * n_traces / max(trig.size, 1)
-    traj = truth.at(trig[:n_traces])
-    return simulate(traj, scene())
+    return truth.at(trig[:n_traces])
 
 
 def timed(fn, repeat):

@@ -61,6 +61,7 @@ import numpy as np
 
 from gpr3d import __version__
 from gpr3d.core.atomic import atomic_write_text
+from gpr3d.core.timing import stage
 from gpr3d.core.units import velocity_from_eps_r
 
 __all__ = ["DemoConfig", "run_demo"]
@@ -575,21 +576,12 @@ def _quat_matrix(q_wxyz):
     return Rotation.from_quat([q_wxyz[1], q_wxyz[2], q_wxyz[3], q_wxyz[0]]).as_matrix()
 
 
-def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=print) -> dict:
-    """Run the demo into ``out_dir`` and return the summary (also written to ``summary.json``)."""
+def _real_stage(out: Path, cfg: DemoConfig, log):
+    """Stage 1: the embedded real recording read, processed and drawn; returns (its path, its summary)."""
     from gpr3d.data import example_dzt
     from gpr3d.io.registry import read
-    from gpr3d.simulation.synthetic import point_targets_bscan
     from gpr3d.viz.bscan import save_bscan_png
 
-    cfg = config or DemoConfig()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "config.json", json.dumps({"gpr3d": __version__, "config": asdict(cfg)}, indent=2))
-    summary: dict = {"gpr3d": __version__, "python": platform.python_version(), "stages": {}}
-    t_start = time.perf_counter()
-
-    # 1. real recording -------------------------------------------------------------
     src = cfg.input or str(example_dzt())
     t = time.perf_counter()
     raw = read(src, channel=cfg.channel)
@@ -605,7 +597,7 @@ def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=prin
         save_bscan_png(proc, out / "real_processed_depth.png", axis="depth", cmap="hot",
                        title=f"{Path(src).name}: processed, depth axis (header eps_r)")
     proc.save(out / "real_processed.h5")
-    summary["stages"]["real"] = {
+    return src, {
         "input": Path(src).name,
         "format": raw.metadata.get("format"),
         "n_traces": raw.n_traces,
@@ -623,7 +615,12 @@ def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=prin
         "figures": sorted(p.name for p in out.glob("real_*.png")),
     }
 
-    # 2. synthetic B-scan with known apexes ------------------------------------------
+
+def _synthetic_stage(out: Path, cfg: DemoConfig, log) -> dict:
+    """Stage 2: a synthetic B-scan with known apexes, its apexes found again, and its RTM."""
+    from gpr3d.simulation.synthetic import point_targets_bscan
+    from gpr3d.viz.bscan import save_bscan_png
+
     syn = point_targets_bscan(cfg.synthetic_targets_xz, noise=cfg.synthetic_noise)
     # no gain here: a time-varying gain moves the envelope peak later (by ~power/t' of the peak width)
     syn_proc = _process(syn, cfg, gain=False)
@@ -648,7 +645,7 @@ def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=prin
         + ", ".join(f"{r['apex_time_error_s'] * 1e9:+.2f} ns" for r in rows)
         + f" (time zero estimated at {t0_est * 1e9:.2f} ns)")
     rtm = _rtm_of_synthetic(syn, out, log)
-    summary["stages"]["synthetic"] = {
+    return {
         "shape": list(syn.shape),
         "eps_r": syn.eps_r,
         "estimated_t0_s": t0_est,
@@ -657,26 +654,48 @@ def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=prin
         "boxes": [[float(v) for v in b] for b in boxes],
         "rtm": rtm,
     }
+
+
+def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=print) -> dict:
+    """Run the demo into ``out_dir`` and return the summary (also written to ``summary.json``)."""
+    cfg = config or DemoConfig()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out / "config.json", json.dumps({"gpr3d": __version__, "config": asdict(cfg)}, indent=2))
+    summary: dict = {"gpr3d": __version__, "python": platform.python_version(), "stages": {}}
+    t_start = time.perf_counter()
+
+    # 1. real recording; 2. synthetic B-scan with known apexes -------------------------------
+    with stage("demo 1: real recording"):
+        src, summary["stages"]["real"] = _real_stage(out, cfg, log)
+    with stage("demo 2: synthetic B-scan"):
+        summary["stages"]["synthetic"] = _synthetic_stage(out, cfg, log)
+
     # 3. random-motion survey from the forward model --------------------------------------
-    summary["stages"]["random_motion"] = _random_motion_stage(out, cfg, log)
+    with stage("demo 3: random-motion survey"):
+        summary["stages"]["random_motion"] = _random_motion_stage(out, cfg, log)
 
     # 4. 3D reconstruction of the random-motion survey -------------------------------------
-    summary["stages"]["reconstruction"] = _reconstruction_stage(out, log)
+    with stage("demo 4: reconstruction"):
+        summary["stages"]["reconstruction"] = _reconstruction_stage(out, log)
 
     # 5. detection and detection-masked migration ----------------------------------------------
-    summary["stages"]["detection"] = _detection_stage(out, src, log)
+    with stage("demo 5-6: detection, depths, masked migration"):
+        summary["stages"]["detection"] = _detection_stage(out, src, log)
 
     # 7. visual-inertial pose of a random-motion cart ---------------------------------------
-    summary["stages"]["pose"] = _pose_stage(out, log)
+    with stage("demo 7: pose"):
+        summary["stages"]["pose"] = _pose_stage(out, log)
 
     # the report: the masked reconstruction of the random-motion survey on one page to open in a browser
     if (out / "reconstruction_masked" / "targets.json").exists():
         from gpr3d.pipeline.report import write_report
 
         t = time.perf_counter()
-        page = write_report(out, survey=out / "random_walk_survey.h5", detections=out / "detections.json",
-                            reconstruction=out / "reconstruction_masked", out=out / "report.html",
-                            title="gpr3d demo: random-motion survey, detection-masked 3D reconstruction")
+        with stage("demo: report"):
+            page = write_report(out, survey=out / "random_walk_survey.h5", detections=out / "detections.json",
+                                reconstruction=out / "reconstruction_masked", out=out / "report.html",
+                                title="gpr3d demo: random-motion survey, detection-masked 3D reconstruction")
         summary["report"] = str(page.relative_to(out))
         log(f"      report: {page} ({time.perf_counter() - t:.1f} s; B-scan with boxes, depth slices, noise map, "
             "3D view: open it in a browser)")

@@ -15,9 +15,17 @@ from tests.conftest import real_file  # noqa: E402
 def test_detect_on_the_real_dzt_writes_the_contract(tmp_path):
     src = real_file("gprpy_gssi_400MHz/FILE____032.DZT")
     out, png = tmp_path / "det.json", tmp_path / "det.png"
-    r = run_cli("detect", src, "--out", out, "--overlay", png)
+    r = run_cli("--timings", tmp_path / "t.json", "detect", src, "--out", out, "--overlay", png)
     assert r.returncode == 0, r.stderr
     d = json.loads(out.read_text())
+    # where its time went: each stage once, in the order it ran (the detector's own inside 'detect')
+    times = json.loads((tmp_path / "t.json").read_text())
+    assert [k for k in times["stages"] if k not in ("compile", "other")] == [
+        "load models", "read", "detect", "windows", "network", "merge", "apexes", "depths", "write", "figures"]
+    counts = {k: n for k, n in times["counts"].items() if k != "compile"}
+    assert counts == {**dict.fromkeys(counts, 1), "load models": 2}  # the detector, then DepthNet
+    assert times["stages"]["network"] <= d["wall_s"]  # the detector's own clock spans its stages
+    assert sum(times["stages"][k] for k in ("windows", "network", "merge", "apexes")) <= d["wall_s"] + 1e-3
     assert d["n_traces"] == 1040 and d["dt_s"] == pytest.approx(48e-9 / 512, rel=1e-9, abs=0)
     assert d["input"] == str(src)
     for t in d["targets"]:

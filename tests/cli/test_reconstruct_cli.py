@@ -177,3 +177,36 @@ def test_eps_r_file_needs_a_header(pipe_survey, tmp_path):
     Survey(data=np.zeros((10, 64), np.float32), dt_s=1e-10, positions_xyz=np.zeros((10, 3))).save(tmp_path / "n.h5")
     r = run_cli("reconstruct", tmp_path / "n.h5", "--out", tmp_path / "o", "--eps-r", "file")
     assert r.returncode == 1 and "gives no eps_r" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_timings_name_every_stage_of_reconstruct_and_add_up(pipe_survey, tmp_path):
+    """``gpr3d --timings FILE``: the stages in the order they ran, each its own time; with the compilations and
+    'other' they add up to the command's time, and the migration's stages agree with the result's own clock."""
+    d, _ = pipe_survey
+    r = run_cli("--timings", tmp_path / "t.json", "reconstruct", d / "line.h5", "--poses", d / "walk.tum",
+                "--out", tmp_path / "out", "--max-depth", "0.7", "--eps-r", "6")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "t.json").read_text())
+    stages = doc["stages"]
+    ran = [k for k in stages if k not in ("compile", "other")]
+    assert ran == ["load models", "read", "processing", "poses", "prepare", "grid", "migrate", "fold", "envelope", "targets",
+                   "write folder", "write volume", "write vti", "figures"]
+    assert doc["command"][:4] == ["gpr3d", "--timings", str(tmp_path / "t.json"), "reconstruct"]
+    assert all(v >= 0 for v in stages.values())
+    assert sum(stages.values()) == pytest.approx(doc["wall_s"], abs=1e-5 * len(stages))
+    assert doc["counts"]["migrate"] == 1 and doc["counts"]["figures"] == 1
+    # the migration's own clock (config.json) spans the migrate stage and any compilation inside it
+    own = json.loads((tmp_path / "out" / "config.json").read_text())["timings_s"]
+    assert stages["migrate"] + stages.get("compile", 0.0) >= own["migrate"] - 1e-3
+    assert stages["migrate"] <= own["migrate"] + 1e-3
+    assert stages["prepare"] == pytest.approx(own["prepare"], abs=1e-3)
+    assert 0 < doc["startup_s"] < 120
+    lines = r.stderr.strip().splitlines()
+    assert lines[0] == f"gpr3d reconstruct: where the time went ({doc['host_cpu']})"
+    assert lines[2].split()[0] == "start-up" and lines[-1].split()[0] == "total"
+    assert "migrated 2500 traces" in r.stdout  # the command's own output is unchanged
+    # an unwritable timings file: one line, before any work
+    r = run_cli("--timings", "/proc/t.json", "reconstruct", d / "line.h5", "--poses", d / "walk.tum",
+                "--out", tmp_path / "out2", "--eps-r", "6")
+    assert r.returncode == 1 and r.stderr.startswith("gpr3d: error: --timings /proc/t.json: cannot write in /proc")
+    assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "out2").exists()

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from gpr3d.cli._common import _check_radius, _check_suffix, _detector, add_depth_args, add_detector_args
 from gpr3d.core.errors import GPR3DError
+from gpr3d.core.timing import stage
 from gpr3d.pipeline import add_depths, load_models
 
 NAME = "detect"
@@ -46,15 +47,20 @@ def run(args):
         read_picture(args.input, args.pixel_map)  # a picture without a time axis fails before the model loads
     elif args.pixel_map is not None:
         raise GPR3DError(f"--pixel-map is for pictures (PNG, JPG, ...); {args.input} is a radar file")
-    det = _detector(args)  # weights checked before the recording is read
+    with stage("load models"):
+        det = _detector(args)  # weights checked before the recording is read
     depthnet = load_models(detector=False, depth=args.depth, depthnet=args.depthnet, device=args.device)[1]
-    surveys = [read_picture(args.input, args.pixel_map, frequency_hz=args.frequency)] if picture else \
-        read_all(args.input, format=args.format)
-    results = [det.detect(s, score_threshold=args.score, input_name=str(args.input)) for s in surveys]
+    with stage("read"):
+        surveys = [read_picture(args.input, args.pixel_map, frequency_hz=args.frequency)] if picture else \
+            read_all(args.input, format=args.format)
+    with stage("detect"):
+        results = [det.detect(s, score_threshold=args.score, input_name=str(args.input)) for s in surveys]
     if args.depth != "none":
-        for s, r in zip(surveys, results):
-            add_depths(s, r, args.depth, depthnet, args.trace_spacing, args.radius)
-    write_detections(results, args.out)
+        with stage("depths"):
+            for s, r in zip(surveys, results):
+                add_depths(s, r, args.depth, depthnet, args.trace_spacing, args.radius)
+    with stage("write"):
+        write_detections(results, args.out)
     for r in results:
         ch = f" channel {r['channel']}" if len(results) > 1 else ""
         print(f"{args.input}{ch}: {len(r['targets'])} targets in {r['n_traces']} traces "
@@ -70,10 +76,11 @@ def run(args):
     if args.overlay:
         from gpr3d.viz.bscan import save_bscan_png
 
-        s = surveys[0]
-        shown = s.dewow().remove_background()
-        save_bscan_png(shown, args.overlay, cmap="gray", boxes=[t["box"] for t in results[0]["targets"]],
-                       apexes=[(t["apex_trace"], t["apex_time_s"]) for t in results[0]["targets"]],
-                       title=f"{Path(args.input).name}: {len(results[0]['targets'])} detections (score >= {args.score})")
+        with stage("figures"):
+            shown = surveys[0].dewow().remove_background()
+            found = results[0]["targets"]
+            save_bscan_png(shown, args.overlay, cmap="gray", boxes=[t["box"] for t in found],
+                           apexes=[(t["apex_trace"], t["apex_time_s"]) for t in found],
+                           title=f"{Path(args.input).name}: {len(found)} detections (score >= {args.score})")
     print(f"wrote {args.out}" + (f" and {args.overlay}" if args.overlay else ""))
     return 0

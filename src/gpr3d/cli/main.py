@@ -42,6 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--version", action="version", version=f"gpr3d {__version__}")
+    p.add_argument("--timings", metavar="FILE", default=None,
+                   help="time the command's stages (read, poses, detect, migrate, compile, targets, figures, "
+                        "writes, ...): a table on stderr and the seconds in FILE (JSON)")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         mod = importlib.import_module(f"gpr3d.cli.{name}")
@@ -56,6 +59,33 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
     print(f"gpr3d: warning: {message}", file=sys.stderr)
 
 
+def _timed(args, argv) -> int:
+    """Run the command inside :func:`gpr3d.core.timing.collect`; write its stages to ``args.timings``."""
+    import json
+    import platform
+
+    from gpr3d.cli._common import _writable
+    from gpr3d.core.atomic import atomic_write_text
+    from gpr3d.core.timing import collect, format_table, process_age_s
+
+    _writable(args.timings, "--timings")
+    startup = process_age_s()
+    with collect() as times:
+        rc = int(args.func(args) or 0)
+    rows = ([("start-up", startup)] if startup is not None else []) + times.rows()
+    try:
+        from llvmlite import binding
+
+        cpu = binding.get_host_cpu_name()
+    except Exception:  # noqa: BLE001 - the name is a label; a missing llvmlite must not fail the command
+        cpu = platform.processor() or platform.machine()
+    doc = {"gpr3d": __version__, "command": ["gpr3d"] + list(sys.argv[1:] if argv is None else argv),
+           "host_cpu": cpu, "startup_s": startup, **times.to_dict(), "counts": times.counts}
+    atomic_write_text(args.timings, json.dumps(doc, indent=1))
+    print(format_table(rows, title=f"gpr3d {args.command}: where the time went ({cpu})"), file=sys.stderr)
+    return rc
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -66,6 +96,8 @@ def main(argv=None) -> int:
     try:
         if hasattr(args, "marks_every"):
             _check_marks_args(args)  # before any file is read
+        if args.timings:
+            return _timed(args, argv)
         return int(args.func(args) or 0)
     except GPR3DError as exc:
         print(f"gpr3d: error: {exc}", file=sys.stderr)

@@ -15,6 +15,7 @@ import numpy as np
 
 from gpr3d.core.deps import require
 from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.timing import stage
 from gpr3d.detection.windows import WindowConfig, apex_of_box, merge, prepare, rows_interval, width_rate, windows
 
 __all__ = ["Detector", "load_detector", "ENGINES"]
@@ -113,37 +114,41 @@ class Detector:
         if not 0.0 <= score_threshold <= 1.0:
             raise InvalidDataError(f"score threshold must lie in 0..1, got {score_threshold!r}")
         t0 = time.perf_counter()
-        proc = prepare(survey, self.window)
-        wins = windows(survey, self.window, processed=proc)
-        raw = self.predict_windows_kinds([w.image for w in wins])
-        boxes, scores, index = merge([(w, b, s) for w, (b, s, _, _) in zip(wins, raw)], survey.n_traces,
-                                     survey.dt_s, nms=self.nms, return_index=True)
-        kinds = self.kinds
-        labels = np.concatenate([r[2] for r in raw])[index] if raw else np.zeros(0, np.int64)
-        shares = np.concatenate([r[3] for r in raw])[index] if raw else np.zeros(0)
-        s_per_row = rows_interval(survey, self.window)
-        # apexes from data whose rows keep the pulse's shape (equalising the rows distorts it)
-        plain = prepare(survey, replace(self.window, equalise=False)) if self.window.equalise else proc
-        t_end = (survey.n_samples - 1) * survey.dt_s
-        kept = []
-        for j in np.argsort(-np.asarray(scores, float), kind="stable"):
-            b, s = boxes[j], scores[j]
-            b = [float(np.clip(b[0], 0, survey.n_traces - 1)), float(np.clip(b[1], 0, t_end)),
-                 float(np.clip(b[2], 0, survey.n_traces - 1)), float(np.clip(b[3], 0, t_end))]
-            if s >= score_threshold and b[2] > b[0] and b[3] > b[1]:
-                kind = kinds[int(labels[j]) - 1] if kinds else "target"
-                kept.append((b, s, kind, float(shares[j]) if kinds else None))
-        # cut boxes take their width from the record's whole ones (one wave speed, one trace step)
-        rate = width_rate([b for b, s, _, _ in kept if s >= 0.5], survey.n_traces, t_end, survey.frequency_hz)
-        targets = []
-        for b, s, kind, share in kept:
-            at, att = apex_of_box(plain, b, s_per_row, frequency_hz=survey.frequency_hz, n_traces=survey.n_traces,
-                                  width_per_s=rate)
-            t = {"box": b, "score": float(s), "apex_trace": int(round(at)), "apex_time_s": float(att),
-                 "kind": kind, "kind_score": share}
-            if survey.positions_xyz is not None and survey.distances_m is not None:
-                t["x_m"] = float(np.interp(at, np.arange(survey.n_traces), survey.distances_m))
-            targets.append(t)
+        with stage("windows"):
+            proc = prepare(survey, self.window)
+            wins = windows(survey, self.window, processed=proc)
+        with stage("network"):
+            raw = self.predict_windows_kinds([w.image for w in wins])
+        with stage("merge"):
+            boxes, scores, index = merge([(w, b, s) for w, (b, s, _, _) in zip(wins, raw)], survey.n_traces,
+                                         survey.dt_s, nms=self.nms, return_index=True)
+        with stage("apexes"):
+            kinds = self.kinds
+            labels = np.concatenate([r[2] for r in raw])[index] if raw else np.zeros(0, np.int64)
+            shares = np.concatenate([r[3] for r in raw])[index] if raw else np.zeros(0)
+            s_per_row = rows_interval(survey, self.window)
+            # apexes from data whose rows keep the pulse's shape (equalising the rows distorts it)
+            plain = prepare(survey, replace(self.window, equalise=False)) if self.window.equalise else proc
+            t_end = (survey.n_samples - 1) * survey.dt_s
+            kept = []
+            for j in np.argsort(-np.asarray(scores, float), kind="stable"):
+                b, s = boxes[j], scores[j]
+                b = [float(np.clip(b[0], 0, survey.n_traces - 1)), float(np.clip(b[1], 0, t_end)),
+                     float(np.clip(b[2], 0, survey.n_traces - 1)), float(np.clip(b[3], 0, t_end))]
+                if s >= score_threshold and b[2] > b[0] and b[3] > b[1]:
+                    kind = kinds[int(labels[j]) - 1] if kinds else "target"
+                    kept.append((b, s, kind, float(shares[j]) if kinds else None))
+            # cut boxes take their width from the record's whole ones (one wave speed, one trace step)
+            rate = width_rate([b for b, s, _, _ in kept if s >= 0.5], survey.n_traces, t_end, survey.frequency_hz)
+            targets = []
+            for b, s, kind, share in kept:
+                at, att = apex_of_box(plain, b, s_per_row, frequency_hz=survey.frequency_hz, n_traces=survey.n_traces,
+                                      width_per_s=rate)
+                t = {"box": b, "score": float(s), "apex_trace": int(round(at)), "apex_time_s": float(att),
+                     "kind": kind, "kind_score": share}
+                if survey.positions_xyz is not None and survey.distances_m is not None:
+                    t["x_m"] = float(np.interp(at, np.arange(survey.n_traces), survey.distances_m))
+                targets.append(t)
         return {"input": input_name or survey.metadata.get("path"), "channel": survey.metadata.get("channel", 0),
                 "n_traces": survey.n_traces, "dt_s": survey.dt_s, "n_windows": len(wins),
                 "detector": self.provenance.get("name", "gpr3d detector"), "score_threshold": score_threshold,

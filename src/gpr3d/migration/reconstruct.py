@@ -22,6 +22,7 @@ from gpr3d import __version__
 from gpr3d.core.atomic import atomic_write_text
 from gpr3d.core.errors import GeometryWarning, InvalidDataError
 from gpr3d.core.grid import Grid3D
+from gpr3d.core.timing import stage
 from gpr3d.core.units import C0, velocity_from_eps_r
 from gpr3d.migration.config import ReconstructConfig
 from gpr3d.migration.masking import box_mask, check_boxes, image_envelope
@@ -221,7 +222,8 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
             raise InvalidDataError("no boxes: nothing to migrate inside them (give boxes=None for the whole record)")
         boxes = check_boxes(boxes, survey.n_traces, survey.n_samples * survey.dt_s)
     t = time.perf_counter()
-    s, cut_s = _prepare(survey, cfg)
+    with stage("prepare"):
+        s, cut_s = _prepare(survey, cfg)
     t_prep = time.perf_counter() - t
     frame = None
     positions = s.positions_xyz
@@ -245,14 +247,15 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
                       "come out as points on it", GeometryWarning, stacklevel=2)
     v = velocity_from_eps_r(eps)
     depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s - s.t0_s - 2 * cfg.air_gap_m / C0) * 0.95
-    grid = Grid3D.covering(positions, depth_m=depth, spacing_m=cfg.spacing_m,
-                           depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m)
-    if frame is not None:
-        grid = replace(grid, y0=0.0, ny=1)
-    check_grid_fits(grid)  # (site tiles too: the whole volume is put together in memory)
-    op = BackProjection(grid, tx, rx, dt_s=s.dt_s, n_samples=s.n_samples, t0_s=s.t0_s, eps_r=eps,
-                        aperture_deg=cfg.aperture_deg, obliquity=cfg.obliquity, spreading=cfg.spreading,
-                        air_gap_m=cfg.air_gap_m, engine=cfg.engine)
+    with stage("grid"):
+        grid = Grid3D.covering(positions, depth_m=depth, spacing_m=cfg.spacing_m,
+                               depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m)
+        if frame is not None:
+            grid = replace(grid, y0=0.0, ny=1)
+        check_grid_fits(grid)  # (site tiles too: the whole volume is put together in memory)
+        op = BackProjection(grid, tx, rx, dt_s=s.dt_s, n_samples=s.n_samples, t0_s=s.t0_s, eps_r=eps,
+                            aperture_deg=cfg.aperture_deg, obliquity=cfg.obliquity, spreading=cfg.spreading,
+                            air_gap_m=cfg.air_gap_m, engine=cfg.engine)
     t = time.perf_counter()
     noise_map = None
     # the fold (how many traces see each voxel inside their aperture and record) comes with the image: in the same
@@ -274,34 +277,40 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
         # boxes refer to the recording's samples; time zero cut some: shift them
         shifted = [[b[0], b[1] - cut_s, b[2], b[3] - cut_s] for b in boxes]
         mask = box_mask(s.n_traces, s.n_samples, s.dt_s, shifted, taper_traces=cfg.taper_traces)
-        out = migrate(s.data * mask, want_fold)
-        noise_map = image_envelope(migrate(s.data * (1 - mask), False, "noise"))
+        with stage("migrate"):
+            out = migrate(s.data * mask, want_fold)
+        with stage("noise map"):
+            noise_map = image_envelope(migrate(s.data * (1 - mask), False, "noise"))
     else:
-        out = migrate(s.data, want_fold)
+        with stage("migrate"):
+            out = migrate(s.data, want_fold)
     image, fold = out if want_fold else (out, None)
     t_mig = time.perf_counter() - t
     if want_fold:
-        floor = 0.05 * float(fold.max())
-        norm = np.maximum(fold, floor)
-        norm = np.sqrt(norm) if cfg.normalize == "sqrt_fold" else norm
-        image = image / norm
-        if noise_map is not None:
-            noise_map = noise_map / norm
-    env = image_envelope(image)
+        with stage("fold"):
+            floor = 0.05 * float(fold.max())
+            norm = np.maximum(fold, floor)
+            norm = np.sqrt(norm) if cfg.normalize == "sqrt_fold" else norm
+            image = image / norm
+            if noise_map is not None:
+                noise_map = noise_map / norm
+    with stage("envelope"):
+        env = image_envelope(image)
     # the band cleared around each line found: half a wavelength (the width of a pipe's image), at least two cells
     tol = 2.0 * max(grid.dx, grid.dy)
     band = max(2 * tol, 0.5 * v / survey.frequency_hz) if survey.frequency_hz else None
-    if frame is None:
-        targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band,
-                                  min_depth_m=cfg.min_target_depth_m)
-    else:
-        targets = extract_profile_targets(env[:, 0, :], grid.x, grid.depth, threshold=cfg.threshold,
-                                          min_line_m=cfg.min_line_m, min_depth_m=cfg.min_target_depth_m)
-        for t in targets:  # [along, 0, depth] -> [x, y, depth]
-            along = [p[0] for p in t.points_xyz]
-            xy = frame.to_world(along)
-            t.extra["along_m"] = along
-            t.points_xyz = [[float(q[0]), float(q[1]), float(p[2])] for q, p in zip(xy, t.points_xyz)]
+    with stage("targets"):
+        if frame is None:
+            targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band,
+                                      min_depth_m=cfg.min_target_depth_m)
+        else:
+            targets = extract_profile_targets(env[:, 0, :], grid.x, grid.depth, threshold=cfg.threshold,
+                                              min_line_m=cfg.min_line_m, min_depth_m=cfg.min_target_depth_m)
+            for t in targets:  # [along, 0, depth] -> [x, y, depth]
+                along = [p[0] for p in t.points_xyz]
+                xy = frame.to_world(along)
+                t.extra["along_m"] = along
+                t.points_xyz = [[float(q[0]), float(q[1]), float(p[2])] for q, p in zip(xy, t.points_xyz)]
     return Reconstruction(image=image, envelope=env, noise_map=noise_map, fold=fold, grid=grid, targets=targets,
                           eps_r=float(eps), config=asdict(cfg), n_traces=s.n_traces,
                           timings_s={"prepare": t_prep, "migrate": t_mig},
@@ -362,10 +371,12 @@ def write_reconstruction(result: "Reconstruction", out_dir, *, source: str = "")
     out.mkdir(parents=True, exist_ok=True)
     g = result.grid
     frame = None if result.frame is None else json.dumps(result.frame.to_dict())
-    write_volume(out / "volume.h5", g, {"image": result.image, "envelope": result.envelope,
-                                        "noise_map": result.noise_map}, eps_r=result.eps_r, source=source,
-                 frame_json=frame)
-    write_vti(out / "volume.vti", g, {"envelope": result.envelope, "noise_map": result.noise_map})
+    with stage("write volume"):
+        write_volume(out / "volume.h5", g, {"image": result.image, "envelope": result.envelope,
+                                            "noise_map": result.noise_map}, eps_r=result.eps_r, source=source,
+                     frame_json=frame)
+    with stage("write vti"):
+        write_vti(out / "volume.vti", g, {"envelope": result.envelope, "noise_map": result.noise_map})
     atomic_write_text(out / "targets.json", json.dumps(targets_to_json(result.targets), indent=1))
     atomic_write_text(out / "config.json", json.dumps({"gpr3d": __version__, "source": source,
                                                        "eps_r": result.eps_r, "eps_r_source": result.eps_r_source,

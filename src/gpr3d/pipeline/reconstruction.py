@@ -72,6 +72,7 @@ def reconstruct_recording(survey, cfg, *, eps_r=None, boxes_file=None, mask: str
     GPR3DError
         No positions, no eps_r to be had, an empty boxes file, boxes outside the record, no detections.
     """
+    from gpr3d.core.timing import stage
     from gpr3d.io.detections import read_boxes
     from gpr3d.migration.reconstruct import reconstruct
     from gpr3d.pipeline.targets import add_depths, targets_from_file
@@ -97,9 +98,11 @@ def reconstruct_recording(survey, cfg, *, eps_r=None, boxes_file=None, mask: str
         found = {"input": str(input_name),
                  "targets": targets_from_file(boxes_file, read_detections(boxes_file)[0]["targets"], survey)}
     if detector is not None and (mask == "detect" or found is None):
-        found = detector.detect(survey, score_threshold=score, input_name=str(input_name))
+        with stage("detect"):
+            found = detector.detect(survey, score_threshold=score, input_name=str(input_name))
     if estimate:
-        add_depths(survey, found, depth, depthnet, trace_spacing_m, radius_m)
+        with stage("depths"):
+            add_depths(survey, found, depth, depthnet, trace_spacing_m, radius_m)
         if "permittivity" not in found:
             raise GPR3DError(f"{input_name}: eps_r cannot be estimated without trace positions; give --eps-r "
                              "or --trace-spacing")
@@ -142,14 +145,15 @@ def write_reconstruction_folder(run: ReconstructionRun, out, *, source: str, com
     list of str
         The files written.
     """
+    from gpr3d.core.timing import stage
     from gpr3d.io.resultdir import result_folder
 
-    with result_folder(out, command=command) as stage:  # the whole result, or the previous one
+    with stage("write folder"), result_folder(out, command=command) as folder:  # the whole result, or the previous
         if run.mask == "detect":
             from gpr3d.io.detections import write_detections
 
-            write_detections([run.found], stage / "detections.json")
-        return write_result(run.result, stage, source=source)
+            write_detections([run.found], folder / "detections.json")
+        return write_result(run.result, folder, source=source)
 
 
 def write_result(result, out, *, source: str = "") -> list:
@@ -173,9 +177,11 @@ def write_result(result, out, *, source: str = "") -> list:
     """
     from pathlib import Path
 
+    from gpr3d.core.timing import stage
     from gpr3d.migration.reconstruct import write_reconstruction
     from gpr3d.viz.volume import reconstruction_figures
 
     write_reconstruction(result, out, source=source)
-    reconstruction_figures(result, out)
+    with stage("figures"):
+        reconstruction_figures(result, out)
     return sorted(p.name for p in Path(out).iterdir())

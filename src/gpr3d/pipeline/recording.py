@@ -94,11 +94,14 @@ def read_recording(path, *, format: str | None = None, channel: int = 0, track=N
     GPR3DError
         A file that cannot be read, in one line naming it.
     """
+    from gpr3d.core.timing import stage
     from gpr3d.io.registry import read
 
-    survey = read(path, format=format, channel=channel)
-    survey = place_traces(survey, track=track, marks_every_m=marks_every_m, marks=marks)
-    return apply_steps(survey, steps)
+    with stage("read"):
+        survey = read(path, format=format, channel=channel)
+        survey = place_traces(survey, track=track, marks_every_m=marks_every_m, marks=marks)
+    with stage("processing"):
+        return apply_steps(survey, steps)
 
 
 def write_survey(survey, out) -> None:
@@ -153,10 +156,12 @@ def attach_trajectory(survey, poses, *, source: str = "the survey"):
     GPR3DError
         When the file holds another number of poses than the survey has traces.
     """
+    from gpr3d.core.timing import stage
     from gpr3d.io.trajectory import attach_poses, read_trajectory
 
-    traj = read_trajectory(poses)
-    if len(traj) != survey.n_traces:
-        raise GPR3DError(f"{poses} holds {len(traj)} poses but {source} has {survey.n_traces} "
-                         "traces (one pose per trace)")
-    return attach_poses(survey, traj, by="index")
+    with stage("poses"):
+        traj = read_trajectory(poses)
+        if len(traj) != survey.n_traces:
+            raise GPR3DError(f"{poses} holds {len(traj)} poses but {source} has {survey.n_traces} "
+                             "traces (one pose per trace)")
+        return attach_poses(survey, traj, by="index")

@@ -31,15 +31,18 @@ def load_models(*, detector: bool = True, depth: str = "hybrid", weights=None, d
     -------
     (Detector or None, DepthEstimator or None)
     """
+    from gpr3d.core.timing import stage
+
     det = net = None
-    if detector:
-        from gpr3d.detection.infer import load_detector
+    with stage("load models"):
+        if detector:
+            from gpr3d.detection.infer import load_detector
 
-        det = load_detector(weights, device=device, engine=runtime)
-    if depth in ("hybrid", "net"):
-        from gpr3d.inversion.depthnet import DepthEstimator
+            det = load_detector(weights, device=device, engine=runtime)
+        if depth in ("hybrid", "net"):
+            from gpr3d.inversion.depthnet import DepthEstimator
 
-        net = DepthEstimator.load(depthnet, device=device)
+            net = DepthEstimator.load(depthnet, device=device)
     return det, net
 
 
