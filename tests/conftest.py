@@ -8,6 +8,9 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+# no background compilation of the numba kernels under the tests (gpr3d.core.warmup): the commands they run compile
+# what they call, as before; the warm-up's own tests turn it on, each with a numba cache of its own
+os.environ.setdefault("GPR3D_WARMUP", "0")
 REAL = Path(os.environ.get("GPR3D_REAL_DATA", REPO.parent / "shared" / "data" / "real"))
 
 

@@ -97,7 +97,10 @@ MODULES = {
     "inversion.evaluate": ["tests/inversion/test_estimate.py", "tests/inversion/test_evaluate_by_hand.py"],
     "detection.windows": ["tests/detection/test_windows.py", "tests/detection/test_windows_by_hand.py", "tests/detection/test_kinds.py"],
     "detection.evaluate": ["tests/detection/test_evaluate.py", "tests/detection/test_evaluate_by_hand.py", "tests/detection/test_kinds.py"],
-    "detection.data": ["tests/detection/test_data_by_hand.py", "tests/detection/test_kinds.py"],
+    "detection.data": ["tests/detection/test_data_by_hand.py", "tests/detection/test_kinds.py",
+                       "tests/detection/test_augment.py"],
+    "detection.augment": ["tests/detection/test_augment.py"],
+    "core.timing": ["tests/core/test_timing.py"],
 }
 
 

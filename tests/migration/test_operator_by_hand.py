@@ -134,3 +134,47 @@ def test_the_kernel_switches_read_the_environment(monkeypatch, name, attr):
     assert made() is True
     monkeypatch.setenv(name.lower(), "0")  # the name is upper case only
     assert made() is True
+
+
+def test_only_the_kernel_that_runs_is_built(monkeypatch):
+    """Building a kernel costs seconds on a machine's first run: with an aperture only the tiled kernel is asked
+    for (with the SIMD loop, or the scalar one where that does not build), without one only the untiled SIMD
+    kernel (or the scalar one where it does not build); the image is the reference's each time."""
+    from gpr3d.migration import _kernels
+
+    grid, tx, rx, data = _geometry(3)
+    asked = []
+    real_tiled, real_simd = _kernels.tiled_adjoint, _kernels.simd_adjoint
+
+    def tiled(path, fold=False, _ok=True):
+        asked.append(("tiled", path, fold))
+        return real_tiled(path, fold) if _ok or path == 0 else None
+
+    def simd(path=_kernels.GATHER, _ok=True):
+        asked.append(("simd", path))
+        return real_simd(path) if _ok else None
+
+    monkeypatch.setattr(_kernels, "tiled_adjoint", tiled)
+    monkeypatch.setattr(_kernels, "simd_adjoint", simd)
+    monkeypatch.setattr(_kernels, "read_path", lambda: _kernels.LOADS)
+    for aperture in (40.0, None):
+        op = BackProjection(grid, tx, rx, dt_s=1e-10, n_samples=data.shape[1], eps_r=5.0, aperture_deg=aperture)
+        ref = op._adjoint_numpy(data)
+        asked.clear()
+        img = op.adjoint(data)
+        assert asked == ([("tiled", _kernels.LOADS, False)] if aperture else [("simd", _kernels.LOADS)])
+        np.testing.assert_allclose(img, ref, atol=1e-4 * float(np.abs(ref).max()))
+        # the SIMD loop does not build here: the scalar depth loop, in the same kernel family
+        monkeypatch.setattr(_kernels, "tiled_adjoint", lambda p, f=False: tiled(p, f, _ok=False))
+        monkeypatch.setattr(_kernels, "simd_adjoint", lambda p=_kernels.GATHER: simd(p, _ok=False))
+        asked.clear()
+        img2 = op.adjoint(data)
+        assert asked == ([("tiled", _kernels.LOADS, False), ("tiled", 0, False)] if aperture
+                         else [("simd", _kernels.LOADS)])
+        np.testing.assert_allclose(img2, img, atol=1e-4 * float(np.abs(img).max()))
+        op.simd = False  # GPR3D_SIMD=0: the SIMD loop is never asked for
+        asked.clear()
+        op.adjoint(data)
+        assert asked == ([("tiled", 0, False)] if aperture else [])
+        monkeypatch.setattr(_kernels, "tiled_adjoint", tiled)
+        monkeypatch.setattr(_kernels, "simd_adjoint", simd)

@@ -96,6 +96,9 @@ def main(argv=None) -> int:
     try:
         if hasattr(args, "marks_every"):
             _check_marks_args(args)  # before any file is read
+        from gpr3d.cli._warm import start_background
+
+        start_background(args.command)  # the numba kernels compiled beside the command, once per machine
         if args.timings:
             return _timed(args, argv)
         return int(args.func(args) or 0)

@@ -228,8 +228,19 @@ def forward(image, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mod
                     row[i0 + np.uint32(1)] += f * m
 
 
+def _after_warmup(group: str) -> None:
+    # a background warm-up compiling this group now (gpr3d.core.warmup): wait for it and load the group from the
+    # cache, rather than compile it a second time beside it
+    from gpr3d.core.warmup import wait
+
+    wait(group)
+
+
 def kernels():
     """The plain (scalar) adjoint and the forward operator."""
+    if "scalar" not in _CACHE:
+        _after_warmup("scalar")
+        _CACHE["scalar"] = True
     return adjoint, forward
 
 
@@ -339,6 +350,8 @@ def simd_adjoint(path: int = GATHER):
     """
     key = ("simd", path)
     if key not in _CACHE:
+        _after_warmup("simd")
+
         def run(*args, _path=path):
             return adjoint_simd(*args, _path)
 
@@ -461,6 +474,8 @@ def tiled_adjoint(path: int, fold: bool = False):
     for the SIMD one), or None where it does not build."""
     key = ("tiled", path, fold)
     if key not in _CACHE:
+        _after_warmup("tiled")
+
         def run(*args, _path=path, _fold=fold):
             return adjoint_tiled(*args, _path, _fold)
 

@@ -287,8 +287,19 @@ class BackProjection:
         padded[:, : self.n_samples] = data
         args = list(self._kernel_args(xs, ys))
         path = _kernels.read_path() if self.gather is None else (_kernels.GATHER if self.gather else _kernels.LOADS)
-        simd = _kernels.simd_adjoint(path) if self.simd else None
-        if simd is not None:
+        # only the kernel that runs is built (each is seconds of compilation on a machine's first run): the tiled
+        # one where there is an aperture, else the untiled SIMD one; either falls back to the scalar depth loop
+        # where the SIMD loop does not build here
+        simd_path = path if self.simd else 0
+        tiled = simd = None
+        if self.tan_ap > 0 and self.tiled:
+            tiled = _kernels.tiled_adjoint(simd_path, with_fold)
+            if tiled is None and simd_path:
+                simd_path, tiled = 0, _kernels.tiled_adjoint(0, with_fold)
+        elif simd_path:
+            simd = _kernels.simd_adjoint(path)
+            simd_path = path if simd is not None else 0
+        if simd_path:
             from gpr3d.migration._simd import W
 
             nd = self.grid.nd
@@ -299,8 +310,6 @@ class BackProjection:
             extra = -nd % W
             args[5] = np.r_[np.full(extra, self.depth[0]), self.depth].astype(np.float32)
             args[6] = np.r_[np.full(extra, self.slow[0]), self.slow].astype(np.float32)
-        tiled = (_kernels.tiled_adjoint(path if simd is not None else 0, with_fold) if self.tan_ap > 0 and self.tiled
-                 else None)
         if tiled is not None:
             # the cost follows the aperture: tiles of columns visit only the traces whose cone reaches them
             mid = (0.5 * (self.tx[:, :2] + self.rx[:, :2])).astype(np.float32)

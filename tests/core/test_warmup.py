@@ -1,0 +1,154 @@
+"""gpr3d.core.warmup: the record of the background compilation, its lock, and the wait for it."""
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from gpr3d.core import warmup
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "nc"))
+    monkeypatch.setenv("GPR3D_WARMUP", "1")
+    return tmp_path / "nc"
+
+
+def test_the_record_lives_in_numba_s_cache_and_lists_the_groups_done(cache):
+    assert warmup.record_dir() == cache
+    k = warmup.key()
+    assert len(k) == 16 and int(k, 16) >= 0 and warmup.key() == k
+    assert warmup.done() == set()
+    warmup.mark_done("tiled")
+    warmup.mark_done("simd")
+    warmup.mark_done("tiled")
+    assert warmup.done() == {"tiled", "simd"} == warmup.done(k)
+    assert json.loads((cache / f"gpr3d-warm-{k}.json").read_text()) == {"done": ["simd", "tiled"]}
+    (cache / f"gpr3d-warm-{k}.json").write_text("{not json")
+    assert warmup.done() == set()  # a damaged record: nothing counts as done
+    (cache / f"gpr3d-warm-{k}.json").write_text("[1, 2]")
+    assert warmup.done() == set()
+
+
+def test_without_numba_cache_dir_the_record_sits_beside_the_kernels(monkeypatch):
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    import gpr3d.migration._kernels as kernels
+
+    assert warmup.record_dir() == Path(kernels.__file__).resolve().parent / "__pycache__"
+
+
+def test_the_key_follows_the_kernels_sources_versions_and_threads(cache, monkeypatch, tmp_path):
+    k = warmup.key()
+    pkg = tmp_path / "pkg"
+    for rel in {f for files in warmup.GROUPS.values() for f in files}:
+        (pkg / rel).parent.mkdir(parents=True, exist_ok=True)
+        (pkg / rel).write_bytes((warmup._PKG / rel).read_bytes())
+    monkeypatch.setattr(warmup, "_PKG", pkg)
+    assert warmup.key() == k  # the same sources: the same key
+    (pkg / "migration" / "_simd.py").write_text((pkg / "migration" / "_simd.py").read_text() + "\n# edited\n")
+    k2 = warmup.key()
+    assert k2 != k
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "7")
+    assert warmup.key() not in (k, k2)
+    monkeypatch.setattr("gpr3d.__version__", "9.9.9")
+    assert warmup.key() not in (k, k2)
+
+
+def test_enabled_by_the_environment(monkeypatch):
+    monkeypatch.setenv("GPR3D_WARMUP", "1")
+    monkeypatch.delenv("NUMBA_DISABLE_JIT", raising=False)
+    assert warmup.enabled()
+    monkeypatch.setenv("GPR3D_WARMUP", "0")
+    assert not warmup.enabled()
+    monkeypatch.setenv("GPR3D_WARMUP", "1")
+    monkeypatch.setenv("NUMBA_DISABLE_JIT", "1")
+    assert not warmup.enabled()
+
+
+def test_one_lock_at_a_time_and_a_dead_holder_s_lock_is_cleared(cache):
+    assert warmup.running() is None
+    assert warmup.claim()
+    assert warmup.running() == os.getpid()
+    assert not warmup.claim()  # held by a live process
+    warmup.release()
+    assert warmup.running() is None and warmup.claim()
+    warmup.release()
+    # a lock left by a process that died: cleared, and claimable again
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    _, lock = warmup._paths()
+    lock.write_text(str(dead.pid))
+    assert warmup.running() is None and not lock.exists()
+    lock.write_text("garbage")
+    assert warmup.running() is None and warmup.claim()
+    warmup.release()
+    warmup.release()  # twice: nothing to remove, no error
+
+
+def test_a_zombie_holder_is_not_running(cache):
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:  # exited, not yet reaped: a zombie
+        with open(f"/proc/{child.pid}/stat") as f:
+            if f.read().rsplit(")", 1)[1].split()[0] == "Z":
+                break
+        time.sleep(0.02)
+    _, lock = warmup._paths()
+    lock.parent.mkdir(parents=True)
+    lock.write_text(str(child.pid))
+    assert warmup.running() is None
+    child.wait()
+
+
+def test_wait_returns_at_once_when_done_when_none_runs_for_itself_and_when_off(cache, monkeypatch):
+    assert warmup.wait("tiled") == 0.0  # no warm-up
+    assert warmup.claim()  # this process is the warm-up: it does not wait for itself
+    assert warmup.wait("tiled") == 0.0
+    warmup.release()
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        _, lock = warmup._paths()
+        lock.write_text(str(sleeper.pid))
+        warmup.mark_done("tiled")
+        assert warmup.wait("tiled") == 0.0  # done already
+        monkeypatch.setenv("GPR3D_WARMUP", "0")
+        assert warmup.wait("simd") == 0.0  # warm-ups off: the caller compiles
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+
+
+def test_wait_lasts_until_the_group_is_done_or_the_warm_up_ends(cache):
+    from gpr3d.core.timing import collect
+
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        _, lock = warmup._paths()
+        lock.parent.mkdir(parents=True)
+        lock.write_text(str(sleeper.pid))
+        said = []
+        threading.Timer(0.6, warmup.mark_done, args=("simd",)).start()
+        with collect(compile_times=False) as t:
+            waited = warmup.wait("simd", log=said.append)
+        assert 0.5 <= waited < 30
+        assert said == ["waiting for the background compilation of gpr3d's simd kernels (once per machine)"]
+        assert t.seconds["compile (background warm-up)"] == pytest.approx(waited, abs=0.05)
+        # another group: the warm-up ends (its process dies) before it is done
+        threading.Timer(0.6, sleeper.kill).start()
+        waited = warmup.wait("scalar")
+        assert 0.5 <= waited < 30 and "scalar" not in warmup.done()
+        # and a wait that runs out
+        sleeper2 = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+        lock.write_text(str(sleeper2.pid))
+        assert 0.3 <= warmup.wait("scalar", timeout_s=0.3) < 10
+        sleeper2.kill()
+        sleeper2.wait()
+    finally:
+        sleeper.kill()
+        sleeper.wait()
