@@ -101,6 +101,7 @@ MODULES = {
                        "tests/detection/test_augment.py"],
     "detection.augment": ["tests/detection/test_augment.py"],
     "core.timing": ["tests/core/test_timing.py"],
+    "core.warmup": ["tests/core/test_warmup.py", "tests/cli/test_warm_cli.py", "-k", "not first_reconstruct"],
 }
 
 

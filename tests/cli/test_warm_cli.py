@@ -58,10 +58,11 @@ def test_the_warm_up_builds_each_group_not_done_in_order_and_lets_go_of_the_lock
 
     monkeypatch.setattr(_warm, "build", build)
     monkeypatch.setattr(os, "nice", lambda n: built.append(("nice", n)))
-    warmup.mark_done("simd")
+    monkeypatch.setattr(warmup, "GROUPS", {"tiled": (), "other": (), "third": ()})
+    warmup.mark_done("other")
     assert _warm.main() == 0
-    assert built == [("nice", 10), "tiled", "scalar"]
-    assert warmup.done() == {"tiled", "simd", "scalar"} and warmup.running() is None
+    assert built == [("nice", 10), "tiled", "third"]
+    assert warmup.done() == {"tiled", "other", "third"} and warmup.running() is None
     # a warm-up already running: this one does nothing
     built.clear()
     warmup._paths()[0].unlink()
@@ -84,9 +85,17 @@ def test_the_warm_up_builds_each_group_not_done_in_order_and_lets_go_of_the_lock
     assert _warm.main() == 0 and built == []
 
 
-def test_an_unknown_group_is_refused():
+def test_an_unknown_group_is_refused_and_tiled_builds_the_tiled_kernel(cache, monkeypatch):
+    from gpr3d.migration import _kernels
+
     with pytest.raises(ValueError, match="no kernel group 'fast'"):
         _warm.build("fast")
+    asked = []
+    monkeypatch.setattr(_kernels, "tiled_adjoint", lambda path, fold=False: asked.append((path, fold)))
+    monkeypatch.setattr(_kernels, "read_path", lambda: 7)
+    _warm.build("tiled")
+    assert asked == [(7, True)]
+    assert list(warmup.GROUPS) == ["tiled"]
 
 
 @pytest.mark.slow

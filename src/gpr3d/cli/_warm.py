@@ -31,24 +31,9 @@ def build(group: str) -> None:
     """Compile one group's kernels (on inputs of a few voxels: numba keeps the machine code in its cache)."""
     from gpr3d.migration import _kernels
 
-    path = _kernels.read_path()
-    if group == "tiled":
-        _kernels.tiled_adjoint(path, True)
-    elif group == "simd":
-        _kernels.simd_adjoint(path)
-    elif group == "scalar":
-        import numpy as np
-
-        from gpr3d.core.grid import Grid3D
-        from gpr3d.migration.operator import BackProjection
-
-        one = np.zeros((1, 3))
-        op = BackProjection(Grid3D(0.0, 0.0, 0.0, 0.1, 0.1, 0.1, 1, 1, 2), one, one, dt_s=1e-10, n_samples=4,
-                            eps_r=4.0)
-        op.simd = False  # (no aperture: untiled) the scalar adjoint, then the forward operator
-        op.forward(op.adjoint(np.zeros((1, 4), np.float32)))
-    else:
+    if group != "tiled":
         raise ValueError(f"no kernel group {group!r}")
+    _kernels.tiled_adjoint(_kernels.read_path(), True)  # (the fold is an argument: one build for both)
 
 
 def main() -> int:

@@ -28,10 +28,11 @@ from pathlib import Path
 __all__ = ["GROUPS", "enabled", "key", "record_dir", "done", "mark_done", "claim", "release", "running", "wait"]
 
 _PKG = Path(__file__).resolve().parents[1]
-_MIGRATION = ("migration/_kernels.py", "migration/_simd.py", "core/raypath.py")
-#: the kernel groups, in the order the warm-up compiles them, each with the sources it depends on: the tiled
-#: back projection (any aperture), the untiled SIMD one (no aperture), the scalar one and the forward operator
-GROUPS = {"tiled": _MIGRATION, "simd": _MIGRATION, "scalar": _MIGRATION}
+#: the kernel groups, in the order the warm-up compiles them, each with the sources it depends on: the tiled back
+#: projection, which every migration with an aperture (reconstruct's default) runs. The rarer kernels (no aperture,
+#: the forward operator) compile on their first call: compiled in the background they would take a core from the
+#: command that started the warm-up, which measured slower for it (benchmarks/results/bench_stages.md)
+GROUPS = {"tiled": ("migration/_kernels.py", "migration/_simd.py", "core/raypath.py")}
 
 
 def enabled() -> bool:
@@ -157,7 +158,7 @@ def release(k: str | None = None) -> None:
 def wait(group: str, *, timeout_s: float = 900.0, poll_s: float = 0.05, log=None) -> float:
     """Wait while a background warm-up is compiling ``group``; returns the seconds waited (0 when it is done,
     or no warm-up runs, or warm-ups are off: then the caller compiles as usual)."""
-    if not enabled():
+    if not enabled() or group not in GROUPS:
         return 0.0
     k = key()
     if group in done(k) or running(k) in (None, os.getpid()):  # (the warm-up itself does not wait for itself)

@@ -238,9 +238,6 @@ def _after_warmup(group: str) -> None:
 
 def kernels():
     """The plain (scalar) adjoint and the forward operator."""
-    if "scalar" not in _CACHE:
-        _after_warmup("scalar")
-        _CACHE["scalar"] = True
     return adjoint, forward
 
 
@@ -350,8 +347,6 @@ def simd_adjoint(path: int = GATHER):
     """
     key = ("simd", path)
     if key not in _CACHE:
-        _after_warmup("simd")
-
         def run(*args, _path=path):
             return adjoint_simd(*args, _path)
 
