@@ -657,9 +657,21 @@ def _synthetic_stage(out: Path, cfg: DemoConfig, log) -> dict:
 
 
 def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=print) -> dict:
-    """Run the demo into ``out_dir`` and return the summary (also written to ``summary.json``)."""
-    cfg = config or DemoConfig()
-    out = Path(out_dir)
+    """Run the demo into ``out_dir`` and return the summary (also written to ``summary.json``); where its time
+    went, stage by stage (:mod:`gpr3d.core.timing`), is printed at the end and written to ``timings.json``."""
+    from gpr3d.core.timing import collect, format_table
+
+    with collect() as times:
+        summary = _run_demo(Path(out_dir), config or DemoConfig(), log)
+    rows = times.rows()
+    summary["timings_s"] = dict(rows)
+    atomic_write_text(Path(out_dir) / "timings.json", json.dumps(times.to_dict(), indent=1))
+    atomic_write_text(Path(out_dir) / "summary.json", json.dumps(summary, indent=2, default=float))
+    log(format_table(rows, title="where the demo's time went (seconds; 'compile': numba, once per machine)"))
+    return summary
+
+
+def _run_demo(out: Path, cfg: DemoConfig, log) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "config.json", json.dumps({"gpr3d": __version__, "config": asdict(cfg)}, indent=2))
     summary: dict = {"gpr3d": __version__, "python": platform.python_version(), "stages": {}}

@@ -200,6 +200,16 @@ def test_demo_end_to_end(tmp_path):
         assert 0 <= pg["right_kind"] <= pg["found_iou50"] <= 9 and sum(pg["kinds"].values()) == pg["n_detections"]
     pose = summary["stages"]["pose"]  # the fused path beats chained odometry that a gap and gross errors break
     assert {"pose_fused.tum", "pose_vo_alone.tum", "pose_truth.tum", "pose_paths.png"} <= names
+    # where its time went: each of its stages, the library's inside them, adding up to its wall time
+    times = json.loads((tmp_path / "d" / "timings.json").read_text())
+    demo_rows = [k for k in times["stages"] if k.startswith("demo")]
+    assert demo_rows == ["demo 1: real recording", "demo 2: synthetic B-scan", "demo 3: random-motion survey",
+                         "demo 4: reconstruction", "demo 5-6: detection, depths, masked migration", "demo 7: pose",
+                         "demo: report"]
+    assert {"migrate", "targets", "figures", "network"} <= set(times["stages"])
+    assert sum(times["stages"].values()) == pytest.approx(times["wall_s"], abs=1e-3)
+    assert summary["timings_s"] == pytest.approx(times["stages"], abs=1e-6)
+    assert "where the demo's time went" in r.stdout and r.stdout.rstrip().splitlines()[-1].split()[0] == "total"
     assert pose["path_m"] > 12 and pose["vo_rejected"] >= pose["vo_outliers"] > 0
     if "fused_ape_m" in pose:
         assert pose["fused_ape_m"] < 0.005 * pose["path_m"] and pose["fused_ape_m"] < 0.5 * pose["vo_alone_ape_m"]

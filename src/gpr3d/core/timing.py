@@ -1,10 +1,11 @@
 """Where a command's time goes: named stages, timed where they run, gathered by whoever asks.
 
-A library function marks its stages with :func:`stage` (``with stage("migrate"): ...``); that costs
-two clock reads and nothing is kept unless someone is collecting. A caller that wants the figures
-opens :func:`collect` around the work and reads the seconds per stage from it afterwards. Stages
-may nest: a stage's seconds are its own, less those of the stages inside it, so the rows add up
-to the time collected (the rest is ``other``). Numba's compilations, where they happen (the kernels
+A library function marks its stages with :func:`stage` (``with stage("migrate"): ...``); nothing
+is timed or kept unless someone is collecting. A caller that wants the figures opens :func:`collect`
+around the work and reads the seconds per stage from it afterwards; collections may nest (``gpr3d
+--timings`` around ``gpr3d demo``, which keeps its own), and each sees every stage run inside it.
+Stages may nest: a stage's seconds are its own, less those of the stages inside it, so the rows add
+up to the time collected (the rest is ``other``). Numba's compilations, where they happen (the kernels
 are cached on disk after the first run), are counted in a ``compile`` row of their own and taken
 out of the stage that triggered them.
 """
@@ -16,9 +17,9 @@ import os
 import time
 from contextlib import contextmanager
 
-__all__ = ["StageTimes", "stage", "collect", "process_age_s", "format_table"]
+__all__ = ["StageTimes", "stage", "collect", "process_age_s", "age_from_proc", "format_table"]
 
-_ACTIVE: contextvars.ContextVar = contextvars.ContextVar("gpr3d_stage_times", default=None)
+_ACTIVE: contextvars.ContextVar = contextvars.ContextVar("gpr3d_stage_times", default=())
 
 
 class StageTimes:
@@ -80,22 +81,21 @@ class StageTimes:
 @contextmanager
 def stage(name: str):
     """Time the block as stage ``name`` for whoever is collecting (nothing is kept when no one is)."""
-    times = _ACTIVE.get()
-    if times is None:
-        yield
-        return
-    times._enter(name)
+    active = _ACTIVE.get()
+    for times in active:
+        times._enter(name)
     try:
         yield
     finally:
-        times._leave()
+        for times in reversed(active):
+            times._leave()
 
 
 class _CompileCounter:
     """Numba's outermost ``numba:compile`` events, their seconds moved into the ``compile`` row."""
 
     def __init__(self, times: StageTimes, clock):
-        self.times, self.clock, self.depth, self.start = times, clock, 0, 0.0
+        self.times, self.clock, self.depth, self.start = times, clock, 0, None
 
     def on_start(self, event):
         if self.depth == 0:
@@ -116,7 +116,7 @@ def _compile_listener(times: StageTimes, clock):
         from numba.core import event
     except ImportError:  # pragma: no cover - numba is a dependency
         return None, None
-    listener = type("CompileListener", (_CompileCounter, event.Listener), {})(times, clock)
+    listener = type("_Listener", (_CompileCounter, event.Listener), {})(times, clock)
     event.register("numba:compile", listener)
     return event, listener
 
@@ -128,18 +128,28 @@ def collect(*, compile_times: bool = True, clock=time.perf_counter):
     ``compile_times``: count numba's compilations in their own row (imports numba when it is installed).
     """
     times = StageTimes(clock)
-    token = _ACTIVE.set(times)
+    token = _ACTIVE.set(_ACTIVE.get() + (times,))
     event, listener = _compile_listener(times, clock) if compile_times else (None, None)
     t0 = clock()
     try:
         yield times
     finally:
-        times.wall_s = clock() - t0
-        while times._open:  # a stage left open by an exception still counts
-            times._leave()
-        if listener is not None:
-            event.unregister("numba:compile", listener)
-        _ACTIVE.reset(token)
+        try:
+            times.wall_s = clock() - t0
+            while times._open:  # a stage left open by an exception still counts
+                times._leave()
+        finally:  # whatever the clock did, the collection ends here
+            if listener is not None:
+                event.unregister("numba:compile", listener)
+            _ACTIVE.reset(token)
+
+
+def age_from_proc(stat: str, uptime: str, ticks_per_s: float) -> float:
+    """A process's age (s) from its ``/proc/PID/stat`` line, ``/proc/uptime`` and the clock ticks per second:
+    the machine's uptime less the process's start (field 22, in ticks since boot). The process's name, in
+    parentheses, may itself hold spaces and parentheses: the fields are counted after its last ``)``."""
+    start_ticks = int(stat.rsplit(")", 1)[1].split()[19])  # fields 3.. after the name: field 22 is the 20th
+    return float(uptime.split()[0]) - start_ticks / ticks_per_s
 
 
 def process_age_s() -> float | None:
@@ -147,11 +157,10 @@ def process_age_s() -> float | None:
     imports' share of a command's time when asked at its start."""
     try:
         with open("/proc/self/stat", encoding="ascii") as f:
-            fields = f.read().rsplit(")", 1)[1].split()
+            stat = f.read()
         with open("/proc/uptime", encoding="ascii") as f:
-            uptime = float(f.read().split()[0])
-        ticks = os.sysconf("SC_CLK_TCK")
-        return max(uptime - int(fields[19]) / ticks, 0.0)
+            uptime = f.read()
+        return age_from_proc(stat, uptime, os.sysconf("SC_CLK_TCK"))
     except (OSError, ValueError, IndexError, AttributeError):
         return None
 

@@ -75,10 +75,10 @@ def stretch_traces(processed: np.ndarray, factor: float) -> np.ndarray:
     proc = np.asarray(processed, dtype=np.float32)
     n = proc.shape[0]
     m = max(2, int(round((n - 1) * factor)) + 1)
-    src = np.clip(np.arange(m, dtype=np.float64) / factor, 0.0, n - 1.0)
-    i0 = np.minimum(np.floor(src).astype(np.int64), n - 2) if n > 1 else np.zeros(m, np.int64)
-    w = (src - i0).astype(np.float32)[:, None]
+    src = np.minimum(np.arange(m) / factor, n - 1.0)  # the last column may fall past the record: its last trace
+    i0 = np.floor(src).astype(np.int64)
     i1 = np.minimum(i0 + 1, n - 1)
+    w = (src - i0).astype(np.float32)[:, None]
     return (proc[i0] * (1.0 - w) + proc[i1] * w).astype(np.float32)
 
 
