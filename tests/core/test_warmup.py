@@ -28,12 +28,24 @@ def test_the_record_lives_in_numba_s_cache_and_lists_the_groups_done(cache):
     warmup.mark_done("tiled")
     warmup.mark_done("other")
     warmup.mark_done("tiled")
-    assert warmup.done() == {"tiled", "other"} == warmup.done(k)
+    assert warmup.done() == {"tiled", "other"}
     assert json.loads((cache / f"gpr3d-warm-{k}.json").read_text()) == {"done": ["other", "tiled"]}
     (cache / f"gpr3d-warm-{k}.json").write_text("{not json")
     assert warmup.done() == set()  # a damaged record: nothing counts as done
     (cache / f"gpr3d-warm-{k}.json").write_text("[1, 2]")
     assert warmup.done() == set()
+    for bad in ("{}", '{"done": null}', '{"done": 3}'):
+        (cache / f"gpr3d-warm-{k}.json").write_text(bad)
+        assert warmup.done() == set(), bad
+
+
+def test_the_record_s_folder_is_made_with_its_parents(tmp_path, monkeypatch):
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "a" / "b" / "c"))
+    warmup.mark_done("tiled")
+    assert warmup.done() == {"tiled"}
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "d" / "e"))
+    assert warmup.claim() and (tmp_path / "d" / "e").is_dir()
+    warmup.release()
 
 
 def test_without_numba_cache_dir_the_record_sits_beside_the_kernels(monkeypatch):
@@ -55,14 +67,30 @@ def test_the_key_follows_the_kernels_sources_versions_and_threads(cache, monkeyp
     k2 = warmup.key()
     assert k2 != k
     monkeypatch.setenv("NUMBA_NUM_THREADS", "7")
-    assert warmup.key() not in (k, k2)
+    k3 = warmup.key()
+    assert k3 not in (k, k2)
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "")
+    empty = warmup.key()
+    monkeypatch.delenv("NUMBA_NUM_THREADS")
+    assert warmup.key() == empty != k3  # unset counts as empty
     monkeypatch.setattr("gpr3d.__version__", "9.9.9")
-    assert warmup.key() not in (k, k2)
+    assert warmup.key() not in (k, k2, empty)
+    # a source that is missing counts by its name
+    monkeypatch.setattr(warmup, "GROUPS", {"g": ("migration/none.py",)})
+    a = warmup.key()
+    monkeypatch.setattr(warmup, "GROUPS", {"g": ("migration/other.py",)})
+    assert warmup.key() != a
 
 
 def test_enabled_by_the_environment(monkeypatch):
-    monkeypatch.setenv("GPR3D_WARMUP", "1")
+    monkeypatch.delenv("GPR3D_WARMUP", raising=False)
     monkeypatch.delenv("NUMBA_DISABLE_JIT", raising=False)
+    assert warmup.enabled()  # on unless turned off
+    for v in ("", "0"):
+        monkeypatch.setenv("NUMBA_DISABLE_JIT", v)
+        assert warmup.enabled()
+    monkeypatch.delenv("NUMBA_DISABLE_JIT")
+    monkeypatch.setenv("GPR3D_WARMUP", "1")
     assert warmup.enabled()
     monkeypatch.setenv("GPR3D_WARMUP", "0")
     assert not warmup.enabled()
@@ -89,6 +117,44 @@ def test_one_lock_at_a_time_and_a_dead_holder_s_lock_is_cleared(cache):
     assert warmup.running() is None and warmup.claim()
     warmup.release()
     warmup.release()  # twice: nothing to remove, no error
+
+
+def test_asking_whether_the_holder_lives_does_not_signal_it(cache):
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        _, lock = warmup._paths()
+        lock.parent.mkdir(parents=True)
+        lock.write_text(str(sleeper.pid))
+        for _ in range(3):
+            assert warmup.running() == sleeper.pid
+        time.sleep(0.2)
+        assert sleeper.poll() is None  # still running: asked with signal 0, never sent one
+        lock.write_text("1")  # process 1 is always there
+        assert warmup.running() == 1
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+
+
+def test_someone_else_s_process_counts_as_alive_and_a_name_holding_parentheses_is_read_right(cache, monkeypatch):
+    def refused(pid, sig):
+        raise PermissionError(1, "not yours")
+
+    monkeypatch.setattr(warmup.os, "kill", refused)
+    assert warmup._alive(os.getpid())
+    monkeypatch.undo()
+    # a process whose name reads like a zombie's state: 'a) Z (b' (the state is after the last ')')
+    code = "open('/proc/self/comm', 'w').write('a) Z (b'); import time; time.sleep(60)"
+    odd = subprocess.Popen([sys.executable, "-c", code])
+    try:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and "Z (b" not in open(f"/proc/{odd.pid}/stat").read():
+            time.sleep(0.02)
+        assert warmup._state(odd.pid) in ("S", "R") and warmup._alive(odd.pid)
+    finally:
+        odd.kill()
+        odd.wait()
+    assert warmup._state(odd.pid) is None  # reaped: gone
 
 
 def test_a_zombie_holder_is_not_running(cache):
@@ -139,10 +205,10 @@ def test_wait_lasts_until_the_group_is_done_or_the_warm_up_ends(cache, monkeypat
         lock.parent.mkdir(parents=True)
         lock.write_text(str(sleeper.pid))
         said = []
-        threading.Timer(0.6, warmup.mark_done, args=("simd",)).start()
+        threading.Timer(0.3, warmup.mark_done, args=("simd",)).start()
         with collect(compile_times=False) as t:
             waited = warmup.wait("simd", log=said.append)
-        assert 0.5 <= waited < 30
+        assert 0.25 <= waited < 1.0  # polled often (every 0.05 s by default), not after a second
         assert said == ["waiting for the background compilation of gpr3d's simd kernels (once per machine)"]
         assert t.seconds["compile (background warm-up)"] == pytest.approx(waited, abs=0.05)
         # another group: the warm-up ends (its process dies) before it is done

@@ -19,8 +19,7 @@ def start_background(command: str):
 
     if command not in COMMANDS or not warmup.enabled():
         return None
-    k = warmup.key()
-    if set(warmup.GROUPS) <= warmup.done(k) or warmup.running(k) is not None:
+    if set(warmup.GROUPS) <= warmup.done() or warmup.running() is not None:
         return None
     return subprocess.Popen([sys.executable, "-m", "gpr3d.cli._warm"], stdin=subprocess.DEVNULL,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
@@ -42,18 +41,17 @@ def main() -> int:
 
     if not warmup.enabled() or not warmup.claim():
         return 0
-    k = warmup.key()
     try:
         try:
             os.nice(10)  # the user's command comes first
         except OSError:  # pragma: no cover - a platform without nice
             pass
         for group in warmup.GROUPS:
-            if group not in warmup.done(k):
+            if group not in warmup.done():
                 build(group)
-                warmup.mark_done(group, k)
+                warmup.mark_done(group)
     finally:
-        warmup.release(k)
+        warmup.release()
     return 0
 
 

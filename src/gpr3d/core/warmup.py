@@ -37,27 +37,22 @@ GROUPS = {"tiled": ("migration/_kernels.py", "migration/_simd.py", "core/raypath
 
 def enabled() -> bool:
     """False when ``GPR3D_WARMUP`` is ``0`` (or numba's JIT is off: nothing to compile)."""
-    return os.environ.get("GPR3D_WARMUP", "1") != "0" and os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0")
+    return os.environ.get("GPR3D_WARMUP") != "0" and os.environ.get("NUMBA_DISABLE_JIT", "0") in ("", "0")
 
 
 def key() -> str:
-    """What the compiled code depends on: versions, CPU and the kernels' sources (16 hex digits)."""
+    """What the compiled code depends on: versions, CPU, thread count and the kernels' sources (16 hex digits)."""
+    import llvmlite.binding as llb
+    import numba
+
     from gpr3d import __version__
 
-    try:
-        import llvmlite.binding as llb
-        import numba
-
-        cpu, nb = llb.get_host_cpu_name(), numba.__version__
-    except ImportError:  # pragma: no cover - numba is a dependency
-        cpu, nb = platform.machine(), "none"
-    h = hashlib.sha256("|".join([__version__, nb, platform.python_version(), cpu,
-                                 os.environ.get("NUMBA_NUM_THREADS", "")]).encode())
+    parts = [__version__, numba.__version__, platform.python_version(), llb.get_host_cpu_name(),
+             os.environ.get("NUMBA_NUM_THREADS", "")]
+    h = hashlib.sha256(json.dumps(parts).encode())
     for rel in sorted({f for files in GROUPS.values() for f in files}):
-        try:
-            h.update((_PKG / rel).read_bytes())
-        except OSError:
-            h.update(rel.encode())
+        path = _PKG / rel
+        h.update(path.read_bytes() if path.is_file() else rel.encode())
     return h.hexdigest()[:16]
 
 
@@ -68,47 +63,51 @@ def record_dir() -> Path:
     return Path(env) if env else _PKG / "migration" / "__pycache__"
 
 
-def _paths(k: str | None = None) -> tuple[Path, Path]:
-    d = record_dir()
-    k = k or key()
+def _paths() -> tuple[Path, Path]:
+    d, k = record_dir(), key()
     return d / f"gpr3d-warm-{k}.json", d / f"gpr3d-warm-{k}.lock"
 
 
-def done(k: str | None = None) -> set:
+def done() -> set:
     """The groups already compiled into the cache (an unreadable record counts as none)."""
-    rec, _ = _paths(k)
+    rec, _ = _paths()
     try:
-        return set(json.loads(rec.read_text()).get("done", []))
-    except (OSError, ValueError, AttributeError):
+        return set(json.loads(rec.read_text())["done"])
+    except (OSError, ValueError, KeyError, TypeError):
         return set()
 
 
-def mark_done(group: str, k: str | None = None) -> None:
+def mark_done(group: str) -> None:
     """Add ``group`` to the record (written whole: a reader sees the old record or the new one)."""
     from gpr3d.core.atomic import atomic_write_text
 
-    rec, _ = _paths(k)
+    rec, _ = _paths()
     rec.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(rec, json.dumps({"done": sorted(done(k) | {group})}))
+    atomic_write_text(rec, json.dumps({"done": sorted(done() | {group})}))
+
+
+def _state(pid: int) -> str | None:
+    """The process's state letter from ``/proc`` (``Z``: a zombie, finished but not yet reaped), or None."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as f:
+            return f.read().rsplit(")", 1)[1].split()[0]  # after the name, which may hold ')'
+    except (OSError, IndexError):
+        return None
 
 
 def _alive(pid: int) -> bool:
     try:
-        os.kill(pid, 0)
+        os.kill(pid, 0)  # signal 0: only asks whether the process exists
     except ProcessLookupError:
         return False
-    except PermissionError:  # someone else's process: alive
-        return True
-    try:  # a finished child not yet reaped is a zombie: not running
-        with open(f"/proc/{pid}/stat", encoding="ascii") as f:
-            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except (OSError, IndexError):
-        return True
+    except PermissionError:  # someone else's process: it exists
+        pass
+    return _state(pid) != "Z"
 
 
-def running(k: str | None = None) -> int | None:
+def running() -> int | None:
     """The process id of a warm-up running now, or None (a lock left by a dead one is removed)."""
-    _, lock = _paths(k)
+    _, lock = _paths()
     try:
         text = lock.read_text()
     except OSError:
@@ -126,11 +125,11 @@ def running(k: str | None = None) -> int | None:
     return None
 
 
-def claim(k: str | None = None) -> bool:
+def claim() -> bool:
     """Take the lock for a new warm-up (True), unless one runs or the record's folder cannot be written (False).
     The lock holds this process's id until :func:`release`."""
-    _, lock = _paths(k)
-    running(k)  # a dead warm-up's lock is cleared first
+    _, lock = _paths()
+    running()  # a dead warm-up's lock is cleared first
     tmp = lock.with_name(f"{lock.name}.{os.getpid()}")
     try:
         lock.parent.mkdir(parents=True, exist_ok=True)
@@ -146,9 +145,9 @@ def claim(k: str | None = None) -> bool:
     return True
 
 
-def release(k: str | None = None) -> None:
+def release() -> None:
     """Remove the lock (the warm-up is over)."""
-    _, lock = _paths(k)
+    _, lock = _paths()
     try:
         lock.unlink()
     except OSError:
@@ -160,8 +159,7 @@ def wait(group: str, *, timeout_s: float = 900.0, poll_s: float = 0.05, log=None
     or no warm-up runs, or warm-ups are off: then the caller compiles as usual)."""
     if not enabled() or group not in GROUPS:
         return 0.0
-    k = key()
-    if group in done(k) or running(k) in (None, os.getpid()):  # (the warm-up itself does not wait for itself)
+    if group in done() or running() in (None, os.getpid()):  # (the warm-up itself does not wait for itself)
         return 0.0
     from gpr3d.core.timing import stage
 
@@ -170,7 +168,7 @@ def wait(group: str, *, timeout_s: float = 900.0, poll_s: float = 0.05, log=None
     t0 = time.monotonic()
     with stage("compile (background warm-up)"):
         while time.monotonic() - t0 < timeout_s:
-            if group in done(k) or running(k) is None:
+            if group in done() or running() is None:
                 break
             time.sleep(poll_s)
     return time.monotonic() - t0
