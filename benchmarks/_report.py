@@ -7,6 +7,17 @@ import sys
 from pathlib import Path
 
 
+def threads_from_argv(default: int = 2) -> None:
+    """Set ``NUMBA_NUM_THREADS`` from ``--threads N`` on the command line (default ``default``): numba reads it when
+    it is first imported, so a benchmark calls this before importing numba or gpr3d's kernels."""
+    import os
+
+    for i, a in enumerate(sys.argv):
+        if a == "--threads" and i + 1 < len(sys.argv):
+            os.environ["NUMBA_NUM_THREADS"] = sys.argv[i + 1]
+    os.environ.setdefault("NUMBA_NUM_THREADS", str(default))
+
+
 def cpu_name() -> str:
     """The host CPU as LLVM names it (e.g. ``znver4``, ``sapphirerapids``), via numba."""
     try:

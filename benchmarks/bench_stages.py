@@ -27,12 +27,13 @@ from __future__ import annotations
 
 import os
 import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _report import cpu_name, threads_from_argv, write_table  # noqa: E402
 
 if __name__ == "__main__":  # numba reads the thread count at import
-    for i, a in enumerate(sys.argv):
-        if a == "--threads" and i + 1 < len(sys.argv):
-            os.environ["NUMBA_NUM_THREADS"] = sys.argv[i + 1]
-    os.environ.setdefault("NUMBA_NUM_THREADS", "2")
+    threads_from_argv()
 
 import argparse  # noqa: E402
 import json  # noqa: E402
@@ -40,13 +41,10 @@ import math  # noqa: E402
 import subprocess  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _report import cpu_name, write_table  # noqa: E402
 from bench_reconstruct import cart_path  # noqa: E402
 from eval_reconstruction import EPS, F, NS, OFFSET, WINDOW, scene  # noqa: E402
 

@@ -11,26 +11,11 @@ from gpr3d.core.survey import Survey
 from gpr3d.detection.augment import Augment, augment_record, stretch_labels, stretch_traces
 from gpr3d.detection.data import random_window
 from gpr3d.detection.windows import WindowConfig, make_window, prepare, record_scale, rows_interval, window_targets
+from tests.detection.test_data_by_hand import Scripted
 
 
-class Draws:
-    """A generator answering uniform() and normal() from lists, recording the arguments."""
-
-    def __init__(self, uniforms=(), randoms=(), integers=()):
-        self.uniforms, self.randoms, self.integers_ = list(uniforms), list(randoms), list(integers)
-        self.calls = []
-
-    def uniform(self, lo, hi):
-        self.calls.append(("uniform", lo, hi))
-        return self.uniforms.pop(0)
-
-    def random(self):
-        self.calls.append(("random",))
-        return self.randoms.pop(0)
-
-    def integers(self, *args):
-        self.calls.append(("integers", *args))
-        return self.integers_.pop(0)
+class Draws(Scripted):
+    """The scripted generator of the window tests, answering normal() too (a constant 0.25 everywhere)."""
 
     def normal(self, loc, sd, size):
         self.calls.append(("normal", loc, sd, size))
