@@ -149,3 +149,22 @@ def test_pseudo3d_refuses_what_it_cannot_do(grid_lines):
     turned = grid_lines.positions_xyz @ np.array([[c, s_, 0], [-s_, c, 0], [0, 0, 1]])
     with pytest.raises(InvalidDataError, match="pseudo-3D needs lines along x or y; line 0 .* 30 deg"):
         reconstruct(grid_lines.replace(positions_xyz=turned), ReconstructConfig(eps_r=EPS, method="pseudo3d"))
+
+
+def test_reconstruct_names_its_stages_for_whoever_times_them(tmp_path):
+    """Under gpr3d.core.timing.collect: prepare, grid, migrate, (noise map with boxes), fold, envelope, targets, in
+    that order, each once; writing adds the volume and the VTI. Nothing is collected without a collector."""
+    from gpr3d.core.timing import collect
+
+    s = _profile([_crossing(0.6, 0.3)], n=101, length=1.0)
+    cfg = ReconstructConfig(spacing_m=0.02, max_depth_m=0.5)
+    with pytest.warns(GeometryWarning), collect(compile_times=False) as t:
+        rec = reconstruct(s, cfg)
+    assert list(t.seconds) == ["prepare", "grid", "migrate", "fold", "envelope", "targets"]
+    assert set(t.counts.values()) == {1}
+    with pytest.warns(GeometryWarning), collect(compile_times=False) as t:
+        reconstruct(s, cfg, boxes=[[10, 1e-9, 90, 8e-9]])
+    assert list(t.seconds) == ["prepare", "grid", "migrate", "noise map", "fold", "envelope", "targets"]
+    with collect(compile_times=False) as t:
+        write_reconstruction(rec, tmp_path / "out", source="line")
+    assert list(t.seconds) == ["write volume", "write vti"]
