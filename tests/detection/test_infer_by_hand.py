@@ -140,6 +140,15 @@ class _KindNet(_Net):
         return out
 
 
+def test_detect_names_its_stages_for_whoever_times_them(spies):
+    from gpr3d.core.timing import collect
+
+    det = infer.Detector(_Net(), WindowConfig(equalise=True))
+    with collect(compile_times=False) as t:
+        det.detect(_survey(), score_threshold=0.45)
+    assert list(t.seconds) == ["windows", "network", "merge", "apexes"] and set(t.counts.values()) == {1}
+
+
 def test_detect_names_each_kept_box_by_its_place_in_the_windows(spies):
     det = infer.Detector(_KindNet(), WindowConfig(equalise=False))
     assert det.kinds == ["rebar", "pvc_pipe", "void"]

@@ -195,3 +195,19 @@ def test_the_read_path_override_beats_the_cpu(monkeypatch):
     assert _kernels.read_path() == GATHER
     monkeypatch.setenv("GPR3D_GATHER", "auto")
     assert _kernels.read_path() == LOADS
+
+
+def test_building_the_tiled_kernel_first_waits_for_a_background_warm_up_of_it(monkeypatch):
+    """(gpr3d.core.warmup) the tiled kernel is the group the background warm-up compiles: building it waits for
+    that group, once; the untiled ones wait for nothing."""
+    import gpr3d.core.warmup as warmup
+
+    waited = []
+    monkeypatch.setattr(warmup, "wait", lambda group: waited.append(group) or 0.0)
+    monkeypatch.setattr(_kernels, "_probe", lambda fn, *extra: fn)
+    _kernels.tiled_adjoint(0, False)
+    _kernels.tiled_adjoint(0, False)  # built: no second wait
+    assert waited == ["tiled"]
+    _kernels.simd_adjoint(LOADS)
+    _kernels.kernels()
+    assert waited == ["tiled"]
