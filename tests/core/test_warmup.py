@@ -120,7 +120,10 @@ def test_one_lock_at_a_time_and_a_dead_holder_s_lock_is_cleared(cache):
 
 
 def test_asking_whether_the_holder_lives_does_not_signal_it(cache):
-    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    # (hang-up restored to its default, which ends the process: under nohup it would be ignored)
+    code = "import signal, time; signal.signal(signal.SIGHUP, signal.SIG_DFL); time.sleep(60)"
+    sleeper = subprocess.Popen([sys.executable, "-c", code])
+    time.sleep(0.5)  # its handler set
     try:
         _, lock = warmup._paths()
         lock.parent.mkdir(parents=True)
