@@ -3,7 +3,7 @@
 numba compiles a kernel on its first call and keeps the machine code in its disk cache, so
 every later process loads it in a fraction of a second; the first call on a fresh install
 pays the compilation (tens of seconds for the migration kernels on two cores). gpr3d's
-command line starts one background process per machine (:mod:`gpr3d.cli._warm`) that calls
+command line starts one background process per machine (``gpr3d.cli._warm``) that calls
 the kernels on tiny inputs, group by group, while the command itself reads, processes and
 detects. A process that reaches a kernel of a group the warm-up is still compiling waits for
 it (:func:`wait`) and then loads the group from the cache, instead of compiling it a second
