@@ -663,10 +663,12 @@ def run_demo(out_dir="gpr3d_demo", config: DemoConfig | None = None, *, log=prin
 
     with collect() as times:
         summary = _run_demo(Path(out_dir), config or DemoConfig(), log)
+    out = Path(out_dir)
     rows = times.rows()
     summary["timings_s"] = dict(rows)
-    atomic_write_text(Path(out_dir) / "timings.json", json.dumps(times.to_dict(), indent=1))
-    atomic_write_text(Path(out_dir) / "summary.json", json.dumps(summary, indent=2, default=float))
+    atomic_write_text(out / "timings.json", json.dumps(times.to_dict(), indent=1))
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2, default=float))
+    log(f"wrote {len(list(out.iterdir()))} files to {out}/ in {summary['total_s']:.1f} s")
     log(format_table(rows, title="where the demo's time went (seconds; 'compile': numba, once per machine)"))
     return summary
 
@@ -713,6 +715,4 @@ def _run_demo(out: Path, cfg: DemoConfig, log) -> dict:
             "3D view: open it in a browser)")
 
     summary["total_s"] = time.perf_counter() - t_start
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2, default=float))
-    log(f"wrote {len(list(out.iterdir()))} files to {out}/ in {summary['total_s']:.1f} s")
     return summary

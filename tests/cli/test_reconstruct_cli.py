@@ -195,11 +195,11 @@ def test_timings_name_every_stage_of_reconstruct_and_add_up(pipe_survey, tmp_pat
     assert all(v >= 0 for v in stages.values())
     assert sum(stages.values()) == pytest.approx(doc["wall_s"], abs=1e-5 * len(stages))
     assert doc["counts"]["migrate"] == 1 and doc["counts"]["figures"] == 1
-    # the migration's own clock (config.json) spans the migrate stage and any compilation inside it
+    # the migration's own clock (config.json) is read outside each stage's, so it spans the stage (and any
+    # compilation inside it): an inequality that holds on any machine (1e-6: the file's rounding)
     own = json.loads((tmp_path / "out" / "config.json").read_text())["timings_s"]
-    assert stages["migrate"] + stages.get("compile", 0.0) >= own["migrate"] - 1e-3
-    assert stages["migrate"] <= own["migrate"] + 1e-3
-    assert stages["prepare"] == pytest.approx(own["prepare"], abs=1e-3)
+    assert stages["migrate"] + stages.get("compile", 0.0) <= own["migrate"] + 1e-6
+    assert 0 < stages["prepare"] <= own["prepare"] + 1e-6
     assert 0 < doc["startup_s"] < 120
     lines = r.stderr.strip().splitlines()
     assert lines[0] == f"gpr3d reconstruct: where the time went ({doc['host_cpu']})"
@@ -210,3 +210,7 @@ def test_timings_name_every_stage_of_reconstruct_and_add_up(pipe_survey, tmp_pat
                 "--out", tmp_path / "out2", "--eps-r", "6")
     assert r.returncode == 1 and r.stderr.startswith("gpr3d: error: --timings /proc/t.json: cannot write in /proc")
     assert len(r.stderr.strip().splitlines()) == 1 and not (tmp_path / "out2").exists()
+    r = run_cli("--timings", tmp_path, "reconstruct", d / "line.h5", "--poses", d / "walk.tum",
+                "--out", tmp_path / "out3", "--eps-r", "6")
+    assert r.returncode == 1 and r.stderr == f"gpr3d: error: --timings {tmp_path}: is a folder; give a file name " \
+        "(e.g. timings.json)\n" and not (tmp_path / "out3").exists()

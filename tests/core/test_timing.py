@@ -167,8 +167,8 @@ def test_a_real_compile_is_counted():
     with collect() as t:
         with stage("work"):
             assert total(np.ones(4)) == 8.0
-    assert t.counts["compile"] == 1 and t.seconds["compile"] > 0
-    assert t.seconds["work"] >= 0 and t.seconds["work"] < t.seconds["compile"] + 1.0
+    assert t.counts["compile"] == 1 and t.seconds["compile"] > 0 and t.seconds["work"] >= 0
+    assert t.seconds["work"] + t.seconds["compile"] <= t.wall_s
 
 
 def test_the_table_lists_each_stage_with_its_share():

@@ -11,6 +11,7 @@ import argparse
 import importlib
 import sys
 import warnings
+from pathlib import Path
 
 from gpr3d import __version__
 from gpr3d.cli._common import _check_marks_args, _Parser
@@ -62,23 +63,17 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 def _timed(args, argv) -> int:
     """Run the command inside :func:`gpr3d.core.timing.collect`; write its stages to ``args.timings``."""
     import json
-    import platform
 
-    from gpr3d.cli._common import _writable
+    from llvmlite import binding
+
     from gpr3d.core.atomic import atomic_write_text
     from gpr3d.core.timing import collect, format_table, process_age_s
 
-    _writable(args.timings, "--timings")
     startup = process_age_s()
     with collect() as times:
         rc = int(args.func(args) or 0)
     rows = ([("start-up", startup)] if startup is not None else []) + times.rows()
-    try:
-        from llvmlite import binding
-
-        cpu = binding.get_host_cpu_name()
-    except Exception:  # noqa: BLE001 - the name is a label; a missing llvmlite must not fail the command
-        cpu = platform.processor() or platform.machine()
+    cpu = binding.get_host_cpu_name()  # (LLVM's name, as numba's; llvmlite comes with numba)
     doc = {"gpr3d": __version__, "command": ["gpr3d"] + list(sys.argv[1:] if argv is None else argv),
            "host_cpu": cpu, "startup_s": startup, **times.to_dict(), "counts": times.counts}
     atomic_write_text(args.timings, json.dumps(doc, indent=1))
@@ -96,6 +91,12 @@ def main(argv=None) -> int:
     try:
         if hasattr(args, "marks_every"):
             _check_marks_args(args)  # before any file is read
+        if args.timings:  # its file checked before any work
+            from gpr3d.cli._common import _writable
+
+            if Path(args.timings).is_dir():
+                raise GPR3DError(f"--timings {args.timings}: is a folder; give a file name (e.g. timings.json)")
+            _writable(args.timings, "--timings")
         from gpr3d.cli._warm import start_background
 
         start_background(args.command)  # the numba kernels compiled beside the command, once per machine
