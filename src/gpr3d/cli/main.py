@@ -19,7 +19,7 @@ from gpr3d.core.errors import GPR3DError
 
 #: the commands' modules, in the order ``gpr3d --help`` lists them
 COMMANDS = ["info", "show", "migrate", "process", "convert", "grid", "cscan", "simulate", "pose", "dataset",
-            "reconstruct", "detect", "depth", "run", "train", "evaluate", "demo"]
+            "reconstruct", "detect", "depth", "run", "live", "replay", "train", "evaluate", "demo"]
 
 EXAMPLES = """\
 examples:
@@ -31,6 +31,7 @@ examples:
   gpr3d convert LINE01.DZT line01.sgy          (.h5 gpr3d HDF5, .sgy/.segy SEG-Y, .png figure)
   gpr3d detect LINE01.DZT --out det.json --overlay det.png
   gpr3d reconstruct survey.h5 --mask detect --out rec
+  gpr3d live tcp://cart.local:5600 --out site --eps-r 9 --until-idle 10
   gpr3d pose fuse --imu imu.csv --odometry cam.tum --wheel wheel.csv --rig rig.json --out antenna.tum
 """
 

@@ -28,13 +28,21 @@ class Grid3D:
 
     @classmethod
     def covering(cls, positions_xyz, *, depth_m: float, spacing_m: float, depth_spacing_m: float | None = None,
-                 pad_m: float = 0.0, d0: float | None = None) -> "Grid3D":
-        """A grid over the horizontal extent of ``positions_xyz`` (plus ``pad_m``) down to ``depth_m``."""
+                 pad_m: float = 0.0, d0: float | None = None, lattice: bool = False) -> "Grid3D":
+        """A grid over the horizontal extent of ``positions_xyz`` (plus ``pad_m``) down to ``depth_m``; with
+        ``lattice`` its corner is rounded down to whole multiples of ``spacing_m`` (``x0 = i * spacing_m``) and it
+        reaches at least as far."""
         p = np.asarray(positions_xyz, float)
         lo = p[:, :2].min(axis=0) - pad_m
         hi = p[:, :2].max(axis=0) + pad_m
         dd = depth_spacing_m or spacing_m
         start = dd if d0 is None else d0
+        if lattice:
+            first = np.floor(lo / spacing_m).astype(int)
+            last = np.ceil(hi / spacing_m).astype(int)
+            return cls(float(first[0] * spacing_m), float(first[1] * spacing_m), float(start), spacing_m, spacing_m,
+                       dd, int(last[0] - first[0]) + 1, int(last[1] - first[1]) + 1,
+                       int(np.floor((depth_m - start) / dd)) + 1)
         n = np.floor((hi - lo) / spacing_m).astype(int) + 1
         nd = int(np.floor((depth_m - start) / dd)) + 1
         return cls(float(lo[0]), float(lo[1]), float(start), spacing_m, spacing_m, dd, int(n[0]), int(n[1]), nd)

@@ -14,11 +14,20 @@ class ReconstructConfig:
     depth_spacing_m: float | None = None
     max_depth_m: float | None = None  #: None: what the time window reaches
     pad_m: float = 0.1
+    #: voxel centres on whole multiples of the spacing (the grid's corner rounded down to them): the lattice live
+    #: mode's tiles share, so that a batch image lands on the same voxels
+    lattice: bool = False
     aperture_deg: float | None = 50.0
     obliquity: bool = True
     spreading: bool = True
     time_zero: str = "peak"  #: "peak", "first_break" or "none" (data already start at time zero)
+    #: time zero given (s after the first sample): the traces are cut there instead of at an estimate (what live
+    #: mode fixes from its first traces, so that a batch run can repeat it)
+    time_zero_s: float | None = None
     remove_background: bool = True
+    #: None: the mean trace of the whole survey is removed; a number of traces: the mean over a centred moving
+    #: window of that many (live mode's background: a trace is final once half a window has followed it)
+    background_window: int | None = None
     normalize: str = "sqrt_fold"  #: divide the image by sqrt(fold) ("sqrt_fold"), by the fold ("fold") or not ("none")
     threshold: float = 0.3
     min_line_m: float = 0.3

@@ -27,14 +27,15 @@ from gpr3d.core.units import C0, velocity_from_eps_r
 from gpr3d.migration.config import ReconstructConfig
 from gpr3d.migration.masking import box_mask, check_boxes, image_envelope
 from gpr3d.migration.operator import BackProjection, antenna_positions
+from gpr3d.processing.timezero import shift_traces
 from gpr3d.migration.targets import (
     extract_profile_targets,
     extract_targets,
     targets_to_json,
 )
 
-__all__ = ["ProfileFrame", "Reconstruction", "ReconstructConfig", "check_site_settings", "reconstruct",
-           "write_reconstruction"]
+__all__ = ["ProfileFrame", "Reconstruction", "ReconstructConfig", "check_site_settings", "normalise_by_fold",
+           "reconstruct", "time_zero_search_s", "volume_targets", "write_reconstruction"]
 
 
 @dataclass
@@ -129,6 +130,11 @@ def check_config(cfg: ReconstructConfig, names: dict | None = None) -> None:
             bad(name, f"{'<' if hi_open else '<='} {hi}")
 
     number("eps_r", none_ok=True, lo=1.0)
+    number("time_zero_s", none_ok=True, lo=0.0)
+    if cfg.background_window is not None and (isinstance(cfg.background_window, bool)
+                                              or not isinstance(cfg.background_window, int)
+                                              or cfg.background_window < 2):
+        bad("background_window", "a whole number of traces >= 2 (or None: the whole survey)")
     for name in ("spacing_m", "depth_spacing_m", "max_depth_m"):
         number(name, positive=True, none_ok=name != "spacing_m")
     number("pad_m", lo=0.0)
@@ -138,7 +144,7 @@ def check_config(cfg: ReconstructConfig, names: dict | None = None) -> None:
     number("min_target_depth_m", none_ok=True, lo=0.0)
     number("taper_traces", lo=0.0)
     number("air_gap_m", lo=0.0)
-    for name in ("obliquity", "spreading", "remove_background"):
+    for name in ("obliquity", "spreading", "remove_background", "lattice"):
         if not isinstance(getattr(cfg, name), bool):
             bad(name, "true or false")
     if cfg.time_zero not in ("peak", "first_break", "none"):
@@ -198,13 +204,24 @@ def _prepare(survey, cfg):
         raise InvalidDataError("the survey has no antenna positions: give --poses (a TUM file, one pose per trace)")
     s = survey
     cut_s = 0.0
-    if cfg.time_zero != "none":
-        s = s.time_zero(method=cfg.time_zero, search_s=min(s.time_window_s / 4, 10e-9))
+    if cfg.time_zero_s is not None:
+        if cfg.time_zero_s >= s.time_window_s:
+            raise InvalidDataError(f"time_zero_s {cfg.time_zero_s:g} s lies beyond the record "
+                                   f"({s.time_window_s:g} s)")
+        s = s.replace(data=shift_traces(s.data, cfg.time_zero_s / s.dt_s), t0_s=0.0)
+        cut_s = float(cfg.time_zero_s) - survey.t0_s
+    elif cfg.time_zero != "none":
+        s = s.time_zero(method=cfg.time_zero, search_s=time_zero_search_s(s))
         # the estimate, to a fraction of a sample: the traces were shifted by it, not by whole samples
         cut_s = float(s.history[-1]["result"]["t0_s"]) - s.t0_s
     if cfg.remove_background:
-        s = s.remove_background()
+        s = s.remove_background(window_traces=cfg.background_window)
     return s, cut_s
+
+
+def time_zero_search_s(survey) -> float:
+    """How far into the record time zero's direct-wave peak is looked for (s)."""
+    return min(survey.time_window_s / 4, 10e-9)
 
 
 def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log=None) -> "Reconstruction":
@@ -249,7 +266,7 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s - s.t0_s - 2 * cfg.air_gap_m / C0) * 0.95
     with stage("grid"):
         grid = Grid3D.covering(positions, depth_m=depth, spacing_m=cfg.spacing_m,
-                               depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m)
+                               depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m, lattice=cfg.lattice)
         if frame is not None:
             grid = replace(grid, y0=0.0, ny=1)
         check_grid_fits(grid)  # (site tiles too: the whole volume is put together in memory)
@@ -288,21 +305,12 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     t_mig = time.perf_counter() - t
     if want_fold:
         with stage("fold"):
-            floor = 0.05 * float(fold.max())
-            norm = np.maximum(fold, floor)
-            norm = np.sqrt(norm) if cfg.normalize == "sqrt_fold" else norm
-            image = image / norm
-            if noise_map is not None:
-                noise_map = noise_map / norm
+            image, noise_map = normalise_by_fold(image, fold, cfg.normalize, noise_map)
     with stage("envelope"):
         env = image_envelope(image)
-    # the band cleared around each line found: half a wavelength (the width of a pipe's image), at least two cells
-    tol = 2.0 * max(grid.dx, grid.dy)
-    band = max(2 * tol, 0.5 * v / survey.frequency_hz) if survey.frequency_hz else None
     with stage("targets"):
         if frame is None:
-            targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band,
-                                      min_depth_m=cfg.min_target_depth_m)
+            targets = volume_targets(env, grid, cfg, v, survey.frequency_hz)
         else:
             targets = extract_profile_targets(env[:, 0, :], grid.x, grid.depth, threshold=cfg.threshold,
                                               min_line_m=cfg.min_line_m, min_depth_m=cfg.min_target_depth_m)
@@ -315,6 +323,25 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
                           eps_r=float(eps), config=asdict(cfg), n_traces=s.n_traces,
                           timings_s={"prepare": t_prep, "migrate": t_mig},
                           updates_per_s=s.n_traces * grid.size / t_mig if t_mig > 0 else None, frame=frame)
+
+
+def normalise_by_fold(image, fold, how: str, noise_map=None, *, fold_max: float | None = None):
+    """``image`` (and ``noise_map``) divided by the fold (``how="fold"``) or its square root (``"sqrt_fold"``), the
+    fold held at least 5 % of its largest (``fold_max``, default ``fold.max()``) so that the grid's thinly covered
+    edges are not blown up. Returns ``(image, noise_map)``."""
+    floor = 0.05 * float(fold.max() if fold_max is None else fold_max)
+    norm = np.maximum(fold, floor)
+    norm = np.sqrt(norm) if how == "sqrt_fold" else norm
+    return image / norm, None if noise_map is None else noise_map / norm
+
+
+def volume_targets(envelope, grid, cfg: ReconstructConfig, v_m_s: float, frequency_hz: float | None) -> list:
+    """The targets of a 3D image's envelope as :func:`reconstruct` extracts them (``cfg``'s threshold, shortest
+    line and shallowest depth; the band cleared around each line found: half a wavelength, at least two cells)."""
+    tol = 2.0 * max(grid.dx, grid.dy)
+    band = max(2 * tol, 0.5 * v_m_s / frequency_hz) if frequency_hz else None
+    return extract_targets(envelope, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band,
+                           min_depth_m=cfg.min_target_depth_m)
 
 
 def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s) -> "Reconstruction":
@@ -335,7 +362,7 @@ def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s) -> "Reconstruction"
     v = velocity_from_eps_r(eps)
     depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s - s.t0_s - 2 * cfg.air_gap_m / C0) * 0.95
     grid = Grid3D.covering(s.positions_xyz, depth_m=depth, spacing_m=cfg.spacing_m,
-                           depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m)
+                           depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m, lattice=cfg.lattice)
     check_grid_fits(grid)
     aperture = cfg.aperture_deg if cfg.aperture_deg is not None else 89.0
     t = time.perf_counter()

@@ -19,6 +19,8 @@ _WHERE = {
     "write_reconstruction_folder": "reconstruction", "write_result": "reconstruction", "FusedPoses": "poses",
     "fuse_recordings": "poses", "poses_at_traces": "poses", "write_rig_recordings": "poses",
     "RunConfig": "run", "run_pipeline": "run", "write_report": "report",
+    "LiveConfig": "live", "open_source": "live", "run_live": "live",
+    "replay_to_tcp": "replay", "replay_to_dzt": "replay",
 }
 
 __all__ = sorted(_WHERE)

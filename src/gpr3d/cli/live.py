@@ -1,0 +1,84 @@
+"""``gpr3d live``: migrate traces as they arrive and keep the targets current while the survey runs."""
+
+from __future__ import annotations
+
+from gpr3d.cli._common import _eps_argument, _in_range, _migration_engine, _out_folder, _reconstruct_defaults
+from gpr3d.core.errors import GPR3DError
+
+NAME = "live"
+HELP = "live 3D: migrate traces as a radar delivers them, targets refreshed while surveying"
+EPILOG = ("examples:\n  gpr3d live tcp://127.0.0.1:5600 --out site --eps-r 9\n"
+          "  gpr3d live LINE.DZT --poses LINE.tum --out site --eps-r 6 --until-idle 10\n\n"
+          "SOURCE: tcp://HOST:PORT (the trace stream of docs/CONVENTIONS.md: each trace with its pose), or a DZT\n"
+          "file the radar is writing with --poses, a TUM file written beside it. Refreshed while running:\n"
+          "OUT/live.json (traces, targets, detections); at the end: volume.h5, volume.vti, targets.json,\n"
+          "config.json (a batch 'gpr3d reconstruct' with its settings gives the same volume), detections.json.\n"
+          "The last line: N traces, R traces/s, lag L s (how long after the newest trace arrived the last\n"
+          "was migrated).")
+
+
+def add_arguments(sp):
+    rc = _reconstruct_defaults()
+    sp.add_argument("source", help="tcp://HOST:PORT, or a growing DZT file (with --poses)")
+    sp.add_argument("--out", required=True, help="output folder")
+    sp.add_argument("--poses", default=None, help="TUM trajectory beside a growing file (one pose per trace)")
+    sp.add_argument("--channel", type=int, default=0, help="channel of a multi-channel DZT (default 0)")
+    sp.add_argument("--offset", type=float, default=0.0, help="transmitter-receiver offset of a DZT's antenna (m)")
+    sp.add_argument("--eps-r", default=None, help="relative permittivity (default: the stream's header)")
+    sp.add_argument("--spacing", type=float, default=0.03, help="voxel size in metres (default 0.03)")
+    sp.add_argument("--depth-spacing", type=float, default=0.02, help="voxel height in metres (default 0.02)")
+    sp.add_argument("--max-depth", type=float, default=None, help="deepest voxel (m; default: the time window)")
+    sp.add_argument("--aperture", type=float, default=rc.aperture_deg,
+                    help=f"beam half-angle in degrees, in (0, 90) (default {rc.aperture_deg:g})")
+    sp.add_argument("--background-window", type=int, default=256,
+                    help="traces in the moving background window (default 256; a trace waits for half of them)")
+    sp.add_argument("--refresh", type=float, default=1.0, help="seconds between target refreshes (default 1)")
+    sp.add_argument("--until-idle", type=float, default=5.0,
+                    help="end once no trace has come for this many seconds (default 5; 0: only at the end mark)")
+    sp.add_argument("--no-detect", action="store_true", help="no hyperbola detection on the windows")
+    sp.add_argument("--weights", default=None, help="detector weights (default: the shipped model)")
+    sp.add_argument("--score", type=float, default=0.5, help="keep detections scoring at least this (0..1)")
+    sp.add_argument("--device", default="cpu", help="cpu (default), cuda, cuda:N")
+    sp.add_argument("--connect-timeout", type=float, default=10.0,
+                    help="seconds to keep trying to connect to a tcp:// source (default 10)")
+
+
+def run(args):
+    from gpr3d.migration.config import ReconstructConfig
+    from gpr3d.migration.reconstruct import check_config
+    from gpr3d.pipeline import LiveConfig, load_models, open_source, run_live
+
+    _out_folder(args.out, "live")
+    _in_range(args.refresh, "--refresh", 0.05, 3600, "seconds")
+    _in_range(args.until_idle, "--until-idle", 0, 86400, "seconds")
+    _in_range(args.connect_timeout, "--connect-timeout", 0, 86400, "seconds")
+    _in_range(args.offset, "--offset", 0, 10, "metres")
+    if not 0.0 <= args.score <= 1.0:
+        raise GPR3DError(f"--score must lie in 0..1, got {args.score}")
+    if not (0 < args.aperture < 90):
+        raise GPR3DError(f"--aperture must lie in (0, 90) degrees for live mode, got {args.aperture:g}")
+    if args.background_window < 2:
+        raise GPR3DError(f"--background-window must be at least 2 traces, got {args.background_window}")
+    eps = _eps_argument(args.eps_r)
+    if eps == "file":
+        eps = None  # the stream's header is the file's
+    rc = ReconstructConfig(eps_r=eps, spacing_m=args.spacing, depth_spacing_m=args.depth_spacing,
+                           max_depth_m=args.max_depth, aperture_deg=args.aperture,
+                           engine=_migration_engine(None, args.device), background_window=args.background_window,
+                           lattice=True)
+    check_config(rc, names={"spacing_m": "--spacing", "depth_spacing_m": "--depth-spacing",
+                            "max_depth_m": "--max-depth", "eps_r": "--eps-r"})
+    detector = None
+    if not args.no_detect:
+        detector, _ = load_models(detector=True, depth="none", weights=args.weights, device=args.device)
+    cfg = LiveConfig(reconstruct=rc, background_window=args.background_window, refresh_s=args.refresh,
+                     detect=not args.no_detect, score=args.score,
+                     until_idle_s=None if args.until_idle == 0 else args.until_idle, eps_r=eps)
+    source = open_source(args.source, poses=args.poses, channel=args.channel, offset_m=args.offset,
+                         connect_s=args.connect_timeout)
+    summary = run_live(source, args.out, cfg, detector=detector, log=print)
+    print(f"{summary.n_targets} targets, {summary.n_detections} detections; trace-to-target latency median "
+          f"{summary.latency_s['median']:.2f} s, max {summary.latency_s['max']:.2f} s; at most {summary.peak_tiles} "
+          f"tiles in memory; wrote {', '.join(summary.files)} to {args.out}/")
+    print(summary.line())
+    return 0

@@ -1,0 +1,78 @@
+"""``gpr3d replay``: feed a recording to live mode as a radar would, at a chosen rate."""
+
+from __future__ import annotations
+
+import math
+
+from gpr3d.cli._common import _in_range
+from gpr3d.core.errors import GPR3DError
+
+NAME = "replay"
+HELP = "replay a recording as a radar delivers it (a TCP trace stream, or a DZT file that grows)"
+EPILOG = ("examples:\n  gpr3d replay survey.h5 --poses path.tum --to tcp://127.0.0.1:5600 --rate 800\n"
+          "  gpr3d replay LINE.DZT --poses LINE.tum --to live/LINE.DZT --poses-out live/LINE.tum --speed 4\n\n"
+          "--rate: traces per second; --speed N: N times the recording's own rate (a DZT's scans per second).\n"
+          "To tcp://: serves the first client that connects (gpr3d live tcp://HOST:PORT).")
+
+
+def add_arguments(sp):
+    sp.add_argument("input", help="the recording (any gpr3d reads; a DZT for --to FILE.DZT)")
+    sp.add_argument("--poses", default=None, help="TUM trajectory, one pose per trace")
+    sp.add_argument("--to", required=True, help="tcp://HOST:PORT (a server), or a .DZT file to grow")
+    sp.add_argument("--poses-out", default=None, help="with --to FILE.DZT: the TUM file the poses grow into")
+    sp.add_argument("--rate", type=float, default=None, help="traces per second")
+    sp.add_argument("--speed", type=float, default=None, help="times the recording's own trace rate")
+    sp.add_argument("--loops", type=int, default=1, help="play the recording this many times (tcp only)")
+    sp.add_argument("--loop-shift", type=float, default=0.0,
+                    help="move each further pass this far along x (m): a long survey from a short one")
+    sp.add_argument("--accept-timeout", type=float, default=60.0, help="seconds to wait for a client (tcp)")
+
+
+def _rate(args, own_rate):
+    if (args.rate is None) == (args.speed is None):
+        raise GPR3DError("give --rate (traces per second) or --speed (times the recording's own rate)")
+    if args.rate is not None:
+        _in_range(args.rate, "--rate", 1e-3, 1e7, "traces per second")
+        return args.rate
+    _in_range(args.speed, "--speed", 1e-3, 1e5, "a factor")
+    if not own_rate:
+        raise GPR3DError("--speed: the recording gives no trace rate; give --rate")
+    return args.speed * own_rate
+
+
+def run(args):
+    from gpr3d.pipeline import attach_trajectory, read_recording, replay_to_dzt, replay_to_tcp
+
+    if args.loops < 1:
+        raise GPR3DError(f"--loops must be at least 1, got {args.loops}")
+    if not math.isfinite(args.loop_shift):
+        raise GPR3DError("--loop-shift must be a finite number of metres")
+    if args.to.startswith("tcp://"):
+        host, _, port = args.to[6:].rpartition(":")
+        if not host or not port.isdigit() or not 0 <= int(port) < 65536:
+            raise GPR3DError(f"--to {args.to}: expected tcp://HOST:PORT with a port in 0..65535")
+        survey = read_recording(args.input)
+        if args.poses:
+            survey = attach_trajectory(survey, args.poses, source=str(args.input))
+        own = None
+        if survey.timestamps_s is not None and survey.n_traces > 1:
+            span = float(survey.timestamps_s[-1] - survey.timestamps_s[0])
+            own = (survey.n_traces - 1) / span if span > 0 else None
+        rate = _rate(args, own)
+        n = replay_to_tcp(survey, int(port), host=host, rate=rate, loops=args.loops, loop_shift_m=args.loop_shift,
+                          accept_s=args.accept_timeout,
+                          on_listen=lambda p: print(f"serving {survey.n_traces * args.loops} traces on "
+                                                    f"tcp://{host}:{p} at {rate:g} traces/s", flush=True),
+                          log=print)
+        print(f"sent {n} traces")
+        return 0
+    if not args.to.lower().endswith(".dzt") or not str(args.input).lower().endswith(".dzt"):
+        raise GPR3DError("--to a file replays a DZT recording into a .DZT file (or give --to tcp://HOST:PORT)")
+    if args.loops != 1:
+        raise GPR3DError("--loops is for tcp:// replays")
+    from gpr3d.io.dzt import read_dzt_header
+
+    rate = _rate(args, read_dzt_header(args.input)["scans_per_s"])
+    n = replay_to_dzt(args.input, args.to, rate=rate, poses=args.poses, poses_out=args.poses_out)
+    print(f"wrote {n} traces to {args.to} at {rate:g} traces/s")
+    return 0

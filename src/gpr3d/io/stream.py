@@ -1,0 +1,283 @@
+"""Traces that arrive while a survey runs: a TCP stream of traces with their poses, and recordings that grow.
+
+The stream format (``docs/CONVENTIONS.md``, "Live trace stream"), little-endian:
+
+- once, the header: the 8 bytes ``GPR3DTR1``, a ``uint32`` length, then that many bytes of UTF-8 JSON with
+  ``n_samples`` (int), ``dt_s`` (s) and optionally ``frequency_hz``, ``offset_m`` (transmitter-receiver, m),
+  ``eps_r``, ``name``;
+- per trace: the 4 bytes ``TRCE``, a ``uint64`` trace index (0, 1, 2, ... in order), a ``float64`` time (s),
+  seven ``float64`` of the antenna's pose (``x y z qw qx qy qz``: world metres, the orientation as a unit
+  quaternion), then ``n_samples`` ``float32`` samples;
+- at the end (optional: a closed connection ends the stream too), the 4 bytes ``END!``.
+
+:class:`StreamDecoder` takes bytes as they come and gives whole traces; :func:`encode_header`,
+:func:`encode_trace` and :data:`END` write the format. :class:`GrowingDZT` and :class:`GrowingTUM` read a DZT
+recording and a TUM trajectory that a radar and a pose filter are still writing: each ``poll()`` gives what has
+been completed since the last.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gpr3d.core.errors import FormatError
+
+__all__ = ["END", "HEADER_MAGIC", "GrowingDZT", "GrowingTUM", "StreamDecoder", "StreamHeader", "Trace",
+           "encode_header", "encode_trace"]
+
+HEADER_MAGIC = b"GPR3DTR1"
+TRACE_TAG = b"TRCE"
+END = b"END!"
+_TRACE = struct.Struct("<4sQd7d")  # tag, index, time, x y z qw qx qy qz
+MAX_HEADER_BYTES = 1 << 20
+MAX_SAMPLES = 1 << 20
+
+
+@dataclass(frozen=True)
+class StreamHeader:
+    """What every trace of a stream shares."""
+
+    n_samples: int
+    dt_s: float
+    frequency_hz: float | None = None
+    offset_m: float = 0.0
+    eps_r: float | None = None
+    name: str = "stream"
+
+    def to_dict(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if v is not None}
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "stream") -> "StreamHeader":
+        if not isinstance(d, dict):
+            raise FormatError(where, "header JSON is not an object")
+        try:
+            n, dt = d["n_samples"], d["dt_s"]
+        except KeyError as exc:
+            raise FormatError(where, f"header lacks {exc.args[0]!r}") from None
+        if isinstance(n, bool) or not isinstance(n, int) or not 2 <= n <= MAX_SAMPLES:
+            raise FormatError(where, f"header n_samples must be a whole number in 2..{MAX_SAMPLES}, got {n!r}")
+
+        def number(key, value, *, lo=0.0, open_lo=True):
+            if value is None:
+                return None
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or value < lo or (open_lo and value == lo):
+                raise FormatError(where, f"header {key} must be a finite number {'>' if open_lo else '>='} {lo:g}, "
+                                         f"got {value!r}")
+            return float(value)
+
+        return cls(n_samples=n, dt_s=number("dt_s", dt), frequency_hz=number("frequency_hz", d.get("frequency_hz")),
+                   offset_m=number("offset_m", d.get("offset_m", 0.0), open_lo=False),
+                   eps_r=number("eps_r", d.get("eps_r"), lo=1.0, open_lo=False), name=str(d.get("name", "stream")))
+
+
+@dataclass
+class Trace:
+    """One trace of a stream: its index, time (s), pose ``[x y z qw qx qy qz]`` and samples."""
+
+    index: int
+    time_s: float
+    pose: np.ndarray
+    samples: np.ndarray
+
+
+def encode_header(header: StreamHeader) -> bytes:
+    """The stream's opening bytes."""
+    body = json.dumps(header.to_dict()).encode()
+    return HEADER_MAGIC + struct.pack("<I", len(body)) + body
+
+
+def encode_trace(index: int, time_s: float, pose, samples) -> bytes:
+    """One trace's bytes (``pose``: ``x y z qw qx qy qz``)."""
+    p = np.asarray(pose, dtype=np.float64).reshape(7)
+    return _TRACE.pack(TRACE_TAG, int(index), float(time_s), *p) + np.asarray(samples, "<f4").tobytes()
+
+
+@dataclass
+class StreamDecoder:
+    """Bytes in (:meth:`feed`), whole traces out; :class:`~gpr3d.core.errors.FormatError` names the first thing
+    that breaks the format (a wrong opening, a trace out of order, a non-finite sample or pose)."""
+
+    where: str = "stream"
+    header: StreamHeader | None = None
+    ended: bool = False
+    next_index: int = 0
+    _buf: bytearray = field(default_factory=bytearray)
+
+    def feed(self, data: bytes) -> list[Trace]:
+        if self.ended and data:
+            raise FormatError(self.where, "bytes after the end mark END!")
+        self._buf += data
+        out: list[Trace] = []
+        while True:
+            if self.header is None:
+                if len(self._buf) < 12:
+                    if self._buf and not HEADER_MAGIC.startswith(bytes(self._buf[:8])):
+                        raise FormatError(self.where, "does not open with GPR3DTR1: not a gpr3d trace stream")
+                    return out
+                if bytes(self._buf[:8]) != HEADER_MAGIC:
+                    raise FormatError(self.where, "does not open with GPR3DTR1: not a gpr3d trace stream")
+                (n,) = struct.unpack("<I", self._buf[8:12])
+                if n > MAX_HEADER_BYTES:
+                    raise FormatError(self.where, f"header of {n} bytes (at most {MAX_HEADER_BYTES})")
+                if len(self._buf) < 12 + n:
+                    return out
+                try:
+                    d = json.loads(bytes(self._buf[12:12 + n]).decode())
+                except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+                    raise FormatError(self.where, f"header is not JSON ({exc})") from None
+                self.header = StreamHeader.from_dict(d, self.where)
+                del self._buf[:12 + n]
+                continue
+            if len(self._buf) < 4:
+                return out
+            tag = bytes(self._buf[:4])
+            if tag == END:
+                self.ended = True
+                if len(self._buf) > 4:
+                    raise FormatError(self.where, "bytes after the end mark END!")
+                self._buf.clear()
+                return out
+            if tag != TRACE_TAG:
+                raise FormatError(self.where, f"trace {self.next_index}: expected TRCE or END!, got {tag!r}")
+            size = _TRACE.size + 4 * self.header.n_samples
+            if len(self._buf) < size:
+                return out
+            _, index, t, *pose = _TRACE.unpack_from(self._buf)
+            if index != self.next_index:
+                raise FormatError(self.where, f"trace index {index} where {self.next_index} was due (lost or "
+                                              "reordered traces)")
+            samples = np.frombuffer(bytes(self._buf[_TRACE.size:size]), "<f4").astype(np.float32)
+            pose = np.asarray(pose)
+            if not (np.all(np.isfinite(pose)) and math.isfinite(t)):
+                raise FormatError(self.where, f"trace {index}: its pose or time is not finite")
+            if abs(np.linalg.norm(pose[3:]) - 1.0) > 1e-3:
+                raise FormatError(self.where, f"trace {index}: its orientation is not a unit quaternion "
+                                              f"(norm {np.linalg.norm(pose[3:]):.4g})")
+            if not np.all(np.isfinite(samples)):
+                raise FormatError(self.where, f"trace {index}: non-finite samples")
+            out.append(Trace(int(index), float(t), pose, samples))
+            self.next_index += 1
+            del self._buf[:size]
+
+    def close(self) -> None:
+        """The connection closed: a trace cut short is an error; otherwise the stream has ended."""
+        if self._buf:
+            raise FormatError(self.where, f"ends inside a trace or header ({len(self._buf)} bytes left over)")
+        self.ended = True
+
+
+class GrowingDZT:
+    """A GSSI DZT file that a radar is still writing (channel ``channel``): :meth:`poll` gives the traces
+    completed since the last call, as :func:`gpr3d.io.dzt.read_dzt` reads them (binary zero taken off, the
+    first two samples, a counter and a mark word, replaced by the third). Until the header is there,
+    ``header`` is None and polls give nothing."""
+
+    def __init__(self, path, channel: int = 0):
+        self.path = Path(path)
+        self.channel = int(channel)
+        self.header: dict | None = None
+        self.n_read = 0
+
+    def _open_header(self) -> bool:
+        from gpr3d.io.dzt import HEADER_BYTES, read_dzt_header
+
+        try:
+            size = self.path.stat().st_size
+        except FileNotFoundError:
+            return False
+        if size < HEADER_BYTES:
+            return False
+        try:
+            hdr = read_dzt_header(self.path)
+        except FormatError as exc:
+            if "beyond the end" in str(exc) or "shorter than" in str(exc):
+                return False  # the headers are still being written
+            raise
+        if not 0 <= self.channel < hdr["n_channels"]:
+            raise FormatError(self.path, f"has {hdr['n_channels']} channel(s): no channel {self.channel}")
+        self.header = hdr
+        return True
+
+    @property
+    def dt_s(self) -> float:
+        return self.header["range_ns"] * 1e-9 / self.header["n_samples"]
+
+    def poll(self) -> np.ndarray:
+        """``(k, n_samples)`` float32: the whole traces written since the last poll (k may be 0)."""
+        if self.header is None and not self._open_header():
+            return np.zeros((0, 0), np.float32)
+        h = self.header
+        ns, nch, bits = h["n_samples"], h["n_channels"], h["bits"]
+        tb = ns * nch * bits // 8
+        size = self.path.stat().st_size
+        have = (size - h["data_offset"]) // tb
+        if have < self.n_read:
+            raise FormatError(self.path, f"shrank while being read ({have} whole traces, {self.n_read} read)")
+        k = int(have - self.n_read)
+        if k == 0:
+            return np.zeros((0, ns), np.float32)
+        dtype = {8: "<u1", 16: "<u2", 32: "<i4"}[bits]
+        zero = {8: 128.0, 16: 32768.0, 32: 0.0}[bits]
+        with open(self.path, "rb") as fh:
+            fh.seek(h["data_offset"] + self.n_read * tb)
+            raw = np.fromfile(fh, dtype=dtype, count=k * ns * nch)
+        if raw.size != k * ns * nch:
+            raise FormatError(self.path, "shrank while being read")
+        out = raw.reshape(k, nch, ns)[:, self.channel, :].astype(np.float32) - np.float32(zero)
+        if ns > 2:
+            out[:, :2] = out[:, 2:3]
+        self.n_read += k
+        return out
+
+
+class GrowingTUM:
+    """A TUM trajectory (``t tx ty tz qx qy qz qw`` per line) still being written: :meth:`poll` gives the rows of
+    the lines completed (ended by a newline) since the last call, as ``(k, 8)`` ``[t x y z qw qx qy qz]``."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self._offset = 0
+        self.n_read = 0
+        self._last_t = -math.inf
+
+    def poll(self) -> np.ndarray:
+        try:
+            with open(self.path, "rb") as fh:
+                fh.seek(self._offset)
+                chunk = fh.read()
+        except FileNotFoundError:
+            return np.zeros((0, 8))
+        end = chunk.rfind(b"\n")
+        if end < 0:
+            return np.zeros((0, 8))
+        self._offset += end + 1
+        rows = []
+        for line in chunk[:end].decode("utf-8", errors="replace").splitlines():
+            s = line.strip()
+            if not s or s.startswith("#"):
+                continue
+            parts = s.split()
+            try:
+                v = [float(x) for x in parts]
+            except ValueError:
+                raise FormatError(self.path, f"pose {self.n_read + len(rows)}: not numbers: {s[:60]!r}") from None
+            if len(v) != 8 or not all(map(math.isfinite, v)):
+                raise FormatError(self.path, f"pose {self.n_read + len(rows)}: expected 8 finite numbers "
+                                             f"(t tx ty tz qx qy qz qw), got {s[:60]!r}")
+            q = np.array([v[7], v[4], v[5], v[6]])
+            if np.linalg.norm(q) < 1e-9:
+                raise FormatError(self.path, f"pose {self.n_read + len(rows)}: a zero quaternion")
+            if v[0] < self._last_t:
+                raise FormatError(self.path, f"timestamps run backwards at pose {self.n_read + len(rows)}")
+            self._last_t = v[0]
+            rows.append([v[0], v[1], v[2], v[3], *(q / np.linalg.norm(q))])
+        self.n_read += len(rows)
+        return np.asarray(rows, dtype=float).reshape(-1, 8)

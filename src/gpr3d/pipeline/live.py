@@ -1,0 +1,638 @@
+"""Live mode: traces migrated as they arrive, targets refreshed while the survey runs (``gpr3d live``).
+
+A source gives traces with their poses as a radar writes them (:class:`TCPSource`: the trace stream of
+:mod:`gpr3d.io.stream`; :class:`FileSource`: a DZT recording and a TUM trajectory that grow).
+:class:`LiveReconstruction` takes them in batches:
+
+1. **time zero** is fixed once, from the first ``time_zero_traces`` traces (the direct-wave peak of their mean
+   trace, as ``reconstruct`` estimates it), and every trace is cut there;
+2. **background**: the mean over a centred moving window of ``background_window`` traces is taken off: a trace
+   is final once half a window has followed it (that many traces of delay);
+3. **migration**: each final trace is added once into the voxels its aperture reaches, on a lattice of tiles
+   (``tile_voxels`` a side, voxel centres on whole multiples of the spacing); the image and the fold are summed
+   per tile; tiles no recent trace can reach are written to ``OUT/tiles/`` and dropped from memory (read back if
+   the cart returns), so memory follows the cart, not the survey;
+4. **detection** runs on each window of raw traces as it fills (the shipped detector, ``--no-detect`` off);
+5. every ``refresh_s`` the targets of the tiles in memory are extracted and ``OUT/live.json`` (traces, rate, lag,
+   targets, detections) is rewritten atomically.
+
+At the end (the stream's end mark, or ``until_idle_s`` without a new trace) the volume over every antenna
+position is put together from the tiles and finished exactly as ``gpr3d reconstruct`` finishes its own (fold
+normalisation, envelope, targets): with the settings written to ``config.json`` (``time_zero_s``,
+``background_window``, ``lattice``) a batch ``reconstruct`` of the same traces gives the same volume, to float
+rounding.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import socket
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from gpr3d.core.atomic import atomic_write_text
+from gpr3d.core.errors import GPR3DError, InvalidDataError
+from gpr3d.core.grid import Grid3D
+from gpr3d.core.units import velocity_from_eps_r
+from gpr3d.io.stream import GrowingDZT, GrowingTUM, StreamDecoder, StreamHeader
+
+__all__ = ["FileSource", "LiveConfig", "LiveReconstruction", "LiveSummary", "TCPSource", "open_source", "run_live"]
+
+
+@dataclass
+class LiveConfig:
+    """Live mode's settings beside the migration's (:class:`~gpr3d.migration.config.ReconstructConfig`)."""
+
+    #: the migration's settings; live mode needs an aperture (it bounds what each trace reaches) and sets
+    #: ``time_zero_s``, ``background_window`` and ``lattice`` itself
+    reconstruct: object = None
+    background_window: int = 256  #: traces in the moving background window (a trace waits for half of them)
+    time_zero_traces: int = 64  #: traces time zero is estimated from
+    tile_voxels: int = 32  #: a tile's side in voxels
+    refresh_s: float = 1.0  #: how often the targets and ``live.json`` are refreshed (s)
+    detect: bool = True  #: run the detector on each window of traces as it fills
+    score: float = 0.5  #: the detector's score threshold
+    until_idle_s: float | None = 5.0  #: end once no trace has come for this long (None: only at the end mark)
+    max_batch: int = 4096  #: the most traces migrated in one go (a backlog is worked off in such batches)
+    final_volume_voxels: int = 200_000_000  #: put the final volume together only up to this size
+    eps_r: float | None = None  #: None: the stream's header's
+
+
+@dataclass
+class LiveSummary:
+    """What a live run did (also ``OUT/live.json``)."""
+
+    n_traces: int
+    wall_s: float
+    traces_per_s: float
+    lag_s: float  #: at the end: how long after the newest trace arrived the last was migrated
+    latency_s: dict  #: trace arrival -> refreshed targets: median and max over the refreshes
+    peak_tiles: int  #: the most tiles held in memory at once
+    n_targets: int
+    n_detections: int
+    files: list = field(default_factory=list)
+    final_volume: bool = True
+
+    def line(self) -> str:
+        return f"{self.n_traces} traces, {self.traces_per_s:.0f} traces/s, lag {self.lag_s:.2f} s"
+
+
+# -- sources -------------------------------------------------------------------------------------------------------
+
+class TCPSource:
+    """Traces with poses from a TCP server speaking the :mod:`gpr3d.io.stream` format (a radar's bridge, or
+    ``gpr3d replay --to tcp://...``). Connects on the first poll, trying again until ``connect_s`` have passed."""
+
+    def __init__(self, host: str, port: int, *, connect_s: float = 10.0):
+        self.host, self.port = host, int(port)
+        self.connect_s = connect_s
+        self.decoder = StreamDecoder(where=f"tcp://{host}:{port}")
+        self.sock = None
+        self._t_start = None
+
+    @property
+    def header(self) -> StreamHeader | None:
+        return self.decoder.header
+
+    @property
+    def ended(self) -> bool:
+        return self.decoder.ended
+
+    def _connect(self) -> bool:
+        if self._t_start is None:
+            self._t_start = time.monotonic()
+        try:
+            s = socket.create_connection((self.host, self.port), timeout=1.0)
+        except OSError as exc:
+            if time.monotonic() - self._t_start > self.connect_s:
+                raise GPR3DError(f"tcp://{self.host}:{self.port}: no connection after {self.connect_s:g} s "
+                                 f"({exc.strerror or exc})") from None
+            return False
+        s.setblocking(False)
+        self.sock = s
+        return True
+
+    def poll(self):
+        """``(data (k, n_samples) float32, poses (k, 7), times (k,))`` of the traces received since the last poll."""
+        if self.sock is None and not self._connect():
+            return None
+        chunks = []
+        closed = False
+        while True:
+            try:
+                b = self.sock.recv(1 << 20)
+            except (BlockingIOError, InterruptedError):
+                break
+            except ConnectionError:
+                closed = True
+                break
+            if not b:
+                closed = True
+                break
+            chunks.append(b)
+            if sum(map(len, chunks)) > (64 << 20):
+                break
+        traces = self.decoder.feed(b"".join(chunks))
+        if closed and not self.decoder.ended:
+            self.decoder.close()
+        return _stack(traces, self.decoder.header)
+
+    def close(self) -> None:
+        if self.sock is not None:
+            self.sock.close()
+
+
+class FileSource:
+    """A DZT recording and a TUM trajectory (one pose per trace, in trace order) that are still being written:
+    trace ``i`` is given once pose ``i`` is there. The stream never ends by itself (``until_idle_s`` ends it)."""
+
+    def __init__(self, recording, poses, *, channel: int = 0, offset_m: float = 0.0,
+                 frequency_hz: float | None = None):
+        if not str(recording).lower().endswith(".dzt"):
+            raise GPR3DError(f"{recording}: live mode reads growing DZT files (or tcp://HOST:PORT)")
+        if poses is None:
+            raise GPR3DError("live mode needs the antenna's poses: give --poses (a TUM file, one pose per trace, "
+                             "that may grow with the recording)")
+        self.dzt = GrowingDZT(recording, channel)
+        self.tum = GrowingTUM(poses)
+        self.offset_m = offset_m
+        self.frequency_hz = frequency_hz
+        self._data = np.zeros((0, 0), np.float32)
+        self._poses = np.zeros((0, 8))
+        self.header = None
+        self.ended = False
+
+    def poll(self):
+        d = self.dzt.poll()
+        if self.dzt.header is None:
+            return None
+        if self.header is None:
+            from gpr3d.io.dzt import _antenna_mhz
+
+            h = self.dzt.header
+            mhz = _antenna_mhz(h["antennas"][self.dzt.channel])
+            self.header = StreamHeader(n_samples=h["n_samples"], dt_s=self.dzt.dt_s,
+                                       frequency_hz=self.frequency_hz or (mhz * 1e6 if mhz else None),
+                                       offset_m=self.offset_m, eps_r=h["eps_r"], name=str(self.dzt.path))
+            self._data = np.zeros((0, h["n_samples"]), np.float32)
+        p = self.tum.poll()
+        self._data = np.concatenate([self._data, d]) if len(d) else self._data
+        self._poses = np.concatenate([self._poses, p]) if len(p) else self._poses
+        k = min(len(self._data), len(self._poses))
+        data, poses = self._data[:k], self._poses[:k]
+        self._data, self._poses = self._data[k:], self._poses[k:]
+        return data, poses[:, 1:], poses[:, 0]
+
+    def close(self) -> None:
+        pass
+
+
+def _stack(traces, header):
+    if header is None:
+        return None
+    if not traces:
+        return np.zeros((0, header.n_samples), np.float32), np.zeros((0, 7)), np.zeros(0)
+    return (np.stack([t.samples for t in traces]), np.stack([t.pose for t in traces]),
+            np.array([t.time_s for t in traces]))
+
+
+def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 0.0,
+                frequency_hz: float | None = None, connect_s: float = 10.0):
+    """``tcp://HOST:PORT`` or a growing DZT file (with ``poses``, a growing TUM file)."""
+    if str(source).startswith("tcp://"):
+        host, _, port = str(source)[6:].rpartition(":")
+        if not host or not port.isdigit() or not 0 < int(port) < 65536:
+            raise GPR3DError(f"{source}: expected tcp://HOST:PORT with a port in 1..65535")
+        if poses is not None:
+            raise GPR3DError("--poses is for a growing file: a tcp:// stream carries each trace's pose")
+        return TCPSource(host, int(port), connect_s=connect_s)
+    return FileSource(source, poses, channel=channel, offset_m=offset_m, frequency_hz=frequency_hz)
+
+
+# -- the engine ----------------------------------------------------------------------------------------------------
+
+class LiveReconstruction:
+    """The state of a live run: feed it batches of raw traces with poses (:meth:`add`), call :meth:`step` to
+    process what is ready, :meth:`finish` at the end."""
+
+    def __init__(self, header: StreamHeader, cfg: LiveConfig, out, *, detector=None, log=None):
+        from gpr3d.migration.config import ReconstructConfig
+        from gpr3d.migration.reconstruct import check_config
+
+        self.h = header
+        self.cfg = cfg
+        rc = cfg.reconstruct or ReconstructConfig()
+        eps = cfg.eps_r or rc.eps_r or header.eps_r
+        if eps is None:
+            raise GPR3DError("no eps_r: the stream's header gives none; give --eps-r")
+        if rc.aperture_deg is None:
+            raise GPR3DError("live mode needs an aperture (--aperture > 0): it bounds the voxels each trace reaches")
+        if rc.method != "backprojection":
+            raise GPR3DError("live mode migrates by back projection (--method backprojection)")
+        self.rc = replace(rc, eps_r=float(eps), lattice=True, background_window=cfg.background_window,
+                          remove_background=True)
+        check_config(self.rc)
+        self.eps = float(eps)
+        self.v = velocity_from_eps_r(self.eps)
+        self.out = Path(out)
+        self.tiles_dir = self.out / "tiles"
+        self.detector = detector if cfg.detect else None
+        self.log = log or (lambda msg: None)
+        w = cfg.background_window
+        self.h1, self.h2 = w // 2, w - 1 - w // 2  # scipy's centred window: i - w//2 .. i + w - 1 - w//2
+        self.t0_s = None
+        self.n_out = None
+        self.raw_pending: list = []  # raw traces waiting for time zero
+        self.n_in = 0
+        # cut traces from index `cut_first` on (kept while the background window may still need them)
+        self.cut = np.zeros((0, header.n_samples), np.float32)
+        self.cut_first = 0
+        self.n_final = 0  # traces migrated
+        self.poses = np.zeros((0, 7))
+        self.arrival = np.zeros(0)  # monotonic time each trace arrived
+        self.tiles: dict = {}  # (a, b) -> [image, fold]
+        self.on_disk: set = set()
+        self.peak_tiles = 0
+        self.fold_max = 0.0
+        self.grid_base = None
+        # detection: raw traces kept for the next window
+        self.raw_tail = np.zeros((0, header.n_samples), np.float32)
+        self.raw_tail_first = 0
+        self.next_window = 0
+        self.detections: list = []
+        self.targets: list = []
+        self.latencies: list = []
+        self.last_refresh = None
+        self.migrate_s = 0.0
+
+    # the depth axis, the reach of a trace, the tile lattice ---------------------------------------------------
+    def _setup_grid(self):
+        rc = self.rc
+        depth = rc.max_depth_m or 0.5 * self.v * (self.n_out * self.h.dt_s - 2 * rc.air_gap_m / 299792458.0) * 0.95
+        dd = rc.depth_spacing_m or rc.spacing_m
+        nd = int(np.floor((depth - dd) / dd)) + 1
+        if nd < 2:
+            raise GPR3DError(f"the record reaches {depth:.3f} m: too shallow for depth steps of {dd:g} m")
+        self.depth_m = depth
+        self.grid_base = Grid3D(0.0, 0.0, dd, rc.spacing_m, rc.spacing_m, dd, 1, 1, nd)
+        # how far from its antennas a trace reaches (the aperture cone at the deepest voxel), with a cell to spare
+        self.reach = self.grid_base.depth[-1] * math.tan(math.radians(rc.aperture_deg)) + 2 * rc.spacing_m
+
+    def add(self, data, poses, times=None, *, now=None):
+        """Raw traces ``(k, n_samples)`` with poses ``(k, 7)`` (``x y z qw qx qy qz``)."""
+        data = np.asarray(data, np.float32)
+        k = len(data)
+        if k == 0:
+            return
+        if data.shape[1] != self.h.n_samples:
+            raise InvalidDataError(f"traces of {data.shape[1]} samples where the stream has {self.h.n_samples}")
+        if not np.all(np.isfinite(data)):
+            bad = int(np.nonzero(~np.all(np.isfinite(data), axis=1))[0][0]) + self.n_in
+            raise InvalidDataError(f"trace {bad}: non-finite samples")
+        now = time.monotonic() if now is None else now
+        p = np.asarray(poses, float).reshape(k, 7).copy()
+        p[:, 3:] /= np.linalg.norm(p[:, 3:], axis=1, keepdims=True)
+        self.poses = np.concatenate([self.poses, p])
+        self.arrival = np.concatenate([self.arrival, np.full(k, now)])
+        self.n_in += k
+        if self.detector is not None:
+            self.raw_tail = np.concatenate([self.raw_tail, data])
+        if self.t0_s is None:
+            self.raw_pending.append(data)
+            if self.n_in >= self.cfg.time_zero_traces:
+                self._fix_time_zero()
+        else:
+            self.cut = np.concatenate([self.cut, self._cut(data)])
+
+    def _fix_time_zero(self):
+        from gpr3d.core.survey import Survey
+        from gpr3d.migration.reconstruct import time_zero_search_s
+        from gpr3d.processing.steps import time_zero
+
+        raw = np.concatenate(self.raw_pending)
+        self.raw_pending = []
+        if self.rc.time_zero_s is not None:
+            t0 = float(self.rc.time_zero_s)
+        elif self.rc.time_zero == "none":
+            t0 = 0.0
+        else:
+            s = Survey(data=raw, dt_s=self.h.dt_s, offset_m=self.h.offset_m)
+            t0 = float(time_zero(s, method=self.rc.time_zero, search_s=time_zero_search_s(s), shift=False)[0]["t0_s"])
+        self.t0_s = t0
+        self.rc = replace(self.rc, time_zero_s=t0)
+        self.n_out = int(np.floor(self.h.n_samples - 1 - t0 / self.h.dt_s + 1e-9)) + 1
+        self._setup_grid()
+        self.cut = self._cut(raw)
+        self.log(f"time zero {t0 * 1e9:.3f} ns (from the first {len(raw)} traces); eps_r {self.eps:g}; "
+                 f"depth {self.depth_m:.2f} m")
+
+    def _cut(self, data):
+        from gpr3d.processing.timezero import shift_traces
+
+        return shift_traces(data, self.t0_s / self.h.dt_s)
+
+    def step(self, *, ended: bool = False, now=None) -> int:
+        """Migrate the traces whose background is final, run the detector on full windows, refresh the targets
+        when due. Returns how many traces were migrated."""
+        from scipy.ndimage import uniform_filter1d
+
+        if self.t0_s is None:
+            if not ended or not self.raw_pending:
+                return 0
+            self._fix_time_zero()
+        n_cut = self.cut_first + len(self.cut)
+        ready = n_cut if ended else n_cut - self.h2
+        done = 0
+        while self.n_final < ready:
+            a = self.n_final
+            b = min(ready, a + self.cfg.max_batch)
+            lo = max(0, a - self.h1)
+            hi = min(n_cut, b + self.h2)
+            x = self.cut[lo - self.cut_first: hi - self.cut_first]
+            bg = uniform_filter1d(x.astype(np.float64), size=self.cfg.background_window, axis=0, mode="nearest")
+            rows = slice(a - lo, b - lo)
+            traces = (x[rows] - bg[rows]).astype(np.float32)
+            self._migrate(traces, self.poses[a:b])
+            self.n_final = b
+            done += b - a
+            keep_from = max(0, self.n_final - self.h1)
+            if keep_from > self.cut_first:
+                self.cut = self.cut[keep_from - self.cut_first:]
+                self.cut_first = keep_from
+            self._evict()
+        if self.detector is not None:
+            self._detect(ended)
+        now = time.monotonic() if now is None else now
+        if self.n_final and (ended or self.last_refresh is None or now - self.last_refresh >= self.cfg.refresh_s):
+            self.refresh(now)
+        return done
+
+    def _migrate(self, traces, poses):
+        from gpr3d.migration.operator import BackProjection, antenna_positions
+
+        t = time.perf_counter()
+        tx, rx = antenna_positions(poses[:, :3], poses[:, 3:], self.h.offset_m)
+        g, T = self.grid_base, self.cfg.tile_voxels
+        both = np.concatenate([tx, rx])[:, :2]
+        lo = np.floor((both.min(axis=0) - self.reach) / g.dx).astype(int) // T
+        hi = np.floor((both.max(axis=0) + self.reach) / g.dx).astype(int) // T
+        na, nb = hi - lo + 1
+        grid = replace(g, x0=float(lo[0] * T) * g.dx, y0=float(lo[1] * T) * g.dy, nx=int(na * T), ny=int(nb * T))
+        op = BackProjection(grid, tx, rx, dt_s=self.h.dt_s, n_samples=self.n_out, t0_s=0.0, eps_r=self.eps,
+                            aperture_deg=self.rc.aperture_deg, obliquity=self.rc.obliquity,
+                            spreading=self.rc.spreading, air_gap_m=self.rc.air_gap_m, engine=self.rc.engine)
+        img, fold = op.adjoint(traces, with_fold=True)
+        for i in range(na):
+            for j in range(nb):
+                sl = (slice(i * T, (i + 1) * T), slice(j * T, (j + 1) * T))
+                f = fold[sl]
+                if not f.any():
+                    continue
+                key = (int(lo[0] + i), int(lo[1] + j))
+                tile = self._tile(key)
+                tile[0] += img[sl]
+                tile[1] += f
+                self.fold_max = max(self.fold_max, float(tile[1].max()))
+        self.peak_tiles = max(self.peak_tiles, len(self.tiles))
+        self.migrate_s += time.perf_counter() - t
+
+    def _tile(self, key):
+        tile = self.tiles.get(key)
+        if tile is None:
+            if key in self.on_disk:
+                with np.load(self._tile_path(key)) as z:
+                    tile = [z["image"].copy(), z["fold"].copy()]
+            else:
+                shape = (self.cfg.tile_voxels, self.cfg.tile_voxels, self.grid_base.nd)
+                tile = [np.zeros(shape, np.float32), np.zeros(shape, np.float32)]
+            self.tiles[key] = tile
+        return tile
+
+    def _tile_path(self, key):
+        return self.tiles_dir / f"tile_{key[0]}_{key[1]}.npz"
+
+    def _save_tile(self, key, tile):
+        import os
+
+        self.tiles_dir.mkdir(parents=True, exist_ok=True)
+        path = self._tile_path(key)
+        tmp = path.with_name(path.name + ".part.npz")
+        np.savez(tmp, image=tile[0], fold=tile[1])
+        os.replace(tmp, path)
+        self.on_disk.add(key)
+
+    def _evict(self):
+        """Tiles no trace of the last ``background_window`` can reach go to disk."""
+        if not self.tiles or self.n_final == 0:
+            return
+        recent = self.poses[max(0, self.n_final - self.cfg.background_window): self.n_final, :2]
+        lo = recent.min(axis=0) - self.reach - self.h.offset_m
+        hi = recent.max(axis=0) + self.reach + self.h.offset_m
+        side = self.cfg.tile_voxels * self.grid_base.dx
+        for key in list(self.tiles):
+            x0, y0 = key[0] * side, key[1] * side
+            if x0 > hi[0] or x0 + side < lo[0] or y0 > hi[1] or y0 + side < lo[1]:
+                self._save_tile(key, self.tiles.pop(key))
+
+    # detection ---------------------------------------------------------------------------------------------------
+    def _detect(self, ended):
+        from gpr3d.core.survey import Survey
+
+        win = self.detector.window.traces
+        step = max(1, int(round(win * (1 - self.detector.window.overlap))))
+        n = self.raw_tail_first + len(self.raw_tail)
+        while self.next_window + win <= n or (ended and self.next_window < n and
+                                              (self.next_window == 0 or self.next_window + win - step < n)):
+            a = self.next_window
+            b = min(n, a + win)
+            data = self.raw_tail[a - self.raw_tail_first: b - self.raw_tail_first]
+            s = Survey(data=data, dt_s=self.h.dt_s, frequency_hz=self.h.frequency_hz, offset_m=self.h.offset_m)
+            found = self.detector.detect(s, score_threshold=self.cfg.score, input_name=self.h.name)
+            for t in found["targets"]:
+                t = dict(t)
+                t["box"] = [t["box"][0] + a, t["box"][1], t["box"][2] + a, t["box"][3]]
+                t["apex_trace"] += a
+                self._add_detection(t)
+            self.next_window = a + step
+            drop = self.next_window - self.raw_tail_first
+            if drop > 0:
+                self.raw_tail = self.raw_tail[drop:]
+                self.raw_tail_first = self.next_window
+            if b == n and ended:
+                break
+
+    def _add_detection(self, t):
+        """Keep ``t`` unless a kept box of the same hyperbola (IoU > 0.5, from the overlapping window) scores
+        higher; replace that one otherwise."""
+        b = t["box"]
+        for i, u in enumerate(self.detections):
+            c = u["box"]
+            iw = min(b[2], c[2]) - max(b[0], c[0])
+            ih = min(b[3], c[3]) - max(b[1], c[1])
+            if iw <= 0 or ih <= 0:
+                continue
+            inter = iw * ih
+            iou = inter / ((b[2] - b[0]) * (b[3] - b[1]) + (c[2] - c[0]) * (c[3] - c[1]) - inter)
+            if iou > 0.5:
+                if t["score"] > u["score"]:
+                    self.detections[i] = t
+                return
+        self.detections.append(t)
+
+    # targets and reports -----------------------------------------------------------------------------------------
+    def _assemble(self, grid, tiles):
+        """The image and fold on ``grid`` (a lattice grid) from ``tiles`` (key -> [image, fold] or a path)."""
+        T = self.cfg.tile_voxels
+        img = np.zeros(grid.shape, np.float32)
+        fold = np.zeros(grid.shape, np.float32)
+        gx, gy = int(round(grid.x0 / grid.dx)), int(round(grid.y0 / grid.dy))
+        for key, tile in tiles.items():
+            ax, ay = key[0] * T - gx, key[1] * T - gy
+            x0, x1 = max(ax, 0), min(ax + T, grid.nx)
+            y0, y1 = max(ay, 0), min(ay + T, grid.ny)
+            if x0 >= x1 or y0 >= y1:
+                continue
+            if not isinstance(tile, list):
+                with np.load(tile) as z:
+                    tile = [z["image"], z["fold"]]
+            img[x0:x1, y0:y1] = tile[0][x0 - ax:x1 - ax, y0 - ay:y1 - ay]
+            fold[x0:x1, y0:y1] = tile[1][x0 - ax:x1 - ax, y0 - ay:y1 - ay]
+        return img, fold
+
+    def _final_grid(self):
+        return Grid3D.covering(self.poses[: self.n_final, :3], depth_m=self.depth_m, spacing_m=self.rc.spacing_m,
+                               depth_spacing_m=self.rc.depth_spacing_m, pad_m=self.rc.pad_m, lattice=True)
+
+    def refresh(self, now=None):
+        """Targets of the tiles in memory (over the antenna positions they hold), and ``live.json``."""
+        from gpr3d.migration.masking import image_envelope
+        from gpr3d.migration.reconstruct import normalise_by_fold, volume_targets
+
+        now = time.monotonic() if now is None else now
+        if self.tiles:
+            side = self.cfg.tile_voxels * self.grid_base.dx
+            keys = np.array(list(self.tiles))
+            p = self.poses[: self.n_final, :2]
+            lo_t, hi_t = keys.min(axis=0) * side, (keys.max(axis=0) + 1) * side
+            inside = np.all((p >= lo_t) & (p < hi_t), axis=1)
+            pts = self.poses[: self.n_final, :3][inside]
+            if len(pts) >= 2:
+                grid = Grid3D.covering(pts, depth_m=self.depth_m, spacing_m=self.rc.spacing_m,
+                                       depth_spacing_m=self.rc.depth_spacing_m, pad_m=self.rc.pad_m, lattice=True)
+                img, fold = self._assemble(grid, self.tiles)
+                img, _ = normalise_by_fold(img, fold, self.rc.normalize, fold_max=self.fold_max)
+                env = image_envelope(img)
+                self.targets = volume_targets(env, grid, self.rc, self.v, self.h.frequency_hz)
+        done = time.monotonic()
+        if self.n_final:
+            self.latencies.append(done - float(self.arrival[self.n_final - 1]))
+        self.last_refresh = now
+        self._write_status(done)
+
+    def status(self, now=None) -> dict:
+        from gpr3d.migration.targets import targets_to_json
+
+        now = time.monotonic() if now is None else now
+        return {"n_traces_in": self.n_in, "n_traces_migrated": self.n_final,
+                "time_zero_s": self.t0_s, "eps_r": self.eps,
+                "tiles_in_memory": len(self.tiles), "tiles_on_disk": len(self.on_disk),
+                "targets": targets_to_json(self.targets), "detections": self.detections}
+
+    def _write_status(self, now):
+        self.out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(self.out / "live.json", json.dumps(self.status(now), indent=1))
+
+    def finish(self, *, source: str = ""):
+        """Everything left migrated; the final volume over every antenna position (when it is at most
+        ``final_volume_voxels``), finished as ``reconstruct`` finishes its own, written to ``OUT``. Returns the
+        :class:`~gpr3d.migration.reconstruct.Reconstruction` (None when the volume is too big: its tiles stay in
+        ``OUT/tiles``)."""
+        from gpr3d.migration.masking import image_envelope
+        from gpr3d.migration.reconstruct import Reconstruction, normalise_by_fold, volume_targets, write_reconstruction
+
+        self.step(ended=True)
+        if self.n_final == 0:
+            raise GPR3DError("no traces arrived: nothing to migrate")
+        grid = self._final_grid()
+        if grid.size > self.cfg.final_volume_voxels:
+            for key, tile in list(self.tiles.items()):
+                self._save_tile(key, tile)
+            self.log(f"the final volume ({grid.nx} x {grid.ny} x {grid.nd}) is larger than "
+                     f"{self.cfg.final_volume_voxels:,} voxels: its tiles are in {self.tiles_dir}")
+            return None
+        tiles = {k: self._tile_path(k) for k in self.on_disk}
+        tiles.update(self.tiles)
+        img, fold = self._assemble(grid, tiles)
+        cfg = self.rc
+        if cfg.normalize != "none":
+            img, _ = normalise_by_fold(img, fold, cfg.normalize)
+        env = image_envelope(img)
+        targets = volume_targets(env, grid, cfg, self.v, self.h.frequency_hz)
+        self.targets = targets
+        res = Reconstruction(image=img, envelope=env, noise_map=None, fold=fold if cfg.normalize != "none" else None,
+                             grid=grid, targets=targets, eps_r=self.eps, config=asdict(cfg), n_traces=self.n_final,
+                             timings_s={"migrate": self.migrate_s}, updates_per_s=None, eps_r_source="live")
+        write_reconstruction(res, self.out, source=source)
+        return res
+
+
+def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: float = 0.02,
+             clock=time.monotonic) -> LiveSummary:
+    """Run live mode on ``source`` (:func:`open_source`) into the folder ``out`` until the stream ends or has
+    been idle ``cfg.until_idle_s``; returns the :class:`LiveSummary` (its :meth:`~LiveSummary.line` is what
+    ``gpr3d live`` prints last)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    live = None
+    t_start = clock()
+    last_new = t_start
+    newest_arrival = None
+    try:
+        while True:
+            got = source.poll()
+            now = clock()
+            if got is not None and live is None and source.header is not None:
+                live = LiveReconstruction(source.header, cfg, out, detector=detector, log=log)
+            if got is not None and len(got[0]):
+                live.add(got[0], got[1], got[2], now=now)
+                last_new = now
+                newest_arrival = now
+            worked = live.step(now=now) if live is not None else 0
+            if source.ended:
+                break
+            if cfg.until_idle_s is not None and now - last_new >= cfg.until_idle_s:
+                break
+            if not worked and (got is None or not len(got[0])):
+                time.sleep(poll_s)
+    finally:
+        source.close()
+    if live is None or live.n_in == 0:
+        raise GPR3DError(f"{getattr(source, 'decoder', None) and source.decoder.where or 'the source'}: no traces "
+                         f"arrived{'' if cfg.until_idle_s is None else f' in {cfg.until_idle_s:g} s'}")
+    live.step(ended=True)
+    t_end = clock()
+    lag = max(0.0, t_end - newest_arrival) if newest_arrival is not None else 0.0
+    if cfg.until_idle_s is not None and not source.ended:
+        lag = max(0.0, lag - cfg.until_idle_s)  # the idle wait itself is not lag
+    busy = (t_end - t_start) - (cfg.until_idle_s if not source.ended and cfg.until_idle_s else 0.0)
+    result = live.finish(source=str(getattr(source.header, "name", "")))
+    lat = np.asarray(live.latencies) if live.latencies else np.zeros(1)
+    summary = LiveSummary(n_traces=live.n_final, wall_s=busy, traces_per_s=live.n_final / max(busy, 1e-9),
+                          lag_s=lag, latency_s={"median": float(np.median(lat)), "max": float(lat.max())},
+                          peak_tiles=live.peak_tiles, n_targets=len(live.targets),
+                          n_detections=len(live.detections), final_volume=result is not None)
+    st = live.status()
+    st["summary"] = asdict(summary)
+    st["config"] = asdict(live.rc)
+    atomic_write_text(out / "live.json", json.dumps(st, indent=1))
+    if live.detections:
+        atomic_write_text(out / "detections.json", json.dumps(
+            {"input": live.h.name, "channel": 0, "n_traces": live.n_in, "dt_s": live.h.dt_s,
+             "detector": "gpr3d detector (live)", "score_threshold": cfg.score, "targets": live.detections},
+            indent=1))
+    summary.files = sorted(p.name for p in out.iterdir())
+    return summary
