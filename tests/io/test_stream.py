@@ -1,0 +1,152 @@
+"""The live trace stream (gpr3d.io.stream): the bytes it writes decode to the same traces however they are cut
+into pieces; each way of breaking the format gets its own one-line error; growing DZT and TUM files give each
+trace once, as the batch readers read them."""
+
+import struct
+
+import numpy as np
+import pytest
+
+from gpr3d.core.errors import FormatError
+from gpr3d.io.dzt import read_dzt
+from gpr3d.io.stream import (
+    END,
+    GrowingDZT,
+    GrowingTUM,
+    StreamDecoder,
+    StreamHeader,
+    encode_header,
+    encode_trace,
+)
+from tests.io.makers import write_dzt
+
+HEADER = StreamHeader(n_samples=5, dt_s=1e-10, frequency_hz=1e9, offset_m=0.05, eps_r=6.0, name="t")
+
+
+def _traces(n=4, seed=0):
+    rng = np.random.default_rng(seed)
+    poses = np.c_[rng.normal(size=(n, 3)), np.tile([np.cos(0.3), 0, 0, np.sin(0.3)], (n, 1))]
+    return poses, rng.normal(size=(n, 5)).astype(np.float32)
+
+
+def _stream(poses, samples, *, end=True):
+    b = encode_header(HEADER)
+    for i, (p, s) in enumerate(zip(poses, samples)):
+        b += encode_trace(i, 0.5 * i, p, s)
+    return b + (END if end else b"")
+
+
+@pytest.mark.parametrize("piece", [1, 7, 1000])
+def test_the_stream_decodes_to_its_traces_in_any_pieces(piece):
+    poses, samples = _traces()
+    raw = _stream(poses, samples)
+    dec = StreamDecoder()
+    got = []
+    for i in range(0, len(raw), piece):
+        got += dec.feed(raw[i:i + piece])
+    assert dec.header == HEADER and dec.ended
+    assert [t.index for t in got] == [0, 1, 2, 3]
+    assert [t.time_s for t in got] == [0.0, 0.5, 1.0, 1.5]
+    np.testing.assert_array_equal(np.stack([t.pose for t in got]), poses)
+    np.testing.assert_array_equal(np.stack([t.samples for t in got]), samples)
+
+
+def test_the_trace_layout_is_the_documented_one():
+    b = encode_trace(3, 2.5, [1, 2, 3, 1, 0, 0, 0], np.array([0.5, -1.0], np.float32))
+    assert b[:4] == b"TRCE"
+    assert struct.unpack("<Qd7d", b[4:76]) == (3, 2.5, 1.0, 2.0, 3.0, 1.0, 0.0, 0.0, 0.0)
+    assert np.frombuffer(b[76:], "<f4").tolist() == [0.5, -1.0]
+    h = encode_header(StreamHeader(n_samples=2, dt_s=1e-9))
+    assert h[:8] == b"GPR3DTR1" and struct.unpack("<I", h[8:12])[0] == len(h) - 12
+
+
+def _header(body):
+    return b"GPR3DTR1" + struct.pack("<I", len(body)) + body
+
+
+def _bad_pose(p):
+    q = p.copy()
+    q[0, 3:] = [1, 1, 0, 0]
+    return q
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda p, s: b"GPR3DXX1" + _stream(p, s)[8:], "does not open with GPR3DTR1"),
+    (lambda p, s: b"NOPE", "does not open with GPR3DTR1"),
+    (lambda p, s: encode_header(HEADER) + encode_trace(1, 0, p[0], s[0]), "trace index 1 where 0 was due"),
+    (lambda p, s: encode_header(HEADER) + encode_trace(0, 0, _bad_pose(p)[0], s[0]), "not a unit quaternion"),
+    (lambda p, s: encode_header(HEADER) + encode_trace(0, 0, p[0], np.full(5, np.nan)), "non-finite samples"),
+    (lambda p, s: encode_header(HEADER) + encode_trace(0, float("inf"), p[0], s[0]), "pose or time is not finite"),
+    (lambda p, s: encode_header(HEADER) + b"XXXX", "expected TRCE or END!"),
+    (lambda p, s: _stream(p, s) + b"TRCE", "bytes after the end mark"),
+    (lambda p, s: _header(b'{"dt_s":1}'), "header lacks 'n_samples'"),
+    (lambda p, s: _header(b'{"n_samples":1,"dt_s":1e-9}'), "n_samples must be"),
+    (lambda p, s: _header(b'{"n_samples":4,"dt_s":-1e-9}'), "dt_s must be"),
+    (lambda p, s: _header(b'{"n_samples":4,"dt_s":1e-9,"eps_r":0.5}'), "eps_r must be"),
+    (lambda p, s: _header(b"{x}"), "header is not JSON"),
+])
+def test_a_broken_stream_is_named_in_one_line(make, message):
+    poses, samples = _traces()
+    with pytest.raises(FormatError, match=message):
+        StreamDecoder().feed(make(poses, samples))
+
+
+def test_a_stream_closed_inside_a_trace_is_an_error_and_at_a_trace_boundary_an_end():
+    poses, samples = _traces()
+    raw = _stream(poses, samples, end=False)
+    dec = StreamDecoder()
+    assert len(dec.feed(raw[:-3])) == 3
+    with pytest.raises(FormatError, match="ends inside a trace"):
+        dec.close()
+    dec = StreamDecoder()
+    assert len(dec.feed(raw)) == 4
+    dec.close()
+    assert dec.ended
+
+
+def test_a_growing_dzt_gives_each_trace_once_as_the_reader_reads_it(tmp_path):
+    whole = write_dzt(tmp_path / "whole.dzt", n_traces=9, n_samples=16)
+    ref = read_dzt(whole)[0].data
+    raw = whole.read_bytes()
+    grow = tmp_path / "grow.dzt"
+    g = GrowingDZT(grow)
+    assert g.poll().shape[0] == 0  # no file yet
+    grow.write_bytes(raw[:600])  # half a header
+    assert g.poll().shape[0] == 0 and g.header is None
+    tb = 16 * 2
+    got = []
+    for cut in (1024, 1024 + tb // 2, 1024 + 3 * tb, 1024 + 3 * tb + 1, 1024 + 8 * tb, len(raw)):
+        grow.write_bytes(raw[:cut])
+        got.append(g.poll())
+    assert [len(x) for x in got] == [0, 0, 3, 0, 5, 1]
+    np.testing.assert_array_equal(np.concatenate(got), ref)
+    assert g.dt_s == pytest.approx(20e-9 / 16)
+    grow.write_bytes(raw[:1024 + 2 * tb])
+    with pytest.raises(FormatError, match="shrank"):
+        g.poll()
+
+
+def test_a_growing_tum_gives_whole_lines_only(tmp_path):
+    p = tmp_path / "poses.tum"
+    t = GrowingTUM(p)
+    assert t.poll().shape == (0, 8)
+    p.write_text("# t x y z qx qy qz qw\n0 1 2 3 0 0 0 2\n0.1 1.5 2 3 0 0 0 1")
+    got = t.poll()
+    np.testing.assert_array_equal(got, [[0, 1, 2, 3, 1, 0, 0, 0]])  # the quaternion as w x y z, normalised
+    with open(p, "a") as f:
+        f.write(".5\n0.2 9 9 9 0 0 1 0\n")
+    np.testing.assert_allclose(t.poll(), [[0.1, 1.5, 2, 3, 1, 0, 0, 0], [0.2, 9, 9, 9, 0, 0, 0, 1]])
+    with open(p, "a") as f:
+        f.write("0.1 0 0 0 0 0 0 1\n")
+    with pytest.raises(FormatError, match="timestamps run backwards at pose 3"):
+        t.poll()
+
+
+@pytest.mark.parametrize("line, message", [("0 1 2 3 0 0 0\n", "expected 8 finite numbers"),
+                                           ("0 1 2 x 0 0 0 1\n", "not numbers"),
+                                           ("0 1 2 3 0 0 0 0\n", "a zero quaternion")])
+def test_a_bad_pose_line_is_named(tmp_path, line, message):
+    p = tmp_path / "poses.tum"
+    p.write_text(line)
+    with pytest.raises(FormatError, match=message):
+        GrowingTUM(p).poll()
