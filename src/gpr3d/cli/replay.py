@@ -28,13 +28,16 @@ def add_arguments(sp):
     sp.add_argument("--accept-timeout", type=float, default=60.0, help="seconds to wait for a client (tcp)")
 
 
-def _rate(args, own_rate):
+def _check_rate(args):
     if (args.rate is None) == (args.speed is None):
         raise GPR3DError("give --rate (traces per second) or --speed (times the recording's own rate)")
-    if args.rate is not None:
-        _in_range(args.rate, "--rate", 1e-3, 1e7, "traces per second")
-        return args.rate
+    _in_range(args.rate, "--rate", 1e-3, 1e7, "traces per second")
     _in_range(args.speed, "--speed", 1e-3, 1e5, "a factor")
+
+
+def _rate(args, own_rate):
+    if args.rate is not None:
+        return args.rate
     if not own_rate:
         raise GPR3DError("--speed: the recording gives no trace rate; give --rate")
     return args.speed * own_rate
@@ -43,6 +46,7 @@ def _rate(args, own_rate):
 def run(args):
     from gpr3d.pipeline import attach_trajectory, read_recording, replay_to_dzt, replay_to_tcp
 
+    _check_rate(args)
     if args.loops < 1:
         raise GPR3DError(f"--loops must be at least 1, got {args.loops}")
     if not math.isfinite(args.loop_shift):

@@ -1,0 +1,77 @@
+"""gpr3d replay feeds gpr3d live over TCP: the last line live prints is the issue's, its numbers the run's; a
+batch reconstruct with live's settings gives the same targets; wrong arguments get one line before any work."""
+
+import json
+import re
+import socket
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from gpr3d.io.hdf5 import write_survey
+from gpr3d.io.trajectory import Trajectory, write_tum
+from tests.pipeline.test_live import survey  # noqa: F401  (the fixture)
+
+
+def _free_port():
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def run_cli(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "gpr3d", *map(str, args)], capture_output=True, text=True,
+                          timeout=timeout)
+
+
+@pytest.mark.slow  # (two processes start gpr3d: seconds each)
+def test_replay_into_live_prints_traces_rate_and_lag(survey, tmp_path):  # noqa: F811
+    write_survey(survey.replace(positions_xyz=None, orientations_quat_wxyz=None), tmp_path / "s.h5")
+    write_tum(Trajectory(np.arange(survey.n_traces) * 0.01, survey.positions_xyz, survey.orientations_quat_wxyz),
+              tmp_path / "s.tum")
+    port = _free_port()
+    server = subprocess.Popen([sys.executable, "-m", "gpr3d", "replay", tmp_path / "s.h5", "--poses",
+                               tmp_path / "s.tum", "--to", f"tcp://127.0.0.1:{port}", "--rate", "2000"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        r = run_cli("live", f"tcp://127.0.0.1:{port}", "--out", tmp_path / "live", "--no-detect",
+                    "--background-window", "32", "--aperture", "45", "--until-idle", "3")
+    finally:
+        out, err = server.communicate(timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert server.returncode == 0, err
+    assert f"sent {survey.n_traces} traces" in out
+    last = r.stdout.strip().splitlines()[-1]
+    m = re.fullmatch(r"(\d+) traces, (\d+) traces/s, lag (\d+\.\d\d) s", last)
+    assert m, last
+    status = json.loads((tmp_path / "live" / "live.json").read_text())["summary"]
+    assert int(m.group(1)) == survey.n_traces == status["n_traces"]
+    assert int(m.group(2)) == round(status["traces_per_s"]) and float(m.group(3)) == round(status["lag_s"], 2)
+    assert 0 < status["traces_per_s"] <= 2100  # never faster than the traces came
+    cfg = json.loads((tmp_path / "live" / "config.json").read_text())["config"]
+    rec = run_cli("reconstruct", tmp_path / "s.h5", "--poses", tmp_path / "s.tum", "--eps-r", "6", "--out",
+                  tmp_path / "rec", "--spacing", cfg["spacing_m"], "--aperture", "45")
+    assert rec.returncode == 0, rec.stderr
+
+
+@pytest.mark.parametrize("args, message", [
+    (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--aperture", "0"], "--aperture must lie in (0, 90)"),
+    (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--background-window", "1"],
+     "--background-window must be at least 2"),
+    (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--refresh", "0"], "--refresh must be seconds"),
+    (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--spacing", "-1", "--no-detect"], "--spacing must be positive"),
+    (["live", "tcp:/bad", "--out", "{tmp}/o", "--no-detect"], "live mode reads growing DZT files"),
+    (["replay", "{tmp}/x.h5", "--to", "tcp://127.0.0.1:1"], "give --rate"),
+    (["replay", "{tmp}/x.h5", "--to", "out.dzt", "--rate", "5"], "replays a DZT recording into a .DZT file"),
+    (["replay", "{tmp}/x.h5", "--to", "tcp://h:1", "--rate", "5", "--loops", "0"], "--loops must be at least 1"),
+])
+def test_wrong_arguments_get_one_line(tmp_path, capsys, args, message):
+    from gpr3d.cli.main import main
+
+    code = main([a.replace("{tmp}", str(tmp_path)) for a in args])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code != 0 and len(err) == 1 and message in err[0], err

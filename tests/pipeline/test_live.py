@@ -1,0 +1,203 @@
+"""Live mode against the batch reconstruct of the same traces: the volume it puts together from its tiles equals
+the batch one (with the settings live mode writes to config.json) whether the traces come over TCP or from a
+DZT file that grows, and whether its tiles stayed in memory or went to disk and came back."""
+
+import json
+import threading
+
+import numpy as np
+import pytest
+
+from gpr3d import Survey
+from gpr3d.core.errors import GPR3DError
+from gpr3d.core.poses import quat_from_yaw
+from gpr3d.io.dzt import read_dzt
+from gpr3d.io.stream import StreamHeader
+from gpr3d.io.volume import read_volume
+from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct
+from gpr3d.pipeline.live import LiveConfig, LiveReconstruction, open_source, run_live
+from gpr3d.pipeline.replay import pace, replay_to_dzt, replay_to_tcp
+from gpr3d.simulation.forward import ForwardScene, Pipe, forward_model
+from tests.io.makers import write_dzt
+
+EPS = 6.0
+DT = 12e-9 / 128
+
+
+def _zigzag(n_lines=6, per=70, length=1.4, step=0.12):
+    pos, yaw = [], []
+    for k in range(n_lines):
+        x = np.linspace(0.0, length, per)
+        pos.append(np.c_[x if k % 2 == 0 else x[::-1], np.full(per, step * k), np.zeros(per)])
+        yaw.append(np.full(per, 0.0 if k % 2 == 0 else np.pi))
+    return np.concatenate(pos), quat_from_yaw(np.concatenate(yaw))
+
+
+@pytest.fixture(scope="module")
+def survey():
+    pos, q = _zigzag()
+    scene = ForwardScene(eps_r=EPS, pipes=[Pipe((0.6, -0.5, -0.22), (0.6, 1.5, -0.22), 0.02)])
+    data = forward_model(scene, pos, q, offset_m=0.05, frequency_hz=800e6, n_samples=128, time_window_s=12e-9,
+                         air_wave=1.0, ground_wave=0.5, noise=0.01)
+    return Survey(data=data, dt_s=DT, offset_m=0.05, frequency_hz=800e6, eps_r=EPS, positions_xyz=pos,
+                  orientations_quat_wxyz=q)
+
+
+def _cfg(**kw):
+    rc = ReconstructConfig(spacing_m=0.03, aperture_deg=45.0)
+    return LiveConfig(reconstruct=rc, background_window=kw.pop("background_window", 32), detect=False,
+                      until_idle_s=kw.pop("until_idle_s", 3.0), refresh_s=0.2, time_zero_traces=40, **kw)
+
+
+def _batch_equals_live(survey, out):
+    cfg = json.loads((out / "config.json").read_text())["config"]
+    assert cfg["lattice"] and cfg["background_window"] and cfg["time_zero_s"] > 0
+    batch = reconstruct(survey, ReconstructConfig(**cfg))
+    vol = read_volume(out / "volume.h5")
+    assert vol.grid == batch.grid
+    ref = np.abs(batch.image).max()
+    np.testing.assert_allclose(vol.arrays["image"], batch.image, rtol=0, atol=2e-5 * ref)
+    got = json.loads((out / "targets.json").read_text())
+    assert len(got) == len(batch.targets) >= 1
+    return batch
+
+
+def _serve(survey, rate, **kw):
+    ports = []
+    ready = threading.Event()
+    th = threading.Thread(target=replay_to_tcp, args=(survey, 0), daemon=True,
+                          kwargs=dict(rate=rate, on_listen=lambda p: (ports.append(p), ready.set()), **kw))
+    th.start()
+    assert ready.wait(10)
+    return th, ports[0]
+
+
+def test_live_over_tcp_equals_the_batch_volume(survey, tmp_path):
+    th, port = _serve(survey, 4000.0)
+    summary = run_live(open_source(f"tcp://127.0.0.1:{port}"), tmp_path, _cfg(), log=None)
+    th.join(10)
+    assert summary.n_traces == survey.n_traces
+    assert summary.line() == (f"{survey.n_traces} traces, {summary.traces_per_s:.0f} traces/s, "
+                              f"lag {summary.lag_s:.2f} s")
+    batch = _batch_equals_live(survey, tmp_path)
+    # the pipe (along y at x = 0.6, top 0.22 m deep) found
+    t = batch.targets[0]
+    assert abs(np.mean([p[0] for p in t.points_xyz]) - 0.6) < 0.05 and abs(t.depth_m - 0.22) < 0.05
+    status = json.loads((tmp_path / "live.json").read_text())
+    assert status["n_traces_migrated"] == survey.n_traces and status["summary"]["n_traces"] == survey.n_traces
+
+
+def test_tiles_written_out_and_read_back_keep_the_volume(survey, tmp_path):
+    """Small tiles and a short window: the far end of each line leaves the cart's reach, goes to disk and is
+    read back when the next line passes it."""
+    header = StreamHeader(n_samples=survey.n_samples, dt_s=DT, frequency_hz=800e6, offset_m=0.05, eps_r=EPS)
+    live = LiveReconstruction(header, _cfg(tile_voxels=4, background_window=8), tmp_path)
+    poses = np.c_[survey.positions_xyz, survey.orientations_quat_wxyz]
+    reloaded = 0
+    for a in range(0, survey.n_traces, 25):
+        live.add(survey.data[a:a + 25], poses[a:a + 25])
+        before = set(live.on_disk)
+        live.step()
+        reloaded += len(before & set(live.tiles))
+    assert live.on_disk and reloaded > 0
+    assert live.peak_tiles < len(live.on_disk | set(live.tiles))
+    live.finish()
+    _batch_equals_live(survey, tmp_path)
+
+
+def _dzt_of(survey, path):
+    """``survey`` as a 32-bit DZT (header from the test maker, samples scaled to integers)."""
+    write_dzt(path, n_traces=0, n_samples=survey.n_samples, bits=32, range_ns=survey.n_samples * DT * 1e9,
+              eps_r=EPS, antennas=("800",))
+    ints = np.round(survey.data / np.abs(survey.data).max() * 2e8).astype("<i4")
+    with open(path, "ab") as f:
+        f.write(ints.tobytes())
+    return path
+
+
+def test_a_growing_dzt_with_growing_poses_equals_the_batch_volume(survey, tmp_path):
+    src = _dzt_of(survey, tmp_path / "rec.dzt")
+    tum = tmp_path / "rec.tum"
+    q = survey.orientations_quat_wxyz
+    tum.write_text("".join(f"{i * 0.01:.2f} " + " ".join(repr(float(v)) for v in (*p, *r[1:], r[0])) + "\n"
+                           for i, (p, r) in enumerate(zip(survey.positions_xyz, q))))
+    grow, grow_tum = tmp_path / "live.dzt", tmp_path / "live.tum"
+    th = threading.Thread(target=replay_to_dzt, args=(src, grow), daemon=True,
+                          kwargs=dict(rate=3000.0, poses=tum, poses_out=grow_tum))
+    th.start()
+    out = tmp_path / "out"
+    source = open_source(grow, poses=grow_tum, offset_m=0.05)
+    summary = run_live(source, out, _cfg(until_idle_s=1.5), log=None)
+    th.join(10)
+    assert summary.n_traces == survey.n_traces
+    assert source.header.frequency_hz == 800e6  # from the antenna's name in the DZT header
+    rec = read_dzt(src)[0].replace(positions_xyz=survey.positions_xyz, orientations_quat_wxyz=q, offset_m=0.05,
+                                   frequency_hz=800e6)
+    _batch_equals_live(rec, out)
+
+
+def test_pace_hands_out_each_item_once_never_early():
+    now = [0.0]
+    slept = []
+
+    def sleep(s):
+        slept.append(s)
+        now[0] += s
+
+    got = []
+    for a, b in pace(10, 4.0, clock=lambda: now[0], sleep=sleep):
+        got.append((a, b, now[0]))
+        now[0] += 0.6 if a == 3 else 0.0  # the consumer falls behind once
+    assert [g[:2] for g in got][0] == (0, 1)
+    assert [i for a, b, _ in got for i in range(a, b)] == list(range(10))
+    for a, b, t in got:
+        assert (b - 1) / 4.0 <= t + 1e-12  # the last item of each range was due
+    assert any(b - a > 1 for a, b, _ in got)  # caught up in one range
+    with pytest.raises(GPR3DError, match="replay rate must be a positive number"):
+        next(pace(3, 0.0))
+
+
+@pytest.mark.parametrize("kw, message", [
+    (dict(aperture_deg=None), "live mode needs an aperture"),
+    (dict(method="pseudo3d"), "live mode migrates by back projection"),
+])
+def test_live_refuses_settings_it_cannot_run(kw, message, tmp_path):
+    header = StreamHeader(n_samples=64, dt_s=1e-10, eps_r=4.0)
+    cfg = LiveConfig(reconstruct=ReconstructConfig(**{"aperture_deg": 45.0, **kw}))
+    with pytest.raises(GPR3DError, match=message):
+        LiveReconstruction(header, cfg, tmp_path)
+
+
+def test_live_without_eps_r_anywhere_is_refused(tmp_path):
+    with pytest.raises(GPR3DError, match="no eps_r: the stream's header gives none"):
+        LiveReconstruction(StreamHeader(n_samples=64, dt_s=1e-10), LiveConfig(), tmp_path)
+
+
+@pytest.mark.parametrize("source, kw, message", [
+    ("tcp://host", {}, "expected tcp://HOST:PORT"),
+    ("tcp://host:99999", {}, "expected tcp://HOST:PORT"),
+    ("tcp://127.0.0.1:5600", {"poses": "p.tum"}, "--poses is for a growing file"),
+    ("rec.dt1", {"poses": "p.tum"}, "live mode reads growing DZT files"),
+    ("rec.dzt", {}, "live mode needs the antenna's poses"),
+])
+def test_wrong_sources_are_named(source, kw, message):
+    with pytest.raises(GPR3DError, match=message):
+        open_source(source, **kw)
+
+
+def test_a_source_where_nothing_comes_ends_in_one_line(tmp_path):
+    source = open_source(str(tmp_path / "never.dzt"), poses=tmp_path / "never.tum")
+    with pytest.raises(GPR3DError, match="no traces arrived in 0.2 s"):
+        run_live(source, tmp_path / "out", _cfg(until_idle_s=0.2), log=None)
+
+
+def test_a_tcp_source_nobody_serves_ends_in_one_line(tmp_path):
+    import socket
+
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    source = open_source(f"tcp://127.0.0.1:{port}", connect_s=0.3)
+    with pytest.raises(GPR3DError, match="no connection after 0.3 s"):
+        run_live(source, tmp_path / "out", _cfg(), log=None)
