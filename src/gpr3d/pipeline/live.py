@@ -202,7 +202,34 @@ def _stack(traces, header):
 
 def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 0.0,
                 frequency_hz: float | None = None, connect_s: float = 10.0):
-    """``tcp://HOST:PORT`` or a growing DZT file (with ``poses``, a growing TUM file)."""
+    """The source of a live run.
+
+    Parameters
+    ----------
+    source : str or Path
+        ``tcp://HOST:PORT`` (the trace stream of :mod:`gpr3d.io.stream`, each trace with its pose), or a DZT file
+        the radar is writing.
+    poses : str or Path, optional
+        With a DZT file: the TUM trajectory written beside it (pose ``i`` for trace ``i``); never with ``tcp://``.
+    channel : int
+        The DZT's channel.
+    offset_m : float
+        The DZT antenna's transmitter-receiver offset (m; a stream's header gives its own).
+    frequency_hz : float, optional
+        The DZT antenna's centre frequency (default: from the antenna's name in the header).
+    connect_s : float
+        How long a ``tcp://`` source keeps trying to connect (s).
+
+    Returns
+    -------
+    TCPSource or FileSource
+        Polled by :func:`run_live`.
+
+    Raises
+    ------
+    GPR3DError
+        A malformed ``tcp://`` address, ``poses`` with a stream, a file that is no DZT, or a DZT without poses.
+    """
     if str(source).startswith("tcp://"):
         host, _, port = str(source)[6:].rpartition(":")
         if not host or not port.isdigit() or not 0 < int(port) < 65536:
@@ -267,6 +294,8 @@ class LiveReconstruction:
         self.targets: list = []
         self.latencies: list = []
         self.last_refresh = None
+        self.refresh_cost_s = 0.0
+        self.n_refreshed = 0  # traces migrated at the last refresh
         self.migrate_s = 0.0
 
     # the depth axis, the reach of a trace, the tile lattice ---------------------------------------------------
@@ -367,7 +396,11 @@ class LiveReconstruction:
         if self.detector is not None:
             self._detect(ended)
         now = time.monotonic() if now is None else now
-        if self.n_final and (ended or self.last_refresh is None or now - self.last_refresh >= self.cfg.refresh_s):
+        # the refresh's period: refresh_s, or longer where a refresh costs more than a fifth of it (the targets'
+        # extraction must not starve the migration)
+        period = max(self.cfg.refresh_s, 5.0 * self.refresh_cost_s)
+        if self.n_final > self.n_refreshed and (ended or self.last_refresh is None
+                                                or now - self.last_refresh >= period):
             self.refresh(now)
         return done
 
@@ -512,7 +545,8 @@ class LiveReconstruction:
         from gpr3d.migration.masking import image_envelope
         from gpr3d.migration.reconstruct import normalise_by_fold, volume_targets
 
-        now = time.monotonic() if now is None else now
+        t_start = time.monotonic()
+        now = t_start if now is None else now
         if self.tiles:
             side = self.cfg.tile_voxels * self.grid_base.dx
             keys = np.array(list(self.tiles))
@@ -527,11 +561,14 @@ class LiveReconstruction:
                 img, _ = normalise_by_fold(img, fold, self.rc.normalize, fold_max=self.fold_max)
                 env = image_envelope(img)
                 self.targets = volume_targets(env, grid, self.rc, self.v, self.h.frequency_hz)
+        self._write_status(now)
         done = time.monotonic()
-        if self.n_final:
-            self.latencies.append(done - float(self.arrival[self.n_final - 1]))
-        self.last_refresh = now
-        self._write_status(done)
+        if self.n_final > self.n_refreshed:
+            # the oldest trace this refresh brings in waited longest: from its arrival to targets that include it
+            self.latencies.append(done - float(self.arrival[self.n_refreshed]))
+        self.n_refreshed = self.n_final
+        self.refresh_cost_s = done - t_start
+        self.last_refresh = done
 
     def status(self, now=None) -> dict:
         from gpr3d.migration.targets import targets_to_json
@@ -582,9 +619,38 @@ class LiveReconstruction:
 
 def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: float = 0.02,
              clock=time.monotonic) -> LiveSummary:
-    """Run live mode on ``source`` (:func:`open_source`) into the folder ``out`` until the stream ends or has
-    been idle ``cfg.until_idle_s``; returns the :class:`LiveSummary` (its :meth:`~LiveSummary.line` is what
-    ``gpr3d live`` prints last)."""
+    """Run live mode on ``source`` into the folder ``out`` until the stream ends or has been idle
+    ``cfg.until_idle_s``.
+
+    Parameters
+    ----------
+    source : TCPSource or FileSource
+        From :func:`open_source`.
+    out : str or Path
+        The folder: ``live.json`` while running, the result files at the end (``docs/CONVENTIONS.md``).
+    cfg : LiveConfig
+        The settings.
+    detector : Detector, optional
+        The hyperbola detector run on each window (with ``cfg.detect``).
+    log : callable
+        Progress lines (``print``; None: silent).
+    poll_s : float
+        How long to wait before polling an idle source again (s).
+    clock : callable
+        Monotonic seconds (tests replace it).
+
+    Returns
+    -------
+    LiveSummary
+        Its :meth:`~LiveSummary.line` is what ``gpr3d live`` prints last.
+
+    Raises
+    ------
+    GPR3DError
+        No traces arrived, no connection, a stream or file that breaks its format, or settings live mode cannot
+        run (no aperture, no eps_r).
+    """
+    log = log or (lambda msg: None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     live = None

@@ -53,8 +53,39 @@ def _poses(survey) -> np.ndarray:
 
 def replay_to_tcp(survey, port: int, *, host: str = "127.0.0.1", rate: float, loops: int = 1,
                   loop_shift_m: float = 0.0, accept_s: float = 30.0, on_listen=None, log=None) -> int:
-    """Serve ``survey`` (with poses) on ``host:port`` to the first client, at ``rate`` traces per second; returns
-    the number of traces sent. ``on_listen(port)`` is called once the server listens (port 0: any free port)."""
+    """Serve ``survey`` with its poses to the first client that connects, at ``rate`` traces per second.
+
+    Parameters
+    ----------
+    survey : Survey
+        With ``positions_xyz`` (and orientations; none: the antenna along world x).
+    port : int
+        The port to listen on (0: any free one; ``on_listen`` is told which).
+    host : str
+        The address to listen on.
+    rate : float
+        Traces per second.
+    loops : int
+        How many times the recording is played.
+    loop_shift_m : float
+        How much further along x each pass lies (m).
+    accept_s : float
+        How long to wait for a client (s).
+    on_listen : callable, optional
+        Called with the port once the server listens.
+    log : callable, optional
+        A line when the client leaves early.
+
+    Returns
+    -------
+    int
+        The traces sent.
+
+    Raises
+    ------
+    GPR3DError
+        A survey without poses, a rate that is no positive number, or no client in ``accept_s``.
+    """
     poses = _poses(survey)
     n = survey.n_traces
     header = StreamHeader(n_samples=survey.n_samples, dt_s=survey.dt_s, frequency_hz=survey.frequency_hz,
@@ -101,8 +132,34 @@ def replay_to_tcp(survey, port: int, *, host: str = "127.0.0.1", rate: float, lo
 
 
 def replay_to_dzt(recording, out, *, rate: float, poses=None, poses_out=None) -> int:
-    """Write the DZT ``recording``'s header to ``out``, then its traces at ``rate`` per second, flushed as they go
-    (and, with ``poses``, its TUM lines to ``poses_out`` in step). Returns the number of traces written."""
+    """Grow a DZT file as a radar would: ``recording``'s header, then its traces at ``rate`` per second.
+
+    Parameters
+    ----------
+    recording : str or Path
+        A DZT file.
+    out : str or Path
+        The DZT file written (flushed after every batch of traces).
+    rate : float
+        Traces per second.
+    poses : str or Path, optional
+        A TUM file, one pose per trace: its lines are appended to ``poses_out`` in step with the traces.
+    poses_out : str or Path, optional
+        Where the poses grow (needed with ``poses``).
+
+    Returns
+    -------
+    int
+        The traces written.
+
+    Raises
+    ------
+    GPR3DError
+        Poses that do not match the traces, no ``poses_out``, ``out`` being the recording, or a rate that is no
+        positive number.
+    FormatError
+        A recording that is no DZT.
+    """
     from gpr3d.io.dzt import read_dzt_header
 
     src = Path(recording)
