@@ -240,7 +240,7 @@ def _random_motion_stage(out: Path, cfg: DemoConfig, log) -> dict:
         from gpr3d.pose.metrics import ape
 
         pose["fused_ape_m"] = ape(est, true)["rmse"]
-    log(f"[3/7] random-motion survey: {survey.n_traces} A-scans x {n_samples} samples from the forward model "
+    log(f"[3/8] random-motion survey: {survey.n_traces} A-scans x {n_samples} samples from the forward model "
         f"in {t_fwd * 1e3:.0f} ms ({rate:,.0f} A-scans/s); a trace every {cfg.trace_spacing_m * 100:g} cm of "
         f"the antenna's {path:.1f} m path")
     log(f"      antenna poses from the visual-inertial fusion ({pose['rig_seconds']:.0f} s of IMU and odometry, "
@@ -300,7 +300,7 @@ def _reconstruction_stage(out: Path, log) -> dict:
         if key == "estimated":
             g, mig = result.grid, result.timings_s["migrate"]
             one_pass = result.image
-    log(f"[4/7] 3D reconstruction: {survey.n_traces} traces -> {g.nx} x {g.ny} x {g.nd} voxels in "
+    log(f"[4/8] 3D reconstruction: {survey.n_traces} traces -> {g.nx} x {g.ny} x {g.nd} voxels in "
         f"{rows['estimated']['wall_s']:.1f} s (migration {mig:.1f} s, "
         f"{rows['estimated']['updates_per_s'] / 1e9:.2f} G updates/s); targets from the fused poses "
         "(from the true poses):")
@@ -346,7 +346,7 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
     from gpr3d.core.survey import Survey
 
     if not (available("torch") and available("torchvision")):
-        log("[5/7] detection skipped: PyTorch is not installed (pip install 'gpr3d[dl]')")
+        log("[5/8] detection skipped: PyTorch is not installed (pip install 'gpr3d[dl]')")
         return {"skipped": "torch not installed"}
     from gpr3d.detection.infer import load_detector
     from gpr3d.io.detections import write_detections
@@ -374,7 +374,7 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
                    boxes=[tg["box"] for tg in real_found["targets"]],
                    apexes=[(tg["apex_trace"], tg["apex_time_s"]) for tg in real_found["targets"]],
                    title=f"{Path(real_path).name}: {len(real_found['targets'])} detections (score >= 0.5)")
-    log(f"[5/7] detection: {len(boxes)} hyperbolas in the {survey.n_traces}-trace survey ({found['n_windows']} "
+    log(f"[5/8] detection: {len(boxes)} hyperbolas in the {survey.n_traces}-trace survey ({found['n_windows']} "
         f"windows in {t_det:.1f} s), {len(real_found['targets'])} in {Path(real_path).name}")
     row = {"n_boxes": len(boxes), "detect_s": t_det, "n_windows": found["n_windows"],
            "real_detections": len(real_found["targets"]), "pgpr": _pgpr_rows(det, out, log)}
@@ -506,7 +506,7 @@ def _depth_rows(survey, found, real, real_found, log, true_xy) -> dict:
                                               "depth_true_m": d_true}
                                              for t, e, d_true in zip(found["targets"], r["targets"], truth)]
     rw = out["random_walk"]
-    log(f"[6/7] depth from the data (random-motion survey, true eps_r {truth_eps:g}; depth error over the "
+    log(f"[6/8] depth from the data (random-motion survey, true eps_r {truth_eps:g}; depth error over the "
         f"{out['random_walk']['n_matched']} of {len(found['targets'])} detections that a pipe's echo explains, "
         "median / mean):")
     for m in ("net", "fit", "hybrid"):
@@ -565,9 +565,63 @@ def _pose_stage(out: Path, log) -> dict:
                                             "fused (IMU + odometry)": at_start(fused)},
                    title=f"visual-inertial pose: {run.path_length_m:.0f} m in {rig.duration_s:.0f} s, "
                          "odometry lost for 2 s")
-    log(f"[7/7] visual-inertial pose: {run.path_length_m:.1f} m of random motion fused in {wall:.1f} s; {msg}; "
+    log(f"[7/8] visual-inertial pose: {run.path_length_m:.1f} m of random motion fused in {wall:.1f} s; {msg}; "
         f"{info['vo_rejected']} odometry frames gated out ({info['vo_outliers']} gross errors planted)")
     return info
+
+
+def _live_stage(out: Path, log, rate: float = 4000.0) -> dict:
+    """The random-motion survey served over TCP (``gpr3d replay``'s server, in a thread) at ``rate`` traces/s to
+    live mode (``gpr3d live``), then its final volume against the batch reconstruct with the settings it wrote."""
+    import threading
+
+    from gpr3d.core.survey import Survey
+    from gpr3d.io.trajectory import read_tum
+    from gpr3d.io.volume import read_volume
+    from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct
+    from gpr3d.pipeline.live import LiveConfig, open_source, run_live
+    from gpr3d.pipeline.replay import replay_to_tcp
+
+    survey = Survey.load(out / "random_walk_survey.h5")
+    est = read_tum(out / "random_walk.tum")
+    survey = survey.replace(positions_xyz=est.positions_xyz, orientations_quat_wxyz=est.orientations_quat_wxyz)
+    ports: list = []
+    ready = threading.Event()
+    server = threading.Thread(target=replay_to_tcp, args=(survey, 0), daemon=True,
+                              kwargs=dict(rate=rate, on_listen=lambda p: (ports.append(p), ready.set())))
+    server.start()
+    if not ready.wait(30):
+        raise RuntimeError("the demo's replay server did not start")
+    from gpr3d.core.deps import available
+
+    detector = None
+    if available("torch") and available("torchvision"):
+        from gpr3d.detection.infer import load_detector
+
+        detector = load_detector()
+    cfg = LiveConfig(reconstruct=ReconstructConfig(spacing_m=0.03, depth_spacing_m=0.02, max_depth_m=0.8),
+                     detect=detector is not None, until_idle_s=1.0)
+    folder = out / "live"
+    summ = run_live(open_source(f"tcp://127.0.0.1:{ports[0]}"), folder, cfg, detector=detector, log=None)
+    server.join(30)
+    settings = json.loads((folder / "config.json").read_text())["config"]
+    batch = reconstruct(survey, ReconstructConfig(**settings))
+    vol = read_volume(folder / "volume.h5")
+    same = vol.grid == batch.grid
+    diff = float(np.abs(vol.arrays["image"] - batch.image).max() / np.abs(batch.image).max()) if same else None
+    found = f"the detector run on each window as it filled ({summ.n_detections} hyperbolas), " if detector else ""
+    verdict = ("grids differ" if diff is None else
+               f"the final volume {'equals' if diff < 1e-4 else 'DIFFERS from'} the batch reconstruct with the same "
+               f"settings (max difference {diff:.1e} of its peak)")
+    log(f"[8/8] live: the survey streamed over TCP at {rate:,.0f} traces/s (gpr3d replay) into gpr3d live: each "
+        f"trace migrated once as it came, into tiles that follow the cart (at most {summ.peak_tiles} in memory), "
+        f"{found}targets refreshed while it ran (trace-to-target latency median {summ.latency_s['median']:.2f} s); "
+        f"{verdict}")
+    log(f"      {summ.line()}")
+    return {"n_traces": summ.n_traces, "traces_per_s": summ.traces_per_s, "lag_s": summ.lag_s,
+            "latency_s": summ.latency_s, "peak_tiles": summ.peak_tiles, "n_targets": summ.n_targets,
+            "n_detections": summ.n_detections if detector else None,
+            "same_grid": same, "max_difference": diff, "folder": "live", "rate": rate}
 
 
 def _quat_matrix(q_wxyz):
@@ -589,7 +643,7 @@ def _real_stage(out: Path, cfg: DemoConfig, log):
     t = time.perf_counter()
     proc = _process(raw, cfg)
     t_proc = time.perf_counter() - t
-    log(f"[1/7] read {Path(src).name}: {raw}")
+    log(f"[1/8] read {Path(src).name}: {raw}")
     log(f"      processed ({', '.join(h['step'] for h in proc.history)}) in {t_proc * 1e3:.0f} ms")
     save_bscan_png(raw, out / "real_raw.png", cmap=cfg.cmap, title=f"{Path(src).name}: raw")
     save_bscan_png(proc, out / "real_processed.png", cmap=cfg.cmap, title=f"{Path(src).name}: processed")
@@ -641,7 +695,7 @@ def _synthetic_stage(out: Path, cfg: DemoConfig, log) -> dict:
     save_bscan_png(syn, out / "synthetic_raw.png", cmap=cfg.cmap, title="synthetic point targets: raw")
     save_bscan_png(syn_proc, out / "synthetic_processed.png", cmap="hot", boxes=boxes,
                    title="synthetic point targets: processed (boxes: windows around the found apexes)")
-    log(f"[2/7] synthetic B-scan {syn.shape}: apex time errors "
+    log(f"[2/8] synthetic B-scan {syn.shape}: apex time errors "
         + ", ".join(f"{r['apex_time_error_s'] * 1e9:+.2f} ns" for r in rows)
         + f" (time zero estimated at {t0_est * 1e9:.2f} ns)")
     rtm = _rtm_of_synthetic(syn, out, log)
@@ -700,6 +754,10 @@ def _run_demo(out: Path, cfg: DemoConfig, log) -> dict:
     # 7. visual-inertial pose of a random-motion cart ---------------------------------------
     with stage("demo 7: pose"):
         summary["stages"]["pose"] = _pose_stage(out, log)
+
+    # 8. live: the same survey streamed as a radar delivers it, migrated as it comes -----------------
+    with stage("demo 8: live"):
+        summary["stages"]["live"] = _live_stage(out, log)
 
     # the report: the masked reconstruction of the random-motion survey on one page to open in a browser
     if (out / "reconstruction_masked" / "targets.json").exists():

@@ -205,7 +205,11 @@ def test_demo_end_to_end(tmp_path):
     demo_rows = [k for k in times["stages"] if k.startswith("demo")]
     assert demo_rows == ["demo 1: real recording", "demo 2: synthetic B-scan", "demo 3: random-motion survey",
                          "demo 4: reconstruction", "demo 5-6: detection, depths, masked migration", "demo 7: pose",
-                         "demo: report"]
+                         "demo 8: live", "demo: report"]
+    live = summary["stages"]["live"]  # the survey streamed into live mode: its volume is the batch one
+    assert live["n_traces"] == walk["n_traces"] and live["same_grid"] and live["max_difference"] < 1e-4
+    assert 0 < live["traces_per_s"] <= 1.05 * live["rate"] and live["n_targets"] >= 3
+    assert live["n_detections"] is None if "skipped" in summary["stages"]["detection"] else live["n_detections"] > 10
     assert {"migrate", "targets", "figures", "network"} <= set(times["stages"])
     assert sum(times["stages"].values()) == pytest.approx(times["wall_s"], abs=1e-3)
     assert summary["timings_s"] == pytest.approx(times["stages"], abs=1e-6)

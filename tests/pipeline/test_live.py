@@ -201,3 +201,50 @@ def test_a_tcp_source_nobody_serves_ends_in_one_line(tmp_path):
     source = open_source(f"tcp://127.0.0.1:{port}", connect_s=0.3)
     with pytest.raises(GPR3DError, match="no connection after 0.3 s"):
         run_live(source, tmp_path / "out", _cfg(), log=None)
+
+
+class _Spans:
+    """A detector stand-in: records the spans it is given; finds one box per span around its middle trace, its
+    score rising with the span's start (a later window sees the hyperbola better)."""
+
+    def __init__(self, traces=8, overlap=0.5):
+        from types import SimpleNamespace
+
+        self.window = SimpleNamespace(traces=traces, overlap=overlap)
+        self.spans = []
+
+    def detect(self, survey, *, score_threshold, input_name):
+        n = survey.n_traces
+        self.spans.append((int(survey.data[0, 2]), n))  # (samples 0 and 1 are a DZT's counter and mark)
+        mid = n // 2
+        return {"targets": [{"box": [mid - 1.0, 1e-9, mid + 1.0, 2e-9], "score": 0.5 + survey.data[0, 0] / 1e4,
+                             "apex_trace": mid, "apex_time_s": 1.2e-9, "kind": "target", "kind_score": None}]}
+
+
+def test_detection_runs_on_every_window_once_as_it_fills(tmp_path):
+    header = StreamHeader(n_samples=16, dt_s=1e-10, eps_r=4.0)
+    det = _Spans()
+    live = LiveReconstruction(header, LiveConfig(reconstruct=ReconstructConfig(aperture_deg=45.0), time_zero_traces=4,
+                                                 background_window=4), tmp_path, detector=det)
+    data = np.tile(np.arange(30, dtype=np.float32)[:, None], (1, 16))  # sample 0 of a trace: its index
+    poses = np.c_[np.linspace(0, 0.6, 30), np.zeros((30, 2)), np.tile([1, 0, 0, 0], (30, 1))]
+    for a, b in ((0, 5), (5, 13), (13, 14), (14, 27)):
+        live.add(data[a:b], poses[a:b])
+        live._detect(False)
+    # windows of 8 traces every 4, all those at hand in one span: [0, 8) and [4, 12) once 13 traces are there,
+    # then [8, 16), [12, 20), [16, 24) once 27 are
+    assert det.spans == [(0, 12), (8, 16)]
+    live.add(data[27:], poses[27:])
+    live._detect(True)  # the end: the full window [20, 28), then one over the last traces, [22, 30)
+    assert det.spans[2:] == [(20, 8), (22, 8)]
+    live._detect(True)  # nothing left
+    assert len(det.spans) == 4
+    # boxes in the stream's traces
+    assert sorted((t["box"][0], t["apex_trace"]) for t in live.detections) == [(5.0, 6), (15.0, 16), (23.0, 24),
+                                                                                (25.0, 26)]
+    # a box of the same hyperbola from an overlapping window: the better one kept, once
+    live._add_detection({"box": [15.2, 1e-9, 17.2, 2e-9], "score": 0.9, "apex_trace": 16})
+    live._add_detection({"box": [24.9, 1e-9, 26.9, 2e-9], "score": 0.1, "apex_trace": 26})
+    live._add_detection({"box": [40.0, 1e-9, 42.0, 2e-9], "score": 0.2, "apex_trace": 41})
+    assert sorted((t["box"][0], t["score"]) for t in live.detections) == [
+        (5.0, 0.5), (15.2, 0.9), (23.0, 0.502), (25.0, 0.5022), (40.0, 0.2)]

@@ -473,30 +473,36 @@ class LiveReconstruction:
 
     # detection ---------------------------------------------------------------------------------------------------
     def _detect(self, ended):
-        from gpr3d.core.survey import Survey
-
+        """Every full window not yet detected, in one call (the detector's own windows fall where live mode's
+        would: a span of one window plus whole steps); at the end, one window over the last traces."""
         win = self.detector.window.traces
         step = max(1, int(round(win * (1 - self.detector.window.overlap))))
         n = self.raw_tail_first + len(self.raw_tail)
-        while self.next_window + win <= n or (ended and self.next_window < n and
-                                              (self.next_window == 0 or self.next_window + win - step < n)):
-            a = self.next_window
-            b = min(n, a + win)
-            data = self.raw_tail[a - self.raw_tail_first: b - self.raw_tail_first]
-            s = Survey(data=data, dt_s=self.h.dt_s, frequency_hz=self.h.frequency_hz, offset_m=self.h.offset_m)
-            found = self.detector.detect(s, score_threshold=self.cfg.score, input_name=self.h.name)
-            for t in found["targets"]:
-                t = dict(t)
-                t["box"] = [t["box"][0] + a, t["box"][1], t["box"][2] + a, t["box"][3]]
-                t["apex_trace"] += a
-                self._add_detection(t)
-            self.next_window = a + step
-            drop = self.next_window - self.raw_tail_first
-            if drop > 0:
-                self.raw_tail = self.raw_tail[drop:]
-                self.raw_tail_first = self.next_window
-            if b == n and ended:
-                break
+        avail = n - self.next_window
+        if avail >= win:
+            k = (avail - win) // step
+            self._detect_span(self.next_window, self.next_window + win + k * step)
+            self.next_window += (k + 1) * step
+        covered = self.next_window - step + win if self.next_window else 0
+        if ended and n > covered:
+            self._detect_span(max(0, n - win), n)
+            self.next_window = n
+        keep = max(0, self.next_window - step)  # the last window at the end may reach back one step
+        if keep > self.raw_tail_first:
+            self.raw_tail = self.raw_tail[keep - self.raw_tail_first:]
+            self.raw_tail_first = keep
+
+    def _detect_span(self, a, b):
+        from gpr3d.core.survey import Survey
+
+        data = self.raw_tail[a - self.raw_tail_first: b - self.raw_tail_first]
+        s = Survey(data=data, dt_s=self.h.dt_s, frequency_hz=self.h.frequency_hz, offset_m=self.h.offset_m)
+        found = self.detector.detect(s, score_threshold=self.cfg.score, input_name=self.h.name)
+        for t in found["targets"]:
+            t = dict(t)
+            t["box"] = [t["box"][0] + a, t["box"][1], t["box"][2] + a, t["box"][3]]
+            t["apex_trace"] += a
+            self._add_detection(t)
 
     def _add_detection(self, t):
         """Keep ``t`` unless a kept box of the same hyperbola (IoU > 0.5, from the overlapping window) scores
