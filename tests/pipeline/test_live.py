@@ -231,20 +231,21 @@ def test_detection_runs_on_every_window_once_as_it_fills(tmp_path):
     for a, b in ((0, 5), (5, 13), (13, 14), (14, 27)):
         live.add(data[a:b], poses[a:b])
         live._detect(False)
-    # windows of 8 traces every 4, all those at hand in one span: [0, 8) and [4, 12) once 13 traces are there,
-    # then [8, 16), [12, 20), [16, 24) once 27 are
-    assert det.spans == [(0, 12), (8, 16)]
+    # windows of 8 traces every 4, each on its own: [0, 8) and [4, 12) once 13 traces are there, then [8, 16),
+    # [12, 20), [16, 24) once 27 are
+    assert det.spans == [(0, 8), (4, 8), (8, 8), (12, 8), (16, 8)]
     live.add(data[27:], poses[27:])
     live._detect(True)  # the end: the full window [20, 28), then one over the last traces, [22, 30)
-    assert det.spans[2:] == [(20, 8), (22, 8)]
+    assert det.spans[5:] == [(20, 8), (22, 8)]
     live._detect(True)  # nothing left
-    assert len(det.spans) == 4
+    assert len(det.spans) == 7
     # boxes in the stream's traces
-    assert sorted((t["box"][0], t["apex_trace"]) for t in live.detections) == [(5.0, 6), (15.0, 16), (23.0, 24),
-                                                                                (25.0, 26)]
+    assert sorted((t["box"][0], t["apex_trace"]) for t in live.detections) == [
+        (3.0, 4), (7.0, 8), (11.0, 12), (15.0, 16), (19.0, 20), (23.0, 24), (25.0, 26)]
     # a box of the same hyperbola from an overlapping window: the better one kept, once
     live._add_detection({"box": [15.2, 1e-9, 17.2, 2e-9], "score": 0.9, "apex_trace": 16})
     live._add_detection({"box": [24.9, 1e-9, 26.9, 2e-9], "score": 0.1, "apex_trace": 26})
     live._add_detection({"box": [40.0, 1e-9, 42.0, 2e-9], "score": 0.2, "apex_trace": 41})
     assert sorted((t["box"][0], t["score"]) for t in live.detections) == [
-        (5.0, 0.5), (15.2, 0.9), (23.0, 0.502), (25.0, 0.5022), (40.0, 0.2)]
+        (3.0, 0.5), (7.0, 0.5004), (11.0, 0.5008), (15.2, 0.9), (19.0, 0.5016), (23.0, 0.502), (25.0, 0.5022),
+        (40.0, 0.2)]

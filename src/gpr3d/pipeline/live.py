@@ -58,7 +58,7 @@ class LiveConfig:
     score: float = 0.5  #: the detector's score threshold
     until_idle_s: float | None = 5.0  #: end once no trace has come for this long (None: only at the end mark)
     max_batch: int = 4096  #: the most traces migrated in one go (a backlog is worked off in such batches)
-    final_volume_voxels: int = 200_000_000  #: put the final volume together only up to this size
+    final_volume_voxels: int = 30_000_000  #: put the final volume together only up to this size (else: its tiles)
     eps_r: float | None = None  #: None: the stream's header's
 
 
@@ -242,6 +242,30 @@ def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 
 
 # -- the engine ----------------------------------------------------------------------------------------------------
 
+class _Rows:
+    """Rows appended at the end of a buffer that doubles when full (appending is amortised O(rows added), where
+    concatenating onto an array copies everything each time)."""
+
+    def __init__(self, width: int):
+        self._a = np.zeros((1024, width))
+        self.n = 0
+
+    def append(self, rows) -> None:
+        rows = np.asarray(rows, float).reshape(-1, self._a.shape[1])
+        if self.n + len(rows) > len(self._a):
+            grown = np.zeros((max(2 * len(self._a), self.n + len(rows)), self._a.shape[1]))
+            grown[: self.n] = self._a[: self.n]
+            self._a = grown
+        self._a[self.n: self.n + len(rows)] = rows
+        self.n += len(rows)
+
+    def __getitem__(self, key):
+        return self._a[: self.n][key]
+
+    def __len__(self) -> int:
+        return self.n
+
+
 class LiveReconstruction:
     """The state of a live run: feed it batches of raw traces with poses (:meth:`add`), call :meth:`step` to
     process what is ready, :meth:`finish` at the end."""
@@ -279,8 +303,8 @@ class LiveReconstruction:
         self.cut = np.zeros((0, header.n_samples), np.float32)
         self.cut_first = 0
         self.n_final = 0  # traces migrated
-        self.poses = np.zeros((0, 7))
-        self.arrival = np.zeros(0)  # monotonic time each trace arrived
+        self._poses = _Rows(7)  # every trace's pose (x y z qw qx qy qz): the final grid covers them all
+        self._arrival = _Rows(1)  # the monotonic time each trace arrived
         self.tiles: dict = {}  # (a, b) -> [image, fold]
         self.on_disk: set = set()
         self.peak_tiles = 0
@@ -297,6 +321,16 @@ class LiveReconstruction:
         self.refresh_cost_s = 0.0
         self.n_refreshed = 0  # traces migrated at the last refresh
         self.migrate_s = 0.0
+
+    @property
+    def poses(self) -> np.ndarray:
+        """``(n_traces_in, 7)``: each trace's pose ``x y z qw qx qy qz``."""
+        return self._poses[:]
+
+    @property
+    def arrival(self) -> np.ndarray:
+        """``(n_traces_in,)``: when each trace arrived (monotonic seconds)."""
+        return self._arrival[:, 0]
 
     # the depth axis, the reach of a trace, the tile lattice ---------------------------------------------------
     def _setup_grid(self):
@@ -325,8 +359,8 @@ class LiveReconstruction:
         now = time.monotonic() if now is None else now
         p = np.asarray(poses, float).reshape(k, 7).copy()
         p[:, 3:] /= np.linalg.norm(p[:, 3:], axis=1, keepdims=True)
-        self.poses = np.concatenate([self.poses, p])
-        self.arrival = np.concatenate([self.arrival, np.full(k, now)])
+        self._poses.append(p)
+        self._arrival.append(np.full(k, now))
         self.n_in += k
         if self.detector is not None:
             self.raw_tail = np.concatenate([self.raw_tail, data])
@@ -473,16 +507,15 @@ class LiveReconstruction:
 
     # detection ---------------------------------------------------------------------------------------------------
     def _detect(self, ended):
-        """Every full window not yet detected, in one call (the detector's own windows fall where live mode's
-        would: a span of one window plus whole steps); at the end, one window over the last traces."""
+        """Every full window not yet detected, one by one (a window's detections do not depend on how the
+        traces arrived: the detector prepares each window on its own; one call a window costs what one call over
+        several does, measured); at the end, one window over the last traces."""
         win = self.detector.window.traces
         step = max(1, int(round(win * (1 - self.detector.window.overlap))))
         n = self.raw_tail_first + len(self.raw_tail)
-        avail = n - self.next_window
-        if avail >= win:
-            k = (avail - win) // step
-            self._detect_span(self.next_window, self.next_window + win + k * step)
-            self.next_window += (k + 1) * step
+        while n - self.next_window >= win:
+            self._detect_span(self.next_window, self.next_window + win)
+            self.next_window += step
         covered = self.next_window - step + win if self.next_window else 0
         if ended and n > covered:
             self._detect_span(max(0, n - win), n)
