@@ -11,7 +11,7 @@ The stream format (``docs/CONVENTIONS.md``, "Live trace stream"), little-endian:
 - at the end (optional: a closed connection ends the stream too), the 4 bytes ``END!``.
 
 :class:`StreamDecoder` takes bytes as they come and gives whole traces; :func:`encode_header`,
-:func:`encode_trace` and :data:`END` write the format. :class:`GrowingDZT` and :class:`GrowingTUM` read a DZT
+:func:`encode_trace` and ``END`` write the format. :class:`GrowingDZT` and :class:`GrowingTUM` read a DZT
 recording and a TUM trajectory that a radar and a pose filter are still writing: each ``poll()`` gives what has
 been completed since the last.
 """
@@ -33,7 +33,7 @@ __all__ = ["END", "HEADER_MAGIC", "GrowingDZT", "GrowingTUM", "StreamDecoder", "
 
 HEADER_MAGIC = b"GPR3DTR1"
 TRACE_TAG = b"TRCE"
-END = b"END!"
+END = b"END!"  #: the end mark
 _TRACE = struct.Struct("<4sQd7d")  # tag, index, time, x y z qw qx qy qz
 MAX_HEADER_BYTES = 1 << 20
 MAX_SAMPLES = 1 << 20
