@@ -601,6 +601,9 @@ class LiveReconstruction:
                 env = image_envelope(img)
                 self.targets = volume_targets(env, grid, self.rc, self.v, self.h.frequency_hz)
         self._write_status(now)
+        behind = float(self.arrival[self.n_in - 1] - self.arrival[self.n_final - 1]) if self.n_final else 0.0
+        self.log(f"  {self.n_in:,} traces in, {self.n_final:,} migrated ({behind:.2f} s behind the newest), "
+                 f"{len(self.targets)} targets, {len(self.detections)} detections, {len(self.tiles)} tiles in memory")
         done = time.monotonic()
         if self.n_final > self.n_refreshed:
             # the oldest trace this refresh brings in waited longest: from its arrival to targets that include it
