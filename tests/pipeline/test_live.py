@@ -187,8 +187,8 @@ def test_wrong_sources_are_named(source, kw, message):
 
 def test_a_source_where_nothing_comes_ends_in_one_line(tmp_path):
     source = open_source(str(tmp_path / "never.dzt"), poses=tmp_path / "never.tum")
-    with pytest.raises(GPR3DError, match="no traces arrived in 0.2 s"):
-        run_live(source, tmp_path / "out", _cfg(until_idle_s=0.2), log=None)
+    with pytest.raises(GPR3DError, match="never.dzt: no traces arrived in 0.3 s"):
+        run_live(source, tmp_path / "out", _cfg(until_idle_s=0.1, start_timeout_s=0.3), log=None)
 
 
 def test_a_tcp_source_nobody_serves_ends_in_one_line(tmp_path):
@@ -249,3 +249,27 @@ def test_detection_runs_on_every_window_once_as_it_fills(tmp_path):
     assert sorted((t["box"][0], t["score"]) for t in live.detections) == [
         (3.0, 0.5), (7.0, 0.5004), (11.0, 0.5008), (15.2, 0.9), (19.0, 0.5016), (23.0, 0.502), (25.0, 0.5022),
         (40.0, 0.2)]
+
+
+def test_the_idle_clock_starts_at_the_first_trace(survey, tmp_path):
+    """A run started before the radar: its idle time (0.3 s) counts from the first trace, not from the start."""
+    import time as _time
+
+    src = _dzt_of(survey, tmp_path / "rec.dzt")
+    tum = tmp_path / "rec.tum"
+    q = survey.orientations_quat_wxyz
+    tum.write_text("".join(f"{i * 0.01:.2f} " + " ".join(repr(float(v)) for v in (*p, *r[1:], r[0])) + "\n"
+                           for i, (p, r) in enumerate(zip(survey.positions_xyz, q))))
+
+    def late():
+        _time.sleep(0.8)
+        replay_to_dzt(src, tmp_path / "live.dzt", rate=5000.0, poses=tum, poses_out=tmp_path / "live.tum")
+
+    th = threading.Thread(target=late, daemon=True)
+    th.start()
+    summary = run_live(open_source(tmp_path / "live.dzt", poses=tmp_path / "live.tum", offset_m=0.05),
+                       tmp_path / "out", _cfg(until_idle_s=0.3, start_timeout_s=10.0), log=None)
+    th.join(10)
+    assert summary.n_traces == survey.n_traces
+    # the rate counts from the first trace: 420 traces written in about 0.08 s, not spread over the 0.8 s wait
+    assert summary.traces_per_s > survey.n_traces / 0.8

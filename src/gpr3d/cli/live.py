@@ -34,7 +34,10 @@ def add_arguments(sp):
                     help="traces in the moving background window (default 256; a trace waits for half of them)")
     sp.add_argument("--refresh", type=float, default=1.0, help="seconds between target refreshes (default 1)")
     sp.add_argument("--until-idle", type=float, default=5.0,
-                    help="end once no trace has come for this many seconds (default 5; 0: only at the end mark)")
+                    help="end once no trace has come for this many seconds after the first (default 5; 0: only at "
+                         "the end mark)")
+    sp.add_argument("--start-timeout", type=float, default=60.0,
+                    help="give up when no trace at all has come in this many seconds (default 60; 0: wait)")
     sp.add_argument("--no-detect", action="store_true", help="no hyperbola detection on the windows")
     sp.add_argument("--weights", default=None, help="detector weights (default: the shipped model)")
     sp.add_argument("--score", type=float, default=0.5, help="keep detections scoring at least this (0..1)")
@@ -51,6 +54,7 @@ def run(args):
     _out_folder(args.out, "live")
     _in_range(args.refresh, "--refresh", 0.05, 3600, "seconds")
     _in_range(args.until_idle, "--until-idle", 0, 86400, "seconds")
+    _in_range(args.start_timeout, "--start-timeout", 0, 86400 * 7, "seconds")
     _in_range(args.connect_timeout, "--connect-timeout", 0, 86400, "seconds")
     _in_range(args.offset, "--offset", 0, 10, "metres")
     if not 0.0 <= args.score <= 1.0:
@@ -73,7 +77,8 @@ def run(args):
         detector, _ = load_models(detector=True, depth="none", weights=args.weights, device=args.device)
     cfg = LiveConfig(reconstruct=rc, background_window=args.background_window, refresh_s=args.refresh,
                      detect=not args.no_detect, score=args.score,
-                     until_idle_s=None if args.until_idle == 0 else args.until_idle, eps_r=eps)
+                     until_idle_s=None if args.until_idle == 0 else args.until_idle,
+                     start_timeout_s=None if args.start_timeout == 0 else args.start_timeout, eps_r=eps)
     source = open_source(args.source, poses=args.poses, channel=args.channel, offset_m=args.offset,
                          connect_s=args.connect_timeout)
     summary = run_live(source, args.out, cfg, detector=detector, log=print)

@@ -57,6 +57,7 @@ class LiveConfig:
     detect: bool = True  #: run the detector on each window of traces as it fills
     score: float = 0.5  #: the detector's score threshold
     until_idle_s: float | None = 5.0  #: end once no trace has come for this long (None: only at the end mark)
+    start_timeout_s: float | None = 60.0  #: give up when no trace at all has come for this long (None: wait)
     max_batch: int = 4096  #: the most traces migrated in one go (a backlog is worked off in such batches)
     final_volume_voxels: int = 30_000_000  #: put the final volume together only up to this size (else: its tiles)
     eps_r: float | None = None  #: None: the stream's header's
@@ -697,8 +698,10 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     out.mkdir(parents=True, exist_ok=True)
     live = None
     t_start = clock()
+    t_first = None  # the first trace's arrival: the idle clock and the rate start there
     last_new = t_start
     newest_arrival = None
+    idle = False
     try:
         while True:
             got = source.poll()
@@ -707,29 +710,34 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
                 live = LiveReconstruction(source.header, cfg, out, detector=detector, log=log)
             if got is not None and len(got[0]):
                 live.add(got[0], got[1], got[2], now=now)
-                last_new = now
-                newest_arrival = now
+                t_first = now if t_first is None else t_first
+                last_new = newest_arrival = now
             worked = live.step(now=now) if live is not None else 0
             if source.ended:
                 break
-            if cfg.until_idle_s is not None and now - last_new >= cfg.until_idle_s:
+            if t_first is None:
+                if cfg.start_timeout_s is not None and now - t_start >= cfg.start_timeout_s:
+                    break
+            elif cfg.until_idle_s is not None and now - last_new >= cfg.until_idle_s:
+                idle = True
                 break
             if not worked and (got is None or not len(got[0])):
                 time.sleep(poll_s)
     finally:
         source.close()
     if live is None or live.n_in == 0:
-        raise GPR3DError(f"{getattr(source, 'decoder', None) and source.decoder.where or 'the source'}: no traces "
-                         f"arrived{'' if cfg.until_idle_s is None else f' in {cfg.until_idle_s:g} s'}")
+        where = getattr(getattr(source, "decoder", None), "where", None) or getattr(getattr(source, "dzt", None),
+                                                                                   "path", "the source")
+        raise GPR3DError(f"{where}: no traces arrived"
+                         + ("" if cfg.start_timeout_s is None else f" in {cfg.start_timeout_s:g} s"))
     live.step(ended=True)
     t_end = clock()
-    lag = max(0.0, t_end - newest_arrival) if newest_arrival is not None else 0.0
-    if cfg.until_idle_s is not None and not source.ended:
-        lag = max(0.0, lag - cfg.until_idle_s)  # the idle wait itself is not lag
-    busy = (t_end - t_start) - (cfg.until_idle_s if not source.ended and cfg.until_idle_s else 0.0)
+    waited = cfg.until_idle_s if idle else 0.0  # the idle wait that ended the run is neither lag nor work
+    lag = max(0.0, t_end - newest_arrival - waited)
+    busy = max(t_end - t_first - waited, 1e-9)
     result = live.finish(source=str(getattr(source.header, "name", "")))
     lat = np.asarray(live.latencies) if live.latencies else np.zeros(1)
-    summary = LiveSummary(n_traces=live.n_final, wall_s=busy, traces_per_s=live.n_final / max(busy, 1e-9),
+    summary = LiveSummary(n_traces=live.n_final, wall_s=busy, traces_per_s=live.n_final / busy,
                           lag_s=lag, latency_s={"median": float(np.median(lat)), "max": float(lat.max())},
                           peak_tiles=live.peak_tiles, n_targets=len(live.targets),
                           n_detections=len(live.detections), final_volume=result is not None)
