@@ -101,6 +101,10 @@ def test_tiles_written_out_and_read_back_keep_the_volume(survey, tmp_path):
         reloaded += len(before & set(live.tiles))
     assert live.on_disk and reloaded > 0
     assert live.peak_tiles < len(live.on_disk | set(live.tiles))
+    live.refresh()  # the preview, before the end: the pipe (along y at x = 0.6, 0.22 m deep) is in it
+    lines = [t for t in live.targets if t.kind == "line"]
+    assert any(abs(np.mean([p[0] for p in t.points_xyz]) - 0.6) < 0.05 and abs(t.depth_m - 0.22) < 0.05
+               for t in lines), live.targets
     live.finish()
     _batch_equals_live(survey, tmp_path)
 

@@ -32,7 +32,8 @@ def add_arguments(sp):
                     help=f"beam half-angle in degrees, in (0, 90) (default {rc.aperture_deg:g})")
     sp.add_argument("--background-window", type=int, default=256,
                     help="traces in the moving background window (default 256; a trace waits for half of them)")
-    sp.add_argument("--refresh", type=float, default=1.0, help="seconds between target refreshes (default 1)")
+    sp.add_argument("--refresh", type=float, default=0.5,
+                    help="seconds between target refreshes (default 0.5; longer where one takes over a third of it)")
     sp.add_argument("--until-idle", type=float, default=5.0,
                     help="end once no trace has come for this many seconds after the first (default 5; 0: only at "
                          "the end mark)")

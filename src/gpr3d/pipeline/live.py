@@ -53,7 +53,9 @@ class LiveConfig:
     background_window: int = 256  #: traces in the moving background window (a trace waits for half of them)
     time_zero_traces: int = 64  #: traces time zero is estimated from
     tile_voxels: int = 32  #: a tile's side in voxels
-    refresh_s: float = 1.0  #: how often the targets and ``live.json`` are refreshed (s)
+    refresh_s: float = 0.5  #: how often the targets and ``live.json`` are refreshed (s; longer where a refresh
+    #: would take more than a third of the time)
+    preview_angle_step_deg: float = 1.0  #: the refreshes' Hough angle step (the final targets: the batch one's)
     detect: bool = True  #: run the detector on each window of traces as it fills
     score: float = 0.5  #: the detector's score threshold
     until_idle_s: float | None = 5.0  #: end once no trace has come for this long (None: only at the end mark)
@@ -343,6 +345,10 @@ class LiveReconstruction:
             raise GPR3DError(f"the record reaches {depth:.3f} m: too shallow for depth steps of {dd:g} m")
         self.depth_m = depth
         self.grid_base = Grid3D(0.0, 0.0, dd, rc.spacing_m, rc.spacing_m, dd, 1, 1, nd)
+        # the band volume_targets clears around each line found (the same for the previews)
+        tol = 2.0 * max(rc.spacing_m, rc.spacing_m)
+        f = self.h.frequency_hz
+        self.band_m = max(2 * tol, 0.5 * self.v / f) if f else None
         # how far from its antennas a trace reaches (the aperture cone at the deepest voxel), with a cell to spare
         self.reach = self.grid_base.depth[-1] * math.tan(math.radians(rc.aperture_deg)) + 2 * rc.spacing_m
 
@@ -431,9 +437,9 @@ class LiveReconstruction:
         if self.detector is not None:
             self._detect(ended)
         now = time.monotonic() if now is None else now
-        # the refresh's period: refresh_s, or longer where a refresh costs more than a fifth of it (the targets'
+        # the refresh's period: refresh_s, or longer where a refresh costs more than a third of it (the targets'
         # extraction must not starve the migration)
-        period = max(self.cfg.refresh_s, 5.0 * self.refresh_cost_s)
+        period = max(self.cfg.refresh_s, 3.0 * self.refresh_cost_s)
         if self.n_final > self.n_refreshed and (ended or self.last_refresh is None
                                                 or now - self.last_refresh >= period):
             self.refresh(now)
@@ -583,7 +589,8 @@ class LiveReconstruction:
     def refresh(self, now=None):
         """Targets of the tiles in memory (over the antenna positions they hold), and ``live.json``."""
         from gpr3d.migration.masking import image_envelope
-        from gpr3d.migration.reconstruct import normalise_by_fold, volume_targets
+        from gpr3d.migration.reconstruct import normalise_by_fold
+        from gpr3d.migration.targets import extract_targets
 
         t_start = time.monotonic()
         now = t_start if now is None else now
@@ -600,7 +607,11 @@ class LiveReconstruction:
                 img, fold = self._assemble(grid, self.tiles)
                 img, _ = normalise_by_fold(img, fold, self.rc.normalize, fold_max=self.fold_max)
                 env = image_envelope(img)
-                self.targets = volume_targets(env, grid, self.rc, self.v, self.h.frequency_hz)
+                # the final extraction's settings but a coarser Hough angle step: a third of the time, measured
+                # (benchmarks/bench_live.py), the same targets on the benchmark's survey
+                self.targets = extract_targets(env, grid, threshold=self.rc.threshold, min_line_m=self.rc.min_line_m,
+                                               band_m=self.band_m, min_depth_m=self.rc.min_target_depth_m,
+                                               angle_step_deg=self.cfg.preview_angle_step_deg)
         self._write_status(now)
         behind = float(self.arrival[self.n_in - 1] - self.arrival[self.n_final - 1]) if self.n_final else 0.0
         self.log(f"  {self.n_in:,} traces in, {self.n_final:,} migrated ({behind:.2f} s behind the newest), "
