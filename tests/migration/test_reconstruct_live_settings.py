@@ -59,6 +59,23 @@ def test_a_moving_background_window_is_the_centred_moving_mean(survey):
     assert np.abs(whole.image - b.image).max() > 1e-3 * np.abs(a.image).max()
 
 
+def test_a_trailing_background_window_ends_at_each_trace(survey):
+    w = 16
+    x = survey.data.astype(np.float64)
+    bg = uniform_filter1d(x, size=w, axis=0, mode="nearest", origin=(w - 1) // 2)
+    # (scipy's trailing window, checked against one by hand in tests/processing/test_filters.py)
+    a = reconstruct(survey.replace(data=(x - bg).astype(np.float32)),
+                    ReconstructConfig(**BASE, time_zero="none", remove_background=False))
+    b = reconstruct(survey, ReconstructConfig(**BASE, time_zero="none", background_window=w, background_trailing=True))
+    np.testing.assert_allclose(b.image, a.image, rtol=0, atol=1e-6 * np.abs(a.image).max())
+    centred = reconstruct(survey, ReconstructConfig(**BASE, time_zero="none", background_window=w))
+    assert np.abs(centred.image - b.image).max() > 1e-3 * np.abs(a.image).max()
+    # without a window there is nothing to trail: the whole survey's mean, as without the flag
+    whole = reconstruct(survey, ReconstructConfig(**BASE, time_zero="none"))
+    np.testing.assert_array_equal(
+        reconstruct(survey, ReconstructConfig(**BASE, time_zero="none", background_trailing=True)).image, whole.image)
+
+
 def test_lattice_grids_sit_on_multiples_of_the_spacing(survey):
     g = reconstruct(survey, ReconstructConfig(**BASE, lattice=True)).grid
     # positions x 0..1, y 0.013..0.413; pad 0.1: corner (-0.1, -0.087) rounded down to (-0.12, -0.09)
@@ -80,6 +97,7 @@ def test_covering_on_a_lattice_by_hand():
     ("background_window", True, "background_window must be"),
     ("time_zero_s", -1e-9, "time_zero_s must be >= 0"),
     ("lattice", "yes", "lattice must be true or false"),
+    ("background_trailing", 1, "background_trailing must be true or false"),
 ])
 def test_wrong_live_settings_are_named(field, value, message):
     with pytest.raises(InvalidDataError, match=message):

@@ -52,6 +52,7 @@ def _cfg(**kw):
 def _batch_equals_live(survey, out):
     cfg = json.loads((out / "config.json").read_text())["config"]
     assert cfg["lattice"] and cfg["background_window"] and cfg["time_zero_s"] > 0
+    assert cfg["background_trailing"] == json.loads((out / "live.json").read_text())["config"]["background_trailing"]
     batch = reconstruct(survey, ReconstructConfig(**cfg))
     vol = read_volume(out / "volume.h5")
     assert vol.grid == batch.grid
@@ -72,9 +73,11 @@ def _serve(survey, rate, **kw):
     return th, ports[0]
 
 
-def test_live_over_tcp_equals_the_batch_volume(survey, tmp_path):
+@pytest.mark.parametrize("trailing", [True, False])
+def test_live_over_tcp_equals_the_batch_volume(survey, tmp_path, trailing):
     th, port = _serve(survey, 4000.0)
-    summary = run_live(open_source(f"tcp://127.0.0.1:{port}"), tmp_path, _cfg(), log=None)
+    summary = run_live(open_source(f"tcp://127.0.0.1:{port}"), tmp_path, _cfg(background_trailing=trailing),
+                       log=None)
     th.join(10)
     assert summary.n_traces == survey.n_traces
     assert summary.line() == (f"{survey.n_traces} traces, {summary.traces_per_s:.0f} traces/s, "

@@ -5,8 +5,17 @@ import pytest
 from scipy import signal
 
 from gpr3d.processing import (
-    bandpass, dewow, envelope, gain_agc, gain_sec, gain_tpow, remove_background, remove_dc, resample_traces,
+    bandpass,
+    dewow,
+    envelope,
+    gain_agc,
+    gain_sec,
+    gain_tpow,
+    remove_background,
+    remove_dc,
+    resample_traces,
 )
+from gpr3d.processing.background import moving_background
 
 DT = 0.1e-9
 
@@ -307,3 +316,33 @@ def test_bandpass_needs_traces_longer_than_its_padding():
     x = np.random.default_rng(5).standard_normal((2, 28))
     sos = butter(4, [4e8, 1.5e9], btype="bandpass", fs=1 / DT, output="sos")
     np.testing.assert_allclose(bandpass(x, DT, fmin_hz=4e8, fmax_hz=1.5e9), sosfiltfilt(sos, x, axis=1), atol=2e-5)
+
+
+def _trailing_by_hand(x, w, stat):
+    """Each trace less ``stat`` of itself and the ``w - 1`` traces before it, the first trace standing in for
+    those before the survey."""
+    pad = np.concatenate([np.repeat(x[:1], w - 1, axis=0), x])
+    return np.stack([x[i] - stat(pad[i:i + w], axis=0) for i in range(len(x))])
+
+
+@pytest.mark.parametrize("w", [2, 3, 4, 7, 21])  # (21: longer than the survey, still trailing, not its mean)
+def test_a_trailing_background_window_ends_at_each_trace(w):
+    x = np.random.default_rng(3).normal(size=(15, 4)).astype(np.float32)
+    np.testing.assert_allclose(remove_background(x, window_traces=w, trailing=True),
+                               _trailing_by_hand(x, w, np.mean), atol=1e-6)
+    if w % 2:  # (an even window's median is scipy's upper middle value, not numpy's mean of the two)
+        np.testing.assert_allclose(remove_background(x, method="median", window_traces=w, trailing=True),
+                                   _trailing_by_hand(x, w, np.median), atol=1e-6)
+    # trace i's background uses no trace after it: changing the later traces leaves it as it was
+    y = x.copy()
+    y[9:] += 5.0
+    np.testing.assert_array_equal(remove_background(y, window_traces=w, trailing=True)[:9],
+                                  remove_background(x, window_traces=w, trailing=True)[:9])
+
+
+def test_a_moving_background_is_named_when_wrong():
+    x = np.zeros((4, 3), np.float32)
+    with pytest.raises(ValueError, match="window_traces must be >= 2"):
+        moving_background(x, 1)
+    with pytest.raises(ValueError, match="unknown background method 'mode'"):
+        moving_background(x, 3, method="mode")

@@ -31,7 +31,9 @@ def add_arguments(sp):
     sp.add_argument("--aperture", type=float, default=rc.aperture_deg,
                     help=f"beam half-angle in degrees, in (0, 90) (default {rc.aperture_deg:g})")
     sp.add_argument("--background-window", type=int, default=256,
-                    help="traces in the moving background window (default 256; a trace waits for half of them)")
+                    help="traces in the moving background window (default 256), ending at each trace")
+    sp.add_argument("--centred-background", action="store_true",
+                    help="centre the background window on each trace (a trace then waits for half a window)")
     sp.add_argument("--refresh", type=float, default=0.5,
                     help="seconds between target refreshes (default 0.5; longer where one takes over a third of it)")
     sp.add_argument("--until-idle", type=float, default=5.0,
@@ -70,13 +72,15 @@ def run(args):
     rc = ReconstructConfig(eps_r=eps, spacing_m=args.spacing, depth_spacing_m=args.depth_spacing,
                            max_depth_m=args.max_depth, aperture_deg=args.aperture,
                            engine=_migration_engine(None, args.device), background_window=args.background_window,
+                           background_trailing=not args.centred_background,
                            lattice=True)
     check_config(rc, names={"spacing_m": "--spacing", "depth_spacing_m": "--depth-spacing",
                             "max_depth_m": "--max-depth", "eps_r": "--eps-r"})
     detector = None
     if not args.no_detect:
         detector, _ = load_models(detector=True, depth="none", weights=args.weights, device=args.device)
-    cfg = LiveConfig(reconstruct=rc, background_window=args.background_window, refresh_s=args.refresh,
+    cfg = LiveConfig(reconstruct=rc, background_window=args.background_window,
+                     background_trailing=not args.centred_background, refresh_s=args.refresh,
                      detect=not args.no_detect, score=args.score,
                      until_idle_s=None if args.until_idle == 0 else args.until_idle,
                      start_timeout_s=None if args.start_timeout == 0 else args.start_timeout, eps_r=eps)

@@ -28,6 +28,9 @@ class ReconstructConfig:
     #: None: the mean trace of the whole survey is removed; a number of traces: the mean over a centred moving
     #: window of that many (live mode's background: a trace is final once half a window has followed it)
     background_window: int | None = None
+    #: with ``background_window``: the window ends at each trace instead of being centred on it (no trace waits
+    #: for later ones: live mode's default)
+    background_trailing: bool = False
     normalize: str = "sqrt_fold"  #: divide the image by sqrt(fold) ("sqrt_fold"), by the fold ("fold") or not ("none")
     threshold: float = 0.3
     min_line_m: float = 0.3

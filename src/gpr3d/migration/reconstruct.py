@@ -144,7 +144,7 @@ def check_config(cfg: ReconstructConfig, names: dict | None = None) -> None:
     number("min_target_depth_m", none_ok=True, lo=0.0)
     number("taper_traces", lo=0.0)
     number("air_gap_m", lo=0.0)
-    for name in ("obliquity", "spreading", "remove_background", "lattice"):
+    for name in ("obliquity", "spreading", "remove_background", "lattice", "background_trailing"):
         if not isinstance(getattr(cfg, name), bool):
             bad(name, "true or false")
     if cfg.time_zero not in ("peak", "first_break", "none"):
@@ -215,7 +215,8 @@ def _prepare(survey, cfg):
         # the estimate, to a fraction of a sample: the traces were shifted by it, not by whole samples
         cut_s = float(s.history[-1]["result"]["t0_s"]) - s.t0_s
     if cfg.remove_background:
-        s = s.remove_background(window_traces=cfg.background_window)
+        s = s.remove_background(window_traces=cfg.background_window,
+                                trailing=bool(cfg.background_window and cfg.background_trailing))
     return s, cut_s
 
 

@@ -6,8 +6,9 @@ A source gives traces with their poses as a radar writes them (:class:`TCPSource
 
 1. **time zero** is fixed once, from the first ``time_zero_traces`` traces (the direct-wave peak of their mean
    trace, as ``reconstruct`` estimates it), and every trace is cut there;
-2. **background**: the mean over a centred moving window of ``background_window`` traces is taken off: a trace
-   is final once half a window has followed it (that many traces of delay);
+2. **background**: the mean over a moving window of ``background_window`` traces is taken off: by default the
+   window ends at the trace (``background_trailing``: no delay); centred, a trace is final once half a window has
+   followed it;
 3. **migration**: each final trace is added once into the voxels its aperture reaches, on a lattice of tiles
    (``tile_voxels`` a side, voxel centres on whole multiples of the spacing); the image and the fold are summed
    per tile; tiles no recent trace can reach are written to ``OUT/tiles/`` and dropped from memory (read back if
@@ -50,7 +51,9 @@ class LiveConfig:
     #: the migration's settings; live mode needs an aperture (it bounds what each trace reaches) and sets
     #: ``time_zero_s``, ``background_window`` and ``lattice`` itself
     reconstruct: object = None
-    background_window: int = 256  #: traces in the moving background window (a trace waits for half of them)
+    background_window: int = 256  #: traces in the moving background window
+    #: the window ends at each trace (no waiting); False: centred on it (a trace waits for half a window)
+    background_trailing: bool = True
     time_zero_traces: int = 64  #: traces time zero is estimated from
     tile_voxels: int = 32  #: a tile's side in voxels
     refresh_s: float = 0.5  #: how often the targets and ``live.json`` are refreshed (s; longer where a refresh
@@ -288,7 +291,7 @@ class LiveReconstruction:
         if rc.method != "backprojection":
             raise GPR3DError("live mode migrates by back projection (--method backprojection)")
         self.rc = replace(rc, eps_r=float(eps), lattice=True, background_window=cfg.background_window,
-                          remove_background=True)
+                          background_trailing=cfg.background_trailing, remove_background=True)
         check_config(self.rc)
         self.eps = float(eps)
         self.v = velocity_from_eps_r(self.eps)
@@ -297,7 +300,9 @@ class LiveReconstruction:
         self.detector = detector if cfg.detect else None
         self.log = log or (lambda msg: None)
         w = cfg.background_window
-        self.h1, self.h2 = w // 2, w - 1 - w // 2  # scipy's centred window: i - w//2 .. i + w - 1 - w//2
+        # the traces before and after each one that its background window spans (scipy's centred window:
+        # i - w//2 .. i + w - 1 - w//2; the trailing one: i - w + 1 .. i)
+        self.h1, self.h2 = (w - 1, 0) if cfg.background_trailing else (w // 2, w - 1 - w // 2)
         self.t0_s = None
         self.n_out = None
         self.raw_pending: list = []  # raw traces waiting for time zero
@@ -406,9 +411,9 @@ class LiveReconstruction:
         return shift_traces(data, self.t0_s / self.h.dt_s)
 
     def step(self, *, ended: bool = False, now=None) -> int:
-        """Migrate the traces whose background is final, run the detector on full windows, refresh the targets
-        when due. Returns how many traces were migrated."""
-        from scipy.ndimage import uniform_filter1d
+        """Migrate the traces whose background is final, refresh the targets when due, run the detector on the
+        full windows. Returns how many traces were migrated (``now`` is not used: kept for callers)."""
+        from gpr3d.processing.background import moving_background, remove_background
 
         if self.t0_s is None:
             if not ended or not self.raw_pending:
@@ -416,16 +421,25 @@ class LiveReconstruction:
             self._fix_time_zero()
         n_cut = self.cut_first + len(self.cut)
         ready = n_cut if ended else n_cut - self.h2
+        w = self.cfg.background_window
+        short = not self.cfg.background_trailing and n_cut < w  # (a centred window as long as the survey: its mean)
+        if short and not ended:
+            ready = 0  # wait: the survey may yet end shorter than the window
         done = 0
         while self.n_final < ready:
             a = self.n_final
             b = min(ready, a + self.cfg.max_batch)
             lo = max(0, a - self.h1)
             hi = min(n_cut, b + self.h2)
+            # the batch's background on a slice holding every trace the rows' windows span: the same numbers (the
+            # slice's ends pad only where the survey's own do); a survey shorter than the window loses its mean
             x = self.cut[lo - self.cut_first: hi - self.cut_first]
-            bg = uniform_filter1d(x.astype(np.float64), size=self.cfg.background_window, axis=0, mode="nearest")
-            rows = slice(a - lo, b - lo)
-            traces = (x[rows] - bg[rows]).astype(np.float32)
+            if short:
+                traces = remove_background(x)
+            else:
+                bg = moving_background(x, w, trailing=self.cfg.background_trailing)
+                traces = (x - bg).astype(np.float32)
+            traces = traces[a - lo: b - lo]
             self._migrate(traces, self.poses[a:b])
             self.n_final = b
             done += b - a
@@ -434,15 +448,15 @@ class LiveReconstruction:
                 self.cut = self.cut[keep_from - self.cut_first:]
                 self.cut_first = keep_from
             self._evict()
+        # the targets before the detector: what a user waits for on screen comes first. The refresh's period:
+        # refresh_s, or longer where a refresh costs more than a third of it (the targets' extraction must not
+        # starve the migration); measured against the clock now, after this step's migration
+        period = max(self.cfg.refresh_s, 3.0 * self.refresh_cost_s)
+        t = time.monotonic()
+        if self.n_final > self.n_refreshed and (ended or self.last_refresh is None or t - self.last_refresh >= period):
+            self.refresh(t)
         if self.detector is not None:
             self._detect(ended)
-        now = time.monotonic() if now is None else now
-        # the refresh's period: refresh_s, or longer where a refresh costs more than a third of it (the targets'
-        # extraction must not starve the migration)
-        period = max(self.cfg.refresh_s, 3.0 * self.refresh_cost_s)
-        if self.n_final > self.n_refreshed and (ended or self.last_refresh is None
-                                                or now - self.last_refresh >= period):
-            self.refresh(now)
         return done
 
     def _migrate(self, traces, poses):
@@ -631,7 +645,7 @@ class LiveReconstruction:
         return {"n_traces_in": self.n_in, "n_traces_migrated": self.n_final,
                 "time_zero_s": self.t0_s, "eps_r": self.eps,
                 "tiles_in_memory": len(self.tiles), "tiles_on_disk": len(self.on_disk),
-                "targets": targets_to_json(self.targets), "detections": self.detections}
+                "targets": targets_to_json(self.targets), "detections": self.detections, "config": asdict(self.rc)}
 
     def _write_status(self, now):
         self.out.mkdir(parents=True, exist_ok=True)
@@ -754,7 +768,6 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
                           n_detections=len(live.detections), final_volume=result is not None)
     st = live.status()
     st["summary"] = asdict(summary)
-    st["config"] = asdict(live.rc)
     atomic_write_text(out / "live.json", json.dumps(st, indent=1))
     if live.detections:
         atomic_write_text(out / "detections.json", json.dumps(

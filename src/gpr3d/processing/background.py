@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import median_filter, uniform_filter1d
 
-__all__ = ["remove_dc", "remove_background"]
+__all__ = ["moving_background", "remove_dc", "remove_background"]
 
 
 def remove_dc(data: np.ndarray, *, sample_range: tuple[int, int] | None = None) -> np.ndarray:
@@ -36,7 +36,7 @@ def remove_dc(data: np.ndarray, *, sample_range: tuple[int, int] | None = None) 
 
 
 def remove_background(
-    data: np.ndarray, *, method: str = "mean", window_traces: int | None = None
+    data: np.ndarray, *, method: str = "mean", window_traces: int | None = None, trailing: bool = False
 ) -> np.ndarray:
     """Subtract the background trace: horizontal bands (antenna ringing, direct wave).
 
@@ -48,7 +48,11 @@ def remove_background(
         The background over traces.
     window_traces : int, optional
         A centred moving window of that many traces (>= 2) instead of the whole survey (keeps slowly varying
-        layers); the edges repeat.
+        layers); the edges repeat. A centred window as long as the survey or longer: the whole survey's.
+    trailing : bool
+        With ``window_traces``: the window ends at each trace (the trace and the ``window_traces - 1`` before it;
+        before the first trace the first repeats) instead of being centred on it: no trace after it is needed,
+        what a survey processed as it is recorded can do without waiting.
 
     Returns
     -------
@@ -63,17 +67,48 @@ def remove_background(
     x = np.asarray(data, dtype=np.float32)
     if method not in ("mean", "median"):
         raise ValueError(f"unknown background method {method!r} (use 'mean' or 'median')")
-    if window_traces is None or window_traces >= x.shape[0]:
+    if window_traces is None or (window_traces >= x.shape[0] and not trailing):
         if method == "mean":
             bg = x.astype(np.float64).mean(axis=0, keepdims=True)
         else:
             bg = np.median(x, axis=0, keepdims=True)
     else:
-        w = int(window_traces)
-        if w < 2:
-            raise ValueError(f"window_traces must be >= 2, got {window_traces}")
-        if method == "mean":
-            bg = uniform_filter1d(x.astype(np.float64), size=w, axis=0, mode="nearest")
-        else:
-            bg = median_filter(x, size=(w, 1), mode="nearest")
+        bg = moving_background(x, window_traces, method=method, trailing=trailing)
     return (x - bg).astype(np.float32)
+
+
+def moving_background(data: np.ndarray, window_traces: int, *, method: str = "mean",
+                      trailing: bool = False) -> np.ndarray:
+    """Each trace's background over a moving window of traces, however few traces there are (the edges repeat).
+
+    Parameters
+    ----------
+    data : (n_traces, n_samples) array
+        The B-scan.
+    window_traces : int
+        Traces in the window (>= 2).
+    method : {"mean", "median"}
+        The background over the window.
+    trailing : bool
+        The window ends at each trace instead of being centred on it.
+
+    Returns
+    -------
+    ndarray
+        ``(n_traces, n_samples)``: float64 means, or medians in ``data``'s float32.
+
+    Raises
+    ------
+    ValueError
+        A window of fewer than two traces, or an unknown method.
+    """
+    w = int(window_traces)
+    if w < 2:
+        raise ValueError(f"window_traces must be >= 2, got {window_traces}")
+    x = np.asarray(data, dtype=np.float32)
+    shift = (w - 1) // 2 if trailing else 0  # scipy's origin: the window moved back to end at the trace
+    if method == "mean":
+        return uniform_filter1d(x.astype(np.float64), size=w, axis=0, mode="nearest", origin=shift)
+    if method == "median":
+        return median_filter(x, size=(w, 1), mode="nearest", origin=(shift, 0))
+    raise ValueError(f"unknown background method {method!r} (use 'mean' or 'median')")

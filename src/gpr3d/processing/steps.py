@@ -69,9 +69,9 @@ def remove_dc(s, *, sample_range=None):
     return {"data": _remove_dc(s.data, sample_range=rng)}, None
 
 
-def remove_background(s, *, method: str = "mean", window_traces: int | None = None):
-    """Subtract the mean/median trace (whole survey, or a moving window of traces)."""
-    return {"data": _remove_background(s.data, method=method, window_traces=window_traces)}, None
+def remove_background(s, *, method: str = "mean", window_traces: int | None = None, trailing: bool = False):
+    """Subtract the mean/median trace (whole survey, or a moving window of traces: centred, or ``trailing``)."""
+    return {"data": _remove_background(s.data, method=method, window_traces=window_traces, trailing=trailing)}, None
 
 
 def gain_tpow(s, *, power: float = 1.0, t_ref_s: float = 1e-9):
