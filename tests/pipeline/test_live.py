@@ -122,12 +122,17 @@ def _dzt_of(survey, path):
     return path
 
 
+def _tum_of(survey, path):
+    """``survey``'s poses as a TUM file (``t x y z qx qy qz qw``), a trace every 10 ms."""
+    path.write_text("".join(f"{i * 0.01:.2f} " + " ".join(repr(float(v)) for v in (*p, *r[1:], r[0])) + "\n"
+                            for i, (p, r) in enumerate(zip(survey.positions_xyz, survey.orientations_quat_wxyz))))
+    return path
+
+
 def test_a_growing_dzt_with_growing_poses_equals_the_batch_volume(survey, tmp_path):
     src = _dzt_of(survey, tmp_path / "rec.dzt")
-    tum = tmp_path / "rec.tum"
+    tum = _tum_of(survey, tmp_path / "rec.tum")
     q = survey.orientations_quat_wxyz
-    tum.write_text("".join(f"{i * 0.01:.2f} " + " ".join(repr(float(v)) for v in (*p, *r[1:], r[0])) + "\n"
-                           for i, (p, r) in enumerate(zip(survey.positions_xyz, q))))
     grow, grow_tum = tmp_path / "live.dzt", tmp_path / "live.tum"
     th = threading.Thread(target=replay_to_dzt, args=(src, grow), daemon=True,
                           kwargs=dict(rate=3000.0, poses=tum, poses_out=grow_tum))
@@ -263,10 +268,7 @@ def test_the_idle_clock_starts_at_the_first_trace(survey, tmp_path):
     import time as _time
 
     src = _dzt_of(survey, tmp_path / "rec.dzt")
-    tum = tmp_path / "rec.tum"
-    q = survey.orientations_quat_wxyz
-    tum.write_text("".join(f"{i * 0.01:.2f} " + " ".join(repr(float(v)) for v in (*p, *r[1:], r[0])) + "\n"
-                           for i, (p, r) in enumerate(zip(survey.positions_xyz, q))))
+    tum = _tum_of(survey, tmp_path / "rec.tum")
 
     def late():
         _time.sleep(0.8)
