@@ -346,3 +346,11 @@ def test_a_moving_background_is_named_when_wrong():
         moving_background(x, 1)
     with pytest.raises(ValueError, match="unknown background method 'mode'"):
         moving_background(x, 3, method="mode")
+
+
+def test_a_moving_background_by_default_is_the_centred_mean_in_double_precision():
+    x = (1e4 + np.random.default_rng(5).normal(size=(9, 2))).astype(np.float32)
+    got = moving_background(x, 3)
+    pad = np.concatenate([x[:1], x, x[-1:]]).astype(np.float64)
+    np.testing.assert_allclose(got, (pad[:-2] + pad[1:-1] + pad[2:]) / 3, rtol=0, atol=1e-9)
+    assert got.dtype == np.float64

@@ -31,6 +31,8 @@ CASES = [
     ("remove_background", {}, lambda s: remove_background(s.data)),
     ("remove_background", {"method": "median", "window_traces": 4},
      lambda s: remove_background(s.data, method="median", window_traces=4)),
+    ("remove_background", {"window_traces": 5, "trailing": True},
+     lambda s: remove_background(s.data, window_traces=5, trailing=True)),
     ("gain_tpow", {}, lambda s: gain_tpow(s.data, DT, power=1.0, t0_s=1.5e-9, t_ref_s=1e-9)),
     ("gain_tpow", {"power": 2.0, "t_ref_s": 3e-9}, lambda s: gain_tpow(s.data, DT, power=2.0, t0_s=1.5e-9, t_ref_s=3e-9)),
     ("gain_sec", {"alpha_per_s": 2e8}, lambda s: gain_sec(s.data, DT, alpha_per_s=2e8, power=1.0, t0_s=1.5e-9,
