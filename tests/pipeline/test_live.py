@@ -282,3 +282,31 @@ def test_the_idle_clock_starts_at_the_first_trace(survey, tmp_path):
     assert summary.n_traces == survey.n_traces
     # the rate counts from the first trace: 420 traces written in about 0.08 s, not spread over the 0.8 s wait
     assert summary.traces_per_s > survey.n_traces / 0.8
+
+
+class _Interrupted:
+    """A source that gives the survey in batches of 50, then the user presses Ctrl-C."""
+
+    def __init__(self, survey, stop_after):
+        self.header = StreamHeader(n_samples=survey.n_samples, dt_s=DT, frequency_hz=800e6, offset_m=0.05,
+                                   eps_r=EPS)
+        self.s, self.stop_after, self.at, self.ended, self.closed = survey, stop_after, 0, False, False
+
+    def poll(self):
+        if self.at >= self.stop_after:
+            raise KeyboardInterrupt
+        a, self.at = self.at, self.at + 50
+        poses = np.c_[self.s.positions_xyz[a:self.at], self.s.orientations_quat_wxyz[a:self.at]]
+        return self.s.data[a:self.at], poses, np.zeros(len(poses))
+
+    def close(self):
+        self.closed = True
+
+
+def test_ctrl_c_ends_the_survey_and_writes_what_came(survey, tmp_path):
+    source = _Interrupted(survey, 300)
+    lines = []
+    summary = run_live(source, tmp_path, _cfg(), log=lines.append)
+    assert source.closed and summary.n_traces == 300
+    assert "interrupted: finishing with the 300 traces received" in lines
+    _batch_equals_live(survey[:300], tmp_path)

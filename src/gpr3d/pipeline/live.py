@@ -17,7 +17,7 @@ A source gives traces with their poses as a radar writes them (:class:`TCPSource
 5. every ``refresh_s`` the targets of the tiles in memory are extracted and ``OUT/live.json`` (traces, rate, lag,
    targets, detections) is rewritten atomically.
 
-At the end (the stream's end mark, or ``until_idle_s`` without a new trace) the volume over every antenna
+At the end (the stream's end mark, ``until_idle_s`` without a new trace, or Ctrl-C) the volume over every antenna
 position is put together from the tiles and finished exactly as ``gpr3d reconstruct`` finishes its own (fold
 normalisation, envelope, targets): with the settings written to ``config.json`` (``time_zero_s``,
 ``background_window``, ``lattice``) a batch ``reconstruct`` of the same traces gives the same volume, to float
@@ -748,6 +748,8 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
                 break
             if not worked and (got is None or not len(got[0])):
                 time.sleep(poll_s)
+    except KeyboardInterrupt:  # Ctrl-C ends the survey: what came is finished and written (a second one aborts)
+        log(f"interrupted: finishing with the {live.n_in if live else 0:,} traces received")
     finally:
         source.close()
     if live is None or live.n_in == 0:
