@@ -208,7 +208,9 @@ def test_demo_end_to_end(tmp_path):
                          "demo 8: live", "demo: report"]
     live = summary["stages"]["live"]  # the survey streamed into live mode: its volume is the batch one
     assert live["n_traces"] == walk["n_traces"] and live["same_grid"] and live["max_difference"] < 1e-4
-    assert 0 < live["traces_per_s"] <= 1.05 * live["rate"] and live["n_targets"] >= 3
+    # counted from the first poll that brings traces, which may come a few hundredths of a second after the
+    # first was sent (a scheduling delay, not the CPU's speed): a fifth over the rate is far more than that
+    assert 0 < live["traces_per_s"] <= 1.2 * live["rate"] and live["n_targets"] >= 3
     assert live["n_detections"] is None if "skipped" in summary["stages"]["detection"] else live["n_detections"] > 10
     assert {"migrate", "targets", "figures", "network"} <= set(times["stages"])
     assert sum(times["stages"].values()) == pytest.approx(times["wall_s"], abs=1e-3)

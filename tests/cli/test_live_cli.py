@@ -1,5 +1,6 @@
-"""gpr3d replay feeds gpr3d live over TCP: the last line live prints is the issue's, its numbers the run's; a
-batch reconstruct with live's settings gives the same targets; wrong arguments get one line before any work."""
+"""gpr3d replay feeds gpr3d live over TCP: the last line live prints is the issue's, its numbers the run's (that
+the volume equals the batch one, and how the rate and lag are counted, tests/pipeline/test_live.py checks); wrong
+arguments get one line before any work."""
 
 import json
 import re
@@ -51,11 +52,8 @@ def test_replay_into_live_prints_traces_rate_and_lag(survey, tmp_path):  # noqa:
     status = json.loads((tmp_path / "live" / "live.json").read_text())["summary"]
     assert int(m.group(1)) == survey.n_traces == status["n_traces"]
     assert int(m.group(2)) == round(status["traces_per_s"]) and float(m.group(3)) == round(status["lag_s"], 2)
-    assert 0 < status["traces_per_s"] <= 2100  # never faster than the traces came
     cfg = json.loads((tmp_path / "live" / "config.json").read_text())["config"]
-    rec = run_cli("reconstruct", tmp_path / "s.h5", "--poses", tmp_path / "s.tum", "--eps-r", "6", "--out",
-                  tmp_path / "rec", "--spacing", cfg["spacing_m"], "--aperture", "45")
-    assert rec.returncode == 0, rec.stderr
+    assert (cfg["background_window"], cfg["background_trailing"], cfg["aperture_deg"]) == (32, True, 45.0)
 
 
 @pytest.mark.parametrize("args, message", [
@@ -68,6 +66,12 @@ def test_replay_into_live_prints_traces_rate_and_lag(survey, tmp_path):  # noqa:
     (["replay", "{tmp}/x.h5", "--to", "tcp://127.0.0.1:1"], "give --rate"),
     (["replay", "{tmp}/x.h5", "--to", "out.dzt", "--rate", "5"], "replays a DZT recording into a .DZT file"),
     (["replay", "{tmp}/x.h5", "--to", "tcp://h:1", "--rate", "5", "--loops", "0"], "--loops must be at least 1"),
+    (["replay", "{tmp}/x.h5", "--to", "tcp://h:1", "--rate", "5", "--accept-timeout", "-1"],
+     "--accept-timeout must be seconds"),
+    (["replay", "{tmp}/x.h5", "--to", "tcp://h:1", "--rate", "5", "--poses-out", "p.tum"], "--poses-out is for"),
+    (["replay", "{tmp}/x.dzt", "--to", "o.dzt", "--rate", "5", "--loop-shift", "5"], "--loops and --loop-shift"),
+    (["replay", "{tmp}/x.dzt", "--to", "o.dzt", "--rate", "5", "--poses", "p.tum"],
+     "takes --poses and --poses-out together"),
 ])
 def test_wrong_arguments_get_one_line(tmp_path, capsys, args, message):
     from gpr3d.cli.main import main

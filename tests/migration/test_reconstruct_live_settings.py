@@ -9,7 +9,13 @@ from gpr3d import Survey
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.grid import Grid3D
 from gpr3d.core.poses import quat_from_yaw
-from gpr3d.migration.reconstruct import ReconstructConfig, check_config, normalise_by_fold, reconstruct
+from gpr3d.migration.reconstruct import (
+    ReconstructConfig,
+    check_config,
+    normalise_by_fold,
+    reconstruct,
+    record_depth_m,
+)
 from gpr3d.processing.timezero import shift_traces
 from gpr3d.simulation.forward import ForwardScene, Pipe, forward_model
 
@@ -118,3 +124,16 @@ def test_normalise_by_fold_holds_the_fold_at_five_percent_of_its_largest():
     out, none = normalise_by_fold(img, fold, "fold", fold_max=400.0)
     np.testing.assert_allclose(out, [0.2, 0.2, 0.04])
     assert none is None
+
+
+def test_the_record_reaches_95_percent_of_its_two_way_time_less_the_air_gap():
+    assert record_depth_m(1e8, 20e-9) == pytest.approx(0.95)  # 0.5 * 1e8 m/s * 20 ns * 0.95
+    # an antenna 0.3 m up spends 2 ns of the record in air
+    assert record_depth_m(1e8, 20e-9, 0.3) == pytest.approx(0.5 * 1e8 * (20e-9 - 0.6 / 299792458.0) * 0.95)
+
+
+def test_the_default_depth_is_the_record_s_reach(survey):
+    g = reconstruct(survey, ReconstructConfig(**BASE)).grid
+    est = survey.time_zero(method="peak", search_s=min(survey.time_window_s / 4, 10e-9))
+    reach = record_depth_m(299792458.0 / np.sqrt(EPS), est.n_samples * est.dt_s)
+    assert g.depth[-1] <= reach < g.depth[-1] + g.dd

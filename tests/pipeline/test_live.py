@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from gpr3d import Survey
-from gpr3d.core.errors import GPR3DError
+from gpr3d.core.errors import GPR3DError, InvalidDataError
 from gpr3d.core.poses import quat_from_yaw
 from gpr3d.io.dzt import read_dzt
 from gpr3d.io.stream import StreamHeader
@@ -263,25 +263,61 @@ def test_detection_runs_on_every_window_once_as_it_fills(tmp_path):
         (40.0, 0.2)]
 
 
-def test_the_idle_clock_starts_at_the_first_trace(survey, tmp_path):
-    """A run started before the radar: its idle time (0.3 s) counts from the first trace, not from the start."""
-    import time as _time
+class _Scripted:
+    """A source that gives nothing for ``wait`` polls, then the survey in ``batches`` polls, then nothing."""
 
-    src = _dzt_of(survey, tmp_path / "rec.dzt")
-    tum = _tum_of(survey, tmp_path / "rec.tum")
+    def __init__(self, survey, wait, batches):
+        self.header = None
+        self.s, self.wait, self.batches, self.polls, self.ended = survey, wait, batches, 0, False
+        self.cuts = np.linspace(0, survey.n_traces, batches + 1).astype(int)
 
-    def late():
-        _time.sleep(0.8)
-        replay_to_dzt(src, tmp_path / "live.dzt", rate=5000.0, poses=tum, poses_out=tmp_path / "live.tum")
+    def poll(self):
+        k, self.polls = self.polls - self.wait, self.polls + 1
+        if k < 0:
+            return None  # (not connected yet: no header)
+        self.header = StreamHeader(n_samples=self.s.n_samples, dt_s=DT, frequency_hz=800e6, offset_m=0.05,
+                                   eps_r=EPS)
+        a, b = (self.cuts[k], self.cuts[k + 1]) if k < self.batches else (0, 0)
+        poses = np.c_[self.s.positions_xyz[a:b], self.s.orientations_quat_wxyz[a:b]]
+        return self.s.data[a:b], poses, np.zeros(b - a)
 
-    th = threading.Thread(target=late, daemon=True)
-    th.start()
-    summary = run_live(open_source(tmp_path / "live.dzt", poses=tmp_path / "live.tum", offset_m=0.05),
-                       tmp_path / "out", _cfg(until_idle_s=0.3, start_timeout_s=10.0), log=None)
-    th.join(10)
+    def close(self):
+        pass
+
+
+def test_the_idle_clock_and_the_rate_start_at_the_first_trace(survey, tmp_path):
+    """A clock that ticks one second a call: the first trace comes at 6 s (five polls found nothing), the last at
+    8 s; with 2.5 s of idleness allowed the run ends at 11 s and is timed at 12 s. The rate counts from the first
+    trace to the end less the idle wait (12 - 6 - 2.5 = 3.5 s), the lag from the newest trace (12 - 8 - 2.5 s)."""
+    ticks = iter(range(1000))
+    summary = run_live(_Scripted(survey, 5, 3), tmp_path, _cfg(until_idle_s=2.5, start_timeout_s=5.5),
+                       log=None, poll_s=0.0, clock=lambda: float(next(ticks)))
     assert summary.n_traces == survey.n_traces
-    # the rate counts from the first trace: 420 traces written in about 0.08 s, not spread over the 0.8 s wait
-    assert summary.traces_per_s > survey.n_traces / 0.8
+    assert summary.wall_s == 3.5 and summary.traces_per_s == survey.n_traces / 3.5
+    assert summary.lag_s == 1.5
+    # nothing at all within start_timeout_s: one line naming it
+    ticks = iter(range(1000))
+    with pytest.raises(GPR3DError, match="no traces arrived in 4.5 s"):
+        run_live(_Scripted(survey, 5, 3), tmp_path / "b", _cfg(until_idle_s=2.5, start_timeout_s=4.5), log=None,
+                 poll_s=0.0, clock=lambda: float(next(ticks)))
+
+
+def test_a_dzt_whose_poses_never_come_is_named(survey, tmp_path):
+    src = _dzt_of(survey, tmp_path / "rec.dzt")
+    source = open_source(src, poses=tmp_path / "missing.tum")
+    with pytest.raises(GPR3DError, match=f"{survey.n_traces} traces came, but no poses for them in .*missing.tum"):
+        run_live(source, tmp_path / "out", _cfg(start_timeout_s=0.3), log=None)
+
+
+@pytest.mark.parametrize("bad, message", [(np.nan, "trace 3: its pose is not finite"),
+                                          (0.0, "trace 3: its pose is not finite or its quaternion zero")])
+def test_a_pose_live_mode_cannot_use_is_named(tmp_path, bad, message):
+    live = LiveReconstruction(StreamHeader(n_samples=16, dt_s=1e-10, eps_r=4.0),
+                              LiveConfig(reconstruct=ReconstructConfig(aperture_deg=45.0)), tmp_path)
+    poses = np.tile([0.0, 0, 0, 1, 0, 0, 0], (5, 1))
+    poses[3, 3:] = bad
+    with pytest.raises(InvalidDataError, match=message):
+        live.add(np.zeros((5, 16), np.float32), poses)
 
 
 class _Interrupted:
@@ -310,3 +346,15 @@ def test_ctrl_c_ends_the_survey_and_writes_what_came(survey, tmp_path):
     assert source.closed and summary.n_traces == 300
     assert "interrupted: finishing with the 300 traces received" in lines
     _batch_equals_live(survey[:300], tmp_path)
+
+
+def test_a_replay_that_cannot_listen_says_where(survey):
+    import socket
+
+    taken = socket.create_server(("127.0.0.1", 0))
+    port = taken.getsockname()[1]
+    try:
+        with pytest.raises(GPR3DError, match=f"tcp://127.0.0.1:{port}: cannot listen there"):
+            replay_to_tcp(survey, port, rate=100.0)
+    finally:
+        taken.close()

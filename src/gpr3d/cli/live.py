@@ -83,7 +83,7 @@ def run(args):
                      background_trailing=not args.centred_background, refresh_s=args.refresh,
                      detect=not args.no_detect, score=args.score,
                      until_idle_s=None if args.until_idle == 0 else args.until_idle,
-                     start_timeout_s=None if args.start_timeout == 0 else args.start_timeout, eps_r=eps)
+                     start_timeout_s=None if args.start_timeout == 0 else args.start_timeout)
     source = open_source(args.source, poses=args.poses, channel=args.channel, offset_m=args.offset,
                          connect_s=args.connect_timeout)
     summary = run_live(source, args.out, cfg, detector=detector, log=print)

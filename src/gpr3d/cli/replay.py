@@ -51,7 +51,10 @@ def run(args):
         raise GPR3DError(f"--loops must be at least 1, got {args.loops}")
     if not math.isfinite(args.loop_shift):
         raise GPR3DError("--loop-shift must be a finite number of metres")
+    _in_range(args.accept_timeout, "--accept-timeout", 0.1, 86400, "seconds")
     if args.to.startswith("tcp://"):
+        if args.poses_out:
+            raise GPR3DError("--poses-out is for --to FILE.DZT: a tcp:// stream carries each trace's pose")
         host, _, port = args.to[6:].rpartition(":")
         if not host or not port.isdigit() or not 0 <= int(port) < 65536:
             raise GPR3DError(f"--to {args.to}: expected tcp://HOST:PORT with a port in 0..65535")
@@ -72,8 +75,10 @@ def run(args):
         return 0
     if not args.to.lower().endswith(".dzt") or not str(args.input).lower().endswith(".dzt"):
         raise GPR3DError("--to a file replays a DZT recording into a .DZT file (or give --to tcp://HOST:PORT)")
-    if args.loops != 1:
-        raise GPR3DError("--loops is for tcp:// replays")
+    if args.loops != 1 or args.loop_shift != 0:
+        raise GPR3DError("--loops and --loop-shift are for tcp:// replays")
+    if (args.poses is None) != (args.poses_out is None):
+        raise GPR3DError("--to FILE.DZT takes --poses and --poses-out together (the poses grow beside the traces)")
     from gpr3d.io.dzt import read_dzt_header
 
     rate = _rate(args, read_dzt_header(args.input)["scans_per_s"])

@@ -35,7 +35,7 @@ from gpr3d.migration.targets import (
 )
 
 __all__ = ["ProfileFrame", "Reconstruction", "ReconstructConfig", "check_site_settings", "normalise_by_fold",
-           "reconstruct", "time_zero_search_s", "volume_targets", "write_reconstruction"]
+           "reconstruct", "record_depth_m", "time_zero_search_s", "volume_targets", "write_reconstruction"]
 
 
 @dataclass
@@ -264,7 +264,7 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
                       "other, so the profile is migrated in 2D (the vertical plane under it) and targets crossing it "
                       "come out as points on it", GeometryWarning, stacklevel=2)
     v = velocity_from_eps_r(eps)
-    depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s - s.t0_s - 2 * cfg.air_gap_m / C0) * 0.95
+    depth = cfg.max_depth_m or record_depth_m(v, s.n_samples * s.dt_s - s.t0_s, cfg.air_gap_m)
     with stage("grid"):
         grid = Grid3D.covering(positions, depth_m=depth, spacing_m=cfg.spacing_m,
                                depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m, lattice=cfg.lattice)
@@ -336,13 +336,22 @@ def normalise_by_fold(image, fold, how: str, noise_map=None, *, fold_max: float 
     return image / norm, None if noise_map is None else noise_map / norm
 
 
-def volume_targets(envelope, grid, cfg: ReconstructConfig, v_m_s: float, frequency_hz: float | None) -> list:
+def volume_targets(envelope, grid, cfg: ReconstructConfig, v_m_s: float, frequency_hz: float | None,
+                   **search) -> list:
     """The targets of a 3D image's envelope as :func:`reconstruct` extracts them (``cfg``'s threshold, shortest
-    line and shallowest depth; the band cleared around each line found: half a wavelength, at least two cells)."""
+    line and shallowest depth; the band cleared around each line found: half a wavelength, at least two cells);
+    ``search``: other settings of :func:`~gpr3d.migration.targets.extract_targets` (live mode's previews take a
+    coarser ``angle_step_deg``)."""
     tol = 2.0 * max(grid.dx, grid.dy)
     band = max(2 * tol, 0.5 * v_m_s / frequency_hz) if frequency_hz else None
     return extract_targets(envelope, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band,
-                           min_depth_m=cfg.min_target_depth_m)
+                           min_depth_m=cfg.min_target_depth_m, **search)
+
+
+def record_depth_m(v_m_s: float, record_s: float, air_gap_m: float = 0.0) -> float:
+    """How deep a record of ``record_s`` after time zero reaches at ``v_m_s`` (m): 95 % of half the two-way
+    time left once the air gap's is taken off (the grid's default depth)."""
+    return 0.5 * v_m_s * (record_s - 2 * air_gap_m / C0) * 0.95
 
 
 def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s) -> "Reconstruction":
@@ -361,7 +370,7 @@ def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s) -> "Reconstruction"
         raise InvalidDataError(f"pseudo-3D needs two lines at least, the survey has {len(lines)}: migrate one "
                                "profile with 'gpr3d migrate', or use method 'backprojection'")
     v = velocity_from_eps_r(eps)
-    depth = cfg.max_depth_m or 0.5 * v * (s.n_samples * s.dt_s - s.t0_s - 2 * cfg.air_gap_m / C0) * 0.95
+    depth = cfg.max_depth_m or record_depth_m(v, s.n_samples * s.dt_s - s.t0_s, cfg.air_gap_m)
     grid = Grid3D.covering(s.positions_xyz, depth_m=depth, spacing_m=cfg.spacing_m,
                            depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m, lattice=cfg.lattice)
     check_grid_fits(grid)
@@ -378,10 +387,7 @@ def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s) -> "Reconstruction"
     env, _ = pseudo3d(s.replace(data=data), grid, eps_r=eps, aperture_deg=aperture, engine=cfg.engine,
                       air_gap_m=cfg.air_gap_m)
     t_mig = time.perf_counter() - t
-    tol = 2.0 * max(grid.dx, grid.dy)
-    band = max(2 * tol, 0.5 * v / s.frequency_hz) if s.frequency_hz else None
-    targets = extract_targets(env, grid, threshold=cfg.threshold, min_line_m=cfg.min_line_m, band_m=band,
-                              min_depth_m=cfg.min_target_depth_m)
+    targets = volume_targets(env, grid, cfg, v, s.frequency_hz)
     # the envelopes of the line images are all there is (no signed 3D image): the image is the envelope
     return Reconstruction(image=env, envelope=env, noise_map=noise_map, fold=None, grid=grid, targets=targets,
                           eps_r=float(eps), config=asdict(cfg), n_traces=s.n_traces,

@@ -20,8 +20,9 @@ A source gives traces with their poses as a radar writes them (:class:`TCPSource
 At the end (the stream's end mark, ``until_idle_s`` without a new trace, or Ctrl-C) the volume over every antenna
 position is put together from the tiles and finished exactly as ``gpr3d reconstruct`` finishes its own (fold
 normalisation, envelope, targets): with the settings written to ``config.json`` (``time_zero_s``,
-``background_window``, ``lattice``) a batch ``reconstruct`` of the same traces gives the same volume, to float
-rounding.
+``background_window``, ``background_trailing``, ``lattice``) a batch ``reconstruct`` of the same traces gives the
+same volume, to float rounding. A survey whose volume would exceed ``final_volume_voxels`` keeps its tiles in
+``OUT/tiles`` and the last refresh's targets in ``OUT/live.json`` instead.
 """
 
 from __future__ import annotations
@@ -48,8 +49,9 @@ __all__ = ["FileSource", "LiveConfig", "LiveReconstruction", "LiveSummary", "TCP
 class LiveConfig:
     """Live mode's settings beside the migration's (:class:`~gpr3d.migration.config.ReconstructConfig`)."""
 
-    #: the migration's settings; live mode needs an aperture (it bounds what each trace reaches) and sets
-    #: ``time_zero_s``, ``background_window`` and ``lattice`` itself
+    #: the migration's settings (``eps_r`` None: the stream header's); live mode needs an aperture (it bounds
+    #: what each trace reaches) and sets ``time_zero_s``, ``background_window``, ``background_trailing`` and
+    #: ``lattice`` itself
     reconstruct: object = None
     background_window: int = 256  #: traces in the moving background window
     #: the window ends at each trace (no waiting); False: centred on it (a trace waits for half a window)
@@ -65,7 +67,6 @@ class LiveConfig:
     start_timeout_s: float | None = 60.0  #: give up when no trace at all has come for this long (None: wait)
     max_batch: int = 4096  #: the most traces migrated in one go (a backlog is worked off in such batches)
     final_volume_voxels: int = 30_000_000  #: put the final volume together only up to this size (else: its tiles)
-    eps_r: float | None = None  #: None: the stream's header's
 
 
 @dataclass
@@ -171,6 +172,7 @@ class FileSource:
         self._poses = np.zeros((0, 8))
         self.header = None
         self.ended = False
+        self.waiting_for_poses = 0  #: traces read whose poses have not come yet
 
     def poll(self):
         d = self.dzt.poll()
@@ -189,6 +191,7 @@ class FileSource:
         self._data = np.concatenate([self._data, d]) if len(d) else self._data
         self._poses = np.concatenate([self._poses, p]) if len(p) else self._poses
         k = min(len(self._data), len(self._poses))
+        self.waiting_for_poses = len(self._data) - k
         data, poses = self._data[:k], self._poses[:k]
         self._data, self._poses = self._data[k:], self._poses[k:]
         return data, poses[:, 1:], poses[:, 0]
@@ -283,7 +286,7 @@ class LiveReconstruction:
         self.h = header
         self.cfg = cfg
         rc = cfg.reconstruct or ReconstructConfig()
-        eps = cfg.eps_r or rc.eps_r or header.eps_r
+        eps = rc.eps_r or header.eps_r
         if eps is None:
             raise GPR3DError("no eps_r: the stream's header gives none; give --eps-r")
         if rc.aperture_deg is None:
@@ -323,6 +326,7 @@ class LiveReconstruction:
         self.raw_tail_first = 0
         self.next_window = 0
         self.detections: list = []
+        self._det_window: list = []  # the window each kept detection came from (its first trace)
         self.targets: list = []
         self.latencies: list = []
         self.last_refresh = None
@@ -342,23 +346,22 @@ class LiveReconstruction:
 
     # the depth axis, the reach of a trace, the tile lattice ---------------------------------------------------
     def _setup_grid(self):
+        from gpr3d.migration.reconstruct import record_depth_m
+
         rc = self.rc
-        depth = rc.max_depth_m or 0.5 * self.v * (self.n_out * self.h.dt_s - 2 * rc.air_gap_m / 299792458.0) * 0.95
+        depth = rc.max_depth_m or record_depth_m(self.v, self.n_out * self.h.dt_s, rc.air_gap_m)
         dd = rc.depth_spacing_m or rc.spacing_m
         nd = int(np.floor((depth - dd) / dd)) + 1
         if nd < 2:
             raise GPR3DError(f"the record reaches {depth:.3f} m: too shallow for depth steps of {dd:g} m")
         self.depth_m = depth
         self.grid_base = Grid3D(0.0, 0.0, dd, rc.spacing_m, rc.spacing_m, dd, 1, 1, nd)
-        # the band volume_targets clears around each line found (the same for the previews)
-        tol = 2.0 * max(rc.spacing_m, rc.spacing_m)
-        f = self.h.frequency_hz
-        self.band_m = max(2 * tol, 0.5 * self.v / f) if f else None
         # how far from its antennas a trace reaches (the aperture cone at the deepest voxel), with a cell to spare
         self.reach = self.grid_base.depth[-1] * math.tan(math.radians(rc.aperture_deg)) + 2 * rc.spacing_m
 
-    def add(self, data, poses, times=None, *, now=None):
-        """Raw traces ``(k, n_samples)`` with poses ``(k, 7)`` (``x y z qw qx qy qz``)."""
+    def add(self, data, poses, *, now=None):
+        """Raw traces ``(k, n_samples)`` with poses ``(k, 7)`` (``x y z qw qx qy qz``), arrived at ``now``
+        (monotonic seconds; default: now)."""
         data = np.asarray(data, np.float32)
         k = len(data)
         if k == 0:
@@ -370,7 +373,11 @@ class LiveReconstruction:
             raise InvalidDataError(f"trace {bad}: non-finite samples")
         now = time.monotonic() if now is None else now
         p = np.asarray(poses, float).reshape(k, 7).copy()
-        p[:, 3:] /= np.linalg.norm(p[:, 3:], axis=1, keepdims=True)
+        norm = np.linalg.norm(p[:, 3:], axis=1)
+        bad = np.nonzero(~np.all(np.isfinite(p), axis=1) | ~(norm > 1e-9))[0]
+        if bad.size:
+            raise InvalidDataError(f"trace {int(bad[0]) + self.n_in}: its pose is not finite or its quaternion zero")
+        p[:, 3:] /= norm[:, None]
         self._poses.append(p)
         self._arrival.append(np.full(k, now))
         self.n_in += k
@@ -410,9 +417,9 @@ class LiveReconstruction:
 
         return shift_traces(data, self.t0_s / self.h.dt_s)
 
-    def step(self, *, ended: bool = False, now=None) -> int:
+    def step(self, *, ended: bool = False) -> int:
         """Migrate the traces whose background is final, refresh the targets when due, run the detector on the
-        full windows. Returns how many traces were migrated (``now`` is not used: kept for callers)."""
+        full windows. Returns how many traces were migrated."""
         from gpr3d.processing.background import moving_background, remove_background
 
         if self.t0_s is None:
@@ -454,7 +461,7 @@ class LiveReconstruction:
         period = max(self.cfg.refresh_s, 3.0 * self.refresh_cost_s)
         t = time.monotonic()
         if self.n_final > self.n_refreshed and (ended or self.last_refresh is None or t - self.last_refresh >= period):
-            self.refresh(t)
+            self.refresh()
         if self.detector is not None:
             self._detect(ended)
         return done
@@ -556,13 +563,18 @@ class LiveReconstruction:
             t = dict(t)
             t["box"] = [t["box"][0] + a, t["box"][1], t["box"][2] + a, t["box"][3]]
             t["apex_trace"] += a
-            self._add_detection(t)
+            self._add_detection(t, a)
 
-    def _add_detection(self, t):
-        """Keep ``t`` unless a kept box of the same hyperbola (IoU > 0.5, from the overlapping window) scores
-        higher; replace that one otherwise."""
+    def _add_detection(self, t, window_start=0):
+        """Keep ``t`` (found in the window starting at trace ``window_start``) unless a kept box of the same
+        hyperbola (IoU > 0.5, from an overlapping window) scores higher; replace that one otherwise. Only the
+        windows that overlap this one are looked at (the kept boxes are in the order of their windows)."""
         b = t["box"]
-        for i, u in enumerate(self.detections):
+        reach = window_start - (self.detector.window.traces if self.detector is not None else np.inf)
+        for i in range(len(self.detections) - 1, -1, -1):
+            if self._det_window[i] <= reach:
+                break  # this window and all before it end before ``t``'s begins
+            u = self.detections[i]
             c = u["box"]
             iw = min(b[2], c[2]) - max(b[0], c[0])
             ih = min(b[3], c[3]) - max(b[1], c[1])
@@ -575,6 +587,7 @@ class LiveReconstruction:
                     self.detections[i] = t
                 return
         self.detections.append(t)
+        self._det_window.append(window_start)
 
     # targets and reports -----------------------------------------------------------------------------------------
     def _assemble(self, grid, tiles):
@@ -600,14 +613,12 @@ class LiveReconstruction:
         return Grid3D.covering(self.poses[: self.n_final, :3], depth_m=self.depth_m, spacing_m=self.rc.spacing_m,
                                depth_spacing_m=self.rc.depth_spacing_m, pad_m=self.rc.pad_m, lattice=True)
 
-    def refresh(self, now=None):
+    def refresh(self):
         """Targets of the tiles in memory (over the antenna positions they hold), and ``live.json``."""
         from gpr3d.migration.masking import image_envelope
-        from gpr3d.migration.reconstruct import normalise_by_fold
-        from gpr3d.migration.targets import extract_targets
+        from gpr3d.migration.reconstruct import normalise_by_fold, volume_targets
 
         t_start = time.monotonic()
-        now = t_start if now is None else now
         if self.tiles:
             side = self.cfg.tile_voxels * self.grid_base.dx
             keys = np.array(list(self.tiles))
@@ -623,10 +634,9 @@ class LiveReconstruction:
                 env = image_envelope(img)
                 # the final extraction's settings but a coarser Hough angle step: a third of the time, measured
                 # (benchmarks/bench_live.py), the same targets on the benchmark's survey
-                self.targets = extract_targets(env, grid, threshold=self.rc.threshold, min_line_m=self.rc.min_line_m,
-                                               band_m=self.band_m, min_depth_m=self.rc.min_target_depth_m,
-                                               angle_step_deg=self.cfg.preview_angle_step_deg)
-        self._write_status(now)
+                self.targets = volume_targets(env, grid, self.rc, self.v, self.h.frequency_hz,
+                                              angle_step_deg=self.cfg.preview_angle_step_deg)
+        self._write_status()
         behind = float(self.arrival[self.n_in - 1] - self.arrival[self.n_final - 1]) if self.n_final else 0.0
         self.log(f"  {self.n_in:,} traces in, {self.n_final:,} migrated ({behind:.2f} s behind the newest), "
                  f"{len(self.targets)} targets, {len(self.detections)} detections, {len(self.tiles)} tiles in memory")
@@ -638,18 +648,17 @@ class LiveReconstruction:
         self.refresh_cost_s = done - t_start
         self.last_refresh = done
 
-    def status(self, now=None) -> dict:
+    def status(self) -> dict:
         from gpr3d.migration.targets import targets_to_json
 
-        now = time.monotonic() if now is None else now
         return {"n_traces_in": self.n_in, "n_traces_migrated": self.n_final,
                 "time_zero_s": self.t0_s, "eps_r": self.eps,
                 "tiles_in_memory": len(self.tiles), "tiles_on_disk": len(self.on_disk),
                 "targets": targets_to_json(self.targets), "detections": self.detections, "config": asdict(self.rc)}
 
-    def _write_status(self, now):
+    def _write_status(self):
         self.out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(self.out / "live.json", json.dumps(self.status(now), indent=1))
+        atomic_write_text(self.out / "live.json", json.dumps(self.status(), indent=1))
 
     def finish(self, *, source: str = ""):
         """Everything left migrated; the final volume over every antenna position (when it is at most
@@ -730,7 +739,7 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     poll_s : float
         How long to wait before polling an idle source again (s).
     clock : callable
-        Monotonic seconds (tests replace it).
+        Monotonic seconds for the arrivals, the idle time and the rate (tests give their own).
 
     Returns
     -------
@@ -752,7 +761,7 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     t_first = None  # the first trace's arrival: the idle clock and the rate start there
     last_new = t_start
     newest_arrival = None
-    idle = False
+    idle = interrupted = False
     try:
         while True:
             got = source.poll()
@@ -760,10 +769,10 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
             if got is not None and live is None and source.header is not None:
                 live = LiveReconstruction(source.header, cfg, out, detector=detector, log=log)
             if got is not None and len(got[0]):
-                live.add(got[0], got[1], got[2], now=now)
+                live.add(got[0], got[1], now=now)
                 t_first = now if t_first is None else t_first
                 last_new = newest_arrival = now
-            worked = live.step(now=now) if live is not None else 0
+            worked = live.step() if live is not None else 0
             if source.ended:
                 break
             if t_first is None:
@@ -775,14 +784,19 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
             if not worked and (got is None or not len(got[0])):
                 time.sleep(poll_s)
     except KeyboardInterrupt:  # Ctrl-C ends the survey: what came is finished and written (a second one aborts)
+        interrupted = True
         log(f"interrupted: finishing with the {live.n_in if live else 0:,} traces received")
     finally:
         source.close()
     if live is None or live.n_in == 0:
         where = getattr(getattr(source, "decoder", None), "where", None) or getattr(getattr(source, "dzt", None),
                                                                                    "path", "the source")
-        raise GPR3DError(f"{where}: no traces arrived"
-                         + ("" if cfg.start_timeout_s is None else f" in {cfg.start_timeout_s:g} s"))
+        waiting = getattr(source, "waiting_for_poses", 0)
+        if waiting:
+            raise GPR3DError(f"{where}: {waiting} traces came, but no poses for them in {source.tum.path}")
+        why = (" before Ctrl-C" if interrupted else "" if cfg.start_timeout_s is None else
+               f" in {cfg.start_timeout_s:g} s")
+        raise GPR3DError(f"{where}: no traces arrived{why}")
     live.step(ended=True)
     t_end = clock()
     waited = cfg.until_idle_s if idle else 0.0  # the idle wait that ended the run is neither lag nor work
@@ -799,7 +813,8 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     atomic_write_text(out / "live.json", json.dumps(st, indent=1))
     if live.detections:
         atomic_write_text(out / "detections.json", json.dumps(
-            {"input": live.h.name, "channel": 0, "n_traces": live.n_in, "dt_s": live.h.dt_s,
+            {"input": live.h.name, "channel": getattr(getattr(source, "dzt", None), "channel", 0),
+             "n_traces": live.n_in, "dt_s": live.h.dt_s,
              "detector": "gpr3d detector (live)", "score_threshold": cfg.score, "targets": live.detections},
             indent=1))
     summary.files = sorted(p.name for p in out.iterdir())

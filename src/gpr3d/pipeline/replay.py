@@ -91,7 +91,10 @@ def replay_to_tcp(survey, port: int, *, host: str = "127.0.0.1", rate: float, lo
     header = StreamHeader(n_samples=survey.n_samples, dt_s=survey.dt_s, frequency_hz=survey.frequency_hz,
                           offset_m=survey.offset_m, eps_r=survey.eps_r,
                           name=str(survey.metadata.get("path", "replay")))
-    srv = socket.create_server((host, port))
+    try:
+        srv = socket.create_server((host, port))
+    except OSError as exc:
+        raise GPR3DError(f"tcp://{host}:{port}: cannot listen there ({exc.strerror or exc})") from None
     srv.settimeout(accept_s)
     if on_listen is not None:
         on_listen(srv.getsockname()[1])
