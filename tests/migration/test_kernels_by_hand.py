@@ -136,12 +136,14 @@ def test_each_built_kernel_runs_its_own_path_and_sums_what_the_scalar_one_does(p
     mid = (0.5 * (op.tx[:, :2] + op.rx[:, :2])).astype(np.float32)
     bsize = max(op.reach_m / 2, _kernels.TILE * 0.05)
     order, start, bx0, by0, nbx, nby = _kernels.bin_traces(mid, bsize)
+    every = np.zeros(op.grid.shape[:2] + (2,), np.int32)
+    every[..., 1] = op.grid.nd
     for p, a in ((0, args), (path, sargs)):
         for fold in (False, True):
             img = np.zeros(op.grid.shape, np.float32)
             fimg = np.zeros(op.grid.shape if fold else (1, 1, 1), np.float32)
             _kernels.tiled_adjoint(p, fold)(data, *a, img, order, start, f32(bx0), f32(by0), f32(bsize), nbx, nby,
-                                            mid, f32(op.reach_m), fimg)
+                                            mid, f32(op.reach_m), every, fimg)
             np.testing.assert_allclose(img, want, rtol=0, atol=1e-5 * peak)
             assert (fimg.max() > 1.0) == fold  # the fold of a trace of ones counts the traces, when asked
 

@@ -154,6 +154,54 @@ def test_tiled_adjoint_sums_what_every_trace_sees(read):
 
 
 @pytest.mark.parametrize("read", list(READS))
+def test_depth_ranges_sum_exactly_what_the_whole_image_has_there(read):
+    """Each column summed over its own depths ``[lo, hi)`` only (what coarse-to-fine imaging refines): those voxels
+    equal the whole image's (the same terms in the same order; image and fold: to float32 rounding, as fastmath
+    lets a voxel fall in a vectorised loop's body or its scalar remainder by where the range starts), every other
+    voxel is 0, and a tile of columns with no depths is skipped. The ranges: random per column, some empty, some reaching
+    past the grid, a block of tiles with none; a third of the traces held above the ground."""
+    simd, gather = READS[read]
+    rng = np.random.default_rng(21)
+    n = 250
+    tx, rx = scattered_antennas(rng, n, -0.8, 1.8, 0.05)
+    grid = Grid3D(0.0, 0.0, 0.04, 0.05, 0.05, 0.02, 25, 22, 37)
+    d = rng.standard_normal((n, 220)).astype(np.float32)
+    gap = np.where(rng.uniform(size=n) < 1 / 3, rng.uniform(0.05, 0.3, n), 0.0)
+    op = BackProjection(grid, tx, rx, dt_s=0.1e-9, n_samples=220, eps_r=6.0, aperture_deg=40, obliquity=True,
+                        spreading=True, air_gap_m=gap)
+    op.simd, op.gather = simd, gather
+    whole, whole_fold = op.adjoint(d, with_fold=True)
+    lo = rng.integers(0, 25, grid.shape[:2])
+    hi = lo + rng.integers(-3, 40, grid.shape[:2])  # some empty (hi <= lo), some past the last depth
+    hi[:16, :8] = 0  # two whole tiles of 8 x 8 columns with nothing to sum
+    kr = np.stack([lo, hi], axis=-1)
+    img, fold = op.adjoint(d, with_fold=True, depth_range=kr)
+    k = np.arange(grid.nd)
+    inside = (k >= lo[..., None]) & (k < hi[..., None])
+    assert inside.sum() > grid.size // 4 and (~inside).sum() > grid.size // 4
+    np.testing.assert_allclose(img[inside], whole[inside], rtol=0, atol=1e-5 * np.abs(whole).max())
+    np.testing.assert_allclose(fold[inside], whole_fold[inside], rtol=0, atol=1e-5 * whole_fold.max())
+    assert not img[~inside].any() and not fold[~inside].any()
+    assert np.abs(whole[~inside]).max() > 0.1 * np.abs(whole).max()  # what was left out is not nothing
+    # the numpy engine keeps the same voxels (it migrates everything and drops the rest)
+    ref = BackProjection(grid, tx, rx, dt_s=0.1e-9, n_samples=220, eps_r=6.0, aperture_deg=40, obliquity=True,
+                         spreading=True, air_gap_m=gap, engine="numpy").adjoint(d, depth_range=kr)
+    np.testing.assert_allclose(img, ref, atol=1e-4 * np.abs(ref).max())
+
+
+def test_depth_ranges_of_the_wrong_shape_are_named():
+    rng = np.random.default_rng(1)
+    tx, rx = scattered_antennas(rng, 20, 0, 1, 0.05)
+    op = BackProjection(Grid3D(0.0, 0.0, 0.04, 0.05, 0.05, 0.02, 6, 5, 8), tx, rx, dt_s=0.1e-9, n_samples=50,
+                        eps_r=6.0, aperture_deg=40)
+    d = np.zeros((20, 50), np.float32)
+    with pytest.raises(InvalidDataError, match=r"depth_range must be \(6, 5, 2\) integers"):
+        op.adjoint(d, depth_range=np.zeros((5, 6, 2), int))
+    with pytest.raises(InvalidDataError, match="depth_range"):
+        op.adjoint(d, depth_range=np.zeros((6, 5, 2)))
+
+
+@pytest.mark.parametrize("read", list(READS))
 @pytest.mark.parametrize("weights", [{}, {"obliquity": True, "spreading": True}])
 def test_fold_in_the_same_pass_equals_migrating_a_trace_of_ones(read, weights):
     """The fold summed in the migration's own pass equals the numpy reference's migration of a trace of ones,

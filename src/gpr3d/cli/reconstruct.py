@@ -23,7 +23,7 @@ from gpr3d.core.errors import GPR3DError
 _RECONSTRUCT_FLAGS = {"spacing_m": "--spacing", "max_depth_m": "--max-depth", "aperture_deg": "--aperture",
                       "threshold": "--threshold", "min_line_m": "--min-line", "engine": "--engine",
                       "min_target_depth_m": "--min-depth", "method": "--method", "tile_m": "--tile",
-                      "air_gap_m": "--air-gap"}
+                      "air_gap_m": "--air-gap", "refine_level": "--refine-level"}
 
 
 NAME = "reconstruct"
@@ -60,6 +60,13 @@ def add_arguments(sp):
     sp.add_argument("--air-gap", type=float, default=rc.air_gap_m,
                     help="the antennas' height above the ground (m) when held a wavelength or more above it (an "
                          f"air-launched antenna: the rays refract at the surface; default {rc.air_gap_m:g})")
+    sp.add_argument("--coarse-to-fine", action="store_true",
+                    help="a coarse pass first, then full resolution only where it finds energy, the rest "
+                         "interpolated (faster on clean data; config.json's 'refine' says what was refined; "
+                         "default: every voxel migrated)")
+    sp.add_argument("--refine-level", type=float, default=rc.refine_level,
+                    help="coarse-to-fine: refine where the coarse envelope reaches this share of --threshold "
+                         f"(default {rc.refine_level:g})")
     sp.add_argument("--engine", choices=("numba", "numpy", "torch"), default=None,
                     help=f"migration kernel (default {rc.engine}; torch with --device cuda: the GPU)")
     sp.add_argument("--mask", choices=("none", "detect"), default="none",
@@ -103,7 +110,8 @@ def run(args):
     settings = dict(spacing_m=args.spacing, max_depth_m=args.max_depth,
                     aperture_deg=None if args.aperture == 0 else args.aperture, threshold=args.threshold,
                     min_line_m=args.min_line, engine=engine, time_zero="none" if args.no_time_zero else "peak",
-                    min_target_depth_m=args.min_depth, method=args.method, air_gap_m=args.air_gap)
+                    min_target_depth_m=args.min_depth, method=args.method, air_gap_m=args.air_gap,
+                    coarse_to_fine=args.coarse_to_fine, refine_level=args.refine_level)
     check_config(ReconstructConfig(**settings, **site), names=_RECONSTRUCT_FLAGS)  # one line, before any work
     eps_given = _eps_argument(args.eps_r)
     estimate = eps_given is None

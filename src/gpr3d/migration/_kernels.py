@@ -384,7 +384,7 @@ def _scalar_depths(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, um
 
 @njit(parallel=True, fastmath=True, cache=True)
 def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image,
-                  order, bin_start, bx0, by0, bsize, nbx, nby, mid, reach, fold_img, path, fold):
+                  order, bin_start, bx0, by0, bsize, nbx, nby, mid, reach, krange, fold_img, path, fold):
     """The adjoint with an aperture, at a cost that follows the aperture.
 
     The image is cut into tiles of ``TILE x TILE`` columns, the traces are binned by their tx-rx midpoint (a
@@ -396,6 +396,10 @@ def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap
     adds exact zeros). ``path``: 0 the scalar depth loop, ``GATHER`` or ``LOADS`` the explicit-SIMD one reading the
     trace that way (``depth``, ``slow`` padded at the top to whole blocks).
     ``fold``: the adjoint of a trace of ones is summed into ``fold_img`` in the same pass.
+    ``krange`` ``(nx, ny, 2)``: each column's depths ``[lo, hi)`` to sum (the others are left as they are in
+    ``image``); a tile whose columns all have none is skipped, and the others look only as far as their deepest
+    voxel's cone reaches (a shallow range visits fewer traces). Each summed voxel gets the same terms, in the same
+    order, as with every depth.
     """
     nx, ny, nd = image.shape
     d0, dd = depth_axis(depth, nd)
@@ -411,16 +415,25 @@ def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap
         tx1 = min(tx0 + TILE, nx)
         ty1 = min(ty0 + TILE, ny)
         xa, xb, ya, yb = x[tx0], x[tx1 - 1], y[ty0], y[ty1 - 1]
+        # the deepest voxel any of the tile's columns sums: none, nothing to do; else the reach of its cone
+        kmax = 0
+        for ix in range(tx0, tx1):
+            for iy in range(ty0, ty1):
+                if krange[ix, iy, 0] < krange[ix, iy, 1]:
+                    kmax = max(kmax, min(krange[ix, iy, 1], nd))
+        if kmax == 0:
+            continue
+        treach = min(reach, tan_ap * depth[off + kmax - 1] + f32(1e-6)) if tan_ap > 0.0 else reach
         acc = np.zeros((TILE * TILE, depth.shape[0]), np.float32)
         facc = np.zeros((TILE * TILE, depth.shape[0] if fold else 1), np.float32)
         uu = np.empty(depth.shape[0], np.float32)
         ww = np.empty(depth.shape[0], np.float32)
         # the bins within reach, one more on each side (float32 rounding at a bin's edge must not drop a trace)
-        i_lo = max(int(math.floor((xa - reach - bx0) / bsize)) - 1, 0)
-        i_hi = min(int(math.floor((xb + reach - bx0) / bsize)) + 1, nbx - 1)
-        j_lo = max(int(math.floor((ya - reach - by0) / bsize)) - 1, 0)
-        j_hi = min(int(math.floor((yb + reach - by0) / bsize)) + 1, nby - 1)
-        r2 = reach * reach
+        i_lo = max(int(math.floor((xa - treach - bx0) / bsize)) - 1, 0)
+        i_hi = min(int(math.floor((xb + treach - bx0) / bsize)) + 1, nbx - 1)
+        j_lo = max(int(math.floor((ya - treach - by0) / bsize)) - 1, 0)
+        j_hi = min(int(math.floor((yb + treach - by0) / bsize)) + 1, nby - 1)
+        r2 = treach * treach
         for bi in range(i_lo, i_hi + 1):
             for bj in range(j_lo, j_hi + 1):
                 b = bi * nby + bj
@@ -437,12 +450,15 @@ def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap
                     g = gap[j]
                     for ix in range(tx0, tx1):
                         for iy in range(ty0, ty1):
+                            if krange[ix, iy, 0] >= krange[ix, iy, 1]:
+                                continue
                             ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
-                            k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
+                            k0 = max(start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd), krange[ix, iy, 0])
                             if g > 0:
                                 k1 = end_depth(ax, ay, bx, by, ha + g, hb + g, lmax2a, d0, dd, nd)
                             else:
                                 k1 = end_depth(ax, ay, bx, by, ha, hb, lmax2, d0, dd, nd)
+                            k1 = min(k1, krange[ix, iy, 1])
                             if k0 < k1:
                                 c = (ix - tx0) * TILE + (iy - ty0)
                                 if path and g <= 0:
@@ -456,11 +472,13 @@ def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap
             for iy in range(ty0, ty1):
                 c = (ix - tx0) * TILE + (iy - ty0)
                 col = image[ix, iy]
-                for k in range(nd):
+                klo = max(krange[ix, iy, 0], 0)
+                khi = min(krange[ix, iy, 1], nd)
+                for k in range(klo, khi):
                     col[k] += acc[c, k + off]
                 if fold:
                     fcol = fold_img[ix, iy]
-                    for k in range(nd):
+                    for k in range(klo, khi):
                         fcol[k] += facc[c, k + off]
 
 
@@ -475,7 +493,7 @@ def tiled_adjoint(path: int, fold: bool = False):
             return adjoint_tiled(*args, _path, _fold)
 
         extra = (np.zeros(0, np.int64), np.zeros(2, np.int64), f32(0), f32(0), f32(1), 1, 1, np.zeros((1, 2), f32),
-                 f32(1), np.zeros((1, 1, 2), f32))
+                 f32(1), np.array([[[0, 2]]], np.int32), np.zeros((1, 1, 2), f32))
         _CACHE[key] = run if _probe(run, *extra) is not None else None
     return _CACHE[key]
 

@@ -257,27 +257,47 @@ class BackProjection:
         return out[:, : self.n_samples].astype(np.float32)
 
     # ---------------------------------------------------------------- public
-    def adjoint(self, data, *, with_fold: bool = False, window=None):
+    def adjoint(self, data, *, with_fold: bool = False, window=None, depth_range=None):
         """Migration: data ``(n_traces, n_samples)`` -> image ``(nx, ny, nd)`` float32.
 
         ``with_fold``: also the fold, the adjoint of a trace of ones (how many traces see each voxel inside their
         aperture and record, weighted), returned as ``(image, fold)``; with an aperture the numba engine sums it in
         the same pass, otherwise it is a second migration. ``window = (ix0, ix1, iy0, iy1)``: only those columns
         of the grid (an image of ``(ix1 - ix0, iy1 - iy0, nd)``, equal to that part of the whole image; what
-        :mod:`.sitetiles` gives each tile)."""
+        :mod:`.sitetiles` gives each tile). ``depth_range`` ``(nx, ny, 2)`` integers (over the window's columns):
+        each column's voxels ``[lo, hi)`` only, the others 0 (image and fold); the numba engine with an aperture
+        then does only that work (what coarse-to-fine imaging refines), the others migrate everything and zero
+        the rest."""
         data = np.ascontiguousarray(data, dtype=np.float32)
         if data.shape != (self.n_traces, self.n_samples):
             raise InvalidDataError(f"data must be {(self.n_traces, self.n_samples)}, got {data.shape}")
         xs, ys = self._window(window)
-        img, fold = self._ENGINES[self.engine][0](self, data, xs, ys, with_fold)
+        krange = None
+        if depth_range is not None:
+            krange = np.asarray(depth_range)
+            if krange.shape != (len(xs), len(ys), 2) or not np.issubdtype(krange.dtype, np.integer):
+                raise InvalidDataError(f"depth_range must be ({len(xs)}, {len(ys)}, 2) integers, got "
+                                       f"{krange.shape} {krange.dtype}")
+            krange = np.ascontiguousarray(np.clip(krange, 0, self.grid.nd), dtype=np.int32)
+        run = self._ENGINES[self.engine][0]
+        if self.engine == "numba":
+            img, fold = run(self, data, xs, ys, with_fold, krange)
+        else:
+            img, fold = run(self, data, xs, ys, with_fold)
         if with_fold and fold is None:  # the engine does not sum it in the same pass: a second migration
-            fold = self._ENGINES[self.engine][0](self, np.ones_like(data), xs, ys, False)[0]
+            fold = run(self, np.ones_like(data), xs, ys, False, *([krange] if self.engine == "numba" else []))[0]
+        if krange is not None:  # what an engine summed outside the ranges (all but the tiled kernel do) is dropped
+            k = np.arange(self.grid.nd)
+            outside = (k < krange[..., :1]) | (k >= krange[..., 1:])
+            img[outside] = 0.0
+            if with_fold:
+                fold[outside] = 0.0
         return (img, fold) if with_fold else img
 
     def _adjoint_numpy_engine(self, data, xs, ys, with_fold):
         return self._adjoint_numpy(data, xs, ys), None
 
-    def _adjoint_numba(self, data, xs, ys, with_fold):
+    def _adjoint_numba(self, data, xs, ys, with_fold, krange=None):
         # (image, fold): the fold where the tiled kernel sums it in the same pass, else None
         from gpr3d.migration import _kernels
 
@@ -317,8 +337,11 @@ class BackProjection:
             bsize = max(reach / 2, _kernels.TILE * max(self.grid.dx, self.grid.dy))  # bins of >= one tile
             order, start, bx0, by0, nbx, nby = _kernels.bin_traces(mid, bsize)
             fold = np.zeros(shape if with_fold else (1, 1, 1), dtype=np.float32)
+            if krange is None:
+                krange = np.zeros(shape[:2] + (2,), np.int32)
+                krange[..., 1] = self.grid.nd
             tiled(padded, *args, img, order, start, np.float32(bx0), np.float32(by0), np.float32(bsize), nbx, nby, mid,
-                  np.float32(reach), fold)
+                  np.float32(reach), krange, fold)
             return img, (fold if with_fold else None)
         if simd is not None:
             simd(padded, *args, img)
@@ -355,6 +378,17 @@ class BackProjection:
     #: ``"torch:cuda"``)
     _ENGINES = {"numba": (_adjoint_numba, _forward_numba), "numpy": (_adjoint_numpy_engine, _forward_numpy),
                 "torch": (_adjoint_torch, _forward_torch)}
+
+    def on_grid(self, grid: Grid3D) -> "BackProjection":
+        """The same operator (traces, velocity, aperture, weights, kernel choices) on another grid with the same
+        depth axis (what coarse-to-fine imaging's coarse pass migrates into)."""
+        if (grid.d0, grid.dd, grid.nd) != (self.grid.d0, self.grid.dd, self.grid.nd):
+            raise InvalidDataError("on_grid keeps the depth axis: the grid must have the same d0, dd and nd")
+        sub = copy.copy(self)
+        sub.grid = grid
+        sub.x = grid.x.astype(np.float64)
+        sub.y = grid.y.astype(np.float64)
+        return sub
 
     def with_traces(self, idx) -> "BackProjection":
         """The same operator (grid, velocity, aperture, weights, kernel choices) for the traces ``idx`` only."""

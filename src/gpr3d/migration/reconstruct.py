@@ -55,6 +55,9 @@ class Reconstruction:
     timings_s: dict
     updates_per_s: float | None  #: traces x voxels / migration seconds
     eps_r_source: str = "given"  #: where eps_r came from (``config.json`` records it)
+    #: what coarse-to-fine imaging did (:func:`gpr3d.migration.refine.refined_adjoint`'s info; ``config.json``
+    #: records it), or why it did not run; None where it was not asked for
+    refine: dict | None = None
     #: None: a 3D image on a world grid; a :class:`ProfileFrame`: one straight profile migrated in 2D, the grid's
     #: x running along the line from ``frame.origin_xy`` (ny = 1, y = 0), targets mapped back to the world
     frame: "ProfileFrame | None" = None
@@ -144,7 +147,8 @@ def check_config(cfg: ReconstructConfig, names: dict | None = None) -> None:
     number("min_target_depth_m", none_ok=True, lo=0.0)
     number("taper_traces", lo=0.0)
     number("air_gap_m", lo=0.0)
-    for name in ("obliquity", "spreading", "remove_background", "lattice", "background_trailing"):
+    number("refine_level", lo=0.0, hi=1.0, lo_open=True)
+    for name in ("obliquity", "spreading", "remove_background", "lattice", "background_trailing", "coarse_to_fine"):
         if not isinstance(getattr(cfg, name), bool):
             bad(name, "true or false")
     if cfg.time_zero not in ("peak", "first_break", "none"):
@@ -281,7 +285,16 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     want_fold = cfg.normalize != "none"
     site = cfg.tile_m is not None or cfg.workers or cfg.scheduler or cfg.checkpoint
 
+    refine = _refine_plan(cfg, s, v, frame, site, op) if cfg.coarse_to_fine else None
+
     def migrate(data, with_fold, part=""):
+        if refine is not None and "skipped" not in refine and not part:
+            from gpr3d.migration.refine import refined_adjoint
+
+            img, fold, info = refined_adjoint(op, data, with_fold=with_fold, wavelength_m=refine["wavelength_m"],
+                                              level=cfg.refine_level * cfg.threshold, normalize=cfg.normalize)
+            refine.update(info)
+            return (img, fold) if with_fold else img
         if not site:
             return op.adjoint(data, with_fold=with_fold)
         from gpr3d.migration.sitetiles import DEFAULT_TILE_M, migrate_site
@@ -323,7 +336,28 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     return Reconstruction(image=image, envelope=env, noise_map=noise_map, fold=fold, grid=grid, targets=targets,
                           eps_r=float(eps), config=asdict(cfg), n_traces=s.n_traces,
                           timings_s={"prepare": t_prep, "migrate": t_mig},
-                          updates_per_s=s.n_traces * grid.size / t_mig if t_mig > 0 else None, frame=frame)
+                          updates_per_s=s.n_traces * grid.size / t_mig if t_mig > 0 else None, frame=frame,
+                          refine=refine)
+
+
+def _refine_plan(cfg, s, v, frame, site, op) -> dict:
+    """Whether coarse-to-fine imaging runs and with what wavelength: ``{"skipped": why}`` where it cannot gain
+    anything (a profile, site tiles, no aperture, an engine without depth ranges)."""
+    if frame is not None:
+        return {"skipped": "one profile, migrated in 2D"}
+    if site:
+        return {"skipped": "site tiles migrate every voxel"}
+    if op.tan_ap <= 0:
+        return {"skipped": "no aperture: every trace reaches every voxel"}
+    if cfg.engine != "numba":
+        return {"skipped": f"engine {cfg.engine!r} migrates every voxel"}
+    from gpr3d.migration.refine import dominant_frequency_hz
+
+    f_data = dominant_frequency_hz(s.data, s.dt_s)
+    f = max(f_data, s.frequency_hz or 0.0)  # the shorter wavelength of the two: the closer coarse columns
+    if not f > 0:
+        return {"skipped": "the traces carry no frequency to size the coarse pass by"}
+    return {"frequency_hz": float(f), "data_frequency_hz": float(f_data), "wavelength_m": float(v / f)}
 
 
 def normalise_by_fold(image, fold, how: str, noise_map=None, *, fold_max: float | None = None):
@@ -417,5 +451,6 @@ def write_reconstruction(result: "Reconstruction", out_dir, *, source: str = "")
                                                        "config": result.config, "grid": g.to_dict(),
                                                        "frame": None if result.frame is None
                                                        else result.frame.to_dict(),
+                                                       "refine": result.refine,
                                                        "timings_s": result.timings_s}, indent=1))
     return sorted(p.name for p in out.iterdir())

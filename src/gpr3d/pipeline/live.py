@@ -294,7 +294,8 @@ class LiveReconstruction:
         if rc.method != "backprojection":
             raise GPR3DError("live mode migrates by back projection (--method backprojection)")
         self.rc = replace(rc, eps_r=float(eps), lattice=True, background_window=cfg.background_window,
-                          background_trailing=cfg.background_trailing, remove_background=True)
+                          background_trailing=cfg.background_trailing, remove_background=True,
+                          coarse_to_fine=False)  # (every voxel is migrated as the traces come)
         check_config(self.rc)
         self.eps = float(eps)
         self.v = velocity_from_eps_r(self.eps)

@@ -1,0 +1,172 @@
+"""Coarse-to-fine imaging (gpr3d.migration.refine): refined voxels equal the whole image's, the others the coarse
+columns interpolated; the marking, the stride and the frequency by hand; reconstruct with it on and off."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy.interpolate import RegularGridInterpolator
+
+from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.grid import Grid3D
+from gpr3d.core.survey import Survey
+from gpr3d.migration import refine
+from gpr3d.migration.config import ReconstructConfig
+from gpr3d.migration.masking import image_envelope
+from gpr3d.migration.operator import BackProjection, antenna_positions
+from gpr3d.migration.reconstruct import check_config, normalise_by_fold, reconstruct, write_reconstruction
+from gpr3d.simulation.forward import ForwardScene, Pipe, Sphere, forward_model
+from gpr3d.simulation.paths import random_walk
+
+
+def test_dominant_frequency_of_a_known_tone():
+    dt = 0.05e-9
+    t = np.arange(400) * dt
+    data = np.sin(2 * np.pi * 450e6 * t)[None, :] * np.linspace(1, 2, 30)[:, None] + 3.0  # (and an offset)
+    # bins are 1 / (400 * 0.05 ns) = 50 MHz apart: 450 MHz is one of them
+    assert refine.dominant_frequency_hz(data, dt) == pytest.approx(450e6)
+
+
+@pytest.mark.parametrize("wavelength, spacing, n, want", [
+    (0.20, 0.02, 100, 3),  # a third of 20 cm over 2 cm columns: 3.33 -> 3
+    (0.24, 0.02, 100, 4),
+    (0.60, 0.02, 100, 4),  # at most MAX_STRIDE
+    (0.06, 0.02, 100, 1),  # columns within a third of a wavelength already
+    (0.20, 0.02, 11, 1),   # too few columns for a coarse pass of 3
+])
+def test_coarse_stride_from_the_wavelength(wavelength, spacing, n, want):
+    g = Grid3D(0.0, 0.0, 0.02, spacing, spacing, 0.02, n, n + 3, 10)
+    assert refine.coarse_stride(g, wavelength) == want
+
+
+def test_marked_depths_by_hand():
+    # coarse columns every 2 fine ones; one hot coarse voxel at column (2, 1), depth 10; margin 0.5 wavelength of
+    # 0.08 m = 2 voxels of 2 cm in depth, none across
+    grid = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 9, 7, 20)
+    cenv = np.full((5, 4, 20), 0.01, np.float32)
+    cenv[2, 1, 10] = 1.0
+    kr, ref, md, mc = refine.refine_ranges(cenv, 2, grid, level=0.5, wavelength_m=0.08, reference_percentile=100)
+    assert (ref, md, mc) == (1.0, 2, 0)
+    # fine column i takes coarse columns i // 2 and i // 2 + 1 (coarse c is fine 2c): coarse 2 <- fine 2, 3, 4, 5
+    want = np.zeros((9, 7, 2), np.int32)
+    for i in (2, 3, 4, 5):
+        for j in (0, 1, 2, 3):  # coarse 1 <- fine 0..3 (j // 2 in {0, 1} with j // 2 + 1 = 1, or j // 2 == 1)
+            if 1 in (j // 2, j // 2 + 1):
+                want[i, j] = (8, 13)
+    np.testing.assert_array_equal(kr, want)
+    # a lateral margin of one coarse column widens the hot column to coarse 1..3 (fine 0..7) and 0..2 (fine 0..5)
+    refine.LATERAL_MARGIN, old = 0.3, refine.LATERAL_MARGIN  # 0.3 x 0.08 m over 4 cm coarse columns -> 1
+    try:
+        kr2 = refine.refine_ranges(cenv, 2, grid, level=0.5, wavelength_m=0.08, reference_percentile=100)[0]
+    finally:
+        refine.LATERAL_MARGIN = old
+    active = kr2[..., 1] > kr2[..., 0]
+    assert active[0:8, 0:6].all() and not active[8].any() and not active[:, 6].any()
+
+
+def _sphere_survey(n=1500, seed=3):
+    walk = random_walk(n, area=((0.0, 1.6), (0.0, 1.6)), step_m=0.02, turn_rate=0.1, seed=seed)
+    sc = ForwardScene(eps_r=6.0, spheres=[Sphere((0.8, 0.7, -0.4), 0.05)])
+    data = forward_model(sc, walk.positions_xyz, walk.orientations_quat_wxyz, offset_m=0.05, frequency_hz=600e6,
+                         n_samples=160, time_window_s=12e-9)
+    return walk, data
+
+
+def test_refined_voxels_equal_the_whole_image_and_the_rest_are_the_coarse_columns_interpolated():
+    walk, data = _sphere_survey()
+    tx, rx = antenna_positions(walk.positions_xyz, walk.orientations_quat_wxyz, 0.05)
+    grid = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 80, 78, 40)
+    op = BackProjection(grid, tx, rx, dt_s=12e-9 / 160, n_samples=160, eps_r=6.0, aperture_deg=45, obliquity=True,
+                        spreading=True)
+    d = data.astype(np.float32)
+    whole, whole_fold = op.adjoint(d, with_fold=True)
+    wl = 0.2  # a longer wavelength than the data's: stride 3
+    img, fold, info = refine.refined_adjoint(op, d, with_fold=True, wavelength_m=wl, level=0.15,
+                                             normalize="sqrt_fold")
+    k = info["stride"]
+    assert k == 3 and 0 < info["refined_fraction"] < 0.3
+    # the ranges the pass used, rebuilt from the coarse envelope of the whole image's own coarse columns
+    cx, cy = np.arange(0, grid.nx + k - 1, k), np.arange(0, grid.ny + k - 1, k)
+    assert (len(cx), len(cy)) == tuple(info["coarse_grid"][:2])
+    cop = op.on_grid(Grid3D(0.0, 0.0, 0.02, 0.06, 0.06, 0.02, len(cx), len(cy), 40))
+    cimg, cfold = cop.adjoint(d, with_fold=True)
+    in_grid = (cx < grid.nx)[:, None] & (cy < grid.ny)[None, :]
+    np.testing.assert_allclose(cimg[:, :][np.ix_(cx < grid.nx, cy < grid.ny)], whole[np.ix_(cx[cx < grid.nx],
+                               cy[cy < grid.ny])], atol=1e-5 * np.abs(whole).max())  # coarse columns are fine ones
+    assert in_grid.any()
+    cenv = image_envelope(normalise_by_fold(cimg, cfold, "sqrt_fold")[0])
+    kr = refine.refine_ranges(cenv, k, grid, level=0.15, wavelength_m=wl)[0]
+    kk = np.arange(grid.nd)
+    inside = (kk >= kr[..., :1]) & (kk < kr[..., 1:])
+    assert inside.mean() == pytest.approx(info["refined_fraction"])
+    peak = np.abs(whole).max()
+    np.testing.assert_allclose(img[inside], whole[inside], atol=1e-5 * peak)
+    np.testing.assert_allclose(fold[inside], whole_fold[inside], atol=1e-5 * whole_fold.max())
+    # elsewhere: the coarse image, interpolated across columns (scipy's bilinear interpolation)
+    want = RegularGridInterpolator((cx, cy), cimg)(np.stack(np.meshgrid(np.arange(grid.nx), np.arange(grid.ny),
+                                                                        indexing="ij"), -1).reshape(-1, 2))
+    want = want.reshape(grid.shape)
+    np.testing.assert_allclose(img[~inside], want[~inside], atol=1e-5 * peak)
+    # the sphere's focus is refined, and the refined image is the whole one where the energy is
+    env = image_envelope(whole)
+    assert inside[np.unravel_index(np.argmax(env), env.shape)]
+    assert inside[env >= 0.5 * env.max()].all()
+
+
+def test_too_much_marked_migrates_every_voxel(monkeypatch):
+    walk, data = _sphere_survey(600)
+    tx, rx = antenna_positions(walk.positions_xyz, walk.orientations_quat_wxyz, 0.05)
+    grid = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 60, 60, 30)
+    op = BackProjection(grid, tx, rx, dt_s=12e-9 / 160, n_samples=160, eps_r=6.0, aperture_deg=45)
+    d = data.astype(np.float32)
+    monkeypatch.setattr(refine, "MAX_REFINED", 0.0)
+    img, fold, info = refine.refined_adjoint(op, d, with_fold=True, wavelength_m=0.2, level=0.15, normalize="fold")
+    whole, whole_fold = op.adjoint(d, with_fold=True)
+    np.testing.assert_array_equal(img, whole)
+    np.testing.assert_array_equal(fold, whole_fold)
+    assert info["refined_fraction"] == 1.0 and 0 < info["marked_fraction"] and "every voxel" in info["why"]
+
+
+def _pipe_survey():
+    walk = random_walk(5000, area=((0.0, 2.4), (0.0, 2.4)), step_m=0.02, turn_rate=0.1, seed=7)
+    sc = ForwardScene(eps_r=9.0, conductivity_s_m=0.002, pipes=[Pipe((0.4, 0.9, -0.55), (2.0, 1.3, -0.55), 0.04),
+                                                                Pipe((1.5, 0.3, -0.35), (1.5, 2.1, -0.35), 0.02)])
+    data = forward_model(sc, walk.positions_xyz, walk.orientations_quat_wxyz, offset_m=0.1, frequency_hz=500e6,
+                         n_samples=256, time_window_s=24e-9, air_wave=1.0, ground_wave=0.5)
+    return Survey(data=data, dt_s=24e-9 / 256, positions_xyz=walk.positions_xyz,
+                  orientations_quat_wxyz=walk.orientations_quat_wxyz, offset_m=0.1, frequency_hz=500e6, eps_r=9.0)
+
+
+def test_reconstruct_coarse_to_fine_finds_the_same_targets_and_says_what_it_did(tmp_path):
+    s = _pipe_survey()
+    full = reconstruct(s, ReconstructConfig())
+    fast = reconstruct(s, ReconstructConfig(coarse_to_fine=True))
+    assert full.refine is None and fast.grid == full.grid
+    r = fast.refine
+    assert r["stride"] == 3 and r["frequency_hz"] == 500e6 and 0 < r["refined_fraction"] < 0.3
+    assert r["wavelength_m"] == pytest.approx(299792458.0 / 3 / 500e6)
+    assert len(full.targets) == len(fast.targets) >= 2
+    for a, b in zip(full.targets, fast.targets):
+        assert a.kind == b.kind
+        np.testing.assert_allclose(np.asarray(b.points_xyz), np.asarray(a.points_xyz), atol=0.03)
+    # where the targets are, the envelope is the whole image's
+    ref = np.percentile(full.envelope.max(axis=2), 99.5)
+    near = full.envelope >= full.config["threshold"] * ref
+    np.testing.assert_allclose(fast.envelope[near], full.envelope[near], rtol=0, atol=0.01 * full.envelope.max())
+    write_reconstruction(fast, tmp_path)
+    doc = json.loads((tmp_path / "config.json").read_text())
+    assert doc["refine"]["stride"] == 3 and doc["config"]["coarse_to_fine"] is True
+
+
+def test_a_profile_or_no_aperture_skips_the_coarse_pass_and_says_why():
+    s = _pipe_survey()
+    r = reconstruct(s, ReconstructConfig(coarse_to_fine=True, aperture_deg=None, max_depth_m=0.4, spacing_m=0.04))
+    assert "no aperture" in r.refine["skipped"]
+
+
+@pytest.mark.parametrize("level", [0.0, -0.1, 1.5, float("nan")])
+def test_refine_level_out_of_range_is_named(level):
+    with pytest.raises(InvalidDataError, match="refine_level must be"):
+        check_config(ReconstructConfig(refine_level=level))
+    with pytest.raises(InvalidDataError, match="coarse_to_fine must be true or false"):
+        check_config(ReconstructConfig(coarse_to_fine="yes"))
