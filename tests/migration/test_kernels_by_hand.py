@@ -39,7 +39,7 @@ def _consistent_problem(args):
         return "mode is not an int"
     if len(args) == 14:
         return None
-    order, start, bx0, by0, bsize, nbx, nby, mid, reach, fold = args[14:]
+    order, start, bx0, by0, bsize, nbx, nby, mid, reach, krange, fold = args[14:]
     if order.dtype != np.int64 or start.dtype != np.int64 or order.ndim != 1:
         return "the bins are not int64"
     if start.shape != (nbx * nby + 1,) or start[-1] != order.size or np.any(np.diff(start) < 0):
@@ -48,6 +48,10 @@ def _consistent_problem(args):
         return "midpoints or fold"
     if fold.shape not in (image.shape, (1, 1, 1)):
         return "the fold image does not match"
+    if krange.dtype != np.int32 or krange.shape != image.shape[:2] + (2,) or not krange.flags.c_contiguous:
+        return "the depth ranges are not int32 (nx, ny, 2)"
+    if np.any(krange[..., 1] > image.shape[2]) or not np.any(krange[..., 1] > krange[..., 0]):
+        return "the depth ranges sum nothing or reach past the image"
     if not all(isinstance(s, np.float32) for s in (bx0, by0, bsize, reach)):
         return "a bin scalar is not float32"
     return None
@@ -62,10 +66,11 @@ def test_the_probe_runs_one_consistent_float32_problem_in_every_weight_mode(extr
         assert _consistent_problem(args) is None, _consistent_problem(args)
 
     tiled_extra = (np.zeros(0, np.int64), np.zeros(2, np.int64), f32(0), f32(0), f32(1), 1, 1,
-                   np.zeros((1, 2), np.float32), f32(1), np.zeros((1, 1, 2), np.float32))
+                   np.zeros((1, 2), np.float32), f32(1), np.array([[[0, 2]]], np.int32),
+                   np.zeros((1, 1, 2), np.float32))
     assert _kernels._probe(fake, *(tiled_extra if extra else ())) is fake
     assert [c[12] for c in calls] == [0, 1, 2, 3]
-    assert all(len(c) == (24 if extra else 14) for c in calls)
+    assert all(len(c) == (25 if extra else 14) for c in calls)
 
 
 def test_a_kernel_that_fails_to_build_or_run_is_none():
@@ -94,7 +99,7 @@ def test_the_kernels_build_here_once_per_path_and_fold(monkeypatch):
     tiles = {(p, f): _kernels.tiled_adjoint(p, f) for p in (0, GATHER, LOADS) for f in (False, True)}
     assert all(t is not None for t in tiles.values()) and len({id(t) for t in tiles.values()}) == 6
     assert _kernels.tiled_adjoint(0) is tiles[(0, False)]  # no fold unless asked
-    assert built == [0, 0] + [10] * 6
+    assert built == [0, 0] + [11] * 6
 
 
 def test_a_kernel_whose_probe_fails_is_none(monkeypatch):
