@@ -65,6 +65,7 @@ MODULES = {
     "migration.velocity": ["tests/migration/test_velocity.py", "-k", "not oblique"],
     "migration.targets": None, "migration.metrics": None,
     "migration.profile": None, "migration.traditional": None, "migration.reconstruct": None,
+    "migration.refine": ["tests/migration/test_refine.py"],
     # less the tests that start a real Dask client: in mutmut's forked children its event loop hangs (the parent's
     # loop thread is gone); the Dask plumbing is checked against a recording stand-in (test_sitetiles_by_hand.py)
     "migration.sitetiles": ["tests/migration/test_sitetiles.py", "tests/migration/test_sitetiles_by_hand.py", "-k",

@@ -122,8 +122,8 @@ def test_the_volume_layout_on_disk(tmp_path):
             ("gpr3d.volume", 1, __version__)
         assert json.loads(f.attrs["grid_json"]) == GRID.to_dict() and f.attrs["axes"] == AXES
         assert "skipped" not in f.attrs  # None attributes left out
-        d = f["image"]
-        assert d.dtype == np.float32 and d.compression == "gzip" and d.compression_opts == 4 and d.shuffle
+        d = f["image"]  # float32, contiguous and uncompressed (written in a fifth of gzip's time)
+        assert d.dtype == np.float32 and d.compression is None and d.chunks is None and not d.shuffle
     assert (SCHEMA, SCHEMA_VERSION, AXES) == ("gpr3d.volume", 1, "x, y, depth (positive down), metres")
 
 

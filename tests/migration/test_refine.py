@@ -39,9 +39,11 @@ def test_coarse_stride_from_the_wavelength(wavelength, spacing, n, want):
     assert refine.coarse_stride(g, wavelength) == want
 
 
-def test_marked_depths_by_hand():
+def test_marked_depths_by_hand(monkeypatch):
     # coarse columns every 2 fine ones; one hot coarse voxel at column (2, 1), depth 10; margin 0.5 wavelength of
     # 0.08 m = 2 voxels of 2 cm in depth, none across
+    monkeypatch.setattr(refine, "DEPTH_MARGIN", 0.5)
+    monkeypatch.setattr(refine, "LATERAL_MARGIN", 0.0)
     grid = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 9, 7, 20)
     cenv = np.full((5, 4, 20), 0.01, np.float32)
     cenv[2, 1, 10] = 1.0
@@ -55,11 +57,8 @@ def test_marked_depths_by_hand():
                 want[i, j] = (8, 13)
     np.testing.assert_array_equal(kr, want)
     # a lateral margin of one coarse column widens the hot column to coarse 1..3 (fine 0..7) and 0..2 (fine 0..5)
-    refine.LATERAL_MARGIN, old = 0.3, refine.LATERAL_MARGIN  # 0.3 x 0.08 m over 4 cm coarse columns -> 1
-    try:
-        kr2 = refine.refine_ranges(cenv, 2, grid, level=0.5, wavelength_m=0.08, reference_percentile=100)[0]
-    finally:
-        refine.LATERAL_MARGIN = old
+    monkeypatch.setattr(refine, "LATERAL_MARGIN", 0.3)  # 0.3 x 0.08 m over 4 cm coarse columns -> 1
+    kr2 = refine.refine_ranges(cenv, 2, grid, level=0.5, wavelength_m=0.08, reference_percentile=100)[0]
     active = kr2[..., 1] > kr2[..., 0]
     assert active[0:8, 0:6].all() and not active[8].any() and not active[:, 6].any()
 

@@ -68,13 +68,15 @@ def image_envelope(image: np.ndarray, *, chunk_voxels: int = 4_000_000) -> np.nd
     Works on slabs of about ``chunk_voxels`` voxels, so the complex temporaries stay small
     (a 1e8-voxel image needs its own size again, not the 16x of one whole transform).
     """
-    from scipy.signal import hilbert  # here: scipy.signal takes seconds to import, and most callers never get here
+    # (the analytic signal on NumPy's FFT, as scipy.signal.hilbert makes it: scipy.signal, with the scipy.stats it
+    # pulls in, takes longer to import than a whole reconstruction's envelope takes)
+    from gpr3d.processing.analytic import hilbert_envelope
 
     img = np.asarray(image, dtype=np.float32)
     out = np.empty_like(img)
     step = max(1, chunk_voxels // max(img.shape[1] * img.shape[2], 1))
     for i in range(0, img.shape[0], step):
-        out[i : i + step] = np.abs(hilbert(img[i : i + step], axis=2))
+        out[i : i + step] = hilbert_envelope(img[i : i + step], axis=2)
     return out
 
 

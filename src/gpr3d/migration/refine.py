@@ -3,12 +3,13 @@
 A coarse pass migrates every ``stride``-th column of the grid (``stride`` from the wavelength: columns about a
 third of a wavelength apart, which the focused image of a point spans several of), with the fold, normalised as
 the image will be. Its envelope marks the voxels that reach ``level`` of the reference that target extraction
-uses (the 99.5th percentile of the ridge map, :func:`gpr3d.migration.targets.extract_targets`), widened by half a
-wavelength in depth and across; each column of the fine grid is then migrated over the depths its coarse
+uses (the 99.5th percentile of the ridge map, :func:`gpr3d.migration.targets.extract_targets`), widened in depth
+(:data:`DEPTH_MARGIN`) and across (:data:`LATERAL_MARGIN`); each column of the fine grid is then migrated over the depths its coarse
 neighbours mark (one interval per column: :meth:`BackProjection.adjoint`'s ``depth_range``), and every other voxel
 takes the coarse image interpolated across columns (the coarse columns are columns of the fine grid: there the
 value is the migrated one at every depth). Where the fine pass ran, image and fold are what migrating every voxel
-gives; the work is the coarse pass (about ``1 / stride**2``) plus the marked share.
+gives; the work is the coarse pass (about ``1 / stride**2``) plus the marked share (more than
+:data:`MAX_REFINED` marked: every voxel is migrated instead).
 
 What was done is returned as a dict for ``config.json`` (``"refine"``).
 """
@@ -29,9 +30,11 @@ __all__ = ["coarse_stride", "dominant_frequency_hz", "refine_ranges", "refined_a
 COARSE_WAVELENGTHS = 1 / 3
 #: the coarse stride is at most this (the lateral interpolation of the rest stays short)
 MAX_STRIDE = 4
-#: how far the marked voxels are widened, in wavelengths: in depth, and across (beyond the fine column's coarse
+#: how far the marked voxels are widened, in wavelengths: in depth (the envelope's Hilbert transform reaches along
+#: the whole column: with half a wavelength, the interpolated rest moved borderline columns across the target
+#: threshold and changed the targets of 2 scenes in 18; with two, none), and across (beyond the fine column's coarse
 #: neighbours)
-DEPTH_MARGIN = 0.5
+DEPTH_MARGIN = 2.0
 LATERAL_MARGIN = 0.0
 #: more than this share of the voxels marked: every voxel is migrated instead (a fine pass over many short depth
 #: ranges costs about what the whole image does; measured in ``benchmarks/eval_coarse_to_fine.py``)

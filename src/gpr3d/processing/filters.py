@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import butter, sosfiltfilt
 
 __all__ = ["bandpass"]
 
@@ -51,6 +50,8 @@ def bandpass(
                              f"traces hold ({lowest:g} Hz) and the Nyquist frequency {nyq:g} Hz")
     if fmin_hz is None and fmax_hz is None:
         raise ValueError("give fmin_hz, fmax_hz or both")
+    from scipy.signal import butter, sosfiltfilt  # (here: scipy.signal is slow to import)
+
     if fmin_hz is not None and fmax_hz is not None:
         if fmin_hz >= fmax_hz:
             raise ValueError(f"fmin_hz ({fmin_hz:g}) must be below fmax_hz ({fmax_hz:g})")

@@ -1,0 +1,34 @@
+"""The reconstruction's figures: what each image shows and how it is drawn."""
+
+import numpy as np
+import pytest
+
+from gpr3d.core.grid import Grid3D
+from gpr3d.migration.reconstruct import Reconstruction
+from gpr3d.migration.targets import Target3D
+from gpr3d.viz import volume as V
+
+
+def _rec(nx, ny=30, nd=12):
+    g = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, nx, ny, nd)
+    env = np.zeros(g.shape, np.float32)
+    env[:, ny // 2, nd // 2] = 1.0  # a line along x at mid-depth
+    env[nx // 3, 3, 2] = 0.5
+    t = Target3D(kind="line", points_xyz=[[0.0, ny // 2 * 0.02, 0.14], [(nx - 1) * 0.02, ny // 2 * 0.02, 0.14]],
+                 score=1.0, depth_m=0.14)
+    return Reconstruction(image=env, envelope=env, noise_map=None, fold=None, grid=g, targets=[t], eps_r=9.0,
+                          config={"threshold": 0.3}, n_traces=10, timings_s={}, updates_per_s=None)
+
+
+@pytest.mark.parametrize("nx, want", [(40, "nearest"), (V.NEAREST_UP_TO, "nearest"),
+                                      (V.NEAREST_UP_TO + 1, "antialiased")])
+def test_top_and_front_views_show_the_envelope_maxima_cell_by_cell_unless_too_large(tmp_path, monkeypatch, nx, want):
+    saved = {}
+    monkeypatch.setattr(V, "save_figure", lambda fig, path, **kw: saved.__setitem__(path.name, fig))
+    rec = _rec(nx)
+    assert V.reconstruction_figures(rec, tmp_path) == ["front.png", "top.png", "view3d.png"]
+    top = saved["top.png"].axes[0].images[0]
+    np.testing.assert_array_equal(top.get_array(), rec.envelope.max(axis=2).T)
+    front = saved["front.png"].axes[0].images[0]
+    np.testing.assert_array_equal(front.get_array(), rec.envelope.max(axis=1).T)
+    assert top.get_interpolation() == want and front.get_interpolation() == want
