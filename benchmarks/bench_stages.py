@@ -6,7 +6,8 @@ The survey: ``--traces`` raw A-scans (default 8000; 512 samples over 40 ns, 500 
 over 4 m x 4 m (``bench_reconstruct.cart_path``, a trace every 2 cm), forward-modelled over the L-pipe scene of
 ``eval_reconstruction.py`` (eps_r 9), written as ``survey.h5`` (no positions) and ``path.tum`` (one pose per
 trace): ``gpr3d reconstruct survey.h5 --poses path.tum --eps-r 9 --out rec`` at every other default.
-``detect`` runs on the embedded 1040-trace DZT (``gpr3d.data.example_dzt``).
+``detect`` runs on the embedded 1040-trace DZT (``gpr3d.data.example_dzt``). ``reconstruct --coarse-to-fine``
+runs warm beside it (:mod:`gpr3d.migration.refine`).
 
 Each command runs in a process of its own with ``gpr3d --timings`` (:mod:`gpr3d.core.timing`): the stages are
 the library's own (read, poses, prepare, grid, migrate, fold, envelope, targets, figures, writes, ...), numba's
@@ -164,6 +165,9 @@ def main(argv=None):
     runs = {"reconstruct, cold cache, no warm-up": timed_command(rec, work, fresh("r0", False), "rec00")}
     runs["reconstruct, cold cache"] = timed_command(rec, work, env, "rec0")
     runs["reconstruct, warm"] = best_of([timed_command(rec, work, env, f"rec{i + 1}") for i in range(args.repeat)])
+    c2f = rec[:-2] + ["--coarse-to-fine", "--out", work / "rec_c2f"]
+    runs["reconstruct --coarse-to-fine, warm"] = best_of([timed_command(c2f, work, env, f"c2f{i + 1}")
+                                                          for i in range(args.repeat)])
     runs["detect, cold cache"] = timed_command(det, work, fresh("d"), "det0")
     runs["detect, warm"] = best_of([timed_command(det, work, env, f"det{i + 1}") for i in range(args.repeat)])
     if args.demo:
@@ -199,6 +203,8 @@ def main(argv=None):
                                                for r in runs.values()) + " |")
     lines.append("| **process wall time** | " + " | ".join(f"**{r['wall_s']:.2f}**" for r in runs.values()) + " |")
     warm = runs["reconstruct, warm"]["wall_s"]
+    warm_c2f = runs["reconstruct --coarse-to-fine, warm"]["wall_s"]
+    refine = json.loads((work / "rec_c2f" / "config.json").read_text())["refine"]
     cold = runs["reconstruct, cold cache"]["wall_s"]
     cold0 = runs["reconstruct, cold cache, no warm-up"]["wall_s"]
     lines += ["", "| reconstruct against the plain reference (same survey, same run) | seconds | x reference |",
@@ -208,6 +214,9 @@ def main(argv=None):
               "1.00 |",
               f"| `gpr3d reconstruct` end to end, warm ({g['nx']} x {g['ny']} x {g['nd']}) | {warm:.2f} | "
               f"{warm / w_ref:.2f} |",
+              f"| `gpr3d reconstruct --coarse-to-fine` end to end, warm (stride {refine.get('stride')}, "
+              f"{100 * refine.get('refined_fraction', 1.0):.0f} % of the voxels refined) | {warm_c2f:.2f} | "
+              f"{warm_c2f / w_ref:.2f} |",
               f"| `gpr3d reconstruct` end to end, cold cache (first run, background warm-up) | {cold:.2f} | "
               f"{cold / w_ref:.2f} |",
               f"| `gpr3d reconstruct` end to end, cold cache, no warm-up (GPR3D_WARMUP=0) | {cold0:.2f} | "

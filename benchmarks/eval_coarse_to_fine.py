@@ -137,8 +137,9 @@ def main(argv=None):
 
     settings = list(dict.fromkeys(r["setting"] for r in rows))
     lines = [f"Host CPU: {cpu_name()}, {args.threads} threads; `reconstruct` at its defaults (true eps_r; 2 cm voxels "
-             f"on soil, 1 cm on slabs; whole record) on the 8000-trace L-pipe survey and eval_scenes seeds "
-             f"{args.seeds} (10,000 traces each)", "",
+             f"on soil, 1 cm on slabs; whole record; every voxel migrated), and with `coarse_to_fine=True` at each "
+             f"`refine_level`, on the 8000-trace L-pipe survey and eval_scenes seeds {args.seeds} (10,000 traces "
+             "each)", "",
              "| setting | migration s (sum) | x every voxel | refined share (mean) | completeness (mean) | "
              "position err m (mean) | false targets (sum) | envelope change where targets are (max, of peak) |",
              "|---|---|---|---|---|---|---|---|"]

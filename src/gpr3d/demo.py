@@ -300,6 +300,7 @@ def _reconstruction_stage(out: Path, log) -> dict:
         if key == "estimated":
             g, mig = result.grid, result.timings_s["migrate"]
             one_pass = result.image
+            result_targets = result.targets
     log(f"[4/8] 3D reconstruction: {survey.n_traces} traces -> {g.nx} x {g.ny} x {g.nd} voxels in "
         f"{rows['estimated']['wall_s']:.1f} s (migration {mig:.1f} s, "
         f"{rows['estimated']['updates_per_s'] / 1e9:.2f} G updates/s); targets from the fused poses "
@@ -332,13 +333,36 @@ def _reconstruction_stage(out: Path, log) -> dict:
     n_tiles = len(plan_tiles(tiled.grid, 0.64))
     log(f"      site scale: in {n_tiles} tiles of 0.64 m with the cone's halo ({wall_tiles:.1f} s), the volume "
         f"{'equals the one-pass volume bit for bit' if same else 'DIFFERS from the one-pass volume'}")
+    # coarse-to-fine (gpr3d reconstruct --coarse-to-fine): every third column first, then every voxel of the columns
+    # where that image holds energy; the targets against the one-pass ones
+    t = time.perf_counter()
+    c2f = reconstruct(survey, ReconstructConfig(spacing_m=0.02, max_depth_m=0.8, coarse_to_fine=True))
+    wall_c2f = time.perf_counter() - t
+    ev_c2f = _named(evaluate_targets(c2f.targets, truth_lines_from_pipes(pipes)))
+    moved = _largest_move(c2f.targets, result_targets)
+    ref = c2f.refine
+    log(f"      coarse-to-fine: {ref.get('refined_fraction', 1.0) * 100:.0f} % of the columns migrated whole "
+        f"(coarse columns every {ref.get('stride', 1)}), migration {c2f.timings_s['migrate']:.1f} s against "
+        f"{mig:.1f} s; {len(c2f.targets)} targets against {len(result_targets)}"
+        + (f", none moved more than {moved * 100:.1f} cm" if moved is not None else " (not the same set)"))
     est = rows["estimated"]
     return {"wall_s": est["wall_s"], "grid": est["grid"], "updates_per_s": est["updates_per_s"],
             "n_targets": est["n_targets"], "false_targets": est["false_targets"], "truth": est["truth"],
             "false_lines": est["false_lines"], "false_points": est["false_points"], "false": est["false"],
             "excess_fraction": est["excess_fraction"],
             "poses": "estimated (visual-inertial fusion)", "with_true_poses": rows["true"], "folder": "reconstruction",
-            "tiles": {"n": n_tiles, "tile_m": 0.64, "wall_s": wall_tiles, "equal_to_one_pass": same}}
+            "tiles": {"n": n_tiles, "tile_m": 0.64, "wall_s": wall_tiles, "equal_to_one_pass": same},
+            "coarse_to_fine": {"wall_s": wall_c2f, "migrate_s": c2f.timings_s["migrate"], "refine": ref,
+                               "n_targets": len(c2f.targets), "false_targets": ev_c2f["false_targets"],
+                               "largest_move_m": moved}}
+
+
+def _largest_move(a, b) -> float | None:
+    """How far (m) the farthest end of a target in ``a`` lies from the same end of its counterpart in ``b`` (the
+    same order, kinds and counts), or None where the two lists differ."""
+    if len(a) != len(b) or any(x.kind != y.kind for x, y in zip(a, b)):
+        return None
+    return max((float(np.abs(np.subtract(x.points_xyz, y.points_xyz)).max()) for x, y in zip(a, b)), default=0.0)
 
 
 def _detection_stage(out: Path, real_path: str, log) -> dict:

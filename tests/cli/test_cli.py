@@ -157,6 +157,9 @@ def test_demo_end_to_end(tmp_path):
     assert len(rtm["focus_error_m"]) == 2 and max(rtm["focus_error_m"]) <= 2 * rtm["cell_m"]
     rec_tiles = summary["stages"]["reconstruction"]["tiles"]  # site tiles give the one-pass volume exactly
     assert rec_tiles["equal_to_one_pass"] and rec_tiles["n"] > 1
+    c2f = summary["stages"]["reconstruction"]["coarse_to_fine"]  # the same targets from part of the work
+    assert c2f["refine"]["stride"] > 1 and 0 < c2f["refine"]["refined_fraction"] < 0.7
+    assert c2f["largest_move_m"] is not None and c2f["largest_move_m"] <= 1e-3
     walk = summary["stages"]["random_motion"]
     # a trace every 1 cm of the antenna's path: the count follows the path length
     assert walk["n_traces"] == pytest.approx(100 * walk["path_m"], abs=2) and walk["path_m"] > 50

@@ -1,3 +1,5 @@
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -347,3 +349,23 @@ def test_voxels_on_the_surface_under_an_air_gap(read, aperture):
     img = op.adjoint(d)
     assert np.all(np.isfinite(img))
     np.testing.assert_allclose(img, ref, atol=1e-4 * np.abs(ref).max())
+
+
+def test_on_grid_keeps_everything_but_the_columns_and_refuses_another_depth_axis():
+    rng = np.random.default_rng(4)
+    tx, rx = scattered_antennas(rng, 30, 0, 1, 0.05)
+    g = Grid3D(0.0, 0.0, 0.04, 0.05, 0.05, 0.02, 8, 7, 10)
+    op = BackProjection(g, tx, rx, dt_s=0.1e-9, n_samples=80, eps_r=6.0, aperture_deg=40, obliquity=True)
+    coarse = replace(g, dx=0.1, dy=0.15, nx=4, ny=3)
+    sub = op.on_grid(coarse)
+    np.testing.assert_array_equal(sub.x, coarse.x)
+    np.testing.assert_array_equal(sub.y, coarse.y)
+    assert sub.grid == coarse and op.grid == g and sub.tan_ap == op.tan_ap and sub.obliquity
+    d = rng.standard_normal((30, 80)).astype(np.float32)
+    want = BackProjection(coarse, tx, rx, dt_s=0.1e-9, n_samples=80, eps_r=6.0, aperture_deg=40,
+                          obliquity=True).adjoint(d)
+    np.testing.assert_array_equal(sub.adjoint(d), want)
+    for bad in (replace(g, nd=9), replace(g, dd=0.03), replace(g, d0=0.02)):
+        with pytest.raises(InvalidDataError, match=r"^on_grid keeps the depth axis: the grid must have the same d0, "
+                                                   r"dd and nd$"):
+            op.on_grid(bad)

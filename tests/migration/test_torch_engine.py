@@ -67,7 +67,8 @@ def test_cuda_where_there_is_none_and_an_air_gap_are_refused():
     else:
         with pytest.raises(InvalidDataError, match="no CUDA device is available here"):
             make("torch:cuda")
-    with pytest.raises(InvalidDataError, match="the torch engine has no air gap"):
+    with pytest.raises(InvalidDataError, match=r"^the torch engine has no air gap \(rays refracted at the surface\): "
+                                               r"use engine 'numba' for an antenna above the ground$"):
         make("torch", air=True)
     assert make("torch").engine == "torch" and make("torch").torch_device == "cpu"
 

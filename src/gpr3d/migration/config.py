@@ -33,10 +33,9 @@ class ReconstructConfig:
     background_trailing: bool = False
     normalize: str = "sqrt_fold"  #: divide the image by sqrt(fold) ("sqrt_fold"), by the fold ("fold") or not ("none")
     threshold: float = 0.3
-    #: coarse-to-fine imaging (:mod:`gpr3d.migration.refine`): a coarse pass over every few columns, then full
-    #: resolution only where its envelope reaches ``refine_level`` x ``threshold`` of the reference level (the rest
-    #: interpolated from the coarse pass); False (the default): every voxel migrated. Off by default while its
-    #: targets still differ from the full image's on some scenes (``benchmarks/results/coarse_to_fine.md``)
+    #: coarse-to-fine imaging (:mod:`gpr3d.migration.refine`): a coarse pass over every few columns, then every
+    #: voxel of the columns where its envelope reaches ``refine_level`` x ``threshold`` of the reference level (the
+    #: other columns interpolated from the coarse pass); False: every voxel migrated
     coarse_to_fine: bool = False
     refine_level: float = 0.5
     min_line_m: float = 0.3
