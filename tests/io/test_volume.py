@@ -115,7 +115,9 @@ from gpr3d.io.volume import AXES, SCHEMA_VERSION, read_cscan, write_cscan, write
 
 
 def test_the_volume_layout_on_disk(tmp_path):
-    p = write_volume(tmp_path / "v.h5", GRID, volumes(), eps_r=7.5, skipped=None)
+    vols = volumes()
+    vols["image"] = vols["image"].astype(np.float64)  # float64 given: float32 stored
+    p = write_volume(tmp_path / "v.h5", GRID, vols, eps_r=7.5, skipped=None)
     assert p == tmp_path / "v.h5"
     with h5py.File(p) as f:
         assert (f.attrs["schema"], int(f.attrs["schema_version"]), f.attrs["gpr3d_version"]) == \
@@ -124,6 +126,7 @@ def test_the_volume_layout_on_disk(tmp_path):
         assert "skipped" not in f.attrs  # None attributes left out
         d = f["image"]  # float32, contiguous and uncompressed (written in a fifth of gzip's time)
         assert d.dtype == np.float32 and d.compression is None and d.chunks is None and not d.shuffle
+        np.testing.assert_array_equal(d[()], vols["image"].astype(np.float32))
     assert (SCHEMA, SCHEMA_VERSION, AXES) == ("gpr3d.volume", 1, "x, y, depth (positive down), metres")
 
 

@@ -2,6 +2,8 @@
 columns interpolated; the marking, the stride and the frequency by hand; reconstruct with it on and off."""
 
 import json
+import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -19,6 +21,18 @@ from gpr3d.simulation.forward import ForwardScene, Pipe, Sphere, forward_model
 from gpr3d.simulation.paths import random_walk
 
 
+def test_dominant_frequency_from_every_few_hundredth_trace():
+    # 1024 traces: every second one is read (1024 // 512); the even ones carry 450 MHz, the odd ones a stronger
+    # 300 MHz that a reading of every trace would pick
+    dt = 0.05e-9
+    t = np.arange(400) * dt
+    data = np.empty((1024, 400))
+    data[0::2] = np.sin(2 * np.pi * 450e6 * t)
+    data[1::2] = 3 * np.sin(2 * np.pi * 300e6 * t)
+    assert refine.dominant_frequency_hz(data, dt) == pytest.approx(450e6)
+    assert refine.dominant_frequency_hz(data[:3], dt) == pytest.approx(300e6)  # 3 traces: all read
+
+
 def test_dominant_frequency_of_a_known_tone():
     dt = 0.05e-9
     t = np.arange(400) * dt
@@ -33,6 +47,8 @@ def test_dominant_frequency_of_a_known_tone():
     (0.60, 0.02, 100, 4),  # at most MAX_STRIDE
     (0.06, 0.02, 100, 1),  # columns within a third of a wavelength already
     (0.20, 0.02, 11, 1),   # too few columns for a coarse pass of 3
+    (0.20, 0.02, 12, 3),   # just enough: four coarse columns' spans
+    (0.13, 0.02, 100, 2),
 ])
 def test_coarse_stride_from_the_wavelength(wavelength, spacing, n, want):
     g = Grid3D(0.0, 0.0, 0.02, spacing, spacing, 0.02, n, n + 3, 10)
@@ -40,27 +56,55 @@ def test_coarse_stride_from_the_wavelength(wavelength, spacing, n, want):
 
 
 def test_marked_columns_by_hand(monkeypatch):
-    # coarse columns every 2 fine ones; one hot coarse voxel at column (2, 1) (any depth: here 10), no margin
+    # coarse columns every 2 fine ones (coarse c is fine 2c): 9 x 7 of them over 17 x 13 fine columns; one hot
+    # coarse voxel at column (4, 3) (any depth: here 10), one exactly at the level at (8, 6), the rest far below
     monkeypatch.setattr(refine, "LATERAL_MARGIN", 0.0)
-    grid = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 9, 7, 20)
-    cenv = np.full((5, 4, 20), 0.01, np.float32)
-    cenv[2, 1, 10] = 1.0
+    grid = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 17, 13, 20)
+    cenv = np.full((9, 7, 20), 0.01, np.float32)
+    cenv[4, 3, 10] = 1.0
+    cenv[8, 6, 2] = 0.5
     cols, ref, mc = refine.refine_columns(cenv, 2, grid, level=0.5, wavelength_m=0.08, reference_percentile=100)
     assert (ref, mc) == (1.0, 0)
-    # fine column i takes coarse columns i // 2 and i // 2 + 1 (coarse c is fine 2c): coarse 2 <- fine 2, 3, 4, 5;
-    # coarse 1 (along y) <- fine 0, 1 (through i // 2 + 1) and 2, 3
-    want = np.zeros((9, 7), bool)
-    want[2:6, 0:4] = True
+    # fine column i takes coarse columns i // 2 and i // 2 + 1: coarse 4 <- fine 6, 7, 8, 9; coarse 3 <- 4, 5, 6, 7;
+    # coarse 8 <- fine 14, 15, 16; coarse 6 <- fine 10, 11, 12 (at the level counts)
+    want = np.zeros((17, 13), bool)
+    want[6:10, 4:8] = True
+    want[14:17, 10:13] = True
     np.testing.assert_array_equal(cols, want)
-    # below the level: nothing (the reference is the 100th percentile, 1.0; level 1.5 is above every column)
+    # above every column's level: nothing; an envelope of zeros (no reference): every column
     assert not refine.refine_columns(cenv, 2, grid, level=1.5, wavelength_m=0.08, reference_percentile=100)[0].any()
-    # a lateral margin of one coarse column widens the hot column to coarse 1..3 (fine 0..7) and 0..2 (fine 0..5)
+    assert refine.refine_columns(np.zeros_like(cenv), 2, grid, level=0.5, wavelength_m=0.08)[0].all()
+    # a lateral margin of a wavelength of 0.2 m over 4 cm coarse columns: 5 coarse columns each way
+    monkeypatch.setattr(refine, "LATERAL_MARGIN", 1.0)
+    assert refine.refine_columns(cenv, 2, grid, level=0.5, wavelength_m=0.2, reference_percentile=100)[2] == 5
+    # one coarse column: the hot one widens to coarse 3..5 along x and 2..4 along y (fine 4..11 and 2..9)
     monkeypatch.setattr(refine, "LATERAL_MARGIN", 0.3)  # 0.3 x 0.08 m over 4 cm coarse columns -> 1
+    cenv[8, 6, 2] = 0.0
     cols2, _, mc2 = refine.refine_columns(cenv, 2, grid, level=0.5, wavelength_m=0.08, reference_percentile=100)
-    want2 = np.zeros((9, 7), bool)
-    want2[0:8, 0:6] = True
+    want2 = np.zeros((17, 13), bool)
+    want2[4:12, 2:10] = True
     assert mc2 == 1
     np.testing.assert_array_equal(cols2, want2)
+
+
+def test_coarse_grid_and_interpolation_by_hand():
+    # the coarse grid starts on the first fine column and reaches the last one: ceil((n - 1) / k) + 1 columns
+    g = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 7, 8, 5)
+    for n, k, want in ((7, 3, 3), (8, 3, 4), (10, 3, 4), (9, 2, 5), (10, 4, 4)):
+        cg = refine._coarse_grid(replace(g, nx=n, ny=n), k)
+        assert (cg.nx, cg.ny, cg.dx, cg.dy) == (want, want, pytest.approx(0.02 * k), pytest.approx(0.02 * k))
+        assert (cg.x0, cg.y0, cg.d0, cg.dd, cg.nd) == (g.x0, g.y0, g.d0, g.dd, g.nd)
+    # interpolation onto every column: fine 0..6 from coarse 0, 3, 6 (the last fine column is a coarse one)
+    c = np.arange(3 * 2 * 4, dtype=np.float32).reshape(3, 2, 4) ** 2
+    out = refine._interp(c, 3, 7, 4)
+    want = RegularGridInterpolator((np.arange(3) * 3, np.arange(2) * 3), c)(
+        np.stack(np.meshgrid(np.arange(7), np.arange(4), indexing="ij"), -1).reshape(-1, 2)).reshape(7, 4, 4)
+    assert out.dtype == np.float32
+    np.testing.assert_allclose(out, want, rtol=1e-6)
+    # a single coarse column along an axis is copied to every fine one; two are interpolated between
+    one = refine._interp(c[:1], 3, 3, 4)
+    np.testing.assert_array_equal(one, np.broadcast_to(refine._upsample(c[:1], 3, 4, 1), (3, 4, 4)))
+    np.testing.assert_allclose(refine._upsample(c[:2], 3, 4, 0)[1], c[0] + (c[1] - c[0]) / 3, rtol=1e-6)
 
 
 def _sphere_survey(n=1500, seed=3):
@@ -120,12 +164,23 @@ def test_too_much_marked_migrates_every_voxel(monkeypatch):
     grid = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 60, 60, 30)
     op = BackProjection(grid, tx, rx, dt_s=12e-9 / 160, n_samples=160, eps_r=6.0, aperture_deg=45)
     d = data.astype(np.float32)
-    monkeypatch.setattr(refine, "MAX_REFINED", 0.0)
-    img, fold, info = refine.refined_adjoint(op, d, with_fold=True, wavelength_m=0.2, level=0.15, normalize="fold")
     whole, whole_fold = op.adjoint(d, with_fold=True)
+    info0 = refine.refined_adjoint(op, d, with_fold=True, wavelength_m=0.2, level=0.15, normalize="fold")[2]
+    marked = info0["refined_fraction"]
+    assert 0 < marked < 1
+    monkeypatch.setattr(refine, "MAX_REFINED", marked)  # exactly at the limit: still refined
+    assert refine.refined_adjoint(op, d, with_fold=True, wavelength_m=0.2, level=0.15,
+                                  normalize="fold")[2]["refined_fraction"] == marked
+    monkeypatch.setattr(refine, "MAX_REFINED", 0.0)
+    t = time.perf_counter()
+    img, fold, info = refine.refined_adjoint(op, d, with_fold=True, wavelength_m=0.2, level=0.15, normalize="fold")
+    wall = time.perf_counter() - t
     np.testing.assert_array_equal(img, whole)
     np.testing.assert_array_equal(fold, whole_fold)
-    assert info["refined_fraction"] == 1.0 and 0 < info["marked_fraction"] and "every voxel" in info["why"]
+    assert info["refined_fraction"] == 1.0 and info["marked_fraction"] == marked
+    assert info["why"] == f"the coarse pass marked {marked:.0%} of the columns: every voxel migrated"
+    assert set(info["seconds"]) == {"coarse", "mark", "fine"} and 0 <= sum(info["seconds"].values()) <= wall
+    assert min(info["seconds"].values()) >= 0 and info["stride"] == 3
 
 
 def _pipe_survey():
@@ -226,3 +281,44 @@ def test_coarse_to_fine_marks_by_the_image_normalised_as_asked():
         refs[how] = r.refine["reference"]
     # the reference is the coarse envelope's, divided by the fold, its square root or nothing: three scales
     assert len({round(v, 12) for v in refs.values()}) == 3
+
+
+def _sphere_op(n=600, size=40, nd=20):
+    walk, data = _sphere_survey(n)
+    tx, rx = antenna_positions(walk.positions_xyz, walk.orientations_quat_wxyz, 0.05)
+    grid = Grid3D(0.4, 0.3, 0.02, 0.02, 0.02, 0.02, size, size, nd)
+    op = BackProjection(grid, tx, rx, dt_s=12e-9 / 160, n_samples=160, eps_r=6.0, aperture_deg=45)
+    return op, data.astype(np.float32)
+
+
+def test_what_the_refined_pass_reports():
+    op, d = _sphere_op(size=60)
+    t = time.perf_counter()
+    img, fold, info = refine.refined_adjoint(op, d, with_fold=False, wavelength_m=0.13, level=0.4,
+                                             normalize="sqrt_fold")
+    wall = time.perf_counter() - t
+    assert fold is None and img.shape == op.grid.shape
+    assert set(info) == {"stride", "coarse_grid", "wavelength_m", "level", "reference", "margin_coarse_columns",
+                         "refined_fraction", "seconds"}
+    assert info["stride"] == 2 and info["coarse_grid"] == [31, 31, 20] and info["wavelength_m"] == 0.13
+    assert info["level"] == 0.4 and info["margin_coarse_columns"] == 0 and 0 < info["refined_fraction"] < 0.7
+    assert set(info["seconds"]) == {"coarse", "mark", "fine", "fill"}
+    assert all(0 <= v for v in info["seconds"].values()) and sum(info["seconds"].values()) <= wall
+    whole = op.adjoint(d)
+    cols = np.abs(img - whole).max(axis=2) <= 1e-5 * np.abs(whole).max()
+    assert cols.mean() >= info["refined_fraction"]  # the refined columns (and the coarse ones) are the whole image's
+
+
+def test_too_few_columns_apart_migrates_every_voxel_and_says_so():
+    op, d = _sphere_op(300, 20, 10)
+    whole, whole_fold = op.adjoint(d, with_fold=True)
+    for with_fold in (True, False):
+        img, fold, info = refine.refined_adjoint(op, d, with_fold=with_fold, wavelength_m=0.08, level=0.15,
+                                                 normalize="fold")  # a third of 8 cm: 1 column of 2 cm
+        assert info == {"stride": 1, "refined_fraction": 1.0,
+                        "why": "the grid's columns are within a third of a wavelength of each other already"}
+        np.testing.assert_array_equal(img, whole)
+        if with_fold:
+            np.testing.assert_array_equal(fold, whole_fold)
+        else:
+            assert fold is None
