@@ -20,7 +20,6 @@ Development used seeds 100-105; the table reports ``--seeds`` (default 0-11), wh
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -33,28 +32,13 @@ if __name__ == "__main__":  # numba reads the thread count at import
 
 import numpy as np  # noqa: E402
 
-from eval_scenes import make_scene  # noqa: E402
+from eval_scenes import make_scene, scene_survey  # noqa: E402
 
 from gpr3d.core.survey import Survey  # noqa: E402
 from gpr3d.migration.config import ReconstructConfig  # noqa: E402
 from gpr3d.migration.metrics import evaluate_targets, truth_lines_from_pipes  # noqa: E402
 from gpr3d.migration.reconstruct import reconstruct  # noqa: E402
-from gpr3d.simulation.forward import ForwardScene, forward_model  # noqa: E402
-from gpr3d.simulation.paths import random_walk  # noqa: E402
-
-
-def scene_survey(spec: dict, n_traces: int = 10_000) -> Survey:
-    """``eval_scenes.run_scene``'s survey of ``spec`` (raw: time zero and background left to ``reconstruct``)."""
-    sc = ForwardScene(eps_r=spec["eps_r"], conductivity_s_m=0.002, pipes=spec["pipes"])
-    walk = random_walk(n_traces, area=spec["area"], step_m=spec["step_m"], turn_rate=0.1, seed=spec["seed"])
-    offset = 0.1 if spec["kind"] == "utility" else 0.04
-    data = forward_model(sc, walk.positions_xyz, walk.orientations_quat_wxyz, offset_m=offset,
-                         frequency_hz=spec["frequency_hz"], n_samples=512, time_window_s=spec["window_s"],
-                         air_wave=1.0, ground_wave=0.5, clutter=spec["clutter"], noise=spec["noise"],
-                         seed=spec["seed"])
-    return Survey(data=data, dt_s=spec["window_s"] / 512, positions_xyz=walk.positions_xyz,
-                  orientations_quat_wxyz=walk.orientations_quat_wxyz, offset_m=offset,
-                  frequency_hz=spec["frequency_hz"], eps_r=spec["eps_r"])
+from gpr3d.simulation.forward import forward_model  # noqa: E402
 
 
 def stages_survey():

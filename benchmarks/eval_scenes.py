@@ -126,7 +126,9 @@ def make_scene(seed: int) -> dict:
             "max_depth_m": deepest + 0.15}
 
 
-def run_scene(spec: dict, n_traces: int = 10_000):
+def scene_survey(spec: dict, n_traces: int = 10_000) -> Survey:
+    """The survey of ``spec``: a cart's random walk over its area, forward-modelled (raw: time zero and background
+    left to ``reconstruct``)."""
     sc = ForwardScene(eps_r=spec["eps_r"], conductivity_s_m=0.002, pipes=spec["pipes"])
     walk = random_walk(n_traces, area=spec["area"], step_m=spec["step_m"], turn_rate=0.1, seed=spec["seed"])
     offset = 0.1 if spec["kind"] == "utility" else 0.04
@@ -134,9 +136,13 @@ def run_scene(spec: dict, n_traces: int = 10_000):
                          frequency_hz=spec["frequency_hz"], n_samples=512, time_window_s=spec["window_s"],
                          air_wave=1.0, ground_wave=0.5, clutter=spec["clutter"], noise=spec["noise"],
                          seed=spec["seed"])
-    s = Survey(data=data, dt_s=spec["window_s"] / 512, positions_xyz=walk.positions_xyz,
-               orientations_quat_wxyz=walk.orientations_quat_wxyz, offset_m=offset,
-               frequency_hz=spec["frequency_hz"], eps_r=spec["eps_r"])
+    return Survey(data=data, dt_s=spec["window_s"] / 512, positions_xyz=walk.positions_xyz,
+                  orientations_quat_wxyz=walk.orientations_quat_wxyz, offset_m=offset,
+                  frequency_hz=spec["frequency_hz"], eps_r=spec["eps_r"])
+
+
+def run_scene(spec: dict, n_traces: int = 10_000):
+    s = scene_survey(spec, n_traces)
     t = time.perf_counter()
     rec = reconstruct(s, ReconstructConfig(eps_r=spec["eps_r"], spacing_m=spec["spacing_m"],
                                            max_depth_m=spec["max_depth_m"]))

@@ -124,6 +124,16 @@ def scattered_antennas(rng, n, lo, hi, lift, offset=0.1):
     return antenna_positions(pos, headings_rad=rng.uniform(-3, 3, n), offset_m=offset)
 
 
+def _scattered_problem(seed, n, lo, hi, n_samples, max_gap):
+    """``n`` antennas scattered over [lo, hi]^2 (:func:`scattered_antennas`), random traces of ``n_samples`` and a
+    third of the antennas held 5 cm to ``max_gap`` above the ground: ``(tx, rx, data, gap)``."""
+    rng = np.random.default_rng(seed)
+    tx, rx = scattered_antennas(rng, n, lo, hi, 0.05)
+    d = rng.standard_normal((n, n_samples)).astype(np.float32)
+    gap = np.where(rng.uniform(size=n) < 1 / 3, rng.uniform(0.05, max_gap, n), 0.0)
+    return tx, rx, d, gap
+
+
 @pytest.mark.parametrize("read", list(READS))
 def test_tiled_adjoint_sums_what_every_trace_sees(read):
     """With an aperture the adjoint visits, per tile of columns, only the traces whose cone reaches it. Traces
@@ -131,12 +141,9 @@ def test_tiled_adjoint_sums_what_every_trace_sees(read):
     lifted, a third held above the ground): the tiled image equals the untiled one and the numpy reference, with
     the SIMD loop reading the trace by hardware gathers or by scalar loads, and with the scalar loop."""
     simd, gather = READS[read]
-    rng = np.random.default_rng(11)
     n = 300
-    tx, rx = scattered_antennas(rng, n, -1, 2, 0.05)
+    tx, rx, d, gap = _scattered_problem(11, n, -1, 2, 200, 0.4)
     grid = Grid3D(0.0, 0.0, 0.04, 0.05, 0.05, 0.02, 27, 23, 30)
-    d = rng.standard_normal((n, 200)).astype(np.float32)
-    gap = np.where(rng.uniform(size=n) < 1 / 3, rng.uniform(0.05, 0.4, n), 0.0)
     kw = dict(dt_s=0.1e-9, n_samples=200, eps_r=6.0, aperture_deg=25, obliquity=True, spreading=True, air_gap_m=gap)
     ref = BackProjection(grid, tx, rx, engine="numpy", **kw).adjoint(d)
     images = {}
@@ -160,15 +167,12 @@ def test_depth_ranges_sum_exactly_what_the_whole_image_has_there(read):
     """Each column summed over its own depths ``[lo, hi)`` only (what coarse-to-fine imaging refines): those voxels
     equal the whole image's (the same terms in the same order; image and fold: to float32 rounding, as fastmath
     lets a voxel fall in a vectorised loop's body or its scalar remainder by where the range starts), every other
-    voxel is 0, and a tile of columns with no depths is skipped. The ranges: random per column, some empty, some reaching
-    past the grid, a block of tiles with none; a third of the traces held above the ground."""
+    voxel is 0, and a tile of columns with no depths is skipped. The ranges: random per column, some empty, some
+    reaching past the grid, a block of tiles with none; a third of the traces held above the ground."""
     simd, gather = READS[read]
-    rng = np.random.default_rng(21)
-    n = 250
-    tx, rx = scattered_antennas(rng, n, -0.8, 1.8, 0.05)
+    tx, rx, d, gap = _scattered_problem(21, 250, -0.8, 1.8, 220, 0.3)
+    rng = np.random.default_rng(22)
     grid = Grid3D(0.0, 0.0, 0.04, 0.05, 0.05, 0.02, 25, 22, 37)
-    d = rng.standard_normal((n, 220)).astype(np.float32)
-    gap = np.where(rng.uniform(size=n) < 1 / 3, rng.uniform(0.05, 0.3, n), 0.0)
     op = BackProjection(grid, tx, rx, dt_s=0.1e-9, n_samples=220, eps_r=6.0, aperture_deg=40, obliquity=True,
                         spreading=True, air_gap_m=gap)
     op.simd, op.gather = simd, gather
