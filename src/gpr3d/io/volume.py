@@ -55,7 +55,7 @@ class Volume:
 
 def write_volume(path, grid: Grid3D, arrays: dict, **attrs) -> Path:
     """Write ``arrays`` (name -> ``grid.shape`` array; None values are left out) and ``attrs`` to ``path``
-    (atomically; float32, uncompressed: see :func:`_store`)."""
+    (atomically; float32, uncompressed: gzip shrank them by a sixth in five times the time)."""
     import h5py
 
     for name, a in arrays.items():

@@ -4,17 +4,17 @@ A coarse pass migrates every ``stride``-th column of the grid (``stride`` from t
 third of a wavelength apart, which the focused image of a point spans several of), with the fold, normalised as
 the image will be. Its envelope marks the coarse columns that reach ``level`` of the reference that target
 extraction uses somewhere in depth (the 99.5th percentile of the ridge map,
-:func:`gpr3d.migration.targets.extract_targets`), widened across by :data:`LATERAL_MARGIN`; every fine column next
+:func:`gpr3d.migration.targets.extract_targets`), widened across by ``LATERAL_MARGIN``; every fine column next
 to a marked coarse one (its two neighbours along x and y) is then migrated whole, at every depth
-(:meth:`BackProjection.adjoint`'s ``depth_range``), and every other column takes the coarse image interpolated
-across columns (the coarse columns are columns of the fine grid: there the value is the migrated one).
+(:meth:`~gpr3d.migration.operator.BackProjection.adjoint`'s ``depth_range``), and every other column takes the
+coarse image interpolated across columns (the coarse columns are columns of the fine grid: there the value is the migrated one).
 
 Whole columns, because an envelope is a Hilbert transform along the column: refining only the marked depths left
 the rest of the column interpolated, and that reached into the refined voxels' envelope enough to move
 borderline columns across the target threshold (2 scenes in 18 changed their targets); whole columns changed
 none (``benchmarks/results/coarse_to_fine.md``). In a refined column image, envelope and fold are what
 migrating every voxel gives; the work is the coarse pass (about ``1 / stride**2``) plus the refined columns' share
-(more than :data:`MAX_REFINED` of the columns marked: every voxel is migrated instead).
+(more than ``MAX_REFINED`` of the columns marked: every voxel is migrated instead).
 
 What was done is returned as a dict for ``config.json`` (``"refine"``).
 """
@@ -53,7 +53,7 @@ def dominant_frequency_hz(data: np.ndarray, dt_s: float) -> float:
 
 def coarse_stride(grid: Grid3D, wavelength_m: float) -> int:
     """Every how many columns the coarse pass migrates: a third of ``wavelength_m`` over the grid's column
-    spacing, at most :data:`MAX_STRIDE`; 1 (nothing to gain) where the grid is that coarse already or too small."""
+    spacing, at most ``MAX_STRIDE``; 1 (nothing to gain) where the grid is that coarse already or too small."""
     k = int(math.floor(COARSE_WAVELENGTHS * wavelength_m / max(grid.dx, grid.dy) + 1e-9))
     k = min(max(k, 1), MAX_STRIDE)
     return k if min(grid.nx, grid.ny) >= 4 * k else 1
@@ -90,7 +90,7 @@ def refine_columns(cenv: np.ndarray, k: int, grid: Grid3D, *, level: float, wave
                    reference_percentile: float = 99.5):
     """The fine columns to migrate whole, ``(nx, ny)`` booleans, from the coarse envelope ``cenv`` (every ``k``-th
     column of ``grid``): the coarse columns where it reaches ``level`` x the ``reference_percentile`` of its ridge
-    map (the column maxima) at some depth, widened by :data:`LATERAL_MARGIN` wavelengths; a fine column is refined
+    map (the column maxima) at some depth, widened by ``LATERAL_MARGIN`` wavelengths; a fine column is refined
     when either of its coarse neighbours along x (``i // k``, ``i // k + 1``) and along y is marked. Returns
     ``(columns, reference, lateral margin in coarse columns)``."""
     from scipy import ndimage
