@@ -50,6 +50,20 @@ def test_reconstruct_with_a_tum_trajectory(pipe_survey):
     assert np.allclose(p[:, 1], 0.6, atol=0.03)  # along x at y = 0.6
     assert np.allclose(p[:, 2], top, atol=0.03)  # depth to the top, positive down
     assert abs(p[1, 0] - p[0, 0]) > 0.6
+    assert json.loads((out / "config.json").read_text())["refine"] is None  # every voxel migrated by default
+    # --coarse-to-fine: the same targets, and config.json says what it did (at its level)
+    r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--out", d / "c2f", "--max-depth", "0.7",
+                "--eps-r", "file", "--coarse-to-fine", "--refine-level", "0.4")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((d / "c2f" / "config.json").read_text())
+    assert doc["config"]["coarse_to_fine"] is True and doc["config"]["refine_level"] == 0.4
+    refine = doc["refine"]
+    assert refine["stride"] == 2 and refine["level"] == pytest.approx(0.4 * doc["config"]["threshold"]), refine
+    assert 0 < refine["refined_fraction"] < 0.7
+    fast = json.loads((d / "c2f" / "targets.json").read_text())["targets"]
+    assert [t["kind"] for t in fast] == [t["kind"] for t in targets]
+    for a, b in zip(targets, fast):
+        np.testing.assert_allclose(b["points_xyz"], a["points_xyz"], atol=1e-3)
 
 
 def test_reconstruct_errors_are_one_line(pipe_survey, tmp_path):
@@ -102,6 +116,9 @@ def test_boxes_make_a_noise_map(pipe_survey, tmp_path):
     (["--tile", "0"], "--tile must be a tile side in metres, at least 10 voxels of --spacing 0.02 (0.2..100000), got 0"),
     (["--workers", "-2"], "workers must be a whole number >= 0, got -2"),
     (["--scheduler", "localhost:8786"], "scheduler must be an address such as tcp://host:8786"),
+    (["--coarse-to-fine", "--refine-level", "0"], "--refine-level must be > 0.0, got 0.0"),
+    (["--coarse-to-fine", "--refine-level", "1.5"], "--refine-level must be <= 1.0, got 1.5"),
+    (["--refine-level", "0.4"], "--refine-level sets how coarse-to-fine imaging refines: give --coarse-to-fine with it"),
 ])
 def test_bad_reconstruct_arguments_are_one_line_errors(pipe_survey, tmp_path, extra, words):
     d, _ = pipe_survey

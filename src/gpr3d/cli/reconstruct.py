@@ -63,8 +63,8 @@ def add_arguments(sp):
     sp.add_argument("--coarse-to-fine", action="store_true",
                     help="a coarse pass over every few columns first, then every voxel of the columns where it "
                          "finds energy, the others interpolated (config.json's 'refine' says how many)")
-    sp.add_argument("--refine-level", type=float, default=rc.refine_level,
-                    help="coarse-to-fine: refine the columns where the coarse envelope reaches this share of "
+    sp.add_argument("--refine-level", type=float, default=None,
+                    help="with --coarse-to-fine: refine the columns where the coarse envelope reaches this share of "
                          f"--threshold (default {rc.refine_level:g})")
     sp.add_argument("--engine", choices=("numba", "numpy", "torch"), default=None,
                     help=f"migration kernel (default {rc.engine}; torch with --device cuda: the GPU)")
@@ -105,12 +105,15 @@ def run(args):
         # a tile of a few voxels spends its time on its margins (0.0001 m once ran 41,000 one-voxel tiles)
         _in_range(args.tile, "--tile", 10 * args.spacing, 1e5, f"a tile side in metres, at least 10 voxels of "
                                                                 f"--spacing {args.spacing:g}")
+    if args.refine_level is not None and not args.coarse_to_fine:
+        raise GPR3DError("--refine-level sets how coarse-to-fine imaging refines: give --coarse-to-fine with it")
     engine = _migration_engine(args.engine, args.device)
     settings = dict(spacing_m=args.spacing, max_depth_m=args.max_depth,
                     aperture_deg=None if args.aperture == 0 else args.aperture, threshold=args.threshold,
                     min_line_m=args.min_line, engine=engine, time_zero="none" if args.no_time_zero else "peak",
                     min_target_depth_m=args.min_depth, method=args.method, air_gap_m=args.air_gap,
-                    coarse_to_fine=args.coarse_to_fine, refine_level=args.refine_level)
+                    coarse_to_fine=args.coarse_to_fine,
+                    refine_level=ReconstructConfig.refine_level if args.refine_level is None else args.refine_level)
     check_config(ReconstructConfig(**settings, **site), names=_RECONSTRUCT_FLAGS)  # one line, before any work
     eps_given = _eps_argument(args.eps_r)
     estimate = eps_given is None
