@@ -14,7 +14,7 @@ peak.
 
 Development used seeds 100-105; the table reports ``--seeds`` (default 0-11), which nothing was tuned on.
 
-    python benchmarks/eval_coarse_to_fine.py [--seeds 0-11] [--levels 0.5,0.75] [--threads 2]
+    python benchmarks/eval_coarse_to_fine.py [--seeds 0-11] [--levels 0.25,0.5] [--threads 2]
 """
 
 from __future__ import annotations
@@ -96,7 +96,7 @@ def compare(name, s, pipes, spacing, levels, log):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", default="0-11")
-    ap.add_argument("--levels", default="0.5,0.75")
+    ap.add_argument("--levels", default="0.25,0.5")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--no-stages-survey", action="store_true")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
