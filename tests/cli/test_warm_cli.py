@@ -23,20 +23,30 @@ def cache(tmp_path, monkeypatch):
 
 def test_only_migrating_commands_start_it_and_only_when_needed(cache, monkeypatch):
     started = []
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])  # stands for the warm-up
 
     class FakePopen:
+        pid = child.pid
+
         def __init__(self, cmd, **kw):
             started.append((cmd, kw))
 
     monkeypatch.setattr(_warm.subprocess, "Popen", FakePopen)
     for cmd in ("info", "detect", "train", "show"):
         assert _warm.start_background(cmd) is None
-    assert started == []
-    assert isinstance(_warm.start_background("reconstruct"), FakePopen)
+    assert started == [] and warmup.running() is None
+    try:
+        assert isinstance(_warm.start_background("reconstruct"), FakePopen)
+        # the lock is the child's from the start: a kernel reached before the child is up waits for it
+        assert warmup.running() == child.pid
+    finally:
+        child.kill()
+        child.wait()
     cmd, kw = started[0]
     assert cmd == [sys.executable, "-m", "gpr3d.cli._warm"]
     assert kw["start_new_session"] and kw["stdout"] == kw["stderr"] == kw["stdin"] == subprocess.DEVNULL
     assert _warm.COMMANDS == ("demo", "reconstruct", "run")
+    assert warmup.running() is None  # (the child gone: its lock cleared)
     for g in warmup.GROUPS:
         warmup.mark_done(g)
     assert _warm.start_background("demo") is None  # all compiled already
@@ -63,6 +73,12 @@ def test_the_warm_up_builds_each_group_not_done_in_order_and_lets_go_of_the_lock
     assert _warm.main() == 0
     assert built == [("nice", 10), "tiled", "third"]
     assert warmup.done() == {"tiled", "other", "third"} and warmup.running() is None
+    # the lock already taken for this process by the command that started it: it builds under that lock
+    warmup._paths()[0].unlink()
+    built.clear()
+    assert warmup.claim(os.getpid())
+    assert _warm.main() == 0
+    assert built == [("nice", 10), "tiled", "other", "third"] and warmup.running() is None
     # a warm-up already running: this one does nothing
     built.clear()
     warmup._paths()[0].unlink()

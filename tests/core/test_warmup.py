@@ -117,6 +117,15 @@ def test_one_lock_at_a_time_and_a_dead_holder_s_lock_is_cleared(cache):
     assert warmup.running() is None and warmup.claim()
     warmup.release()
     warmup.release()  # twice: nothing to remove, no error
+    # taken for another (live) process: it holds the lock, this one does not
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        assert warmup.claim(other.pid) and warmup.running() == other.pid
+        assert not warmup.claim() and not warmup.claim(os.getpid())
+    finally:
+        other.kill()
+        other.wait()
+    assert warmup.running() is None
 
 
 def test_asking_whether_the_holder_lives_does_not_signal_it(cache):

@@ -21,9 +21,13 @@ def start_background(command: str):
         return None
     if set(warmup.GROUPS) <= warmup.done() or warmup.running() is not None:
         return None
-    return subprocess.Popen([sys.executable, "-m", "gpr3d.cli._warm"], stdin=subprocess.DEVNULL,
+    proc = subprocess.Popen([sys.executable, "-m", "gpr3d.cli._warm"], stdin=subprocess.DEVNULL,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
                             close_fds=True)
+    # the lock taken for the child now, not when it is up (its start-up, a second or more on a busy machine, could
+    # let the command reach the kernels first and compile them beside it); the child may have taken it already
+    warmup.claim(proc.pid)
+    return proc
 
 
 def build(group: str) -> None:
@@ -39,7 +43,9 @@ def main() -> int:
     """Compile every group not yet done, lowest priority, under the lock (another warm-up running: nothing)."""
     from gpr3d.core import warmup
 
-    if not warmup.enabled() or not warmup.claim():
+    if not warmup.enabled():
+        return 0
+    if warmup.running() != os.getpid() and not warmup.claim():  # (the starting command took it for us, or not)
         return 0
     try:
         try:

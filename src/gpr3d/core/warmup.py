@@ -125,15 +125,17 @@ def running() -> int | None:
     return None
 
 
-def claim() -> bool:
+def claim(pid: int | None = None) -> bool:
     """Take the lock for a new warm-up (True), unless one runs or the record's folder cannot be written (False).
-    The lock holds this process's id until :func:`release`."""
+    The lock holds ``pid`` (default: this process's id) until :func:`release`: the command that starts the
+    warm-up takes it for the child at once, so a kernel reached before the child is up already finds it running."""
     _, lock = _paths()
     running()  # a dead warm-up's lock is cleared first
+    holder = os.getpid() if pid is None else pid
     tmp = lock.with_name(f"{lock.name}.{os.getpid()}")
     try:
         lock.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_text(str(os.getpid()))
+        tmp.write_text(str(holder))
         os.link(tmp, lock)  # appears whole, with the id in it, or not at all (another holds it)
     except OSError:
         return False
