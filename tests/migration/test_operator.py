@@ -373,3 +373,42 @@ def test_on_grid_keeps_everything_but_the_columns_and_refuses_another_depth_axis
         with pytest.raises(InvalidDataError, match=r"^on_grid keeps the depth axis: the grid must have the same d0, "
                                                    r"dd and nd$"):
             op.on_grid(bad)
+
+
+def test_the_tiled_adjoint_lets_other_threads_run_while_it_sums():
+    """Live mode reads its source in a thread beside the migration: the tiled kernel runs without Python's lock
+    (``nogil``). A thread that notes the time every half millisecond, while the main thread migrates for a few tenths
+    of a second: held, it would note next to nothing between the kernel's start and end (Python hands its lock over every
+    5 ms, but compiled code never offers it)."""
+    import threading
+    import time
+
+    rng = np.random.default_rng(3)
+    tx, rx = scattered_antennas(rng, 4000, 0.0, 2.0, 0.05)
+    d = rng.standard_normal((4000, 400)).astype(np.float32)
+    grid = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 100, 100, 80)
+    op = BackProjection(grid, tx, rx, dt_s=0.1e-9, n_samples=400, eps_r=6.0, aperture_deg=45)
+    assert op.tiled
+    BackProjection(grid, tx[:10], rx[:10], dt_s=0.1e-9, n_samples=400, eps_r=6.0, aperture_deg=45).adjoint(d[:10])
+    # (compiled or loaded before the clock starts)
+    marks, stop = [], threading.Event()
+
+    def note():
+        while not stop.is_set():
+            marks.append(time.perf_counter())
+            time.sleep(0.0005)
+
+    th = threading.Thread(target=note)
+    th.start()
+    calls = []
+    try:
+        time.sleep(0.02)
+        while sum(b - a for a, b in calls) < 0.3 and len(calls) < 50:  # (a few tenths of a second on any CPU)
+            t0 = time.perf_counter()
+            op.adjoint(d)
+            calls.append((t0, time.perf_counter()))
+    finally:
+        stop.set()
+        th.join()
+    inside = [m for m in marks if any(a + 0.01 < m < b - 0.01 for a, b in calls)]
+    assert len(inside) > 50, (calls, len(inside))

@@ -15,7 +15,7 @@ from gpr3d.io.dzt import read_dzt
 from gpr3d.io.stream import StreamHeader
 from gpr3d.io.volume import read_volume
 from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct
-from gpr3d.pipeline.live import LiveConfig, LiveReconstruction, open_source, run_live
+from gpr3d.pipeline.live import LiveConfig, LiveReconstruction, SourceReader, open_source, run_live
 from gpr3d.pipeline.replay import pace, replay_to_dzt, replay_to_tcp
 from gpr3d.simulation.forward import ForwardScene, Pipe, forward_model
 from tests.io.makers import write_dzt
@@ -46,7 +46,8 @@ def survey():
 def _cfg(**kw):
     rc = ReconstructConfig(spacing_m=0.03, aperture_deg=45.0)
     return LiveConfig(reconstruct=rc, background_window=kw.pop("background_window", 32), detect=False,
-                      until_idle_s=kw.pop("until_idle_s", 3.0), refresh_s=0.2, time_zero_traces=40, **kw)
+                      until_idle_s=kw.pop("until_idle_s", 3.0), refresh_s=kw.pop("refresh_s", 0.2),
+                      time_zero_traces=40, **kw)
 
 
 def _batch_equals_live(survey, out):
@@ -98,7 +99,7 @@ def test_tiles_written_out_and_read_back_keep_the_volume(survey, tmp_path):
     """Small tiles and a short window: the far end of each line leaves the cart's reach, goes to disk and is
     read back when the next line passes it."""
     header = StreamHeader(n_samples=survey.n_samples, dt_s=DT, frequency_hz=800e6, offset_m=0.05, eps_r=EPS)
-    live = LiveReconstruction(header, _cfg(tile_voxels=4, background_window=8), tmp_path)
+    live = LiveReconstruction(header, _cfg(tile_voxels=4, background_window=8, min_batch=1), tmp_path)
     poses = np.c_[survey.positions_xyz, survey.orientations_quat_wxyz]
     reloaded = 0
     for a in range(0, survey.n_traces, 25):
@@ -114,6 +115,29 @@ def test_tiles_written_out_and_read_back_keep_the_volume(survey, tmp_path):
                for t in lines), live.targets
     live.finish()
     _batch_equals_live(survey, tmp_path)
+
+
+def test_traces_wait_for_a_batch_but_not_for_a_due_refresh(survey, tmp_path):
+    """Migration in batches of ``min_batch`` traces or more (each batch costs a grid over its reach), at most
+    ``max_batch`` at a time; a due refresh first migrates whatever waits, and a backlog is shown part by part."""
+    header = StreamHeader(n_samples=survey.n_samples, dt_s=DT, frequency_hz=800e6, offset_m=0.05, eps_r=EPS)
+    live = LiveReconstruction(header, _cfg(min_batch=50, max_batch=20, refresh_s=3600.0), tmp_path)
+    poses = np.c_[survey.positions_xyz, survey.orientations_quat_wxyz]
+
+    def feed(a, b):
+        live.add(survey.data[a:b], poses[a:b])
+        return live.step()
+
+    # the first refresh is due at once: 20 traces migrated, shown, then the other 25 of the backlog (the next
+    # refresh an hour away)
+    assert feed(0, 45) == 45 and live.n_final == 45 and live.n_refreshed == 20 and len(live.latencies) == 1
+    assert feed(45, 75) == 0 and live.n_final == 45  # 30 waiting: fewer than a batch
+    assert feed(75, 95) == 50 and live.n_final == 95 and live.n_refreshed == 20  # 50: a batch, no refresh yet
+    live.last_refresh -= 3600.0  # the refresh due: the 3 waiting traces migrated first, then all 98 shown
+    assert feed(95, 98) == 3 and live.n_final == live.n_refreshed == 98 and len(live.latencies) == 2
+    assert live.step(ended=True) == 0
+    live.finish()
+    _batch_equals_live(survey[:98], tmp_path)
 
 
 def _dzt_of(survey, path):
@@ -246,14 +270,18 @@ def test_detection_runs_on_every_window_once_as_it_fills(tmp_path):
     poses = np.c_[np.linspace(0, 0.6, 30), np.zeros((30, 2)), np.tile([1, 0, 0, 0], (30, 1))]
     for a, b in ((0, 5), (5, 13), (13, 14), (14, 27)):
         live.add(data[a:b], poses[a:b])
-        live._detect(False)
+        live._detect(False, 0)
     # windows of 8 traces every 4, each on its own: [0, 8) and [4, 12) once 13 traces are there, then [8, 16),
     # [12, 20), [16, 24) once 27 are
     assert det.spans == [(0, 8), (4, 8), (8, 8), (12, 8), (16, 8)]
     live.add(data[27:], poses[27:])
-    live._detect(True)  # the end: the full window [20, 28), then one over the last traces, [22, 30)
+    # the window [20, 28) is full, but a refresh is due for traces ready and not yet shown: the detector waits
+    # (the targets first)
+    assert live.last_refresh is None and live._detect(False, 1) == 0 and len(det.spans) == 5
+    assert live._detect(False, 0) == 1 and det.spans[5:] == [(20, 8)]
+    assert live._detect(True, 30) == 1  # the end: one window over the last traces, [22, 30)
     assert det.spans[5:] == [(20, 8), (22, 8)]
-    live._detect(True)  # nothing left
+    assert live._detect(True, 30) == 0  # nothing left
     assert len(det.spans) == 7
     # boxes in the stream's traces
     assert sorted((t["box"][0], t["apex_trace"]) for t in live.detections) == [
@@ -295,7 +323,7 @@ def test_the_idle_clock_and_the_rate_start_at_the_first_trace(survey, tmp_path):
     trace to the end less the idle wait (12 - 6 - 2.5 = 3.5 s), the lag from the newest trace (12 - 8 - 2.5 s)."""
     ticks = iter(range(1000))
     summary = run_live(_Scripted(survey, 5, 3), tmp_path, _cfg(until_idle_s=2.5, start_timeout_s=5.5),
-                       log=None, poll_s=0.0, clock=lambda: float(next(ticks)))
+                       log=None, poll_s=0.0, clock=lambda: float(next(ticks)), reader_thread=False)
     assert summary.n_traces == survey.n_traces
     assert summary.wall_s == 3.5 and summary.traces_per_s == survey.n_traces / 3.5
     assert summary.lag_s == 1.5
@@ -303,7 +331,7 @@ def test_the_idle_clock_and_the_rate_start_at_the_first_trace(survey, tmp_path):
     ticks = iter(range(1000))
     with pytest.raises(GPR3DError, match="no traces arrived in 4.5 s"):
         run_live(_Scripted(survey, 5, 3), tmp_path / "b", _cfg(until_idle_s=2.5, start_timeout_s=4.5), log=None,
-                 poll_s=0.0, clock=lambda: float(next(ticks)))
+                 poll_s=0.0, clock=lambda: float(next(ticks)), reader_thread=False)
 
 
 def test_a_dzt_whose_poses_never_come_is_named(survey, tmp_path):
@@ -362,3 +390,101 @@ def test_a_replay_that_cannot_listen_says_where(survey):
             replay_to_tcp(survey, port, rate=100.0)
     finally:
         taken.close()
+
+
+class _Timed:
+    """Batches of 3 traces at 0, 0.15 and 0.3 s after the first poll, then the end (or a broken stream)."""
+
+    def __init__(self, fail=False):
+        self.header, self.ended, self.fail, self.t0, self.given, self.closed = None, False, fail, None, 0, False
+
+    def poll(self):
+        import time
+
+        now = time.monotonic()
+        self.t0 = self.t0 or now
+        if self.given < 3 and now - self.t0 >= 0.15 * self.given:
+            self.given += 1
+            if self.fail and self.given == 3:
+                raise GPR3DError("tcp://x:1: the stream broke")
+            return np.full((3, 4), float(self.given), np.float32), np.zeros((3, 7)), np.zeros(3)
+        self.ended = self.given == 3
+        return None
+
+    def close(self):
+        self.closed = True
+
+
+def test_the_reader_stamps_traces_when_they_come_not_when_they_are_taken():
+    import time
+
+    src = _Timed()
+    reader = SourceReader(src, poll_s=0.002)
+    time.sleep(0.6)  # the main loop busy migrating: the batches wait in the queue
+    taken = time.monotonic()
+    got = reader.take()
+    assert [float(g[0][0][0, 0]) for g in got] == [1.0, 2.0, 3.0]
+    at = np.array([a for _, a in got]) - src.t0
+    np.testing.assert_allclose(at, [0.0, 0.15, 0.3], atol=0.05)  # when each came, not 0.6 s
+    assert taken - src.t0 > 0.55
+    assert reader.ended and reader.take() == []
+    reader.close()
+    assert src.closed
+
+
+def test_the_reader_hands_over_what_came_before_the_source_broke_then_its_error():
+    import time
+
+    reader = SourceReader(_Timed(fail=True), poll_s=0.002)
+    time.sleep(0.5)
+    assert [float(g[0][0][0, 0]) for g in reader.take()] == [1.0, 2.0]
+    assert not reader.ended
+    with pytest.raises(GPR3DError, match="the stream broke"):
+        reader.take()
+    reader.close()
+
+
+def test_a_refresh_is_due_a_period_after_the_last_one_started_longer_when_refreshes_cost_more(tmp_path):
+    """The period: ``refresh_s`` from the start of the last refresh, or three times the median cost of the last
+    five refreshes where that is longer (one slow refresh does not hold the next one back)."""
+    import time
+
+    live = LiveReconstruction(StreamHeader(n_samples=16, dt_s=1e-10, eps_r=4.0), _cfg(refresh_s=0.2), tmp_path)
+    assert live._refresh_due()  # none yet
+    live.last_refresh = time.monotonic() - 0.25
+    assert live._refresh_due()
+    live.refresh_costs = [0.1, 0.1, 5.0, 0.1, 0.1]  # median 0.1: a period of 0.3 s
+    assert not live._refresh_due()
+    live.last_refresh -= 0.1
+    assert live._refresh_due()
+    live.refresh_costs = [0.2, 0.2, 0.01]  # median 0.2: 0.6 s
+    assert not live._refresh_due()
+    # refresh() records its cost (the last five) and its start
+    live.refresh_costs = [9.0] * 5
+    t = time.monotonic()
+    live.refresh()
+    assert len(live.refresh_costs) == 5 and live.refresh_costs[:4] == [9.0] * 4 and live.refresh_costs[4] < 1.0
+    assert t <= live.last_refresh <= t + live.refresh_costs[4]
+
+
+def test_live_mode_asks_glibc_to_keep_the_memory_it_frees(monkeypatch):
+    import ctypes
+
+    from gpr3d.pipeline import live as live_mod
+
+    calls = []
+
+    class _Libc:
+        def mallopt(self, param, value):
+            calls.append((param, value))
+            return 1
+
+    monkeypatch.setattr(ctypes, "CDLL", lambda name: _Libc())
+    assert live_mod._keep_freed_memory()
+    assert calls == [(-3, 32 << 20), (-1, (1 << 31) - 1)]  # M_MMAP_THRESHOLD 32 MB, M_TRIM_THRESHOLD: never
+
+    def missing(name):
+        raise OSError("no libc")
+
+    monkeypatch.setattr(ctypes, "CDLL", missing)
+    assert not live_mod._keep_freed_memory()
