@@ -1,21 +1,24 @@
 """Live mode: traces migrated as they arrive, targets refreshed while the survey runs (``gpr3d live``).
 
 A source gives traces with their poses as a radar writes them (:class:`TCPSource`: the trace stream of
-:mod:`gpr3d.io.stream`; :class:`FileSource`: a DZT recording and a TUM trajectory that grow).
-:class:`LiveReconstruction` takes them in batches:
+:mod:`gpr3d.io.stream`; :class:`FileSource`: a DZT recording and a TUM trajectory that grow), read by a thread
+of its own (:class:`SourceReader`) that stamps each trace with the time it came. :class:`LiveReconstruction`
+takes them in batches:
 
 1. **time zero** is fixed once, from the first ``time_zero_traces`` traces (the direct-wave peak of their mean
    trace, as ``reconstruct`` estimates it), and every trace is cut there;
 2. **background**: the mean over a moving window of ``background_window`` traces is taken off: by default the
    window ends at the trace (``background_trailing``: no delay); centred, a trace is final once half a window has
    followed it;
-3. **migration**: each final trace is added once into the voxels its aperture reaches, on a lattice of tiles
+3. **migration**: each final trace is added once into the voxels its aperture reaches (in batches of at least
+   ``min_batch`` traces, or whatever waits when a refresh is due), on a lattice of tiles
    (``tile_voxels`` a side, voxel centres on whole multiples of the spacing); the image and the fold are summed
    per tile; tiles no recent trace can reach are written to ``OUT/tiles/`` and dropped from memory (read back if
    the cart returns), so memory follows the cart, not the survey;
 4. **detection** runs on each window of raw traces as it fills (the shipped detector, ``--no-detect`` off);
-5. every ``refresh_s`` the targets of the tiles in memory are extracted and ``OUT/live.json`` (traces, rate, lag,
-   targets, detections) is rewritten atomically.
+5. every ``refresh_s`` (from the start of the last refresh) the targets of the tiles in memory are extracted and
+   ``OUT/live.json`` (traces, rate, lag, targets, detections) is rewritten atomically; a due refresh comes before
+   the next detector window.
 
 At the end (the stream's end mark, ``until_idle_s`` without a new trace, or Ctrl-C) the volume over every antenna
 position is put together from the tiles and finished exactly as ``gpr3d reconstruct`` finishes its own (fold
@@ -85,7 +88,7 @@ class LiveSummary:
     wall_s: float
     traces_per_s: float
     lag_s: float  #: at the end: how long after the newest trace arrived the last was migrated
-    latency_s: dict  #: trace arrival -> refreshed targets: median and max over the refreshes
+    latency_s: dict  #: trace arrival -> refreshed targets: median, 99th percentile and max over the refreshes
     peak_tiles: int  #: the most tiles held in memory at once
     n_targets: int
     n_detections: int
@@ -415,6 +418,8 @@ class LiveReconstruction:
         self._det_window: list = []  # the window each kept detection came from (its first trace)
         self.targets: list = []
         self.latencies: list = []
+        #: called before a refresh to add the traces that came meanwhile (run_live: what the reader has queued)
+        self.intake = None
         self.last_refresh = None  # when the last refresh started
         self.refresh_costs: list = []  # how long the last few refreshes took (s)
         self.n_refreshed = 0  # traces migrated at the last refresh
@@ -503,28 +508,37 @@ class LiveReconstruction:
 
         return shift_traces(data, self.t0_s / self.h.dt_s)
 
+    def _readiness(self, ended: bool):
+        """``(n_cut, ready, short)``: the traces cut so far, those whose background is final, and whether a centred
+        window spans the whole survey so far."""
+        n_cut = self.cut_first + len(self.cut)
+        ready = n_cut if ended else n_cut - self.h2
+        short = not self.cfg.background_trailing and n_cut < self.cfg.background_window
+        if short and not ended:
+            ready = 0  # wait: the survey may yet end shorter than the window
+        return n_cut, ready, short
+
     def step(self, *, ended: bool = False) -> int:
         """Migrate the traces whose background is final (once ``min_batch`` of them wait, or a refresh is due),
-        refresh the targets when due, run the detector on the full windows. Returns how many traces were
-        migrated."""
+        refresh the targets when due (taking in first what :attr:`intake` has waiting), run the detector on the
+        full windows. Returns how many traces were migrated and windows detected."""
         if self.t0_s is None:
             if not ended or not self.raw_pending:
                 return 0
             self._fix_time_zero()
-        n_cut = self.cut_first + len(self.cut)
-        ready = n_cut if ended else n_cut - self.h2
         w = self.cfg.background_window
-        short = not self.cfg.background_trailing and n_cut < w  # (a centred window as long as the survey: its mean)
-        if short and not ended:
-            ready = 0  # wait: the survey may yet end shorter than the window
+        n_cut, ready, short = self._readiness(ended)
         work = 0
         if ended or ready - self.n_final >= self.cfg.min_batch or self._refresh_due():
             while self.n_final < ready:
                 work += self._migrate_to(min(ready, self.n_final + self.cfg.max_batch), n_cut, w, short)
                 if not ended and self.n_final < ready and self._refresh_due():
                     self.refresh()  # a backlog: the targets of what is migrated so far, then on with the rest
-        # the targets before the detector: what a user waits for on screen comes first; the refresh's clock is
-        # read after this step's migration, and it takes in every trace ready by then
+        # the targets before the detector: what a user waits for on screen comes first. The refresh takes in the
+        # traces that came while this step worked, and shows every trace ready by then
+        if not ended and self._refresh_due() and self.intake is not None:
+            self.intake()
+            n_cut, ready, short = self._readiness(ended)
         if ready > self.n_refreshed and (ended or self._refresh_due()):
             work += self._migrate_to(ready, n_cut, w, short)
             self.refresh()
@@ -896,6 +910,15 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     newest_arrival = None
     idle = interrupted = False
     reader = SourceReader(source, clock=clock) if reader_thread else None
+
+    def add(batches):
+        nonlocal t_first, last_new, newest_arrival
+        for got, at in batches:
+            if len(got[0]):
+                live.add(got[0], got[1], now=at)
+                t_first = at if t_first is None else t_first
+                last_new = newest_arrival = at
+
     try:
         while True:
             if reader is not None:
@@ -908,11 +931,9 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
                 ended = source.ended
             if batches and live is None and source.header is not None:
                 live = LiveReconstruction(source.header, cfg, out, detector=detector, log=log)
-            for got, at in batches:
-                if len(got[0]):
-                    live.add(got[0], got[1], now=at)
-                    t_first = at if t_first is None else t_first
-                    last_new = newest_arrival = at
+                if reader is not None:
+                    live.intake = lambda: add(reader.take())  # (a due refresh takes in what came meanwhile)
+            add(batches)
             worked = live.step() if live is not None else 0
             if ended:
                 break
@@ -954,7 +975,8 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     result = live.finish(source=str(getattr(source.header, "name", "")))
     lat = np.asarray(live.latencies) if live.latencies else np.zeros(1)
     summary = LiveSummary(n_traces=live.n_final, wall_s=busy, traces_per_s=live.n_final / busy,
-                          lag_s=lag, latency_s={"median": float(np.median(lat)), "max": float(lat.max())},
+                          lag_s=lag, latency_s={"median": float(np.median(lat)),
+                                                "p99": float(np.percentile(lat, 99)), "max": float(lat.max())},
                           peak_tiles=live.peak_tiles, n_targets=len(live.targets),
                           n_detections=len(live.detections), final_volume=result is not None)
     st = live.status()
