@@ -67,22 +67,25 @@ def live_run(work: Path, rate: float, env: dict, name: str, *, loops: int = 1, e
     out = work / name
     server = subprocess.Popen([sys.executable, "-m", "gpr3d", "replay", work / "survey.h5", "--poses",
                                work / "path.tum", "--to", f"tcp://127.0.0.1:{port}", "--rate", str(rate),
-                               "--loops", str(loops), "--loop-shift", "5"], env=env, stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True)
+                               "--loops", str(loops), "--loop-shift", "5"], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     t = time.perf_counter()
+    # (its progress lines to a file: a pipe nobody reads while it runs would fill and stall it)
+    log = open(work / f"{name}.log", "w")  # noqa: SIM115 - closed below
     live = subprocess.Popen([sys.executable, "-m", "gpr3d", "live", f"tcp://127.0.0.1:{port}", "--out", out,
-                             "--until-idle", "3", *extra], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+                             "--until-idle", "3", *extra], env=env, stdout=log, stderr=subprocess.STDOUT, text=True)
     samples = []
     while live.poll() is None:
         m = rss_mib(live.pid)
         if m is not None:
             samples.append((time.perf_counter() - t, m))
         time.sleep(1.0)
-    stdout, stderr = live.communicate()
-    server.communicate(timeout=60)
+    live.wait()
+    log.close()
+    stdout = (work / f"{name}.log").read_text()
+    server.wait(timeout=60)
     if live.returncode != 0:
-        raise SystemExit(f"gpr3d live failed: {stderr.strip()[-2000:]}")
+        raise SystemExit(f"gpr3d live failed: {stdout.strip()[-2000:]}")
     summary = json.loads((out / "live.json").read_text())["summary"]
     summary["rss_mib"] = samples
     summary["last_line"] = stdout.strip().splitlines()[-1]

@@ -497,3 +497,36 @@ def test_live_mode_asks_glibc_to_keep_the_memory_it_frees(monkeypatch):
 
     monkeypatch.setattr(ctypes, "CDLL", missing)
     assert not live_mod._keep_freed_memory()
+
+
+def test_a_refresh_looks_where_traces_came_and_keeps_the_targets_elsewhere(survey, tmp_path):
+    """The regions: the tiles traces reached since the last refresh and their neighbours in memory, in groups
+    that touch (corners too); a target found before outside them stays, one reaching into them (a line, also
+    between its ends) is replaced by what the region shows now."""
+    from gpr3d.migration.targets import Target3D
+
+    header = StreamHeader(n_samples=survey.n_samples, dt_s=DT, frequency_hz=800e6, offset_m=0.05, eps_r=EPS)
+    live = LiveReconstruction(header, _cfg(min_batch=1, refresh_s=3600.0), tmp_path)
+    blank = [np.zeros(1), np.zeros(1)]
+    live.tiles = {k: blank for k in [(0, 0), (1, 1), (3, 0), (5, 5), (5, 6), (9, 9)]}
+    live.dirty = {(0, 0), (4, 0), (5, 5)}
+    got = sorted((tuple(a), tuple(b)) for a, b in live._refresh_regions())
+    # (0, 0) with (1, 1) at its corner; (3, 0) beside (4, 0), which is not in memory; (5, 5) with (5, 6); not (9, 9)
+    assert got == [((0, 0), (1, 1)), ((3, 0), (3, 0)), ((5, 5), (5, 6))]
+    live.dirty = set()
+    assert live._refresh_regions() == []
+    # the survey: a pipe along y at x = 0.6, 0.22 m deep
+    live.tiles = {}
+    poses = np.c_[survey.positions_xyz, survey.orientations_quat_wxyz]
+    live.add(survey.data, poses)
+    live.step(ended=True)
+    assert live.dirty == set() and live.n_refreshed == survey.n_traces
+    pipe = [t for t in live.targets if t.kind == "line" and abs(t.points_xyz[0][0] - 0.6) < 0.05]
+    assert len(pipe) == 1
+    far = Target3D("point", [[40.0, 40.0, 0.3]], 0.3, 1.0)  # in no region
+    across = Target3D("line", [[-5.0, 0.5, 0.5], [5.0, 0.5, 0.5]], 0.5, 1.0)  # its ends outside, its middle in
+    live.targets = [far, across]
+    live.dirty = set(live.tiles)
+    live.refresh()
+    assert far in live.targets and across not in live.targets
+    assert [t for t in live.targets if t.kind == "line" and abs(t.points_xyz[0][0] - 0.6) < 0.05]

@@ -406,6 +406,7 @@ class LiveReconstruction:
         self._poses = _Rows(7)  # every trace's pose (x y z qw qx qy qz): the final grid covers them all
         self._arrival = _Rows(1)  # the monotonic time each trace arrived
         self.tiles: dict = {}  # (a, b) -> [image, fold]
+        self.dirty: set = set()  # the tiles traces were added to since the last refresh
         self.on_disk: set = set()
         self.peak_tiles = 0
         self.fold_max = 0.0
@@ -606,6 +607,7 @@ class LiveReconstruction:
                 if not f.any():
                     continue
                 key = (int(lo[0] + i), int(lo[1] + j))
+                self.dirty.add(key)
                 tile = self._tile(key)
                 tile[0] += img[sl]
                 tile[1] += f
@@ -738,29 +740,52 @@ class LiveReconstruction:
         return Grid3D.covering(self.poses[: self.n_final, :3], depth_m=self.depth_m, spacing_m=self.rc.spacing_m,
                                depth_spacing_m=self.rc.depth_spacing_m, pad_m=self.rc.pad_m, lattice=True)
 
+    def _refresh_regions(self) -> list:
+        """The parts of the lattice a refresh looks at: the tiles traces were added to since the last refresh, with
+        the tiles in memory next to them, in groups that touch (a cart that jumped, or crossed back, gives two);
+        each a ``(key_lo, key_hi)`` box of tile keys, inclusive."""
+        from scipy.ndimage import find_objects, label
+
+        near = {(a + da, b + db) for a, b in self.dirty for da in (-1, 0, 1) for db in (-1, 0, 1)}
+        keys = np.array(sorted(near & set(self.tiles)), dtype=int).reshape(-1, 2)
+        if not len(keys):
+            return []
+        k0 = keys.min(axis=0)
+        occupied = np.zeros(tuple(keys.max(axis=0) - k0 + 1), bool)
+        occupied[tuple((keys - k0).T)] = True
+        groups, _ = label(occupied, structure=np.ones((3, 3), bool))
+        return [(k0 + np.array([sl[0].start, sl[1].start]), k0 + np.array([sl[0].stop - 1, sl[1].stop - 1]))
+                for sl in find_objects(groups)]
+
     def refresh(self):
-        """Targets of the tiles in memory (over the antenna positions they hold), and ``live.json``."""
+        """The targets where traces were added since the last refresh (:meth:`_refresh_regions`), on the tiles in
+        memory there; the targets elsewhere are kept from earlier refreshes (a target reaching into a refreshed
+        region is replaced by what the region shows now); and ``live.json``."""
         from gpr3d.migration.masking import image_envelope
         from gpr3d.migration.reconstruct import normalise_by_fold, volume_targets
 
         t_start = time.monotonic()
-        if self.tiles:
-            side = self.cfg.tile_voxels * self.grid_base.dx
-            keys = np.array(list(self.tiles))
-            p = self.poses[: self.n_final, :2]
-            lo_t, hi_t = keys.min(axis=0) * side, (keys.max(axis=0) + 1) * side
-            inside = np.all((p >= lo_t) & (p < hi_t), axis=1)
-            pts = self.poses[: self.n_final, :3][inside]
-            if len(pts) >= 2:
-                grid = Grid3D.covering(pts, depth_m=self.depth_m, spacing_m=self.rc.spacing_m,
-                                       depth_spacing_m=self.rc.depth_spacing_m, pad_m=self.rc.pad_m, lattice=True)
-                img, fold = self._assemble(grid, self.tiles)
-                img, _ = normalise_by_fold(img, fold, self.rc.normalize, fold_max=self.fold_max)
-                env = image_envelope(img, chunk_voxels=1_000_000)  # (slabs of 8 MB: reused, see keep_memory)
-                # the final extraction's settings but a coarser Hough angle step: a third of the time, measured
-                # (benchmarks/bench_live.py), the same targets on the benchmark's survey
-                self.targets = volume_targets(env, grid, self.rc, self.v, self.h.frequency_hz,
-                                              angle_step_deg=self.cfg.preview_angle_step_deg)
+        T, g = self.cfg.tile_voxels, self.grid_base
+        for k_lo, k_hi in self._refresh_regions():
+            n = k_hi - k_lo + 1
+            grid = replace(g, x0=float(k_lo[0] * T) * g.dx, y0=float(k_lo[1] * T) * g.dy, nx=int(n[0] * T),
+                           ny=int(n[1] * T))
+            img, fold = self._assemble(grid, self.tiles)
+            img, _ = normalise_by_fold(img, fold, self.rc.normalize, fold_max=self.fold_max)
+            env = image_envelope(img, chunk_voxels=1_000_000)  # (slabs of 8 MB: reused, see keep_memory)
+            # the final extraction's settings but a coarser Hough angle step: a third of the time, measured
+            # (benchmarks/bench_live.py), the same targets on the benchmark's survey
+            found = volume_targets(env, grid, self.rc, self.v, self.h.frequency_hz,
+                                   angle_step_deg=self.cfg.preview_angle_step_deg)
+            lo_m, hi_m = k_lo * T * g.dx, (k_hi + 1) * T * g.dx
+
+            def reaches(t):  # (a line: along its length, not only at its ends)
+                ends = np.asarray(t.points_xyz, float).reshape(-1, 3)[:, :2]
+                xy = ends[:1] + np.linspace(0.0, 1.0, 65)[:, None] * (ends[-1:] - ends[:1])
+                return bool(np.any(np.all((xy >= lo_m) & (xy < hi_m), axis=1)))
+
+            self.targets = [t for t in self.targets if not reaches(t)] + found
+        self.dirty.clear()
         self._write_status()
         behind = float(self.arrival[self.n_in - 1] - self.arrival[self.n_final - 1]) if self.n_final else 0.0
         self.log(f"  {self.n_in:,} traces in, {self.n_final:,} migrated ({behind:.2f} s behind the newest), "
