@@ -766,10 +766,18 @@ class LiveReconstruction:
 
         t_start = time.monotonic()
         T, g = self.cfg.tile_voxels, self.grid_base
+        p = self.poses[: self.n_final, :2]
         for k_lo, k_hi in self._refresh_regions():
-            n = k_hi - k_lo + 1
-            grid = replace(g, x0=float(k_lo[0] * T) * g.dx, y0=float(k_lo[1] * T) * g.dy, nx=int(n[0] * T),
-                           ny=int(n[1] * T))
+            # the region's tiles, cut down to the antenna positions inside them and the pad (as reconstruct's grid
+            # covers the positions): the tiles reach an aperture further, where little is seen
+            lo_m, hi_m = k_lo * T * g.dx, (k_hi + 1) * T * g.dx
+            pts = p[np.all((p >= lo_m) & (p < hi_m), axis=1)]
+            if len(pts) < 2:
+                continue
+            i0 = np.maximum(np.floor((pts.min(axis=0) - self.rc.pad_m) / g.dx).astype(int), k_lo * T)
+            i1 = np.minimum(np.ceil((pts.max(axis=0) + self.rc.pad_m) / g.dx).astype(int) + 1, (k_hi + 1) * T)
+            grid = replace(g, x0=float(i0[0]) * g.dx, y0=float(i0[1]) * g.dy, nx=int(i1[0] - i0[0]),
+                           ny=int(i1[1] - i0[1]))
             img, fold = self._assemble(grid, self.tiles)
             img, _ = normalise_by_fold(img, fold, self.rc.normalize, fold_max=self.fold_max)
             env = image_envelope(img, chunk_voxels=1_000_000)  # (slabs of 8 MB: reused, see keep_memory)
@@ -777,7 +785,7 @@ class LiveReconstruction:
             # (benchmarks/bench_live.py), the same targets on the benchmark's survey
             found = volume_targets(env, grid, self.rc, self.v, self.h.frequency_hz,
                                    angle_step_deg=self.cfg.preview_angle_step_deg)
-            lo_m, hi_m = k_lo * T * g.dx, (k_hi + 1) * T * g.dx
+            lo_m, hi_m = i0 * g.dx, i1 * g.dx
 
             def reaches(t):  # (a line: along its length, not only at its ends)
                 ends = np.asarray(t.points_xyz, float).reshape(-1, 3)[:, :2]
