@@ -63,6 +63,11 @@ def test_replay_into_live_prints_traces_rate_and_lag(survey, tmp_path):  # noqa:
     (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--refresh", "0"], "--refresh must be seconds"),
     (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--spacing", "-1", "--no-detect"], "--spacing must be positive"),
     (["live", "tcp:/bad", "--out", "{tmp}/o", "--no-detect"], "live mode reads growing DZT files"),
+    (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--no-detect"], "a bag's traces carry no sample interval: give it"),
+    (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--dt", "0.1", "--no-detect"], "--dt are for a ROS bag"),
+    (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "-1", "--no-detect"], "--dt must be ns"),
+    (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "0.1", "--speed", "-2", "--no-detect"], "--speed must be"),
+    (["live", "{tmp}/missing.bag", "--out", "{tmp}/o", "--dt", "0.1", "--no-detect"], "no such bag"),
     (["replay", "{tmp}/x.h5", "--to", "tcp://127.0.0.1:1"], "give --rate"),
     (["replay", "{tmp}/x.h5", "--to", "out.dzt", "--rate", "5"], "replays a DZT recording into a .DZT file"),
     (["replay", "{tmp}/x.h5", "--to", "tcp://h:1", "--rate", "5", "--loops", "0"], "--loops must be at least 1"),
@@ -79,3 +84,18 @@ def test_wrong_arguments_get_one_line(tmp_path, capsys, args, message):
     code = main([a.replace("{tmp}", str(tmp_path)) for a in args])
     err = capsys.readouterr().err.strip().splitlines()
     assert code != 0 and len(err) == 1 and message in err[0], err
+
+
+def test_live_replays_a_ros_bag_given_its_sample_interval_and_topics(survey, tmp_path, capsys):  # noqa: F811
+    from gpr3d.cli.main import main
+    from tests.pipeline.test_live import DT, EPS, _bag_of
+
+    bag = _bag_of(survey, tmp_path / "run.bag", ros1=True)
+    code = main(["live", str(bag), "--dt", str(DT * 1e9), "--trace-topic", "/gpr/traces", "--pose-topic",
+                 "/odometry", "--speed", "0", "--eps-r", str(EPS), "--offset", "0.05", "--no-detect",
+                 "--background-window", "32", "--aperture", "45", "--out", str(tmp_path / "live")])
+    out = capsys.readouterr().out.strip().splitlines()
+    assert code == 0
+    assert re.fullmatch(rf"{survey.n_traces} traces, \d+ traces/s, lag \d+\.\d\d s", out[-1]), out[-1]
+    cfg = json.loads((tmp_path / "live" / "config.json").read_text())["config"]
+    assert cfg["eps_r"] == EPS and cfg["background_window"] == 32

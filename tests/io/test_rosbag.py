@@ -7,9 +7,9 @@ import pytest
 
 pytest.importorskip("rosbags")
 
-from gpr3d.core.errors import FormatError, InvalidDataError  # noqa: E402
-from gpr3d.io.rosbag import (bag_topics, iter_bag_rgbd, read_bag_camera_info, read_bag_imu,  # noqa: E402
-                             read_bag_trajectory, write_bag)
+from gpr3d.core.errors import FormatError, GPR3DError, InvalidDataError  # noqa: E402
+from gpr3d.io.rosbag import (TRACE_TYPE, bag_topics, iter_bag_rgbd, iter_bag_traces,  # noqa: E402
+                             read_bag_camera_info, read_bag_imu, read_bag_trajectory, write_bag)
 from gpr3d.pose.render import CameraIntrinsics, FloorScene, render_rgbd, rig_camera_poses  # noqa: E402
 from gpr3d.pose.rig import RigConfig, simulate_rig  # noqa: E402
 
@@ -113,3 +113,46 @@ def test_rgbd_bag_to_fused_antenna_poses(tmp_path, run, capsys):
     est = read_tum(tmp_path / "a.tum")
     assert ape(est, run.truth_trajectory())["rmse"] < 0.01 * run.path_length_m
     shutil.rmtree(tmp_path / "bag")
+
+
+@pytest.mark.parametrize("ros1", [False, True])
+def test_gpr_traces_round_trip_one_or_several_a_message(tmp_path, ros1):
+    rng = np.random.default_rng(5)
+    t = 100.0 + 0.01 * np.arange(6) + 1e-9 * rng.integers(0, 1000, 6)
+    data = rng.standard_normal((6, 8)).astype(np.float32)
+    path = tmp_path / ("g.bag" if ros1 else "g2")
+    write_bag(path, traces=(t, data), ros1=ros1)
+    assert [(tp, m) for tp, m, _ in bag_topics(path)] == [("/gpr/traces", TRACE_TYPE)]
+    got = list(iter_bag_traces(path))  # (the one topic whose type names a trace)
+    assert len(got) == 6
+    np.testing.assert_allclose([g[0] for g in got], t, atol=1e-9, rtol=0)
+    np.testing.assert_array_equal(np.concatenate([g[1] for g in got]), data)
+    # a message of two traces of 4 samples each, one after the other
+    two = list(iter_bag_traces(path, "/gpr/traces", samples_per_trace=4))
+    assert all(g[1].shape == (2, 4) for g in two)
+    np.testing.assert_array_equal(np.concatenate([g[1] for g in two]), data.reshape(12, 4))
+
+
+def test_gpr_trace_bags_that_cannot_be_read_give_one_line(tmp_path, run):
+    path = tmp_path / "u"
+    write_bag(path, traces=([0.0, 0.1], [np.zeros(4), np.zeros(5)]))  # a trace of 5 samples after one of 4
+    with pytest.raises(InvalidDataError, match="message 1 holds 5 samples where the traces have 4 "
+                                               r"\(several traces a message: give the samples per trace\)"):
+        list(iter_bag_traces(path))
+    with pytest.raises(InvalidDataError, match="message 0 holds 4 samples where the traces have 3$"):
+        list(iter_bag_traces(path, samples_per_trace=3))
+    with pytest.raises(GPR3DError, match="samples per trace must be a whole number of at least 2, got 1"):
+        list(iter_bag_traces(path, samples_per_trace=1))
+    nan = tmp_path / "n"
+    write_bag(nan, traces=([0.0, 0.1], [np.zeros(4), np.array([0, np.nan, 0, 0])]))
+    with pytest.raises(InvalidDataError, match="/gpr/traces: message 1 holds non-finite samples"):
+        list(iter_bag_traces(nan))
+    imu = tmp_path / "i"
+    write_bag(imu, imu=run.imu)
+    with pytest.raises(InvalidDataError, match="no GPR trace topic"):
+        list(iter_bag_traces(imu))
+    with pytest.raises(InvalidDataError, match=r"/imu: its messages \(sensor_msgs/msg/Imu\) hold no header and "
+                                               "numeric array named trace, samples, data"):
+        list(iter_bag_traces(imu, "/imu"))
+    with pytest.raises(InvalidDataError, match="no topic '/gpr'"):
+        list(iter_bag_traces(imu, "/gpr"))

@@ -15,7 +15,8 @@ from gpr3d.io.dzt import read_dzt
 from gpr3d.io.stream import StreamHeader
 from gpr3d.io.volume import read_volume
 from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct
-from gpr3d.pipeline.live import LiveConfig, LiveReconstruction, SourceReader, open_source, run_live
+from gpr3d.pipeline.live import (BagSource, LiveConfig, LiveReconstruction, SourceReader, open_source,
+                                 run_live)
 from gpr3d.pipeline.replay import pace, replay_to_dzt, replay_to_tcp
 from gpr3d.simulation.forward import ForwardScene, Pipe, forward_model
 from tests.io.makers import write_dzt
@@ -530,3 +531,65 @@ def test_a_refresh_looks_where_traces_came_and_keeps_the_targets_elsewhere(surve
     live.refresh()
     assert far in live.targets and across not in live.targets
     assert [t for t in live.targets if t.kind == "line" and abs(t.points_xyz[0][0] - 0.6) < 0.05]
+
+
+def _bag_of(survey, path, *, ros1=False, pose_span=None):
+    """``survey`` as a bag: ``/gpr/traces`` one trace a message, 10 ms apart from t = 50 s, and ``/odometry``
+    the poses at the same stamps (``pose_span``: only those of these traces)."""
+    pytest.importorskip("rosbags")
+    from gpr3d.core.trajectory import Trajectory
+    from gpr3d.io.rosbag import write_bag
+
+    t = 50.0 + 0.01 * np.arange(survey.n_traces)
+    keep = slice(None) if pose_span is None else slice(*pose_span)
+    traj = Trajectory(t[keep], survey.positions_xyz[keep], survey.orientations_quat_wxyz[keep])
+    write_bag(path, traces=(t, survey.data), trajectory=traj, ros1=ros1)
+    return path
+
+
+@pytest.mark.parametrize("ros1", [False, True])
+def test_a_ros_bag_replayed_equals_the_batch_volume(survey, tmp_path, ros1):
+    bag = _bag_of(survey, tmp_path / ("s.bag" if ros1 else "s2"), ros1=ros1)
+    source = open_source(bag, offset_m=0.05, frequency_hz=800e6, bag={"dt_s": DT, "speed": None, "eps_r": EPS})
+    assert isinstance(source, BagSource)
+    summary = run_live(source, tmp_path / "out", _cfg(), log=None)
+    assert summary.n_traces == survey.n_traces
+    _batch_equals_live(survey, tmp_path / "out")
+
+
+def test_a_bag_is_given_at_its_own_pace_and_traces_outside_the_poses_are_left_out(survey, tmp_path):
+    bag = _bag_of(survey, tmp_path / "p", pose_span=(10, 60))  # poses from trace 10's stamp to trace 59's
+    now = [0.0]
+    src = BagSource(bag, dt_s=DT, speed=2.0, clock=lambda: now[0])
+    got = []
+    for step in range(40):  # 0.0051 s of clock a poll: 0.0102 s of bag at twice its pace, one trace a poll
+        out = src.poll()
+        got.append(len(out[0]))
+        if len(out[0]):
+            assert out[2][0] >= 50.0 + 0.01 * 10
+        now[0] += 0.0051
+    # the replay starts at the first trace's pose (trace 10's, the first pose after traces 0-9: those are left
+    # out), then one trace a poll
+    assert got[0] == 1 and src.skipped == 10 and all(g == 1 for g in got[1:])
+    now[0] += 100.0
+    rest = src.poll()
+    assert len(rest[0]) == 50 - 40 and src.skipped == 10 + survey.n_traces - 60 and src.ended
+    np.testing.assert_array_equal(rest[0], survey.data[50:60])
+    np.testing.assert_allclose(rest[1][:, :3], survey.positions_xyz[50:60], atol=1e-9)
+    src.close()
+
+
+@pytest.mark.parametrize("kw, message", [
+    (dict(dt_s=0.0), "a bag's traces carry no sample interval: give it"),
+    (dict(dt_s=DT, speed=-1.0), "the replay speed must be a positive number, got -1.0"),
+])
+def test_bag_settings_that_cannot_run_are_named(survey, tmp_path, kw, message):
+    bag = _bag_of(survey, tmp_path / "k")
+    with pytest.raises(GPR3DError, match=message):
+        BagSource(bag, **kw)
+    with pytest.raises(GPR3DError, match="a bag's traces carry no sample interval"):
+        open_source(bag)
+    with pytest.raises(GPR3DError, match="--dt, --trace-topic are for a ROS bag"):
+        open_source("tcp://127.0.0.1:5000", bag={"dt_s": DT, "trace_topic": "/g"})
+    with pytest.raises(GPR3DError, match="--speed are for a ROS bag"):
+        open_source(tmp_path / "rec.dzt", bag={"speed": 2.0})

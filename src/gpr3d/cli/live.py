@@ -8,9 +8,12 @@ from gpr3d.core.errors import GPR3DError
 NAME = "live"
 HELP = "live 3D: migrate traces as a radar delivers them, targets refreshed while surveying"
 EPILOG = ("examples:\n  gpr3d live tcp://127.0.0.1:5600 --out site --eps-r 9\n"
-          "  gpr3d live LINE.DZT --poses LINE.tum --out site --eps-r 6 --until-idle 10\n\n"
-          "SOURCE: tcp://HOST:PORT (the trace stream of docs/CONVENTIONS.md: each trace with its pose), or a DZT\n"
-          "file the radar is writing with --poses, a TUM file written beside it. Refreshed while running:\n"
+          "  gpr3d live LINE.DZT --poses LINE.tum --out site --eps-r 6 --until-idle 10\n"
+          "  gpr3d live run.bag --dt 0.1 --trace-topic /gpr/traces --pose-topic /odometry --out site --eps-r 6\n\n"
+          "SOURCE: tcp://HOST:PORT (the trace stream of docs/CONVENTIONS.md: each trace with its pose), a DZT\n"
+          "file the radar is writing with --poses, a TUM file written beside it, or a ROS bag (.bag, or a ROS 2\n"
+          "bag folder) replayed at its own pace: a trace topic (a header and a float array named trace, samples\n"
+          "or data), poses from a pose topic or --poses. Refreshed while running:\n"
           "OUT/live.json (traces, targets, detections); at the end: volume.h5, volume.vti, targets.json,\n"
           "config.json (a batch 'gpr3d reconstruct' with its settings gives the same volume), detections.json.\n"
           "The last line: N traces, R traces/s, lag L s (how long after the newest trace arrived the last\n"
@@ -19,9 +22,17 @@ EPILOG = ("examples:\n  gpr3d live tcp://127.0.0.1:5600 --out site --eps-r 9\n"
 
 def add_arguments(sp):
     rc = _reconstruct_defaults()
-    sp.add_argument("source", help="tcp://HOST:PORT, or a growing DZT file (with --poses)")
+    sp.add_argument("source", help="tcp://HOST:PORT, a growing DZT file (with --poses), or a ROS bag")
     sp.add_argument("--out", required=True, help="output folder")
-    sp.add_argument("--poses", default=None, help="TUM trajectory beside a growing file (one pose per trace)")
+    sp.add_argument("--poses", default=None, help="TUM trajectory beside a growing file (one pose per trace), or for "
+                                                  "a bag's traces (interpolated at their stamps)")
+    sp.add_argument("--dt", type=float, default=None, help="a bag's sample interval in ns (its messages carry none)")
+    sp.add_argument("--trace-topic", default=None, help="a bag's GPR trace topic (default: the one such topic)")
+    sp.add_argument("--pose-topic", default=None, help="a bag's pose topic (default: the one such topic)")
+    sp.add_argument("--samples-per-trace", type=int, default=None,
+                    help="a bag's messages hold several traces of this many samples (default: one a message)")
+    sp.add_argument("--speed", type=float, default=1.0,
+                    help="replay a bag at this many times its pace (default 1; 0: as fast as it reads)")
     sp.add_argument("--channel", type=int, default=0, help="channel of a multi-channel DZT (default 0)")
     sp.add_argument("--offset", type=float, default=0.0, help="transmitter-receiver offset of a DZT's antenna (m)")
     sp.add_argument("--eps-r", default=None, help="relative permittivity (default: the stream's header)")
@@ -84,8 +95,18 @@ def run(args):
                      detect=not args.no_detect, score=args.score,
                      until_idle_s=None if args.until_idle == 0 else args.until_idle,
                      start_timeout_s=None if args.start_timeout == 0 else args.start_timeout)
+    bag = {}
+    if args.dt is not None:
+        _in_range(args.dt, "--dt", 1e-4, 1e3, "ns")
+        bag["dt_s"] = args.dt * 1e-9
+    if args.speed != 1.0:
+        _in_range(args.speed, "--speed", 0, 1e6, "times the bag's pace")
+        bag["speed"] = None if args.speed == 0 else args.speed
+    for name in ("trace_topic", "pose_topic", "samples_per_trace"):
+        if getattr(args, name) is not None:
+            bag[name] = getattr(args, name)
     source = open_source(args.source, poses=args.poses, channel=args.channel, offset_m=args.offset,
-                         connect_s=args.connect_timeout)
+                         connect_s=args.connect_timeout, bag=bag or None)
     summary = run_live(source, args.out, cfg, detector=detector, log=print)
     print(f"{summary.n_targets} targets, {summary.n_detections} detections; trace-to-target latency median "
           f"{summary.latency_s['median']:.2f} s, max {summary.latency_s['max']:.2f} s; at most {summary.peak_tiles} "

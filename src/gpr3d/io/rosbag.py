@@ -7,12 +7,18 @@ Read from a bag (a ROS 1 ``.bag`` file or a ROS 2 bag folder):
   :class:`~gpr3d.core.trajectory.Trajectory` (:func:`read_bag_trajectory`): visual odometry's camera poses, or a
   reference;
 * ``sensor_msgs/CameraInfo`` -> :class:`gpr3d.core.camera.CameraIntrinsics` (:func:`read_bag_camera_info`);
+* GPR traces (a message with a ``header`` and the samples in a float array named ``trace``, ``samples`` or
+  ``data``: the layout of ``GPRTrace`` of a ROS 1 driver of the Noggin radar, and of gpr3d's own
+  ``gpr_msgs/msg/GPRTrace``, :data:`TRACE_MSG`) -> ``(t, traces)`` per message (:func:`iter_bag_traces`): what
+  ``gpr3d live`` replays from a bag;
 * ``sensor_msgs/Image`` and ``sensor_msgs/CompressedImage`` (colour: ``rgb8``, ``bgr8``, ``rgba8``, ``bgra8``,
   ``mono8``, JPEG/PNG; depth: ``16UC1`` millimetres or ``32FC1`` metres) -> ``(t, colour, depth)`` frames for
   :func:`gpr3d.pose.vo.rgbd_odometry`, colour and depth paired by the nearest stamp (:func:`iter_bag_rgbd`).
 
 Times are the messages' header stamps (the sensor's clock), in seconds. A topic left out is found by its
-message type when the bag holds exactly one of that type; otherwise the error lists the candidates.
+message type when the bag holds exactly one of that type (a trace topic: one whose type's name holds ``Trace`` or
+``GPR``); otherwise the error lists the candidates. A ROS 2 bag must hold its message definitions for a type
+outside the standard ones (rosbag2 does from Iron on, and with MCAP storage); a ROS 1 bag always does.
 ``rosbags`` is an optional extra (``pip install 'gpr3d[pose]'``).
 """
 
@@ -25,13 +31,19 @@ import numpy as np
 from gpr3d.core.errors import FormatError, GPR3DError, InvalidDataError
 from gpr3d.core.trajectory import Trajectory
 
-__all__ = ["bag_topics", "read_bag_imu", "read_bag_trajectory", "read_bag_camera_info", "iter_bag_rgbd",
-           "write_bag"]
+__all__ = ["TRACE_MSG", "TRACE_TYPE", "bag_topics", "read_bag_imu", "read_bag_trajectory", "read_bag_camera_info",
+           "iter_bag_rgbd", "iter_bag_traces", "write_bag"]
 
 _IMU = ("sensor_msgs/msg/Imu",)
 _POSE = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped", "nav_msgs/msg/Odometry")
 _INFO = ("sensor_msgs/msg/CameraInfo",)
 _IMAGE = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+
+
+#: gpr3d's trace message type and its definition (one trace a message; several: ``samples_per_trace``)
+TRACE_TYPE = "gpr_msgs/msg/GPRTrace"
+TRACE_MSG = "std_msgs/Header header\nfloat32[] trace\n"
+_TRACE_FIELDS = ("trace", "samples", "data")
 
 
 def _reader(path):
@@ -195,14 +207,62 @@ def iter_bag_rgbd(path, colour_topic: str, depth_topic: str, *, max_dt_s: float 
         r.close()
 
 
+def _pick_traces(r, path, topic):
+    if topic is not None:
+        conns = [c for c in r.connections if c.topic == topic]
+        if not conns:
+            raise InvalidDataError(f"{path}: no topic {topic!r} (topics: {sorted({c.topic for c in r.connections})})")
+        return conns
+    name = lambda c: c.msgtype.rsplit("/", 1)[-1].lower()  # noqa: E731
+    conns = [c for c in r.connections if "trace" in name(c) or "gpr" in name(c)]
+    names = sorted({c.topic for c in conns})
+    if len(names) != 1:
+        what = f"several GPR trace topics {names}" if names else "no GPR trace topic (a type named *Trace* or *GPR*)"
+        raise InvalidDataError(f"{path}: {what}: name the topic (topics: "
+                               f"{sorted((c.topic, c.msgtype) for c in r.connections)})")
+    return conns
+
+
+def iter_bag_traces(path, topic: str | None = None, *, samples_per_trace: int | None = None):
+    """``(t, traces)`` for each message of a GPR trace topic, in the bag's order: its header stamp (s) and its
+    samples as float32 ``(k, n_samples)``: one trace a message, or ``k`` traces one after another when
+    ``samples_per_trace`` is given (all at the message's stamp). Every message must hold the same number of
+    samples (or whole multiples of ``samples_per_trace``), all finite."""
+    if samples_per_trace is not None and (int(samples_per_trace) != samples_per_trace or samples_per_trace < 2):
+        raise GPR3DError(f"samples per trace must be a whole number of at least 2, got {samples_per_trace!r}")
+    r = _reader(path)
+    try:
+        conns = _pick_traces(r, path, topic)
+        where = f"{path}: {conns[0].topic}"
+        n = samples_per_trace
+        for i, (_, m) in enumerate(_messages(r, conns)):
+            arr = next((getattr(m, f) for f in _TRACE_FIELDS if isinstance(getattr(m, f, None), np.ndarray)), None)
+            if arr is None or not hasattr(m, "header") or arr.dtype.kind not in "fiu":
+                raise InvalidDataError(f"{where}: its messages ({conns[0].msgtype}) hold no header and numeric "
+                                       f"array named {', '.join(_TRACE_FIELDS)}")
+            n = n or arr.size
+            if arr.size == 0 or arr.size % n:
+                raise InvalidDataError(f"{where}: message {i} holds {arr.size} samples where the traces have {n}"
+                                       + ("" if samples_per_trace else " (several traces a message: give the "
+                                                                       "samples per trace)"))
+            a = arr.astype(np.float32).reshape(-1, n)
+            if not np.all(np.isfinite(a)):
+                raise InvalidDataError(f"{where}: message {i} holds non-finite samples")
+            yield _stamp(m), a
+    finally:
+        r.close()
+
+
 def write_bag(path, *, imu=None, trajectory: Trajectory | None = None, frames=None, intrinsics=None,
-              ros1: bool = False, frame_id: str = "camera") -> None:
+              traces=None, ros1: bool = False, frame_id: str = "camera") -> None:
     """Write a small bag (ROS 2 folder, or a ROS 1 ``.bag`` with ``ros1=True``): ``/imu`` (Imu), ``/odometry``
     (PoseStamped), ``/camera/color`` and ``/camera/depth`` (Image: rgb8, 16UC1) with ``/camera/info``
-    (CameraInfo). For tests, examples and handing synthetic runs to ROS tools."""
-    from rosbags.typesys import Stores, get_typestore
+    (CameraInfo), ``/gpr/traces`` (:data:`TRACE_TYPE`, one message per trace of ``traces = (t_s, data)``). For
+    tests, examples and handing synthetic runs to ROS tools."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    ts.register(get_types_from_msg(TRACE_MSG, TRACE_TYPE))
     T = ts.types
     Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
 
@@ -254,6 +314,11 @@ def write_bag(path, *, imu=None, trajectory: Trajectory | None = None, frames=No
                 msgs.append((t, cd, ser(Image(encoding="16UC1", step=2 * w,
                                               data=np.ascontiguousarray(depth, "<u2").view(np.uint8).reshape(-1), **kw),
                                         "sensor_msgs/msg/Image")))
+        if traces is not None:
+            c = writer.add_connection("/gpr/traces", TRACE_TYPE, typestore=ts)
+            for t, row in zip(*traces):
+                m = T[TRACE_TYPE](header=header(t), trace=np.asarray(row, np.float32).reshape(-1))
+                msgs.append((t, c, ser(m, TRACE_TYPE)))
         if intrinsics is not None:
             c = writer.add_connection("/camera/info", "sensor_msgs/msg/CameraInfo", typestore=ts)
             i = intrinsics

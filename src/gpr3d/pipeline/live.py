@@ -1,7 +1,8 @@
 """Live mode: traces migrated as they arrive, targets refreshed while the survey runs (``gpr3d live``).
 
 A source gives traces with their poses as a radar writes them (:class:`TCPSource`: the trace stream of
-:mod:`gpr3d.io.stream`; :class:`FileSource`: a DZT recording and a TUM trajectory that grow), read by a thread
+:mod:`gpr3d.io.stream`; :class:`FileSource`: a DZT recording and a TUM trajectory that grow; :class:`BagSource`:
+a ROS bag replayed at its own pace), read by a thread
 of its own (:class:`SourceReader`) that stamps each trace with the time it came. :class:`LiveReconstruction`
 takes them in batches:
 
@@ -45,8 +46,8 @@ from gpr3d.core.grid import Grid3D
 from gpr3d.core.units import velocity_from_eps_r
 from gpr3d.io.stream import GrowingDZT, GrowingTUM, StreamDecoder, StreamHeader
 
-__all__ = ["FileSource", "LiveConfig", "LiveReconstruction", "LiveSummary", "SourceReader", "TCPSource", "open_source",
-           "run_live"]
+__all__ = ["BagSource", "FileSource", "LiveConfig", "LiveReconstruction", "LiveSummary", "SourceReader", "TCPSource",
+           "open_source", "run_live"]
 
 
 @dataclass
@@ -211,6 +212,88 @@ class FileSource:
         pass
 
 
+class BagSource:
+    """A ROS 1 or ROS 2 bag replayed at its own pace (``speed`` times it; None: as fast as it reads): the traces of
+    a GPR trace topic (:func:`gpr3d.io.rosbag.iter_bag_traces`), each with the antenna's pose interpolated at its
+    stamp from a pose topic of the same bag (PoseStamped, PoseWithCovarianceStamped, Odometry) or a TUM file.
+    A trace is given once the replay clock has passed its stamp and the first pose after it (as a radar and a pose
+    filter deliver them live); traces outside the poses' time span are left out and counted (``skipped``). The
+    bag's trace messages carry no sample interval: ``dt_s`` is required."""
+
+    def __init__(self, bag, *, dt_s: float, trace_topic: str | None = None, pose_topic: str | None = None,
+                 poses=None, samples_per_trace: int | None = None, speed: float | None = 1.0,
+                 offset_m: float = 0.0, frequency_hz: float | None = None, eps_r: float | None = None,
+                 clock=time.monotonic):
+        from gpr3d.io.rosbag import iter_bag_traces, read_bag_trajectory
+
+        if not (isinstance(dt_s, (int, float)) and math.isfinite(dt_s) and 0 < dt_s < 1e-6):
+            raise GPR3DError(f"{bag}: a bag's traces carry no sample interval: give it (--dt, in ns; got {dt_s!r} s)")
+        if speed is not None and not (math.isfinite(speed) and speed > 0):
+            raise GPR3DError(f"the replay speed must be a positive number, got {speed!r}")
+        if poses is not None:
+            from gpr3d.io.trajectory import read_tum
+
+            self.trajectory = read_tum(poses)
+        else:
+            self.trajectory = read_bag_trajectory(bag, pose_topic)
+        ts = self.trajectory.timestamps_s
+        if ts.size < 2 or np.any(np.diff(ts) <= 0):
+            raise GPR3DError(f"{poses or bag}: the poses' stamps must increase strictly (two poses at least)")
+        self.path = str(bag)
+        self.dt_s, self.speed, self.clock = float(dt_s), speed, clock
+        self.offset_m, self.frequency_hz, self.eps_r = offset_m, frequency_hz, eps_r
+        self._traces = iter_bag_traces(bag, trace_topic, samples_per_trace=samples_per_trace)
+        self._next = None  # the next message, read but not yet due
+        self._start = None  # (bag time, clock) when the replay began
+        self.header = None
+        self.ended = False
+        self.skipped = 0  #: traces outside the poses' time span
+
+    def _due(self, t: float) -> float:
+        """The bag time at which a trace stamped ``t`` can be given: once the first pose after it has come."""
+        ts = self.trajectory.timestamps_s
+        return max(t, float(ts[min(int(np.searchsorted(ts, t)), ts.size - 1)]))
+
+    def poll(self):
+        now = self.clock()
+        times, rows = [], []
+        while not self.ended:
+            if self._next is None:
+                try:
+                    self._next = next(self._traces)
+                except StopIteration:
+                    self.ended = True
+                    break
+            t, tr = self._next
+            if self._start is None:
+                self._start = (self._due(t), now)
+            if self.speed is not None and (self._due(t) - self._start[0]) / self.speed > now - self._start[1]:
+                break  # not yet
+            self._next = None
+            if self.header is None:
+                self.header = StreamHeader(n_samples=tr.shape[1], dt_s=self.dt_s, frequency_hz=self.frequency_hz,
+                                           offset_m=self.offset_m, eps_r=self.eps_r, name=self.path)
+            ts = self.trajectory.timestamps_s
+            if not ts[0] <= t <= ts[-1]:
+                self.skipped += len(tr)
+                continue
+            times.extend([t] * len(tr))
+            rows.append(tr)
+        if self.header is None:
+            return None
+        n = self.header.n_samples
+        if not rows:
+            return np.zeros((0, n), np.float32), np.zeros((0, 7)), np.zeros(0)
+        data = np.concatenate(rows)
+        if data.shape[1] != n:
+            raise InvalidDataError(f"{self.path}: traces of {data.shape[1]} samples after traces of {n}")
+        at = self.trajectory.at(np.asarray(times))
+        return data, np.c_[at.positions_xyz, at.orientations_quat_wxyz], np.asarray(times)
+
+    def close(self) -> None:
+        self._traces.close()
+
+
 def _stack(traces, header):
     if header is None:
         return None
@@ -297,17 +380,23 @@ class SourceReader:
         self.source.close()
 
 
+def _bag_flags(bag: dict) -> str:
+    """The command line's names of a bag's settings (``dt_s`` -> ``--dt``, ``trace_topic`` -> ``--trace-topic``)."""
+    return ", ".join(sorted("--" + k.removesuffix("_s").replace("_", "-") for k in bag))
+
+
 def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 0.0,
-                frequency_hz: float | None = None, connect_s: float = 10.0):
+                frequency_hz: float | None = None, connect_s: float = 10.0, bag: dict | None = None):
     """The source of a live run.
 
     Parameters
     ----------
     source : str or Path
-        ``tcp://HOST:PORT`` (the trace stream of :mod:`gpr3d.io.stream`, each trace with its pose), or a DZT file
-        the radar is writing.
+        ``tcp://HOST:PORT`` (the trace stream of :mod:`gpr3d.io.stream`, each trace with its pose), a DZT file
+        the radar is writing, or a ROS bag (a ``.bag`` file or a ROS 2 bag folder) to replay.
     poses : str or Path, optional
-        With a DZT file: the TUM trajectory written beside it (pose ``i`` for trace ``i``); never with ``tcp://``.
+        With a DZT file: the TUM trajectory written beside it (pose ``i`` for trace ``i``); with a bag: a TUM
+        trajectory interpolated at the traces' stamps instead of the bag's pose topic; never with ``tcp://``.
     channel : int
         The DZT's channel.
     offset_m : float
@@ -316,10 +405,13 @@ def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 
         The DZT antenna's centre frequency (default: from the antenna's name in the header).
     connect_s : float
         How long a ``tcp://`` source keeps trying to connect (s).
+    bag : dict, optional
+        A bag's settings for :class:`BagSource` (``dt_s``, ``trace_topic``, ``pose_topic``, ``samples_per_trace``,
+        ``speed``, ``eps_r``).
 
     Returns
     -------
-    TCPSource or FileSource
+    TCPSource, FileSource or BagSource
         Polled by :func:`run_live`.
 
     Raises
@@ -333,7 +425,17 @@ def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 
             raise GPR3DError(f"{source}: expected tcp://HOST:PORT with a port in 1..65535")
         if poses is not None:
             raise GPR3DError("--poses is for a growing file: a tcp:// stream carries each trace's pose")
+        if bag:
+            raise GPR3DError(f"{source}: {_bag_flags(bag)} are for a ROS bag (a .bag file or a ROS 2 bag folder)")
         return TCPSource(host, int(port), connect_s=connect_s)
+    p = Path(source)
+    if p.suffix.lower() == ".bag" or (p / "metadata.yaml").is_file():
+        settings = dict(bag or {})
+        if "dt_s" not in settings:
+            raise GPR3DError(f"{source}: a bag's traces carry no sample interval: give it (--dt, in ns)")
+        return BagSource(p, poses=poses, offset_m=offset_m, frequency_hz=frequency_hz, **settings)
+    if bag:
+        raise GPR3DError(f"{source}: {_bag_flags(bag)} are for a ROS bag (a .bag file or a ROS 2 bag folder)")
     return FileSource(source, poses, channel=channel, offset_m=offset_m, frequency_hz=frequency_hz)
 
 
@@ -992,14 +1094,16 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
         else:
             source.close()
     if live is None or live.n_in == 0:
-        where = getattr(getattr(source, "decoder", None), "where", None) or getattr(getattr(source, "dzt", None),
-                                                                                   "path", "the source")
+        where = (getattr(getattr(source, "decoder", None), "where", None) or getattr(source, "path", None)
+                 or getattr(getattr(source, "dzt", None), "path", "the source"))
         waiting = getattr(source, "waiting_for_poses", 0)
         if waiting:
             raise GPR3DError(f"{where}: {waiting} traces came, but no poses for them in {source.tum.path}")
         why = (" before Ctrl-C" if interrupted else "" if cfg.start_timeout_s is None else
                f" in {cfg.start_timeout_s:g} s")
         raise GPR3DError(f"{where}: no traces arrived{why}")
+    if getattr(source, "skipped", 0):
+        log(f"{source.skipped:,} traces outside the poses' time span left out")
     live.step(ended=True)
     t_end = clock()
     waited = cfg.until_idle_s if idle else 0.0  # the idle wait that ended the run is neither lag nor work
