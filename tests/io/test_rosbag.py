@@ -1,5 +1,6 @@
 """ROS 1 and ROS 2 bags written with rosbags and read back; the pipeline from a bag to fused poses."""
 
+import re
 import shutil
 
 import numpy as np
@@ -133,6 +134,27 @@ def test_gpr_traces_round_trip_one_or_several_a_message(tmp_path, ros1):
     np.testing.assert_array_equal(np.concatenate([g[1] for g in two]), data.reshape(12, 4))
 
 
+@pytest.mark.parametrize("msgtype, found", [
+    ("radar_pkg/msg/RadarTrace", True), ("sensors/msg/GPRScan", True), ("husky_gpr/msg/GPRTrace", True),
+    ("gpr_msgs/msg/Scan", False),  # (the package's name does not count: the type's own)
+])
+def test_the_trace_topic_is_found_by_its_type_s_name(tmp_path, run, msgtype, found):
+    path = tmp_path / "f"
+    t = np.arange(3) * 0.1 + 1.0
+    write_bag(path, imu=run.imu, traces={"/radar/a": (t, np.ones((3, 4)))}, trace_type=msgtype)
+    if found:
+        got = list(iter_bag_traces(path))  # (the IMU's messages left alone)
+        assert [g[1].shape for g in got] == [(1, 4)] * 3
+    else:
+        with pytest.raises(InvalidDataError, match="no GPR trace topic"):
+            list(iter_bag_traces(path))
+    two = tmp_path / "two"
+    write_bag(two, traces={"/a": (t, np.ones((3, 4))), "/b": (t, np.ones((3, 4)))})
+    with pytest.raises(InvalidDataError, match=r"several GPR trace topics \['/a', '/b'\]: name the topic"):
+        list(iter_bag_traces(two))
+    assert len(list(iter_bag_traces(two, "/b", samples_per_trace=2))) == 3  # (2 samples a trace: the fewest)
+
+
 def test_gpr_trace_bags_that_cannot_be_read_give_one_line(tmp_path, run):
     path = tmp_path / "u"
     write_bag(path, traces=([0.0, 0.1], [np.zeros(4), np.zeros(5)]))  # a trace of 5 samples after one of 4
@@ -154,5 +176,5 @@ def test_gpr_trace_bags_that_cannot_be_read_give_one_line(tmp_path, run):
     with pytest.raises(InvalidDataError, match=r"/imu: its messages \(sensor_msgs/msg/Imu\) hold no header and "
                                                "numeric array named trace, samples, data"):
         list(iter_bag_traces(imu, "/imu"))
-    with pytest.raises(InvalidDataError, match="no topic '/gpr'"):
+    with pytest.raises(InvalidDataError, match=re.escape(f"{imu}: no topic '/gpr'")):
         list(iter_bag_traces(imu, "/gpr"))

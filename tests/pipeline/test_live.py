@@ -4,6 +4,7 @@ DZT file that grows, and whether its tiles stayed in memory or went to disk and 
 
 import json
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -288,6 +289,10 @@ def test_detection_runs_on_every_window_once_as_it_fills(tmp_path):
     # the window [20, 28) is full, but a refresh is due for traces ready and not yet shown: the detector waits
     # (the targets first)
     assert live.last_refresh is None and live._detect(False, 1) == 0 and len(det.spans) == 5
+    # nor does a window start that would end after the refresh falls due (its running mean: a long window)
+    live.last_refresh, live.window_s = time.monotonic(), 100.0
+    assert live._detect(False, 1) == 0 and len(det.spans) == 5
+    live.last_refresh, live.window_s = None, 0.0
     assert live._detect(False, 0) == 1 and det.spans[5:] == [(20, 8)]
     assert live._detect(True, 30) == 1  # the end: one window over the last traces, [22, 30)
     assert det.spans[5:] == [(20, 8), (22, 8)]
@@ -469,6 +474,8 @@ def test_a_refresh_is_due_a_period_after_the_last_one_started_longer_when_refres
     assert live._refresh_due()
     live.refresh_costs = [0.2, 0.2, 0.01]  # median 0.2: 0.6 s
     assert not live._refresh_due()
+    # due within the time the work about to start takes (0.35 s since the last start, 0.6 s of period)
+    assert live._refresh_due(ahead_s=0.3) and not live._refresh_due(ahead_s=0.2)
     # refresh() records its cost (the last five) and its start
     live.refresh_costs = [9.0] * 5
     t = time.monotonic()

@@ -254,15 +254,16 @@ def iter_bag_traces(path, topic: str | None = None, *, samples_per_trace: int | 
 
 
 def write_bag(path, *, imu=None, trajectory: Trajectory | None = None, frames=None, intrinsics=None,
-              traces=None, ros1: bool = False, frame_id: str = "camera") -> None:
+              traces=None, trace_type: str = TRACE_TYPE, ros1: bool = False, frame_id: str = "camera") -> None:
     """Write a small bag (ROS 2 folder, or a ROS 1 ``.bag`` with ``ros1=True``): ``/imu`` (Imu), ``/odometry``
     (PoseStamped), ``/camera/color`` and ``/camera/depth`` (Image: rgb8, 16UC1) with ``/camera/info``
-    (CameraInfo), ``/gpr/traces`` (:data:`TRACE_TYPE`, one message per trace of ``traces = (t_s, data)``). For
-    tests, examples and handing synthetic runs to ROS tools."""
+    (CameraInfo), ``/gpr/traces`` (``trace_type``, laid out as :data:`TRACE_MSG`: one message per trace of
+    ``traces = (t_s, data)``, or ``{topic: (t_s, data)}`` for several topics). For tests, examples and handing
+    synthetic runs to ROS tools."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
-    ts.register(get_types_from_msg(TRACE_MSG, TRACE_TYPE))
+    ts.register(get_types_from_msg(TRACE_MSG, trace_type))
     T = ts.types
     Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
 
@@ -314,11 +315,12 @@ def write_bag(path, *, imu=None, trajectory: Trajectory | None = None, frames=No
                 msgs.append((t, cd, ser(Image(encoding="16UC1", step=2 * w,
                                               data=np.ascontiguousarray(depth, "<u2").view(np.uint8).reshape(-1), **kw),
                                         "sensor_msgs/msg/Image")))
-        if traces is not None:
-            c = writer.add_connection("/gpr/traces", TRACE_TYPE, typestore=ts)
-            for t, row in zip(*traces):
-                m = T[TRACE_TYPE](header=header(t), trace=np.asarray(row, np.float32).reshape(-1))
-                msgs.append((t, c, ser(m, TRACE_TYPE)))
+        for topic, (times, rows) in (traces if isinstance(traces, dict) else
+                                     {} if traces is None else {"/gpr/traces": traces}).items():
+            c = writer.add_connection(topic, trace_type, typestore=ts)
+            for t, row in zip(times, rows):
+                m = T[trace_type](header=header(t), trace=np.asarray(row, np.float32).reshape(-1))
+                msgs.append((t, c, ser(m, trace_type)))
         if intrinsics is not None:
             c = writer.add_connection("/camera/info", "sensor_msgs/msg/CameraInfo", typestore=ts)
             i = intrinsics

@@ -525,6 +525,7 @@ class LiveReconstruction:
         self.intake = None
         self.last_refresh = None  # when the last refresh started
         self.refresh_costs: list = []  # how long the last few refreshes took (s)
+        self.window_s = 0.0  # how long a detector window takes (s; a running mean)
         self.n_refreshed = 0  # traces migrated at the last refresh
         self.migrate_s = 0.0
 
@@ -649,14 +650,15 @@ class LiveReconstruction:
             work += self._detect(ended, ready)
         return work
 
-    def _refresh_due(self) -> bool:
-        """The refresh's period, from the start of the last one, is over: ``refresh_s``, or longer where a refresh
-        costs more than a third of it (the targets' extraction must not starve the migration; the cost is the
-        median of the last five, so that one refresh slowed by the machine does not hold the next one back)."""
+    def _refresh_due(self, ahead_s: float = 0.0) -> bool:
+        """The refresh's period, from the start of the last one, is over (or will be within ``ahead_s``: the time
+        the work about to start takes): ``refresh_s``, or longer where a refresh costs more than a third of it (the
+        targets' extraction must not starve the migration; the cost is the median of the last five, so that one
+        refresh slowed by the machine does not hold the next one back)."""
         if self.last_refresh is None:
             return True
         cost = float(np.median(self.refresh_costs)) if self.refresh_costs else 0.0
-        return time.monotonic() - self.last_refresh >= max(self.cfg.refresh_s, 3.0 * cost)
+        return time.monotonic() + ahead_s - self.last_refresh >= max(self.cfg.refresh_s, 3.0 * cost)
 
     def _migrate_to(self, ready, n_cut, w, short) -> int:
         """Migrate every trace up to ``ready`` (in batches of at most ``max_batch``); returns how many."""
@@ -766,9 +768,12 @@ class LiveReconstruction:
         n = self.raw_tail_first + len(self.raw_tail)
         ran = 0
         while n - self.next_window >= win:
-            if not ended and ready > self.n_refreshed and self._refresh_due():
+            # (a window that would end after the refresh falls due waits for it)
+            if not ended and ready > self.n_refreshed and self._refresh_due(self.window_s):
                 break
+            t = time.monotonic()
             self._detect_span(self.next_window, self.next_window + win)
+            self.window_s = 0.8 * self.window_s + 0.2 * (time.monotonic() - t)
             self.next_window += step
             ran += 1
         covered = self.next_window - step + win if self.next_window else 0
