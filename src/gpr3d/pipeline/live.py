@@ -322,6 +322,7 @@ class SourceReader:
         self._finished = threading.Event()  # the thread is over: the source ended, failed or was stopped
         self._arrived = threading.Event()  # something was queued since the last take
         self._error = None
+        self.last_arrival = None  #: when the newest batch came (``clock()``), None before the first
         self._thread = threading.Thread(target=self._run, name="gpr3d-live-reader", daemon=True)
         self._thread.start()
 
@@ -334,7 +335,8 @@ class SourceReader:
             while not self._stop.is_set():
                 got = self.source.poll()
                 if got is not None and len(got[0]):
-                    self._queue.put((got, self.clock()))
+                    self.last_arrival = self.clock()
+                    self._queue.put((got, self.last_arrival))
                     self._arrived.set()
                 if self.source.ended:
                     break
@@ -367,6 +369,11 @@ class SourceReader:
         if not out and self._error is not None and self._finished.is_set():
             raise self._error
         return out
+
+    @property
+    def waiting(self) -> bool:
+        """Batches read and not yet taken."""
+        return not self._queue.empty()
 
     @property
     def ended(self) -> bool:
@@ -525,7 +532,6 @@ class LiveReconstruction:
         self.intake = None
         self.last_refresh = None  # when the last refresh started
         self.refresh_costs: list = []  # how long the last few refreshes took (s)
-        self.window_s = 0.0  # how long a detector window takes (s; a running mean)
         self.n_refreshed = 0  # traces migrated at the last refresh
         self.migrate_s = 0.0
 
@@ -650,15 +656,14 @@ class LiveReconstruction:
             work += self._detect(ended, ready)
         return work
 
-    def _refresh_due(self, ahead_s: float = 0.0) -> bool:
-        """The refresh's period, from the start of the last one, is over (or will be within ``ahead_s``: the time
-        the work about to start takes): ``refresh_s``, or longer where a refresh costs more than a third of it (the
-        targets' extraction must not starve the migration; the cost is the median of the last five, so that one
-        refresh slowed by the machine does not hold the next one back)."""
+    def _refresh_due(self) -> bool:
+        """The refresh's period, from the start of the last one, is over: ``refresh_s``, or longer where a refresh
+        costs more than a third of it (the targets' extraction must not starve the migration; the cost is the
+        median of the last five, so that one refresh slowed by the machine does not hold the next one back)."""
         if self.last_refresh is None:
             return True
         cost = float(np.median(self.refresh_costs)) if self.refresh_costs else 0.0
-        return time.monotonic() + ahead_s - self.last_refresh >= max(self.cfg.refresh_s, 3.0 * cost)
+        return time.monotonic() - self.last_refresh >= max(self.cfg.refresh_s, 3.0 * cost)
 
     def _migrate_to(self, ready, n_cut, w, short) -> int:
         """Migrate every trace up to ``ready`` (in batches of at most ``max_batch``); returns how many."""
@@ -768,12 +773,9 @@ class LiveReconstruction:
         n = self.raw_tail_first + len(self.raw_tail)
         ran = 0
         while n - self.next_window >= win:
-            # (a window that would end after the refresh falls due waits for it)
-            if not ended and ready > self.n_refreshed and self._refresh_due(self.window_s):
+            if not ended and ready > self.n_refreshed and self._refresh_due():
                 break
-            t = time.monotonic()
             self._detect_span(self.next_window, self.next_window + win)
-            self.window_s = 0.8 * self.window_s + 0.2 * (time.monotonic() - t)
             self.next_window += step
             ran += 1
         covered = self.next_window - step + win if self.next_window else 0
@@ -1079,6 +1081,10 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
                 break
             if reader is not None:
                 now = clock()
+                if reader.waiting:  # (traces came while this step worked: not idle, whatever the clock says)
+                    continue
+                if reader.last_arrival is not None:
+                    last_new = max(last_new, reader.last_arrival)
             if t_first is None:
                 if cfg.start_timeout_s is not None and now - t_start >= cfg.start_timeout_s:
                     break
