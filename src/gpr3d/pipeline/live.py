@@ -924,8 +924,10 @@ class LiveReconstruction:
                 "targets": targets_to_json(self.targets), "detections": self.detections, "config": asdict(self.rc)}
 
     def _write_status(self):
+        # (compact: rewritten at every refresh, and it grows with the survey's detections: at 2,600 of them,
+        # indented JSON measured 29 ms a refresh, compact 11 ms; the last one, at the end, is indented)
         self.out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(self.out / "live.json", json.dumps(self.status(), indent=1))
+        atomic_write_text(self.out / "live.json", json.dumps(self.status(), separators=(",", ":")))
 
     def finish(self, *, source: str = ""):
         """Everything left migrated; the final volume over every antenna position (when it is at most
