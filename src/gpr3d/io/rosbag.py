@@ -9,7 +9,7 @@ Read from a bag (a ROS 1 ``.bag`` file or a ROS 2 bag folder):
 * ``sensor_msgs/CameraInfo`` -> :class:`gpr3d.core.camera.CameraIntrinsics` (:func:`read_bag_camera_info`);
 * GPR traces (a message with a ``header`` and the samples in a float array named ``trace``, ``samples`` or
   ``data``: the layout of ``GPRTrace`` of a ROS 1 driver of the Noggin radar, and of gpr3d's own
-  ``gpr_msgs/msg/GPRTrace``, :data:`TRACE_MSG`) -> ``(t, traces)`` per message (:func:`iter_bag_traces`): what
+  ``gpr_msgs/msg/GPRTrace``, ``TRACE_MSG``) -> ``(t, traces)`` per message (:func:`iter_bag_traces`): what
   ``gpr3d live`` replays from a bag;
 * ``sensor_msgs/Image`` and ``sensor_msgs/CompressedImage`` (colour: ``rgb8``, ``bgr8``, ``rgba8``, ``bgra8``,
   ``mono8``, JPEG/PNG; depth: ``16UC1`` millimetres or ``32FC1`` metres) -> ``(t, colour, depth)`` frames for
@@ -40,8 +40,9 @@ _INFO = ("sensor_msgs/msg/CameraInfo",)
 _IMAGE = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 
 
-#: gpr3d's trace message type and its definition (one trace a message; several: ``samples_per_trace``)
+#: gpr3d's trace message type (one trace a message; several: ``samples_per_trace``)
 TRACE_TYPE = "gpr_msgs/msg/GPRTrace"
+#: its definition: a header and the samples
 TRACE_MSG = "std_msgs/Header header\nfloat32[] trace\n"
 _TRACE_FIELDS = ("trace", "samples", "data")
 
@@ -257,7 +258,7 @@ def write_bag(path, *, imu=None, trajectory: Trajectory | None = None, frames=No
               traces=None, trace_type: str = TRACE_TYPE, ros1: bool = False, frame_id: str = "camera") -> None:
     """Write a small bag (ROS 2 folder, or a ROS 1 ``.bag`` with ``ros1=True``): ``/imu`` (Imu), ``/odometry``
     (PoseStamped), ``/camera/color`` and ``/camera/depth`` (Image: rgb8, 16UC1) with ``/camera/info``
-    (CameraInfo), ``/gpr/traces`` (``trace_type``, laid out as :data:`TRACE_MSG`: one message per trace of
+    (CameraInfo), ``/gpr/traces`` (``trace_type``, laid out as ``TRACE_MSG``: one message per trace of
     ``traces = (t_s, data)``, or ``{topic: (t_s, data)}`` for several topics). For tests, examples and handing
     synthetic runs to ROS tools."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore

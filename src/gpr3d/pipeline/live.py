@@ -630,7 +630,7 @@ class LiveReconstruction:
 
     def step(self, *, ended: bool = False) -> int:
         """Migrate the traces whose background is final (once ``min_batch`` of them wait, or a refresh is due),
-        refresh the targets when due (taking in first what :attr:`intake` has waiting), run the detector on the
+        refresh the targets when due (taking in first what ``intake`` has waiting), run the detector on the
         full windows. Returns how many traces were migrated and windows detected."""
         if self.t0_s is None:
             if not ended or not self.raw_pending:
