@@ -867,7 +867,7 @@ class LiveReconstruction:
                 for sl in find_objects(groups)]
 
     def refresh(self):
-        """The targets where traces were added since the last refresh (:meth:`_refresh_regions`), on the tiles in
+        """The targets where traces were added since the last refresh (``_refresh_regions``), on the tiles in
         memory there; the targets elsewhere are kept from earlier refreshes (a target reaching into a refreshed
         region is replaced by what the region shows now); and ``live.json``."""
         from gpr3d.migration.masking import image_envelope
