@@ -231,10 +231,19 @@ def iter_bag_traces(path, topic: str | None = None, *, samples_per_trace: int | 
     samples (or whole multiples of ``samples_per_trace``), all finite."""
     if samples_per_trace is not None and (int(samples_per_trace) != samples_per_trace or samples_per_trace < 2):
         raise GPR3DError(f"samples per trace must be a whole number of at least 2, got {samples_per_trace!r}")
+    r = _reader(path)  # (the bag and its topic checked now; the messages read as they are asked for)
+    try:
+        topic = _pick_traces(r, path, topic)[0].topic
+    finally:
+        r.close()
+    return _trace_messages(path, topic, samples_per_trace)
+
+
+def _trace_messages(path, topic, samples_per_trace):
     r = _reader(path)
     try:
-        conns = _pick_traces(r, path, topic)
-        where = f"{path}: {conns[0].topic}"
+        conns = [c for c in r.connections if c.topic == topic]
+        where = f"{path}: {topic}"
         n = samples_per_trace
         for i, (_, m) in enumerate(_messages(r, conns)):
             arr = next((getattr(m, f) for f in _TRACE_FIELDS if isinstance(getattr(m, f, None), np.ndarray)), None)

@@ -230,6 +230,9 @@ class BagSource:
             raise GPR3DError(f"{bag}: a bag's traces carry no sample interval: give it (--dt, in ns; got {dt_s!r} s)")
         if speed is not None and not (math.isfinite(speed) and speed > 0):
             raise GPR3DError(f"the replay speed must be a positive number, got {speed!r}")
+        if poses is not None and pose_topic is not None:
+            raise GPR3DError(f"{bag}: poses from a TUM file (--poses) or from the bag's {pose_topic}: give one")
+        self._traces = iter_bag_traces(bag, trace_topic, samples_per_trace=samples_per_trace)  # (checked now)
         if poses is not None:
             from gpr3d.io.trajectory import read_tum
 
@@ -242,7 +245,6 @@ class BagSource:
         self.path = str(bag)
         self.dt_s, self.speed, self.clock = float(dt_s), speed, clock
         self.offset_m, self.frequency_hz, self.eps_r = offset_m, frequency_hz, eps_r
-        self._traces = iter_bag_traces(bag, trace_topic, samples_per_trace=samples_per_trace)
         self._next = None  # the next message, read but not yet due
         self._start = None  # (bag time, clock) when the replay began
         self.header = None
@@ -281,12 +283,9 @@ class BagSource:
             rows.append(tr)
         if self.header is None:
             return None
-        n = self.header.n_samples
         if not rows:
-            return np.zeros((0, n), np.float32), np.zeros((0, 7)), np.zeros(0)
-        data = np.concatenate(rows)
-        if data.shape[1] != n:
-            raise InvalidDataError(f"{self.path}: traces of {data.shape[1]} samples after traces of {n}")
+            return np.zeros((0, self.header.n_samples), np.float32), np.zeros((0, 7)), np.zeros(0)
+        data = np.concatenate(rows)  # (one width: iter_bag_traces holds every message to the first's)
         at = self.trajectory.at(np.asarray(times))
         return data, np.c_[at.positions_xyz, at.orientations_quat_wxyz], np.asarray(times)
 
@@ -640,10 +639,7 @@ class LiveReconstruction:
         n_cut, ready, short = self._readiness(ended)
         work = 0
         if ended or ready - self.n_final >= self.cfg.min_batch or self._refresh_due():
-            while self.n_final < ready:
-                work += self._migrate_to(min(ready, self.n_final + self.cfg.max_batch), n_cut, w, short)
-                if not ended and self.n_final < ready and self._refresh_due():
-                    self.refresh()  # a backlog: the targets of what is migrated so far, then on with the rest
+            work += self._migrate_to(ready, n_cut, w, short, refresh=not ended)
         # the targets before the detector: what a user waits for on screen comes first. The refresh takes in the
         # traces that came while this step worked, and shows every trace ready by then
         if not ended and self._refresh_due() and self.intake is not None:
@@ -665,8 +661,10 @@ class LiveReconstruction:
         cost = float(np.median(self.refresh_costs)) if self.refresh_costs else 0.0
         return time.monotonic() - self.last_refresh >= max(self.cfg.refresh_s, 3.0 * cost)
 
-    def _migrate_to(self, ready, n_cut, w, short) -> int:
-        """Migrate every trace up to ``ready`` (in batches of at most ``max_batch``); returns how many."""
+    def _migrate_to(self, ready, n_cut, w, short, *, refresh: bool = False) -> int:
+        """Migrate every trace up to ``ready`` (in batches of at most ``max_batch``; with ``refresh``, a backlog
+        shows the targets of what is migrated so far between its batches when a refresh falls due); returns how
+        many."""
         from gpr3d.processing.background import moving_background, remove_background
 
         done = 0
@@ -692,6 +690,8 @@ class LiveReconstruction:
                 self.cut = self.cut[keep_from - self.cut_first:]
                 self.cut_first = keep_from
             self._evict()
+            if refresh and self.n_final < ready and self._refresh_due():
+                self.refresh()
         return done
 
     def _migrate(self, traces, poses):
