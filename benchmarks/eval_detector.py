@@ -11,7 +11,7 @@ Sets (no training or tuning touches them):
   ``datasets/gprmax_survey.h5``; ``gpr3d simulate --preset survey --seed 4242``), all its
   records, when present. Nothing trains or tunes on it.
 
-Prints a Markdown table per set and writes ``detector_eval.md`` / ``.csv`` beside
+Prints a Markdown table per set and writes ``detector_eval.md`` / ``.csv`` (``--name``) beside
 ``--out``, with training time (from the weights' provenance) and CPU time per window.
 """
 
@@ -77,8 +77,11 @@ def main(argv=None):
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--runtime", default="torch", choices=("auto", "torch", "onnx"),
                    help="torch (default) or onnx ('default' weights only: the shipped export)")
+    p.add_argument("--refiner", nargs="*", default=[], help="box refiners (.pt/.onnx; 'default': the shipped one): "
+                   "each detector is measured without a refiner, then with each")
     p.add_argument("--score", type=float, default=0.5, help="score threshold for apex recall / false targets")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
+    p.add_argument("--name", default="detector_eval", help="the result files' name in --out (.md and .csv)")
     p.add_argument("--worst", type=int, default=0, help="draw the K records of the survey and gprmax_survey sets "
                    "with the lowest apex recall (first weights) into docs/figures/detections/worst_*.png")
     args = p.parse_args(argv)
@@ -88,9 +91,16 @@ def main(argv=None):
     from gpr3d.detection.models import count_parameters
 
     rows = []
-    for w in args.weights:
-        det = load_detector(None if w == "default" else w, engine=args.runtime)
+    for w, refiner in [(w, r) for w in args.weights for r in [None, *args.refiner]]:
+        det = load_detector(None if w == "default" else w, engine=args.runtime, refiner="none")
+        det.refiner = None
         prov = det.provenance
+        name = prov.get("name", Path(w).stem)
+        if refiner:
+            from gpr3d.detection.refine import load_refiner
+
+            det.refiner = load_refiner(None if refiner == "default" else refiner)
+            name += f" + refiner {'shipped' if refiner == 'default' else Path(refiner).name}"
         for kind in args.sets:
             if kind == "gprmax400" and not (ROOT / "datasets" / "gprmax400.h5").exists():
                 continue
@@ -100,7 +110,7 @@ def main(argv=None):
             t = time.perf_counter()
             m = evaluate_detector(det, records(kind, args.n, args.seed, args.gprmax_survey),
                                   score_threshold=args.score)
-            rows.append({"model": prov.get("name", Path(w).stem), "set": kind, "records": m["n_records"],
+            rows.append({"model": name, "set": kind, "records": m["n_records"],
                          "true_targets": m["n_true"], "mAP@0.5": m["mAP@0.5"], "mAP@0.75": m["mAP@0.75"],
                          "AR@10": m["AR@10"], "AR@100": m["AR@100"], "apex_recall": m["apex_recall"],
                          "false_per_true": m["false_per_true"], "cpu_s_per_window": m["s_per_window"],
@@ -111,7 +121,7 @@ def main(argv=None):
                          "apex_recall_by_kind": " ".join(f"{k}:{v['recall']:.2f}({v['n']})"
                                                          for k, v in m["apex_recall_by_kind"].items())})
             print(json.dumps(rows[-1]), flush=True)
-            if args.worst and kind in ("survey", "gprmax_survey") and w == args.weights[0]:
+            if args.worst and kind in ("survey", "gprmax_survey") and w == args.weights[0] and refiner is None:
                 draw_worst(det, m["rows"], args, kind)
     head = ["model", "set", "records", "true_targets", "mAP@0.75", "mAP@0.5", "AR@10", "AR@100", "apex_recall",
             "false_per_true", "apex_recall_by_kind", "cpu_s_per_window", "params_M", "train_steps", "train_s",
@@ -126,8 +136,8 @@ def main(argv=None):
             cells.append(f"{v:.3f}" if isinstance(v, float) else str(v))
         lines.append("| " + " | ".join(cells) + " |")
     out = Path(args.out)
-    write_table(out, "detector_eval.md", "\n".join(lines), "eval_detector.py", argv)
-    with open(out / "detector_eval.csv", "w", newline="") as f:
+    write_table(out, f"{args.name}.md", "\n".join(lines), "eval_detector.py", argv)
+    with open(out / f"{args.name}.csv", "w", newline="") as f:
         wr = csv.DictWriter(f, fieldnames=list(rows[0].keys()) if rows else head)
         wr.writeheader()
         wr.writerows(rows)

@@ -48,7 +48,7 @@ def load(spec):
     from gpr3d.detection.infer import Detector, load_detector
 
     if spec == "default":
-        return load_detector(), "shipped default"
+        return load_detector(refiner="none"), "shipped default"
     p = Path(spec)
     if p.name.startswith("checkpoint"):
         import torch
@@ -66,7 +66,7 @@ def load(spec):
         model.eval()
         torch.set_grad_enabled(False)
         return Detector(model, WindowConfig(**cfg["window"])), f"{p.parent.name} step {ck['step']}"
-    return load_detector(p), p.name
+    return load_detector(p, refiner="none"), p.name
 
 
 def evaluate(det, records):
@@ -127,6 +127,8 @@ def main(argv=None):
     p.add_argument("--only", default=None, help="these pictures only (a glob, e.g. IECAS_* for one radar's)")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
     p.add_argument("--name", default="pgpr.md", help="the result file's name in --out")
+    p.add_argument("--refiner", nargs="*", default=[], help="box refiners (.pt/.onnx; 'default': the shipped one): "
+                   "each detector is measured without a refiner, then with each")
     p.add_argument("--worst", type=int, default=0, help="overlays of the K B-scans with the most missed labels "
                    "(first detector), into --figures")
     p.add_argument("--figures", default=str(ROOT / "docs" / "figures" / "pgpr"))
@@ -142,8 +144,14 @@ def main(argv=None):
              "| detector | set, metric kind | mAP@0.5 | mAP@0.75 | mAP@[.5:.95] | AR@10 | AR@100 | recall@0.5 |",
              "|---|---|---|---|---|---|---|---|"]
     timing = []
-    for spec in args.detectors:
+    for spec, refiner in [(d, r) for d in args.detectors for r in [None, *args.refiner]]:
         det, name = load(spec)
+        det.refiner = None
+        if refiner:
+            from gpr3d.detection.refine import load_refiner
+
+            det.refiner = load_refiner(None if refiner == "default" else refiner)
+            name += f" + refiner {'shipped' if refiner == 'default' else Path(refiner).name}"
         for part, sub in [(what, recs)] + [(f"{what} {d} only", v) for d, v in devices.items()]:
             m = evaluate(det, sub)
             lines.append(_row(name, f"{part}, class-agnostic", m))
@@ -153,7 +161,7 @@ def main(argv=None):
             if part == what:
                 timing.append(f"{name}: {m['s_per_window'] * 1e3:.0f} ms per window, {m['wall_s']:.0f} s for the set")
             print(lines[-1], flush=True)
-        if args.worst and spec == args.detectors[0]:
+        if args.worst and spec == args.detectors[0] and refiner == ([None, *args.refiner][-1]):
             lines += ["", *worst_cases(det, recs, args.worst, Path(args.figures)), ""]
     for name, m50, m, rec in PUBLISHED:
         lines.append(f"| {name} | P-GPR test, class-averaged | {m50:.3f} | - | {m:.3f} | - | - | "

@@ -465,6 +465,13 @@ def _pgpr_rows(det, out: Path, log) -> dict:
                        [tg["score"] for tg in res["targets"]])
     found = sum(h is not None for h in hits)
     right = sum(bool(h and h[2]) for h in hits)
+    fit = {"refined": _mean_best_iou(truth, res["targets"], px)}
+    if det.refiner is not None:  # the same detector without its box refiner: the network's own boxes
+        refiner, det.refiner = det.refiner, None
+        try:
+            fit["network"] = _mean_best_iou(truth, det.detect(survey, score_threshold=0.5)["targets"], px)
+        finally:
+            det.refiner = refiner
     kinds = [tg["kind"] for tg in res["targets"]]
     named = ", ".join(f"{kinds.count(k)} {k}" for k in sorted(set(kinds))) or "none"
     truth_kinds = [lab["kind"] for lab in truth]
@@ -475,9 +482,26 @@ def _pgpr_rows(det, out: Path, log) -> dict:
     log(f"      real P-GPR B-scan {name} (1.6 GHz wall; Yue et al., CC BY 4.0): {len(kinds)} hyperbolas ({named}) "
         f"in {wall:.1f} s; of its {len(truth)} labelled ({truth_kinds.count('rebar')} rebar, "
         f"{truth_kinds.count('pvc_pipe')} pipe) {found} found at IoU >= 0.5, {right} of them of the right kind")
+    if "network" in fit:
+        log(f"      boxes placed by the box refiner ({res['refiner']}): mean IoU with the labels "
+            f"{fit['refined']:.2f}, the network's own boxes {fit['network']:.2f}")
     return {"image": name, "n_detections": len(kinds), "kinds": {k: kinds.count(k) for k in set(kinds)},
             "n_labelled": len(truth), "found_iou50": found, "right_kind": right, "detect_s": wall,
+            "mean_iou": fit, "refiner": res["refiner"],
             "figure": "detections_pgpr.png"}
+
+
+def _mean_best_iou(truth, targets, px) -> float:
+    """The mean over the labels of the best IoU any of ``targets`` reaches with each (0 where none overlaps)."""
+    from gpr3d.detection.refine import pair_iou
+
+    if not truth:
+        return float("nan")
+    lab = np.array([np.asarray(x["box"]) * px for x in truth]).reshape(-1, 4)
+    if not targets:
+        return 0.0
+    box = np.array([np.asarray(x["box"]) * px for x in targets]).reshape(-1, 4)
+    return float(pair_iou(lab[:, None, :], box[None, :, :]).max(axis=1).mean())
 
 
 def _true_top_depth(point_xy, apex_time_s, pipes, *, t0_s, v_m_s, offset_m, tolerance_s) -> float:

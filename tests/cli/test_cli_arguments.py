@@ -128,6 +128,9 @@ def one_line_error(capsys, argv, *needles):
     (["train", "detector", "--out", "/sys/gpr3d_t"], ["--out /sys/gpr3d_t: cannot write in /sys"]),
     (["simulate", "--engine", "forward", "--n", "1", "--out", "/sys/gpr3d_s"], ["--out /sys/gpr3d_s: cannot write"]),
     (["depth", DZT, "--out", "{d}/d.txt"], ["--out", "d.txt: expected a .json file"]),
+    (["detect", DZT, "--out", "{d}/d.json", "--refiner", "{d}/none.pt"], ["none.pt", "no such box refiner weights file"]),
+    (["detect", DZT, "--out", "{d}/d.json", "--refiner", "{d}/none.onnx"], ["none.onnx", "no such ONNX refiner file"]),
+    (["run", DZT, "--out", "{d}/run", "--refiner", "{d}/none.pt"], ["--refiner", "none.pt: no such file"]),
 ])
 def test_a_wrong_argument_is_one_line_naming_it_and_leaves_nothing(files, capsys, argv, needles):
     """Each case the issue lists (tracebacks, a hang, wrong results with no error, unhelpful messages)."""

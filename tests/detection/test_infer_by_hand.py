@@ -186,9 +186,21 @@ def test_a_wrong_threshold_is_named_before_any_work(spies, bad):
 def test_the_engine_is_chosen_by_the_file_the_device_and_what_is_installed(monkeypatch, tmp_path):
     from gpr3d.detection import ort
 
-    calls = []
-    monkeypatch.setattr(ort.OnnxDetector, "load", classmethod(lambda cls, p, device: calls.append(("onnx", p, device))))
-    monkeypatch.setattr(infer.Detector, "load", classmethod(lambda cls, p, device: calls.append(("torch", p, device))))
+    from types import SimpleNamespace
+
+    from gpr3d.detection import refine
+
+    calls, refiners = [], []
+
+    def loaded(engine):
+        def load(cls, p, device):
+            calls.append((engine, p, device))
+            return SimpleNamespace(model=None if engine == "onnx" else object(), refiner=None)
+        return classmethod(load)
+
+    monkeypatch.setattr(ort.OnnxDetector, "load", loaded("onnx"))
+    monkeypatch.setattr(infer.Detector, "load", loaded("torch"))
+    monkeypatch.setattr(refine, "load_refiner", lambda p, engine: refiners.append((p, engine)) or (p, engine))
     shipped = tmp_path / "default.onnx"
     monkeypatch.setattr(ort, "DEFAULT_ONNX", shipped)
     import importlib.util
@@ -208,6 +220,11 @@ def test_the_engine_is_chosen_by_the_file_the_device_and_what_is_installed(monke
     assert calls == [("torch", None, "cpu"), ("onnx", None, "cpu"), ("torch", None, "cuda"), ("torch", None, "cpu"),
                      ("onnx", "m.ONNX", "cpu"), ("torch", "m.pt", "cpu"), ("torch", "m.pt", "cpu"),
                      ("onnx", None, "cpu")]
+    # the shipped refiner with the shipped detector only, in the detector's engine
+    assert refiners == [(None, "torch"), (None, "onnx"), (None, "torch"), (None, "torch"), (None, "onnx")]
+    assert infer.load_detector(refiner="none").refiner is None and infer.load_detector(refiner=None).refiner is None
+    assert infer.load_detector("m.pt", refiner="r.pt").refiner == ("r.pt", "torch")
+    assert infer.load_detector("m.onnx", refiner="default").refiner == (None, "onnx")
     for kw, msg in [(dict(engine="tensorrt"), "unknown engine 'tensorrt'; choose one of auto, torch, onnx"),
                     (dict(path="m.pt", engine="onnx"), "--runtime onnx needs an .onnx file (export one with python "
                      "references/detection/export_onnx.py m.pt OUT.onnx), not m.pt"),

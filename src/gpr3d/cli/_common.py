@@ -113,7 +113,7 @@ def _detector(args):
 
     if not 0.0 <= args.score <= 1.0:
         raise GPR3DError(f"--score must lie in 0..1, got {args.score}")
-    return load_detector(args.weights, device=args.device, engine=args.runtime)
+    return load_detector(args.weights, device=args.device, engine=args.runtime, refiner=args.refiner)
 
 
 def _check_radius(args, method: str) -> None:
@@ -165,6 +165,9 @@ def add_detector_args(sp):
     sp.add_argument("--weights", default=None, help="detector weights (default: the shipped model)")
     sp.add_argument("--score", type=float, default=0.5, help="keep detections scoring at least this (0..1)")
     sp.add_argument("--device", default="cpu", help="cpu (default), cuda, cuda:N")
+    sp.add_argument("--refiner", default="auto", help="box refiner that places the boxes by a label rule: auto "
+                    "(default: the shipped one with the shipped detector, none with --weights), none, or a "
+                    "refiner's .pt/.onnx file")
     sp.add_argument("--runtime", default="auto", choices=("auto", "torch", "onnx"),
                     help="auto (default: ONNX Runtime for the shipped model on the CPU, else PyTorch), "
                          "torch, or onnx (an .onnx export; no PyTorch import, faster start)")

@@ -125,7 +125,8 @@ def run(args):
     # weights checked before the work starts
     detector, depthnet = load_models(detector=args.mask == "detect" or (estimate and not args.boxes),
                                      depth=args.depth if estimate else "none", weights=args.weights,
-                                     depthnet=args.depthnet, device=args.device, runtime=args.runtime)
+                                     depthnet=args.depthnet, device=args.device, runtime=args.runtime,
+                                     refiner=args.refiner)
     survey = read_recording(args.input, format=args.format, channel=args.channel, track=args.track,
                             marks_every_m=args.marks_every, marks=args.marks)
     if args.poses:

@@ -61,7 +61,7 @@ def run(args):
                     imu=args.imu, odometry=args.odometry, wheel=args.wheel, rig=args.rig, track=args.track,
                     trace_spacing_m=args.trace_spacing, eps_r=eps, depth=args.depth, score=args.score,
                     weights=args.weights, depthnet=args.depthnet, device=args.device, runtime=args.runtime,
-                    reconstruct=settings)
+                    refiner=args.refiner, reconstruct=settings)
     summary = run_pipeline(cfg, log=print)
     from gpr3d.migration.targets import target_name
 

@@ -26,11 +26,26 @@ __all__ = ["Detector", "load_detector", "ENGINES"]
 ENGINES = ("auto", "torch", "onnx")
 
 
-def load_detector(path=None, *, device: str = "cpu", engine: str = "auto") -> "Detector":
+def load_detector(path=None, *, device: str = "cpu", engine: str = "auto", refiner="auto") -> "Detector":
     """The detector in ``path`` (default: the shipped one), run by ``engine`` (see ``ENGINES``).
 
     ``path`` may be a ``.pt`` weights file (torch) or an ``.onnx`` export of one (onnx).
+    ``refiner``: the box refiner that places its boxes (:mod:`gpr3d.detection.refine`):
+    ``"auto"`` the shipped one with the shipped detector and none with other weights,
+    ``"none"`` (or None) none, or a refiner's ``.pt``/``.onnx`` file.
     """
+    det = _load_network(path, device=device, engine=engine)
+    if refiner == "auto":
+        refiner = "default" if path is None else None
+    if refiner not in (None, "none"):
+        from gpr3d.detection.refine import load_refiner
+
+        onnx = det.model is None  # the ONNX engine: no PyTorch for the refiner either
+        det.refiner = load_refiner(None if refiner == "default" else refiner, engine="onnx" if onnx else "torch")
+    return det
+
+
+def _load_network(path, *, device: str, engine: str) -> "Detector":
     from gpr3d.core.errors import GPR3DError
 
     if engine not in ENGINES:
@@ -71,6 +86,8 @@ class Detector:
     """A trained detector with its window settings."""
 
     nms = None  #: None: torchvision's non-maximum suppression when merging windows
+    #: a :class:`~gpr3d.detection.refine.BoxRefiner` that moves the merged boxes onto a label rule (None: the network's)
+    refiner = None
 
     def __init__(self, model, window: WindowConfig, *, provenance: dict | None = None, device: str = "cpu",
                  batch: int = 8):
@@ -122,6 +139,14 @@ class Detector:
         with stage("merge"):
             boxes, scores, index = merge([(w, b, s) for w, (b, s, _, _) in zip(wins, raw)], survey.n_traces,
                                          survey.dt_s, nms=self.nms, return_index=True)
+        if self.refiner is not None and len(boxes):
+            with stage("refine"):
+                from gpr3d.detection.refine import record_image
+
+                boxes, quality = self.refiner.refine(survey, self.window.rows, boxes,
+                                                     record_image(proc, self.window.style))
+                if quality is not None and self.refiner.rescore:
+                    scores = np.asarray(scores, float) * quality ** self.refiner.rescore
         with stage("apexes"):
             kinds = self.kinds
             labels = np.concatenate([r[2] for r in raw])[index] if raw else np.zeros(0, np.int64)
@@ -151,5 +176,7 @@ class Detector:
                 targets.append(t)
         return {"input": input_name or survey.metadata.get("path"), "channel": survey.metadata.get("channel", 0),
                 "n_traces": survey.n_traces, "dt_s": survey.dt_s, "n_windows": len(wins),
-                "detector": self.provenance.get("name", "gpr3d detector"), "score_threshold": score_threshold,
+                "detector": self.provenance.get("name", "gpr3d detector"),
+                "refiner": None if self.refiner is None else self.refiner.provenance.get("name", "gpr3d box refiner"),
+                "score_threshold": score_threshold,
                 "wall_s": time.perf_counter() - t0, "targets": targets}

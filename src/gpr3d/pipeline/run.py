@@ -50,6 +50,7 @@ class RunConfig:
     score: float = 0.5  #: the detector's score threshold
     weights: str | None = None  #: detector weights (default: the shipped ones)
     depthnet: str | None = None  #: DepthNet weights (default: the shipped ones)
+    refiner: str | None = "auto"  #: the box refiner: auto (the shipped one with the shipped detector), none, or a file
     device: str = "cpu"  #: cpu, cuda, cuda:N
     runtime: str = "auto"  #: the detector's runtime
     reconstruct: dict = field(default_factory=dict)  #: ReconstructConfig settings (spacing_m, max_depth_m, ...)
@@ -128,6 +129,8 @@ def check_run_config(cfg: RunConfig) -> None:
         v = getattr(cfg, n)
         if v is not None and not Path(v).exists():
             raise GPR3DError(f"--{n.replace('_', '-')} {v}: no such file" if n != "input" else f"{v}: no such file")
+    if cfg.refiner not in (None, "auto", "none") and not Path(cfg.refiner).is_file():
+        raise GPR3DError(f"--refiner {cfg.refiner}: no such file (or auto, none)")
 
 
 def _survey_stage(cfg: RunConfig, out: Path, log):
@@ -170,7 +173,7 @@ def _detections_stage(cfg: RunConfig, out: Path, log):
 
     estimate = cfg.eps_r is None  # (a given eps_r: the depths come from the migration)
     det, net = load_models(detector=True, depth=cfg.depth if estimate else "none", weights=cfg.weights,
-                           depthnet=cfg.depthnet, device=cfg.device, runtime=cfg.runtime)
+                           depthnet=cfg.depthnet, device=cfg.device, runtime=cfg.runtime, refiner=cfg.refiner)
     s = gpr3d.read(out / "survey.h5")
     found = det.detect(s, score_threshold=cfg.score, input_name=str(cfg.input))
     if estimate and (found["targets"] or cfg.depth != "fit"):
@@ -242,7 +245,8 @@ def run_pipeline(cfg: RunConfig, *, log=print, progress: bool | None = None) -> 
     settings.pop("out")
     keys = {}
     keys["survey"] = _key("survey", files, {k: settings[k] for k in ("format", "channel", "trace_spacing_m")})
-    keys["detections"] = _key("detections", keys["survey"], _sha(cfg.weights), _sha(cfg.depthnet),
+    refiner = cfg.refiner if cfg.refiner in (None, "auto", "none") else _sha(cfg.refiner)
+    keys["detections"] = _key("detections", keys["survey"], _sha(cfg.weights), _sha(cfg.depthnet), refiner,
                               {k: settings[k] for k in ("eps_r", "depth", "score")})
     keys["reconstruction"] = _key("reconstruction", keys["detections"], {k: settings[k] for k in ("eps_r", "reconstruct")})
     work = {"survey": _survey_stage, "detections": _detections_stage, "reconstruction": _reconstruction_stage}

@@ -11,7 +11,7 @@ __all__ = ["add_depths", "load_models", "read_targets", "targets_from_file"]
 
 
 def load_models(*, detector: bool = True, depth: str = "hybrid", weights=None, depthnet=None, device: str = "cpu",
-                runtime: str = "auto"):
+                runtime: str = "auto", refiner="auto"):
     """The detector and DepthNet a run needs, loaded (a wrong file fails here, in one line, before any work).
 
     Parameters
@@ -26,6 +26,8 @@ def load_models(*, detector: bool = True, depth: str = "hybrid", weights=None, d
         ``cpu``, ``cuda`` or ``cuda:N``.
     runtime : {"auto", "torch", "onnx"}
         The detector's runtime.
+    refiner : str or Path or None
+        The detector's box refiner (``load_detector``'s: ``"auto"``, ``"none"`` or a file).
 
     Returns
     -------
@@ -38,7 +40,7 @@ def load_models(*, detector: bool = True, depth: str = "hybrid", weights=None, d
         if detector:
             from gpr3d.detection.infer import load_detector
 
-            det = load_detector(weights, device=device, engine=runtime)
+            det = load_detector(weights, device=device, engine=runtime, refiner=refiner)
         if depth in ("hybrid", "net"):
             from gpr3d.inversion.depthnet import DepthEstimator
 

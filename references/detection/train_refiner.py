@@ -1,0 +1,106 @@
+"""Train the box refiner (``gpr3d.detection.refine``) on labelled records, on the CPU, in minutes.
+
+    python references/detection/train_refiner.py --out runs/refiner.pt [--pgpr DIR] [--synthetic N]
+        [--gprmax FILE.h5[:N]] [--epochs 9] [--per-label 24] [--onnx OUT.onnx]
+
+Labels from P-GPR's train split (its own box rule: the people who labelled its real
+B-scans) and, with ``--synthetic N`` / ``--gprmax``, from N survey-scale synthetic records
+(``survey_sample(1000, i)``, the detector's training source) and packed gprMax records
+(``FILE:N`` leaves out its last N): gpr3d's label rule (``docs/labels.md``). Each record
+is rendered as the shipped detector's windows render it. Nothing of P-GPR's validation
+split nor of the held-out gprMax survey set is read.
+
+P-GPR: Yue, Qin, Zhu, Ye, Wang, "P-GPR: a Ground Penetrating Radar Dataset for Pipeline
+Detection", CIKM '26; CC BY 4.0. A refiner trained on it carries that credit in its provenance.
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from eval_pgpr import PGPR_DEFAULT, pgpr_records  # noqa: E402
+
+from finetune_pgpr import PGPR_CREDIT  # noqa: E402  (beside this file)
+
+
+def samples(records, window):
+    """``(image, label boxes px)`` of each record, rendered as the detector's windows are."""
+    from gpr3d.detection.refine import record_image, record_pixmap
+    from gpr3d.detection.windows import prepare
+
+    for survey, lab in records:
+        pm = record_pixmap(survey, window.rows)
+        boxes = [pm.box_to_px(x["box"]) for x in lab["labels"] if x.get("visible", True)]
+        yield record_image(prepare(survey, window), window.style), np.asarray(boxes, float).reshape(-1, 4)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", required=True, help="the refiner's weights (.pt)")
+    p.add_argument("--pgpr", default=str(PGPR_DEFAULT), help="P-GPR folder (its train/ is read); 'none' for none")
+    p.add_argument("--synthetic", type=int, default=0, help="survey-scale synthetic records (seed 1000) to add")
+    p.add_argument("--gprmax", default=None, help="a packed gprMax file to add, FILE:N leaving out its last N")
+    p.add_argument("--name", default="gpr3d box refiner", help="the refiner's name in detections")
+    p.add_argument("--epochs", type=int, default=9)
+    p.add_argument("--per-label", type=int, default=24)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quality", action="store_true", help="also learn each box's IoU with its label (and boxes "
+                   "that hold none: --negatives x --per-label per label)")
+    p.add_argument("--negatives", type=float, default=0.5)
+    p.add_argument("--rescore", type=float, default=0.0, help="detector scores x quality^this (needs --quality)")
+    p.add_argument("--onnx", default=None, help="also export the refiner with its cropping to this .onnx")
+    args = p.parse_args(argv)
+    import torch
+
+    from gpr3d.detection.refine import export_refiner_onnx, save_refiner, train_refiner
+    from gpr3d.detection.weights import load_weights
+
+    _, window, _ = load_weights()
+    records, parts = [], []
+    if args.pgpr != "none":
+        recs = pgpr_records(args.pgpr, "train")
+        records += recs
+        parts.append(f"P-GPR train ({len(recs)} B-scans)")
+    if args.synthetic:
+        from gpr3d.simulation.surveys import survey_sample
+
+        records += [survey_sample(1000, i) for i in range(args.synthetic)]
+        parts.append(f"survey_sample(1000, i < {args.synthetic})")
+    if args.gprmax:
+        from gpr3d.io.packed import labelled_records
+
+        path, _, held = args.gprmax.partition(":")
+        recs = list(labelled_records(path))
+        recs = recs[: len(recs) - int(held)] if held else recs
+        records += recs
+        parts.append(f"{Path(path).name} ({len(recs)} records{f', its last {held} left out' if held else ''})")
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    if args.rescore and not args.quality:
+        p.error("--rescore needs --quality")
+    net = train_refiner(samples(records, window), epochs=args.epochs, per_label=args.per_label, seed=args.seed,
+                        quality=args.quality, negatives=args.negatives, log=lambda m: print(m, flush=True))
+    wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
+    prov = {"name": args.name, "command": "python references/detection/train_refiner.py " + " ".join(argv or sys.argv[1:]),
+            "data": " + ".join(parts), "epochs": args.epochs, "per_label": args.per_label, "seed": args.seed,
+            "quality": args.quality, "negatives": args.negatives if args.quality else 0,
+            "train_wall_s": round(wall, 1), "train_cpu_s": round(cpu, 1), "torch_threads": torch.get_num_threads(),
+            "host": platform.processor() or platform.machine()}
+    if args.pgpr != "none":
+        prov["credit"] = PGPR_CREDIT
+    save_refiner(net, args.out, provenance=prov, rescore=args.rescore)
+    print(f"wrote {args.out}: {wall:.0f} s wall, {cpu:.0f} s CPU")
+    if args.onnx:
+        r = export_refiner_onnx(args.out, args.onnx)
+        print(f"wrote {r['file']} ({r['bytes']} bytes), largest difference from PyTorch {r['max_abs_diff']:.2e}")
+
+
+if __name__ == "__main__":
+    main()

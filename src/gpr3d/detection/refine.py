@@ -1,0 +1,374 @@
+"""Boxes placed by a dataset's label rule: a small network that moves each detected box.
+
+A detector's box regression sees a hyperbola through 7 x 7 pooled features of a
+network trained mostly on other data; the people who label a data set follow their
+own rule for where a hyperbola's box ends (how far down its legs, how wide). The
+refiner looks again at each box in the record's image: it crops a region twice the
+box's size around it (``EXPAND``), resampled to ``CROP`` x ``CROP`` pixels
+(torchvision's ``roi_align``), and a four-stage convolutional network predicts how far
+each edge must move, in box widths and heights (:func:`box_deltas`). It is trained on
+the labels themselves, each shifted and resized at random as a detector's boxes are
+wrong (:data:`JITTER`), mirrored at random (a hyperbola's box rule is symmetric), so
+that training needs no detector run and takes minutes on two cores
+(``references/detection/train_refiner.py``).
+
+Images are the detector's own (:func:`record_image`: the whole record rendered as its
+windows are), boxes are record boxes ``[trace0, t0_s, trace1, t1_s]``. The network
+runs in PyTorch (:class:`BoxRefiner`) or, exported with its cropping, in ONNX Runtime
+(:class:`OnnxBoxRefiner`), so that ``gpr3d detect`` need not import PyTorch.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from gpr3d.core.atomic import atomic_path
+from gpr3d.core.deps import require
+from gpr3d.core.errors import FormatError, InvalidDataError
+from gpr3d.io.coco import PixelMap
+from gpr3d.io.weights import half_state_dict, read_weights_file
+
+__all__ = ["CROP", "EXPAND", "JITTER", "DEFAULT_REFINER", "DEFAULT_REFINER_ONNX", "record_image", "record_pixmap",
+           "box_deltas", "apply_deltas", "jitter_boxes", "pair_iou", "build_refiner", "crops", "BoxRefiner", "OnnxBoxRefiner",
+           "load_refiner", "save_refiner", "train_refiner", "export_refiner_onnx"]
+
+CROP = 64  #: crop side in pixels
+EXPAND = 2.0  #: the crop covers the box's width and height times this, about its centre
+#: how training boxes are drawn about a label: centre shift (box widths), width and height
+#: factors (log-normal sigma), top and bottom shifts (box heights): a detector's spread on
+#: real data (``benchmarks/results/pgpr_box_fit.md``)
+JITTER = {"centre": 0.06, "width": 0.2, "top": 0.1, "bottom": 0.15}
+FORMAT = "gpr3d.refiner"
+DEFAULT_REFINER = Path(__file__).with_name("default_refiner.pt")
+DEFAULT_REFINER_ONNX = Path(__file__).with_name("default_refiner.onnx")
+_META = "gpr3d.refiner"
+_MIN_SIDE = 2.0  # pixels: a box is never taken as thinner than this
+
+
+def record_pixmap(survey, rows: int) -> PixelMap:
+    """Pixels of the record image (:func:`record_image`): column ``c`` trace ``c``, row ``r`` time ``r`` rows."""
+    spr = (survey.n_samples - 1) * survey.dt_s / (rows - 1)
+    return PixelMap(trace0=-0.5, traces_per_px=1.0, t0_s=-0.5 * spr, s_per_px=spr)
+
+
+def record_image(processed: np.ndarray, style: str = "channels") -> np.ndarray:
+    """The whole record as the detector's windows show it: ``(3, rows, n_traces)`` float32.
+
+    ``processed``: the detector's view ``(n_traces, rows)`` (:func:`gpr3d.detection.windows.prepare`).
+    """
+    from gpr3d.processing.image import record_scale, render_channels
+
+    return render_channels(processed, style, scale=record_scale(processed))
+
+
+def box_deltas(boxes, targets) -> np.ndarray:
+    """How far each edge of ``boxes`` (k, 4) must move to reach ``targets``, in the box's width and height."""
+    b, t = np.asarray(boxes, float).reshape(-1, 4), np.asarray(targets, float).reshape(-1, 4)
+    wh = np.maximum(b[:, 2:] - b[:, :2], _MIN_SIDE)
+    return np.concatenate([(t[:, :2] - b[:, :2]) / wh, (t[:, 2:] - b[:, 2:]) / wh], axis=1)
+
+
+def apply_deltas(boxes, deltas) -> np.ndarray:
+    """``boxes`` (k, 4) moved by ``deltas`` (:func:`box_deltas`'s inverse); an edge never crosses its partner."""
+    b, d = np.asarray(boxes, float).reshape(-1, 4), np.asarray(deltas, float).reshape(-1, 4)
+    wh = np.maximum(b[:, 2:] - b[:, :2], _MIN_SIDE)
+    lo, hi = b[:, :2] + d[:, :2] * wh, b[:, 2:] + d[:, 2:] * wh
+    mid = 0.5 * (lo + hi)
+    return np.concatenate([np.minimum(lo, mid - 0.5), np.maximum(hi, mid + 0.5)], axis=1)
+
+
+def jitter_boxes(boxes, n: int, rng, spread: dict | None = None) -> np.ndarray:
+    """``n`` boxes drawn about each of ``boxes`` (k, 4) as a detector misses them (``JITTER``), label by label."""
+    s = dict(JITTER, **(spread or {}))
+    g = np.repeat(np.asarray(boxes, float).reshape(-1, 4), n, axis=0)
+    w, h = g[:, 2] - g[:, 0], g[:, 3] - g[:, 1]
+    cx = 0.5 * (g[:, 0] + g[:, 2]) + rng.normal(0, s["centre"], len(g)) * w
+    half = 0.5 * w * np.exp(rng.normal(0, s["width"], len(g)))
+    top = g[:, 1] + rng.normal(0, s["top"], len(g)) * h
+    bottom = np.maximum(g[:, 3] + rng.normal(0, s["bottom"], len(g)) * h, top + 0.1 * h + 1)
+    return np.stack([cx - half, top, cx + half, bottom], axis=1)
+
+
+def build_refiner(quality: bool = False):
+    """A fresh refiner network: ``(n, 3, CROP, CROP)`` crops in, ``(n, 4)`` edge moves out (with ``quality``
+    a fifth column: the logit of the box's IoU with the label it belongs to, 0 for none)."""
+    torch = require("torch")
+    nn = torch.nn
+
+    def stage(i, o):
+        return nn.Sequential(nn.Conv2d(i, o, 3, 2, 1), nn.BatchNorm2d(o), nn.ReLU(inplace=True))
+
+    torch.manual_seed(0)
+    side = CROP // 16
+    return nn.Sequential(stage(3, 32), stage(32, 48), stage(48, 64), stage(64, 96), nn.Flatten(),
+                         nn.Linear(96 * side * side, 256), nn.ReLU(inplace=True), nn.Linear(256, 5 if quality else 4))
+
+
+def _regions(torch, boxes):
+    """Crop regions ``(k, 4)``: each box's centre, ``EXPAND`` times its sides."""
+    c = 0.5 * (boxes[:, :2] + boxes[:, 2:])
+    wh = (boxes[:, 2:] - boxes[:, :2]).clamp(min=_MIN_SIDE)
+    return torch.cat([c - 0.5 * EXPAND * wh, c + 0.5 * EXPAND * wh], dim=1)
+
+
+def crops(image, boxes_px):
+    """``(k, 3, CROP, CROP)`` crops (a torch tensor) of ``image`` (3, rows, cols) around ``boxes_px`` (k, 4)."""
+    torch = require("torch")
+    from torchvision.ops import roi_align
+
+    img = torch.as_tensor(np.asarray(image, np.float32) if not torch.is_tensor(image) else image)
+    b = torch.as_tensor(np.asarray(boxes_px, np.float32).reshape(-1, 4))
+    return roi_align(img[None], [_regions(torch, b)], output_size=CROP, spatial_scale=1.0, sampling_ratio=2,
+                     aligned=True)
+
+
+class _Graph:
+    """The refiner with its cropping, as one module (image, boxes) -> deltas: what ONNX exports."""
+
+    def __new__(cls, net):
+        torch = require("torch")
+        from torchvision.ops import roi_align
+
+        class Graph(torch.nn.Module):
+            def __init__(self):
+                super().__init__()
+                self.net = net
+
+            def forward(self, image, boxes):
+                rois = torch.cat([torch.zeros_like(boxes[:, :1]), _regions(torch, boxes)], dim=1)
+                x = roi_align(image, rois, output_size=CROP, spatial_scale=1.0, sampling_ratio=2, aligned=True)
+                return self.net(x)
+
+        return Graph()
+
+
+def _refined(survey, rows, boxes, image, predict):
+    """``(record boxes moved, quality or None)`` with ``predict(image (1, 3, rows, cols), boxes px (k, 4))``.
+
+    A refiner with a quality output is asked again about the moved boxes: their
+    predicted IoU with the label each belongs to (0..1).
+    """
+    b = np.asarray(boxes, float).reshape(-1, 4)
+    if not len(b):
+        return b, None
+    pm = record_pixmap(survey, rows)
+    px = np.array([pm.box_to_px(x) for x in b])
+    img = np.ascontiguousarray(image[None], dtype=np.float32)
+    d = predict(img, np.ascontiguousarray(px, dtype=np.float32))
+    moved = apply_deltas(px, d[:, :4])
+    quality = None
+    if d.shape[1] > 4:
+        quality = 1.0 / (1.0 + np.exp(-predict(img, np.ascontiguousarray(moved, dtype=np.float32))[:, 4]))
+    return np.array([pm.px_to_box(x) for x in moved]), quality
+
+
+def pair_iou(a, b) -> np.ndarray:
+    """IoU of each box of ``a`` (..., 4) with the box of ``b`` in the same place (broadcast)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    ix = np.clip(np.minimum(a[..., 2], b[..., 2]) - np.maximum(a[..., 0], b[..., 0]), 0, None)
+    iy = np.clip(np.minimum(a[..., 3], b[..., 3]) - np.maximum(a[..., 1], b[..., 1]), 0, None)
+    inter = ix * iy
+    union = (a[..., 2] - a[..., 0]) * (a[..., 3] - a[..., 1]) + (b[..., 2] - b[..., 0]) * (b[..., 3] - b[..., 1]) - inter
+    return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+
+
+class BoxRefiner:
+    """A trained refiner (PyTorch); :meth:`refine` moves record boxes onto its label rule."""
+
+    #: scores are multiplied by the predicted quality to this power (0: left as the detector gave them)
+    rescore = 0.0
+
+    def __init__(self, net, provenance: dict | None = None, rescore: float = 0.0):
+        self.net, self.provenance, self.rescore = net.eval(), provenance or {}, float(rescore)
+
+    @classmethod
+    def load(cls, path=None) -> "BoxRefiner":
+        p = Path(path) if path is not None else DEFAULT_REFINER
+        obj = read_weights_file(p, FORMAT, "box refiner")
+        if obj.get("crop") != CROP or obj.get("expand") != EXPAND:
+            raise FormatError(p, f"a refiner for {obj.get('crop')} px crops x {obj.get('expand')}, this gpr3d makes "
+                                 f"{CROP} px x {EXPAND}")
+        net = build_refiner(quality=obj.get("outputs", 4) == 5)
+        try:
+            net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in obj["state_dict"].items()})
+        except RuntimeError as exc:
+            raise FormatError(p, f"weights do not fit the refiner: {str(exc).splitlines()[-1].strip()[:160]}") from None
+        return cls(net, obj.get("provenance"), rescore=obj.get("rescore", 0.0))
+
+    def predict(self, image, boxes_px) -> np.ndarray:
+        """Edge moves ``(k, 4)`` for boxes in pixels of ``image`` (1, 3, rows, cols) (and the quality logit)."""
+        torch = require("torch")
+        with torch.inference_mode():
+            return self.net(crops(image[0], boxes_px)).numpy().astype(float)
+
+    def refine(self, survey, rows: int, boxes, image):
+        """``(boxes moved, quality)``: ``boxes`` (k, 4) of ``survey`` onto the label rule, and their predicted IoU
+        with it (``None`` for a refiner without a quality output); ``image``: the record's
+        :func:`record_image` of ``rows`` rows."""
+        return _refined(survey, rows, boxes, image, self.predict)
+
+
+class OnnxBoxRefiner(BoxRefiner):
+    """The refiner exported with its cropping (:func:`export_refiner_onnx`), run by ONNX Runtime."""
+
+    def __init__(self, session, provenance: dict | None = None, rescore: float = 0.0):
+        self.session, self.provenance, self.rescore = session, provenance or {}, float(rescore)
+
+    @classmethod
+    def load(cls, path=None) -> "OnnxBoxRefiner":
+        ort = require("onnxruntime")
+        p = Path(path) if path is not None else DEFAULT_REFINER_ONNX
+        if not p.is_file():
+            raise FormatError(p, "no such ONNX refiner file")
+        opts = ort.SessionOptions()
+        opts.log_severity_level = 3
+        try:
+            sess = ort.InferenceSession(str(p), opts, providers=["CPUExecutionProvider"])
+        except Exception as exc:  # noqa: BLE001 - ORT raises its own exception types
+            raise FormatError(p, f"not a readable ONNX refiner ({type(exc).__name__})") from None
+        meta = sess.get_modelmeta().custom_metadata_map.get(_META)
+        if meta is None:
+            raise FormatError(p, "an ONNX file without gpr3d refiner metadata")
+        meta = json.loads(meta)
+        if meta.get("crop") != CROP or meta.get("expand") != EXPAND:
+            raise FormatError(p, f"a refiner for {meta.get('crop')} px crops x {meta.get('expand')}, this gpr3d "
+                                 f"makes {CROP} px x {EXPAND}")
+        return cls(sess, meta.get("provenance"), rescore=meta.get("rescore", 0.0))
+
+    def predict(self, image, boxes_px) -> np.ndarray:
+        return self.session.run(None, {"image": image, "boxes": boxes_px})[0].astype(float)
+
+
+def load_refiner(path=None, *, engine: str = "torch") -> BoxRefiner:
+    """The refiner in ``path`` (default: the shipped one): ``.pt`` in PyTorch, ``.onnx`` in ONNX Runtime.
+
+    ``engine="onnx"`` with no path loads the shipped ONNX export.
+    """
+    if (path is not None and str(path).lower().endswith(".onnx")) or (path is None and engine == "onnx"):
+        return OnnxBoxRefiner.load(path)
+    return BoxRefiner.load(path)
+
+
+def save_refiner(net, path, *, provenance: dict | None = None, rescore: float = 0.0) -> None:
+    """Write a refiner's weights (float16) atomically with its crop settings, provenance and ``rescore``."""
+    torch = require("torch")
+    outputs = int(net[-1].out_features)
+    if rescore and outputs != 5:
+        raise InvalidDataError("rescore needs a refiner with a quality output")
+    obj = {"format": FORMAT, "version": 1, "crop": CROP, "expand": EXPAND, "outputs": outputs,
+           "rescore": float(rescore), "state_dict": half_state_dict(net), "provenance": provenance or {}}
+    with atomic_path(path, suffix=".pt.part") as tmp:
+        torch.save(obj, tmp)
+
+
+def export_refiner_onnx(weights=None, out=DEFAULT_REFINER_ONNX) -> dict:
+    """Export a refiner weights file (default: the shipped one) with its cropping to ONNX, atomically.
+
+    Returns ``{"file", "bytes", "max_abs_diff"}``: the largest difference of the graph's
+    edge moves from PyTorch's on a test image.
+    """
+    torch = require("torch")
+    require("onnx")
+    ort = require("onnxruntime")
+    from gpr3d.io.onnxweights import finish_export
+
+    src = Path(weights) if weights is not None else DEFAULT_REFINER
+    ref = BoxRefiner.load(src)
+    graph = _Graph(ref.net).eval()
+    rng = np.random.default_rng(0)
+    image = rng.random((1, 3, 64, 300), dtype=np.float32)
+    boxes = np.array([[20, 10, 80, 30], [150, 5, 260, 50], [0, 0, 40, 63]], np.float32)
+    meta = {"crop": CROP, "expand": EXPAND, "rescore": ref.rescore, "provenance": ref.provenance, "source_weights": src.name,
+            "source_sha256": hashlib.sha256(src.read_bytes()).hexdigest()}
+    with atomic_path(out, suffix=".onnx.part") as tmp:
+        torch.onnx.export(graph, (torch.from_numpy(image), torch.from_numpy(boxes)), str(tmp), opset_version=17,
+                          input_names=["image", "boxes"], output_names=["deltas"], dynamo=False,
+                          dynamic_axes={"image": {2: "rows", 3: "cols"}, "boxes": {0: "k"}, "deltas": {0: "k"}})
+        finish_export(tmp, _META, meta)
+        sess = ort.InferenceSession(str(tmp), providers=["CPUExecutionProvider"])
+        got = sess.run(None, {"image": image, "boxes": boxes})[0]
+        diff = float(np.abs(got - ref.predict(image, boxes)).max())
+    return {"file": str(out), "bytes": Path(out).stat().st_size, "max_abs_diff": diff}
+
+
+def _negatives(labels, n, rows, cols, rng):
+    """``n`` boxes anywhere in a ``rows`` x ``cols`` image, sized as ``labels`` are (each size x a log-normal factor)."""
+    pick = labels[rng.integers(0, len(labels), n)]
+    w = (pick[:, 2] - pick[:, 0]) * np.exp(rng.normal(0, 0.3, n))
+    h = (pick[:, 3] - pick[:, 1]) * np.exp(rng.normal(0, 0.3, n))
+    cx, cy = rng.uniform(0, cols, n), rng.uniform(0, rows, n)
+    return np.stack([cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2], axis=1)
+
+
+def train_refiner(samples, *, epochs: int = 9, per_label: int = 24, batch: int = 128, lr: float = 2e-3,
+                  seed: int = 0, quality: bool = False, negatives: float = 0.5, log=None):
+    """A refiner trained on ``samples``: an iterable of ``(image (3, rows, cols), label boxes px (k, 4))``.
+
+    Each label gives ``per_label`` boxes drawn about it (:func:`jitter_boxes`), each crop
+    mirrored at random; the target is the label. With ``quality`` the network also learns
+    each box's IoU with its label, and ``negatives`` x ``per_label`` boxes per label drawn
+    anywhere in the image (sized as its labels) teach it what no label holds (their IoU: the
+    best over the labels; their edges learn only where that is at least 0.3). One-cycle
+    AdamW, smooth L1 on the edge moves, binary cross-entropy on the IoU. Returns the network
+    in eval mode.
+    """
+    torch = require("torch")
+    if epochs < 1 or per_label < 1 or batch < 1 or not 0 <= negatives <= 10:
+        raise InvalidDataError(f"epochs, per_label and batch must be positive and negatives in 0..10, got {epochs}, "
+                               f"{per_label}, {batch}, {negatives}")
+    rng = np.random.default_rng(seed)
+    xs, ys = [], []
+    for image, labels in samples:
+        g = np.asarray(labels, float).reshape(-1, 4)
+        if not len(g):
+            continue
+        jb, jg = jitter_boxes(g, per_label, rng), np.repeat(g, per_label, axis=0)
+        y = [box_deltas(jb, jg)]
+        if quality:
+            n_neg = int(round(negatives * per_label * len(g)))
+            nb = _negatives(g, n_neg, image.shape[1], image.shape[2], rng)
+            best = np.argmax(pair_iou(nb[:, None, :], g[None, :, :]), axis=1)
+            ng = g[best] if n_neg else np.zeros((0, 4))
+            n_iou = pair_iou(nb, ng)
+            y = [np.concatenate([np.concatenate([box_deltas(jb, jg), pair_iou(jb, jg)[:, None], np.ones((len(jb), 1))], 1),
+                                 np.concatenate([box_deltas(nb, ng), n_iou[:, None], (n_iou >= 0.3)[:, None]], 1)])]
+            jb = np.concatenate([jb, nb])
+        xs.append(crops(image, jb))
+        ys.append(torch.as_tensor(y[0], dtype=torch.float32))
+    if not xs:
+        raise InvalidDataError("no labelled boxes to train the refiner on")
+    x_all, y_all = torch.cat(xs), torch.cat(ys)
+    net = build_refiner(quality)
+    torch.manual_seed(seed)
+    opt = torch.optim.AdamW(net.parameters(), lr / 2, weight_decay=1e-4)
+    n = len(x_all)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, lr, total_steps=epochs * ((n + batch - 1) // batch))
+    for epoch in range(epochs):
+        net.train()
+        order, total = torch.randperm(n), 0.0
+        for i in range(0, n, batch):
+            idx = order[i : i + batch]
+            x, y = x_all[idx].clone(), y_all[idx].clone()
+            flip = torch.rand(len(idx)) < 0.5  # mirrored: left and right edges swap, and change sign
+            x[flip] = x[flip].flip(-1)
+            y[flip, 0], y[flip, 2] = -y_all[idx][flip, 2], -y_all[idx][flip, 0]
+            out = net(x)
+            if quality:
+                w = y[:, 5:6]
+                loss = (torch.nn.functional.smooth_l1_loss(out[:, :4], y[:, :4], beta=0.05, reduction="none") * w).sum() \
+                    / (4 * w.sum()).clamp(min=1) \
+                    + torch.nn.functional.binary_cross_entropy_with_logits(out[:, 4], y[:, 4])
+            else:
+                loss = torch.nn.functional.smooth_l1_loss(out, y, beta=0.05)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += float(loss.detach()) * len(idx)
+        if log:
+            log(f"epoch {epoch + 1}/{epochs}: loss {total / n:.4f} over {n} crops")
+    return net.eval()
