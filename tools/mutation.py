@@ -84,7 +84,7 @@ MODULES = {
     "detection.kindheads": ["tests/detection/test_kinds.py"],
     "detection.infer": ["tests/detection/test_infer_by_hand.py", "tests/detection/test_kinds.py",
                         "tests/detection/test_refine.py::test_the_detector_refines_its_merged_boxes_before_it_reports_them"],
-    "detection.refine": ["tests/detection/test_refine.py"],
+    "detection.refine": ["tests/detection/test_refine.py", "-m", "not slow"],
     "detection.ort": ["tests/detection/test_onnx_runtime.py"],
     "detection.train": ["tests/detection/test_train_by_hand.py", "tests/detection/test_kinds.py"],
     "detection.weights": ["tests/detection/test_weights_train.py", "tests/detection/test_kinds.py", "-k",
