@@ -111,13 +111,14 @@ def test_the_quality_output_learns_the_iou_and_what_holds_no_label():
     assert np.median(np.concatenate(away)) < 0.15 < np.median(pred[truth > 0.6])
 
 
-def test_train_refiner_refuses_what_it_cannot_train_on():
+def test_train_refiner_refuses_what_it_cannot_train_on(tmp_path):
     with pytest.raises(InvalidDataError, match="epochs"):
         R.train_refiner([], epochs=0)
     with pytest.raises(InvalidDataError, match="negatives"):
         R.train_refiner([], negatives=-1)
     with pytest.raises(InvalidDataError, match="quality output"):
-        R.save_refiner(R.build_refiner(), "never.pt", rescore=1.0)
+        R.save_refiner(R.build_refiner(), tmp_path / "never.pt", rescore=1.0)
+    assert not (tmp_path / "never.pt").exists()
     with pytest.raises(InvalidDataError, match="no labelled boxes"):
         R.train_refiner([(np.zeros((3, 32, 32), np.float32), np.zeros((0, 4)))], epochs=1)
 
@@ -266,16 +267,28 @@ def test_onnx_export_gives_pytorch_s_edge_moves(tmp_path):
         if isinstance(m, torch.nn.BatchNorm2d):
             m.running_mean.uniform_(-0.2, 0.2)
             m.running_var.uniform_(0.5, 2.0)
-    R.save_refiner(net, p, rescore=0.5)
+    R.save_refiner(net, p, rescore=0.5, provenance={"name": "test refiner"})
     r = R.export_refiner_onnx(p, tmp_path / "r.onnx")
-    assert r["max_abs_diff"] < 1e-3  # ONNX Runtime's RoiAlign rounds apart from torchvision's by ~1e-4
+    assert r["max_abs_diff"] < 1e-3
+    assert r["file"] == str(tmp_path / "r.onnx") and r["bytes"] == (tmp_path / "r.onnx").stat().st_size
+    assert not list(tmp_path.glob("*.part"))  # ONNX Runtime's RoiAlign rounds apart from torchvision's by ~1e-4
     onnx_ref, torch_ref = R.load_refiner(tmp_path / "r.onnx"), R.load_refiner(p)
     assert isinstance(onnx_ref, R.OnnxBoxRefiner) and onnx_ref.rescore == 0.5
+    assert onnx_ref.provenance == {"name": "test refiner"}
+    import hashlib
+    import json
+
+    meta = json.loads(onnx_ref.session.get_modelmeta().custom_metadata_map["gpr3d.refiner"])
+    assert meta["source_sha256"] == hashlib.sha256(p.read_bytes()).hexdigest() and meta["source_weights"] == "r.pt"
     rng = np.random.default_rng(2)
     image = rng.random((1, 3, 96, 500), dtype=np.float32)
     boxes = np.array([[100, 20, 160, 50], [400, 0, 499, 95], [3, 40, 9, 44]], np.float32)
     got, want = onnx_ref.predict(image, boxes), torch_ref.predict(image, boxes)
     assert got.shape == (3, 5)
+    for k in (1, 6):  # any number of boxes, any image size: the graph's axes are free
+        many = np.tile(boxes, (2, 1))[:k] * np.float32(0.5)
+        small = image[:, :, :50, :260]
+        np.testing.assert_allclose(onnx_ref.predict(small, many), torch_ref.predict(small, many), atol=1e-3)
     assert np.abs(want).max() > 1e-3
     np.testing.assert_allclose(got, want, atol=1e-3)
 
@@ -326,3 +339,77 @@ def test_the_shipped_refiner_brings_boxes_closer_to_real_labels():
             best[name] += list(R.pair_iou(truth[:, None, :], boxes[None, :, :]).max(axis=1, initial=0.0))
     a, b = np.mean(best["plain"]), np.mean(best["refined"])
     assert b > a + 0.015, (a, b)
+
+
+def test_pair_iou_against_hand_values_and_broadcast():
+    a = np.array([[0.0, 0.0, 10.0, 10.0], [0.0, 0.0, 4.0, 2.0], [5.0, 5.0, 5.0, 9.0]])
+    b = np.array([[5.0, 0.0, 15.0, 10.0], [2.0, 1.0, 6.0, 3.0], [5.0, 5.0, 5.0, 9.0]])
+    # half overlap: 50 / 150; 2 x 1 = 2 of 8 + 8 - 2 = 14; zero-area boxes: 0, not nan
+    np.testing.assert_allclose(R.pair_iou(a, b), [50 / 150, 2 / 14, 0.0])
+    m = R.pair_iou(a[:, None, :], b[None, :, :])
+    assert m.shape == (3, 3)
+    np.testing.assert_allclose(np.diag(m), R.pair_iou(a, b))
+    np.testing.assert_allclose(m[0, 1], 8 / 100)  # [2, 1, 6, 3] lies inside the first box
+
+
+def test_negatives_lie_anywhere_in_the_image_sized_as_the_labels():
+    rng = np.random.default_rng(11)
+    labels = np.array([[10.0, 10.0, 50.0, 30.0]])  # 40 x 20
+    n = R._negatives(labels, 20000, 64, 300, rng)
+    w, h = n[:, 2] - n[:, 0], n[:, 3] - n[:, 1]
+    cx, cy = 0.5 * (n[:, 0] + n[:, 2]), 0.5 * (n[:, 1] + n[:, 3])
+    assert n.shape == (20000, 4)
+    assert abs(np.median(w) - 40) < 1 and abs(np.median(h) - 20) < 0.5
+    assert abs(np.std(np.log(w / 40)) - 0.3) < 0.01 and abs(np.std(np.log(h / 20)) - 0.3) < 0.01
+    assert 0 <= cx.min() < 2 and 298 < cx.max() <= 300 and 0 <= cy.min() < 1 and 63 < cy.max() <= 64
+    assert abs(np.corrcoef(w, h)[0, 1]) < 0.05  # two factors, one per side
+
+
+def test_onnx_refiner_files_that_are_not_refiners_are_one_line(tmp_path):
+    pytest.importorskip("onnx")
+    pytest.importorskip("onnxruntime")
+    from gpr3d.detection.ort import NMS_ONNX
+    from gpr3d.io.onnxweights import finish_export
+
+    with pytest.raises(FormatError, match=r"gone\.onnx: no such ONNX refiner file"):
+        R.load_refiner(tmp_path / "gone.onnx")
+    (tmp_path / "junk.onnx").write_bytes(b"not onnx")
+    with pytest.raises(FormatError, match=r"junk\.onnx: not a readable ONNX refiner \("):
+        R.load_refiner(tmp_path / "junk.onnx")
+    with pytest.raises(FormatError, match=r"nms\.onnx: an ONNX file without gpr3d refiner metadata"):
+        R.load_refiner(NMS_ONNX)
+    import shutil
+
+    for name, meta, msg in [("crop.onnx", {"crop": 32, "expand": R.EXPAND}, "a refiner for 32 px crops x 2.0"),
+                            ("expand.onnx", {"crop": R.CROP, "expand": 3.0}, "a refiner for 64 px crops x 3.0")]:
+        shutil.copy(NMS_ONNX, tmp_path / name)
+        finish_export(tmp_path / name, "gpr3d.refiner", meta)
+        with pytest.raises(FormatError, match=rf"{name}: {msg}, this gpr3d makes 64 px x 2.0"):
+            R.load_refiner(tmp_path / name)
+    shutil.copy(NMS_ONNX, tmp_path / "plain.onnx")
+    finish_export(tmp_path / "plain.onnx", "gpr3d.refiner", {"crop": R.CROP, "expand": R.EXPAND})
+    ok = R.load_refiner(tmp_path / "plain.onnx")  # no provenance or rescore written: none, and 0
+    assert ok.provenance == {} and ok.rescore == 0.0
+
+
+def test_refiner_weights_that_do_not_fit_are_one_line(tmp_path):
+    net = R.build_refiner(quality=True)
+    obj = {"format": R.FORMAT, "version": 1, "crop": R.CROP, "expand": R.EXPAND, "outputs": 4,
+           "state_dict": {k: v.half() for k, v in net.state_dict().items()}}
+    torch.save(obj, tmp_path / "five.pt")  # five outputs, the file says four
+    with pytest.raises(FormatError, match=r"five\.pt: weights do not fit the refiner: size mismatch"):
+        R.load_refiner(tmp_path / "five.pt")
+    torch.save(dict(obj, crop=R.CROP, expand=3.0), tmp_path / "x3.pt")
+    with pytest.raises(FormatError, match=r"x3\.pt: a refiner for 64 px crops x 3.0, this gpr3d makes 64 px x 2.0"):
+        R.load_refiner(tmp_path / "x3.pt")
+    old = {k: v for k, v in obj.items() if k != "outputs"}  # a file without "outputs" or "rescore": four, and 0
+    old["state_dict"] = {k: v.half() for k, v in R.build_refiner().state_dict().items()}
+    torch.save(old, tmp_path / "old.pt")
+    ref = R.load_refiner(tmp_path / "old.pt")
+    assert ref.rescore == 0.0 and ref.provenance == {} and ref.net[-1].out_features == 4
+    x = torch.rand(1, 3, R.CROP, R.CROP)
+    with torch.inference_mode():  # float16 on disk, float32 in the network
+        assert ref.net[0][0].weight.dtype == torch.float32
+        np.testing.assert_allclose(ref.net(x).numpy(), R.build_refiner().half().float().eval()(x).numpy(), atol=1e-5)
+    with pytest.raises(FormatError, match=r"gone\.pt: no such box refiner weights file"):
+        R.load_refiner(tmp_path / "gone.pt")
