@@ -177,18 +177,24 @@ def test_quality_is_asked_of_the_moved_boxes():
     np.testing.assert_allclose(got[0, [0, 2]], [40.0, 80.0])
 
 
-def test_the_detector_refines_its_merged_boxes_before_it_reports_them():
+def _one_box_detector(cfg):
+    """A detector whose network finds one box, score 0.9, in every window."""
     from gpr3d.detection.infer import Detector
-    from gpr3d.detection.windows import WindowConfig
-
-    s = _survey(n_traces=256)
 
     class OneBox(Detector):
         def predict_windows_kinds(self, images):
             return [(np.array([[40.0, 30.0, 90.0, 60.0]]), np.array([0.9]), np.array([1]), np.ones(1))
                     for _ in images]
 
-    det = OneBox(None, WindowConfig(traces=256, rows=128, overlap=0.0))
+    return OneBox(None, cfg)
+
+
+def test_the_detector_refines_its_merged_boxes_before_it_reports_them():
+    from gpr3d.detection.windows import WindowConfig
+
+    s = _survey(n_traces=256)
+
+    det = _one_box_detector(WindowConfig(traces=256, rows=128, overlap=0.0))
     plain = det.detect(s)
     assert plain["refiner"] is None
     plain = plain["targets"]
@@ -212,18 +218,12 @@ def test_the_detector_refines_its_merged_boxes_before_it_reports_them():
 
 def test_the_refiner_sees_the_record_as_the_windows_render_it_and_is_timed():
     from gpr3d.core.timing import collect
-    from gpr3d.detection.infer import Detector
     from gpr3d.detection.windows import WindowConfig, prepare
 
     s = _survey(n_traces=256)
 
-    class OneBox(Detector):
-        def predict_windows_kinds(self, images):
-            return [(np.array([[40.0, 30.0, 90.0, 60.0]]), np.array([0.9]), np.array([1]), np.ones(1))
-                    for _ in images]
-
     cfg = WindowConfig(traces=256, rows=128, overlap=0.0, style="hot")
-    det = OneBox(None, cfg)
+    det = _one_box_detector(cfg)
     seen = []
     det.refiner = _Fixed([0.0, 0.0, 0.0, 0.0])
     det.refiner.predict = lambda image, boxes: seen.append(image) or np.zeros((len(boxes), 4))
