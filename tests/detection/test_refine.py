@@ -42,6 +42,8 @@ def test_jitter_spreads_boxes_as_the_table_says():
     j = R.jitter_boxes(g, 40000, rng)
     centre = 0.5 * (j[:, 0] + j[:, 2])
     assert abs(np.std((centre - 120.0) / 40.0) - R.JITTER["centre"]) < 0.003
+    assert abs(np.mean((centre - 120.0) / 40.0)) < 0.002 and abs(np.mean((j[:, 1] - 50.0) / 20.0)) < 0.003
+    assert abs(np.median(np.log((j[:, 2] - j[:, 0]) / 40.0))) < 0.005
     assert abs(np.std(np.log((j[:, 2] - j[:, 0]) / 40.0)) - R.JITTER["width"]) < 0.005
     assert abs(np.std((j[:, 1] - 50.0) / 20.0) - R.JITTER["top"]) < 0.003
     assert abs(np.median((j[:, 3] - 70.0) / 20.0)) < 0.01
@@ -116,6 +118,14 @@ def test_train_refiner_refuses_what_it_cannot_train_on(tmp_path):
         R.train_refiner([], epochs=0)
     with pytest.raises(InvalidDataError, match="negatives"):
         R.train_refiner([], negatives=-1)
+    with pytest.raises(InvalidDataError, match="negatives"):
+        R.train_refiner([], negatives=10.5)
+    # the smallest settings are allowed, and a record without labels is passed over, not the end of the data
+    img = np.random.default_rng(0).random((3, 32, 64), dtype=np.float32)
+    one = np.array([[10.0, 8.0, 30.0, 20.0]])
+    for kw in (dict(per_label=1, batch=1), dict(quality=True, negatives=0.0), dict(quality=True, negatives=10.0)):
+        net = R.train_refiner([(img, np.zeros((0, 4))), (img, one)], epochs=1, **kw)
+        assert net[-1].out_features == (5 if kw.get("quality") else 4)
     with pytest.raises(InvalidDataError, match="quality output"):
         R.save_refiner(R.build_refiner(), tmp_path / "never.pt", rescore=1.0)
     assert not (tmp_path / "never.pt").exists()
