@@ -21,11 +21,12 @@ def test_detect_on_the_real_dzt_writes_the_contract(tmp_path):
     # where its time went: each stage once, in the order it ran (the detector's own inside 'detect')
     times = json.loads((tmp_path / "t.json").read_text())
     assert [k for k in times["stages"] if k not in ("compile", "other")] == [
-        "load models", "read", "detect", "windows", "network", "merge", "apexes", "depths", "write", "figures"]
+        "load models", "read", "detect", "windows", "network", "merge", "refine", "apexes", "depths", "write", "figures"]
     counts = {k: n for k, n in times["counts"].items() if k != "compile"}
     assert counts == {**dict.fromkeys(counts, 1), "load models": 2}  # the detector, then DepthNet
     assert times["stages"]["network"] <= d["wall_s"]  # the detector's own clock spans its stages
-    assert sum(times["stages"][k] for k in ("windows", "network", "merge", "apexes")) <= d["wall_s"] + 1e-3
+    assert sum(times["stages"][k] for k in ("windows", "network", "merge", "refine", "apexes")) <= d["wall_s"] + 1e-3
+    assert d["refiner"] == "refiner_pgpr_synth"  # the shipped box refiner placed the shipped detector's boxes
     assert d["n_traces"] == 1040 and d["dt_s"] == pytest.approx(48e-9 / 512, rel=1e-9, abs=0)
     assert d["input"] == str(src)
     for t in d["targets"]:
@@ -80,7 +81,7 @@ def test_eval_detector_on_a_dataset_folder_matches_the_library(tmp_path):
     pytest.importorskip("distributed")
     pytest.importorskip("pycocotools")
     from gpr3d.detection.evaluate import evaluate_detector
-    from gpr3d.detection.infer import Detector
+    from gpr3d.detection.infer import load_detector
     from gpr3d.io.packed import labelled_records
     from gpr3d.simulation.dataset import SimulateConfig, build_dataset
     from gpr3d.simulation.surveys import survey_sample
@@ -93,7 +94,7 @@ def test_eval_detector_on_a_dataset_folder_matches_the_library(tmp_path):
     (ds / "samples" / "000001" / "labels.json").write_text(json.dumps(lab))
     r = run_cli("eval", "detector", "--data", ds)
     assert r.returncode == 0, r.stderr
-    m = evaluate_detector(Detector.load(), labelled_records(ds), score_threshold=0.5)
+    m = evaluate_detector(load_detector(), labelled_records(ds), score_threshold=0.5)  # as the command loads it
     assert f"{m['n_records']} records, {m['n_true']} targets" in r.stdout
     lines = r.stdout.strip().splitlines()
     row = lines[lines.index("|---|---|---|---|---|---|---|") + 1].split("|")
