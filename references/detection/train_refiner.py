@@ -52,10 +52,6 @@ def main(argv=None):
     p.add_argument("--epochs", type=int, default=9)
     p.add_argument("--per-label", type=int, default=24)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--quality", action="store_true", help="also learn each box's IoU with its label (and boxes "
-                   "that hold none: --negatives x --per-label per label)")
-    p.add_argument("--negatives", type=float, default=0.5)
-    p.add_argument("--rescore", type=float, default=0.0, help="detector scores x quality^this (needs --quality)")
     p.add_argument("--onnx", default=None, help="also export the refiner with its cropping to this .onnx")
     args = p.parse_args(argv)
     import torch
@@ -83,19 +79,16 @@ def main(argv=None):
         records += recs
         parts.append(f"{Path(path).name} ({len(recs)} records{f', its last {held} left out' if held else ''})")
     t0, cpu0 = time.perf_counter(), time.process_time()
-    if args.rescore and not args.quality:
-        p.error("--rescore needs --quality")
     net = train_refiner(samples(records, window), epochs=args.epochs, per_label=args.per_label, seed=args.seed,
-                        quality=args.quality, negatives=args.negatives, log=lambda m: print(m, flush=True))
+                        log=lambda m: print(m, flush=True))
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     prov = {"name": args.name, "command": "python references/detection/train_refiner.py " + " ".join(argv or sys.argv[1:]),
             "data": " + ".join(parts), "epochs": args.epochs, "per_label": args.per_label, "seed": args.seed,
-            "quality": args.quality, "negatives": args.negatives if args.quality else 0,
             "train_wall_s": round(wall, 1), "train_cpu_s": round(cpu, 1), "torch_threads": torch.get_num_threads(),
             "host": platform.processor() or platform.machine()}
     if args.pgpr != "none":
         prov["credit"] = PGPR_CREDIT
-    save_refiner(net, args.out, provenance=prov, rescore=args.rescore)
+    save_refiner(net, args.out, provenance=prov)
     print(f"wrote {args.out}: {wall:.0f} s wall, {cpu:.0f} s CPU")
     if args.onnx:
         r = export_refiner_onnx(args.out, args.onnx)

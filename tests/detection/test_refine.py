@@ -97,38 +97,17 @@ def test_training_moves_boxes_onto_a_rule_it_can_see():
     assert np.mean(after >= 0.75) > np.mean(before >= 0.75) + 0.2
 
 
-def test_the_quality_output_learns_the_iou_and_what_holds_no_label():
-    rng = np.random.default_rng(5)
-    net = R.train_refiner(_blob_records(60, rng), epochs=6, per_label=16, batch=64, quality=True, negatives=0.5)
-    ref = R.BoxRefiner(net)
-    truth, pred, away = [], [], []
-    for img, label in _blob_records(15, np.random.default_rng(6)):
-        start = R.jitter_boxes(label, 6, rng, spread={"centre": 0.3, "width": 0.4})
-        truth.append(R.pair_iou(start, np.repeat(label, 6, 0)))
-        pred.append(1 / (1 + np.exp(-ref.predict(img[None], start.astype(np.float32))[:, 4])))
-        far = label + np.array([[80.0, 0.0, 80.0, 0.0]]) if label[0, 0] < 70 else label - np.array([[70.0, 0, 70.0, 0]])
-        away.append(1 / (1 + np.exp(-ref.predict(img[None], far.astype(np.float32))[:, 4])))
-    truth, pred = np.concatenate(truth), np.concatenate(pred)
-    assert np.corrcoef(truth, pred)[0, 1] > 0.6
-    assert np.median(np.concatenate(away)) < 0.15 < np.median(pred[truth > 0.6])
-
-
 def test_train_refiner_refuses_what_it_cannot_train_on(tmp_path):
     with pytest.raises(InvalidDataError, match="epochs"):
         R.train_refiner([], epochs=0)
-    with pytest.raises(InvalidDataError, match="negatives"):
-        R.train_refiner([], negatives=-1)
-    with pytest.raises(InvalidDataError, match="negatives"):
-        R.train_refiner([], negatives=10.5)
+    for kw in (dict(per_label=0), dict(batch=0)):
+        with pytest.raises(InvalidDataError, match="must be positive"):
+            R.train_refiner([], **kw)
     # the smallest settings are allowed, and a record without labels is passed over, not the end of the data
     img = np.random.default_rng(0).random((3, 32, 64), dtype=np.float32)
     one = np.array([[10.0, 8.0, 30.0, 20.0]])
-    for kw in (dict(per_label=1, batch=1), dict(quality=True, negatives=0.0), dict(quality=True, negatives=10.0)):
-        net = R.train_refiner([(img, np.zeros((0, 4))), (img, one)], epochs=1, **kw)
-        assert net[-1].out_features == (5 if kw.get("quality") else 4)
-    with pytest.raises(InvalidDataError, match="quality output"):
-        R.save_refiner(R.build_refiner(), tmp_path / "never.pt", rescore=1.0)
-    assert not (tmp_path / "never.pt").exists()
+    net = R.train_refiner([(img, np.zeros((0, 4))), (img, one)], epochs=1, per_label=1, batch=1)
+    assert net[-1].out_features == 4 and not net.training
     with pytest.raises(InvalidDataError, match="no labelled boxes"):
         R.train_refiner([(np.zeros((3, 32, 32), np.float32), np.zeros((0, 4)))], epochs=1)
 
@@ -139,21 +118,16 @@ def _survey(n_traces=300, n_samples=128, dt=5e-11):
 
 
 class _Fixed:
-    """A refiner whose network asks the same edge moves of every box (and with a fifth value, its quality logit
-    from the box's left edge: ``q_per_px`` per pixel)."""
+    """A refiner whose network asks the same edge moves of every box."""
 
-    rescore = 0.0
     provenance = {"name": "fixed moves"}
 
-    def __init__(self, d, q_per_px=None, rescore=0.0):
-        self.d, self.q_per_px, self.rescore, self.seen = np.asarray(d, float), q_per_px, rescore, []
+    def __init__(self, d):
+        self.d, self.seen = np.asarray(d, float), []
 
     def predict(self, image, boxes_px):
         self.seen.append((image.shape, boxes_px.copy()))
-        out = np.repeat(self.d[None], len(boxes_px), 0)
-        if self.q_per_px is not None:
-            out = np.concatenate([out, self.q_per_px * boxes_px[:, :1]], axis=1)
-        return out
+        return np.repeat(self.d[None], len(boxes_px), 0)
 
     refine = R.BoxRefiner.refine
 
@@ -165,26 +139,15 @@ def test_refine_works_in_the_record_image_pixels_and_returns_record_boxes():
     boxes = np.array([[20.0, 1e-9, 60.0, 2e-9]])
     fixed = _Fixed([0.1, -0.25, 0.0, 0.5])
     image = np.zeros((3, rows, s.n_traces), np.float32)
-    got, quality = fixed.refine(s, rows, boxes, image)
-    assert quality is None and len(fixed.seen) == 1
+    got = fixed.refine(s, rows, boxes, image)
+    assert len(fixed.seen) == 1
     shape, px = fixed.seen[0]
     assert shape == (1, 3, rows, s.n_traces)
     np.testing.assert_allclose(px[0], [20.5, 1e-9 / spr + 0.5, 60.5, 2e-9 / spr + 0.5], rtol=1e-6)
     w, h = 40.0, 1e-9
     np.testing.assert_allclose(got[0], [20 + 0.1 * w, 1e-9 - 0.25 * h, 60.0, 2e-9 + 0.5 * h], rtol=1e-5)
-    none, q = fixed.refine(s, rows, np.zeros((0, 4)), image)
-    assert none.shape == (0, 4) and q is None
-
-
-def test_quality_is_asked_of_the_moved_boxes():
-    s = _survey()
-    rows = 256
-    fixed = _Fixed([0.5, 0.0, 0.5, 0.0], q_per_px=0.01)  # moved half a width right; logit 0.01 x left edge
-    got, quality = fixed.refine(s, rows, np.array([[20.0, 1e-9, 60.0, 2e-9]]), np.zeros((3, rows, 300), np.float32))
-    assert len(fixed.seen) == 2
-    np.testing.assert_allclose(fixed.seen[1][1][0, 0], 40.5)  # the second look is at the moved box
-    np.testing.assert_allclose(quality, [1 / (1 + np.exp(-0.405))], rtol=1e-6)
-    np.testing.assert_allclose(got[0, [0, 2]], [40.0, 80.0])
+    none = fixed.refine(s, rows, np.zeros((0, 4)), image)
+    assert none.shape == (0, 4) and len(fixed.seen) == 1  # no boxes: the network is not asked
 
 
 def _one_box_detector(cfg):
@@ -218,12 +181,6 @@ def test_the_detector_refines_its_merged_boxes_before_it_reports_them():
     np.testing.assert_allclose(b[2] - a[2], 0.2 * (a[2] - a[0]), rtol=1e-6)
     np.testing.assert_allclose(b[3] - a[3], 0.1 * (a[3] - a[1]), rtol=1e-6)
     assert moved[0]["score"] == plain[0]["score"]
-    det.refiner = _Fixed([0.0, 0.0, 0.0, 0.0], q_per_px=0.0, rescore=2.0)  # quality 0.5: score x 0.25
-    np.testing.assert_allclose(det.detect(s, score_threshold=0.0)["targets"][0]["score"], 0.9 * 0.25, rtol=1e-6)
-    det.refiner.rescore = 0.0
-    np.testing.assert_allclose(det.detect(s)["targets"][0]["score"], 0.9, rtol=1e-6)
-    det.refiner = _Fixed([0.0, 0.0, 0.0, 0.0], rescore=2.0)  # no quality output: rescore has nothing to use
-    np.testing.assert_allclose(det.detect(s)["targets"][0]["score"], 0.9, rtol=1e-6)
 
 
 def test_the_refiner_sees_the_record_as_the_windows_render_it_and_is_timed():
@@ -251,10 +208,7 @@ def test_weights_round_trip_and_bad_files_are_one_line(tmp_path):
     p = tmp_path / "r.pt"
     R.save_refiner(net, p, provenance={"data": "none"})
     ref = R.load_refiner(p)
-    assert ref.provenance == {"data": "none"} and ref.rescore == 0.0
-    R.save_refiner(R.build_refiner(quality=True), tmp_path / "q.pt", rescore=0.5)
-    q = R.load_refiner(tmp_path / "q.pt")
-    assert q.rescore == 0.5 and q.net[-1].out_features == 5
+    assert ref.provenance == {"data": "none"}
     x = torch.rand(2, 3, R.CROP, R.CROP)
     with torch.inference_mode():
         np.testing.assert_allclose(ref.net(x).numpy(), net.eval().half().float()(x).numpy(), atol=1e-5)
@@ -272,18 +226,18 @@ def test_onnx_export_gives_pytorch_s_edge_moves(tmp_path):
     pytest.importorskip("onnx")
     pytest.importorskip("onnxruntime")
     p = tmp_path / "r.pt"
-    net = R.build_refiner(quality=True)
+    net = R.build_refiner()
     for m in net.modules():  # a trained-looking network: batch norm statistics not the identity
         if isinstance(m, torch.nn.BatchNorm2d):
             m.running_mean.uniform_(-0.2, 0.2)
             m.running_var.uniform_(0.5, 2.0)
-    R.save_refiner(net, p, rescore=0.5, provenance={"name": "test refiner"})
+    R.save_refiner(net, p, provenance={"name": "test refiner"})
     r = R.export_refiner_onnx(p, tmp_path / "r.onnx")
     assert r["max_abs_diff"] < 1e-3
     assert r["file"] == str(tmp_path / "r.onnx") and r["bytes"] == (tmp_path / "r.onnx").stat().st_size
     assert not list(tmp_path.glob("*.part"))  # ONNX Runtime's RoiAlign rounds apart from torchvision's by ~1e-4
     onnx_ref, torch_ref = R.load_refiner(tmp_path / "r.onnx"), R.load_refiner(p)
-    assert isinstance(onnx_ref, R.OnnxBoxRefiner) and onnx_ref.rescore == 0.5
+    assert isinstance(onnx_ref, R.OnnxBoxRefiner)
     assert onnx_ref.provenance == {"name": "test refiner"}
     import hashlib
     import json
@@ -294,7 +248,7 @@ def test_onnx_export_gives_pytorch_s_edge_moves(tmp_path):
     image = rng.random((1, 3, 96, 500), dtype=np.float32)
     boxes = np.array([[100, 20, 160, 50], [400, 0, 499, 95], [3, 40, 9, 44]], np.float32)
     got, want = onnx_ref.predict(image, boxes), torch_ref.predict(image, boxes)
-    assert got.shape == (3, 5)
+    assert got.shape == (3, 4)
     for k in (1, 6):  # any number of boxes, any image size: the graph's axes are free
         many = np.tile(boxes, (2, 1))[:k] * np.float32(0.5)
         small = image[:, :, :50, :260]
@@ -362,19 +316,6 @@ def test_pair_iou_against_hand_values_and_broadcast():
     np.testing.assert_allclose(m[0, 1], 8 / 100)  # [2, 1, 6, 3] lies inside the first box
 
 
-def test_negatives_lie_anywhere_in_the_image_sized_as_the_labels():
-    rng = np.random.default_rng(11)
-    labels = np.array([[10.0, 10.0, 50.0, 30.0]])  # 40 x 20
-    n = R._negatives(labels, 20000, 64, 300, rng)
-    w, h = n[:, 2] - n[:, 0], n[:, 3] - n[:, 1]
-    cx, cy = 0.5 * (n[:, 0] + n[:, 2]), 0.5 * (n[:, 1] + n[:, 3])
-    assert n.shape == (20000, 4)
-    assert abs(np.median(w) - 40) < 1 and abs(np.median(h) - 20) < 0.5
-    assert abs(np.std(np.log(w / 40)) - 0.3) < 0.01 and abs(np.std(np.log(h / 20)) - 0.3) < 0.01
-    assert 0 <= cx.min() < 2 and 298 < cx.max() <= 300 and 0 <= cy.min() < 1 and 63 < cy.max() <= 64
-    assert abs(np.corrcoef(w, h)[0, 1]) < 0.05  # two factors, one per side
-
-
 def test_onnx_refiner_files_that_are_not_refiners_are_one_line(tmp_path):
     pytest.importorskip("onnx")
     pytest.importorskip("onnxruntime")
@@ -398,25 +339,26 @@ def test_onnx_refiner_files_that_are_not_refiners_are_one_line(tmp_path):
             R.load_refiner(tmp_path / name)
     shutil.copy(NMS_ONNX, tmp_path / "plain.onnx")
     finish_export(tmp_path / "plain.onnx", "gpr3d.refiner", {"crop": R.CROP, "expand": R.EXPAND})
-    ok = R.load_refiner(tmp_path / "plain.onnx")  # no provenance or rescore written: none, and 0
-    assert ok.provenance == {} and ok.rescore == 0.0
+    ok = R.load_refiner(tmp_path / "plain.onnx")  # no provenance written: none
+    assert ok.provenance == {}
 
 
 def test_refiner_weights_that_do_not_fit_are_one_line(tmp_path):
-    net = R.build_refiner(quality=True)
-    obj = {"format": R.FORMAT, "version": 1, "crop": R.CROP, "expand": R.EXPAND, "outputs": 4,
+    net = R.build_refiner()
+    net[-1] = torch.nn.Linear(256, 5)  # a refiner with a fifth output (an earlier quality variant)
+    obj = {"format": R.FORMAT, "version": 1, "crop": R.CROP, "expand": R.EXPAND, "outputs": 5, "rescore": 0.5,
            "state_dict": {k: v.half() for k, v in net.state_dict().items()}}
-    torch.save(obj, tmp_path / "five.pt")  # five outputs, the file says four
+    torch.save(obj, tmp_path / "five.pt")
     with pytest.raises(FormatError, match=r"five\.pt: weights do not fit the refiner: size mismatch"):
         R.load_refiner(tmp_path / "five.pt")
     torch.save(dict(obj, crop=R.CROP, expand=3.0), tmp_path / "x3.pt")
     with pytest.raises(FormatError, match=r"x3\.pt: a refiner for 64 px crops x 3.0, this gpr3d makes 64 px x 2.0"):
         R.load_refiner(tmp_path / "x3.pt")
-    old = {k: v for k, v in obj.items() if k != "outputs"}  # a file without "outputs" or "rescore": four, and 0
+    old = {k: v for k, v in obj.items() if k not in ("outputs", "rescore")}  # keys this gpr3d does not need
     old["state_dict"] = {k: v.half() for k, v in R.build_refiner().state_dict().items()}
     torch.save(old, tmp_path / "old.pt")
     ref = R.load_refiner(tmp_path / "old.pt")
-    assert ref.rescore == 0.0 and ref.provenance == {} and ref.net[-1].out_features == 4
+    assert ref.provenance == {} and ref.net[-1].out_features == 4
     x = torch.rand(1, 3, R.CROP, R.CROP)
     with torch.inference_mode():  # float16 on disk, float32 in the network
         assert ref.net[0][0].weight.dtype == torch.float32

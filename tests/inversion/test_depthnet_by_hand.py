@@ -793,7 +793,7 @@ def test_the_onnx_export_answers_as_pytorch_and_carries_its_metadata(tmp_path):
                                                  float(np.max(np.abs(got[1] - ref[1])))), rel=1e-3, abs=1e-12)
     with pytest.raises(FormatError) as err:
         DepthEstimator.load(tmp_path / "none.onnx")
-    assert str(err.value) == "none.onnx: no such DepthNet file"
+    assert str(err.value) == "none.onnx: no such ONNX DepthNet file"
 
 
 # ------------------------------------------------------------------------------------------------ records by hand
@@ -1125,7 +1125,8 @@ def test_onnx_files_that_are_not_depthnets_are_named(tmp_path):
         dn._onnx_session(bad)
     with pytest.raises(Exception) as direct:
         ort.InferenceSession(str(bad), providers=["CPUExecutionProvider"])
-    assert str(err.value) == f"bad.onnx: not a readable ONNX DepthNet ({type(direct.value).__name__})"
+    first = str(direct.value).splitlines()[0][:120]
+    assert str(err.value) == f"bad.onnx: not a readable ONNX DepthNet ({type(direct.value).__name__}: {first})"
     graph = helper.make_graph([helper.make_node("Identity", ["x"], ["y"])], "g",
                               [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1])],
                               [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1])])

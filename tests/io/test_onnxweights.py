@@ -102,3 +102,51 @@ def test_finish_export_checks_the_model_before_it_writes(tmp_path):
     with pytest.raises(onnx.checker.ValidationError, match="nowhere"):
         finish_export(path, "gpr3d_meta", {})
     assert path.read_bytes() == before  # left as it was
+
+
+def test_open_session_returns_the_metadata_and_sets_the_thread_pool(tmp_path):
+    from onnx import numpy_helper
+
+    from gpr3d.io.onnxweights import finish_export, open_session
+
+    path = tmp_path / "m.onnx"
+    w = np.eye(4, dtype=np.float32) * 2
+    onnx.save(_graph([numpy_helper.from_array(w, "w")]), str(path))
+    finish_export(path, "gpr3d_meta", {"kind": "test", "n": 3})
+    sess, meta = open_session(path, "gpr3d_meta", "thing")
+    assert meta == {"kind": "test", "n": 3}
+    x = np.array([[1.0, -2.0, 0.5, 3.0]], np.float32)
+    np.testing.assert_allclose(sess.run(None, {"x": x})[0], 2 * x)
+    opts = sess.get_session_options()
+    assert opts.intra_op_num_threads == 0  # ONNX Runtime's own choice
+    with pytest.raises(Exception):  # noqa: B017 - no entry: ORT raises its own error type
+        opts.get_session_config_entry("session.intra_op.allow_spinning")
+    quiet, _ = open_session(path, "gpr3d_meta", "thing", threads=1, spin=False)
+    opts = quiet.get_session_options()
+    assert opts.intra_op_num_threads == 1
+    assert opts.get_session_config_entry("session.intra_op.allow_spinning") == "0"
+    assert opts.log_severity_level == 3
+
+
+def test_open_session_names_the_file_and_what_it_should_hold(tmp_path):
+    from gpr3d.core.errors import FormatError
+    from gpr3d.io.onnxweights import finish_export, open_session
+
+    with pytest.raises(FormatError) as err:
+        open_session(tmp_path / "gone.onnx", "k", "widget")
+    assert str(err.value) == "gone.onnx: no such ONNX widget file"
+    (tmp_path / "junk.onnx").write_bytes(b"not onnx")
+    with pytest.raises(FormatError) as err:
+        open_session(tmp_path / "junk.onnx", "k", "widget")
+    with pytest.raises(Exception) as direct:  # noqa: B017
+        ort.InferenceSession(str(tmp_path / "junk.onnx"), providers=["CPUExecutionProvider"])
+    first = str(direct.value).splitlines()[0][:120]
+    assert str(err.value) == f"junk.onnx: not a readable ONNX widget ({type(direct.value).__name__}: {first})"
+    from onnx import numpy_helper
+
+    path = tmp_path / "other.onnx"
+    onnx.save(_graph([numpy_helper.from_array(np.eye(4, dtype=np.float32), "w")]), str(path))
+    finish_export(path, "someone_else", {})
+    with pytest.raises(FormatError) as err:
+        open_session(path, "k", "widget")
+    assert str(err.value) == "other.onnx: an ONNX file without gpr3d widget metadata"

@@ -143,10 +143,7 @@ class Detector:
             with stage("refine"):
                 from gpr3d.detection.refine import record_image
 
-                boxes, quality = self.refiner.refine(survey, self.window.rows, boxes,
-                                                     record_image(proc, self.window.style))
-                if quality is not None and self.refiner.rescore:
-                    scores = np.asarray(scores, float) * quality ** self.refiner.rescore
+                boxes = self.refiner.refine(survey, self.window.rows, boxes, record_image(proc, self.window.style))
         with stage("apexes"):
             kinds = self.kinds
             labels = np.concatenate([r[2] for r in raw])[index] if raw else np.zeros(0, np.int64)

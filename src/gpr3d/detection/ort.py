@@ -16,7 +16,6 @@ The window settings and the provenance travel in the graph's metadata.
 from __future__ import annotations
 
 import hashlib
-import json
 from pathlib import Path
 
 import numpy as np
@@ -130,25 +129,12 @@ class OnnxDetector(Detector):
 
     @classmethod
     def load(cls, path=None, *, device: str = "cpu", threads: int | None = None) -> "OnnxDetector":
-        ort = require("onnxruntime")
+        from gpr3d.io.onnxweights import open_session
+
         p = Path(path) if path is not None else DEFAULT_ONNX
         if str(device) != "cpu":
             raise FormatError(p, f"the ONNX engine runs on the CPU; use the torch engine for --device {device}")
-        if not p.is_file():
-            raise FormatError(p, "no such ONNX detector file")
-        opts = ort.SessionOptions()
-        if threads:
-            opts.intra_op_num_threads = int(threads)
-        opts.log_severity_level = 3
-        try:
-            sess = ort.InferenceSession(str(p), opts, providers=["CPUExecutionProvider"])
-        except Exception as exc:  # noqa: BLE001 - ORT raises its own exception types
-            raise FormatError(p, f"not a readable ONNX detector ({type(exc).__name__}: "
-                                 f"{str(exc).splitlines()[0][:120]})") from None
-        meta = sess.get_modelmeta().custom_metadata_map.get(_META)
-        if meta is None:
-            raise FormatError(p, "an ONNX file without gpr3d detector metadata")
-        meta = json.loads(meta)
+        sess, meta = open_session(p, _META, "detector", threads=threads)
         return cls(sess, WindowConfig(**meta["window"]), provenance=meta.get("provenance", {}), path=p,
                    kinds=meta.get("kinds"))
 

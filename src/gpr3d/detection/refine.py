@@ -21,7 +21,6 @@ runs in PyTorch (:class:`BoxRefiner`) or, exported with its cropping, in ONNX Ru
 from __future__ import annotations
 
 import hashlib
-import json
 from pathlib import Path
 
 import numpy as np
@@ -93,9 +92,8 @@ def jitter_boxes(boxes, n: int, rng, spread: dict | None = None) -> np.ndarray:
     return np.stack([cx - half, top, cx + half, bottom], axis=1)
 
 
-def build_refiner(quality: bool = False):
-    """A fresh refiner network: ``(n, 3, CROP, CROP)`` crops in, ``(n, 4)`` edge moves out (with ``quality``
-    a fifth column: the logit of the box's IoU with the label it belongs to, 0 for none)."""
+def build_refiner():
+    """A fresh refiner network: ``(n, 3, CROP, CROP)`` crops in, ``(n, 4)`` edge moves out."""
     torch = require("torch")
     nn = torch.nn
 
@@ -105,7 +103,7 @@ def build_refiner(quality: bool = False):
     torch.manual_seed(0)
     side = CROP // 16
     return nn.Sequential(stage(3, 32), stage(32, 48), stage(48, 64), stage(64, 96), nn.Flatten(),
-                         nn.Linear(96 * side * side, 256), nn.ReLU(inplace=True), nn.Linear(256, 5 if quality else 4))
+                         nn.Linear(96 * side * side, 256), nn.ReLU(inplace=True), nn.Linear(256, 4))
 
 
 def _regions(torch, boxes):
@@ -126,44 +124,32 @@ def crops(image, boxes_px):
                      aligned=True)
 
 
-class _Graph:
+def _graph(net):
     """The refiner with its cropping, as one module (image, boxes) -> deltas: what ONNX exports."""
+    torch = require("torch")
+    from torchvision.ops import roi_align
 
-    def __new__(cls, net):
-        torch = require("torch")
-        from torchvision.ops import roi_align
+    class Graph(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.net = net
 
-        class Graph(torch.nn.Module):
-            def __init__(self):
-                super().__init__()
-                self.net = net
+        def forward(self, image, boxes):
+            rois = torch.cat([torch.zeros_like(boxes[:, :1]), _regions(torch, boxes)], dim=1)
+            return self.net(roi_align(image, rois, output_size=CROP, spatial_scale=1.0, sampling_ratio=2, aligned=True))
 
-            def forward(self, image, boxes):
-                rois = torch.cat([torch.zeros_like(boxes[:, :1]), _regions(torch, boxes)], dim=1)
-                x = roi_align(image, rois, output_size=CROP, spatial_scale=1.0, sampling_ratio=2, aligned=True)
-                return self.net(x)
-
-        return Graph()
+    return Graph()
 
 
 def _refined(survey, rows, boxes, image, predict):
-    """``(record boxes moved, quality or None)`` with ``predict(image (1, 3, rows, cols), boxes px (k, 4))``.
-
-    A refiner with a quality output is asked again about the moved boxes: their
-    predicted IoU with the label each belongs to (0..1).
-    """
+    """Record boxes moved with ``predict(image (1, 3, rows, cols), boxes px (k, 4))``."""
     b = np.asarray(boxes, float).reshape(-1, 4)
     if not len(b):
-        return b, None
+        return b
     pm = record_pixmap(survey, rows)
     px = np.array([pm.box_to_px(x) for x in b])
-    img = np.ascontiguousarray(image[None], dtype=np.float32)
-    d = predict(img, np.ascontiguousarray(px, dtype=np.float32))
-    moved = apply_deltas(px, d[:, :4])
-    quality = None
-    if d.shape[1] > 4:
-        quality = 1.0 / (1.0 + np.exp(-predict(img, np.ascontiguousarray(moved, dtype=np.float32))[:, 4]))
-    return np.array([pm.px_to_box(x) for x in moved]), quality
+    d = predict(np.ascontiguousarray(image[None], dtype=np.float32), np.ascontiguousarray(px, dtype=np.float32))
+    return np.array([pm.px_to_box(x) for x in apply_deltas(px, d)])
 
 
 def pair_iou(a, b) -> np.ndarray:
@@ -179,11 +165,8 @@ def pair_iou(a, b) -> np.ndarray:
 class BoxRefiner:
     """A trained refiner (PyTorch); :meth:`refine` moves record boxes onto its label rule."""
 
-    #: scores are multiplied by the predicted quality to this power (0: left as the detector gave them)
-    rescore = 0.0
-
-    def __init__(self, net, provenance: dict | None = None, rescore: float = 0.0):
-        self.net, self.provenance, self.rescore = net.eval(), provenance or {}, float(rescore)
+    def __init__(self, net, provenance: dict | None = None):
+        self.net, self.provenance = net.eval(), provenance or {}
 
     @classmethod
     def load(cls, path=None) -> "BoxRefiner":
@@ -192,52 +175,42 @@ class BoxRefiner:
         if obj.get("crop") != CROP or obj.get("expand") != EXPAND:
             raise FormatError(p, f"a refiner for {obj.get('crop')} px crops x {obj.get('expand')}, this gpr3d makes "
                                  f"{CROP} px x {EXPAND}")
-        net = build_refiner(quality=obj.get("outputs", 4) == 5)
+        net = build_refiner()
         try:
             net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in obj["state_dict"].items()})
         except RuntimeError as exc:
             raise FormatError(p, f"weights do not fit the refiner: {str(exc).splitlines()[-1].strip()[:160]}") from None
-        return cls(net, obj.get("provenance"), rescore=obj.get("rescore", 0.0))
+        return cls(net, obj.get("provenance"))
 
     def predict(self, image, boxes_px) -> np.ndarray:
-        """Edge moves ``(k, 4)`` for boxes in pixels of ``image`` (1, 3, rows, cols) (and the quality logit)."""
+        """Edge moves ``(k, 4)`` for boxes in pixels of ``image`` (1, 3, rows, cols)."""
         torch = require("torch")
         with torch.inference_mode():
             return self.net(crops(image[0], boxes_px)).numpy().astype(float)
 
     def refine(self, survey, rows: int, boxes, image):
-        """``(boxes moved, quality)``: ``boxes`` (k, 4) of ``survey`` onto the label rule, and their predicted IoU
-        with it (``None`` for a refiner without a quality output); ``image``: the record's
-        :func:`record_image` of ``rows`` rows."""
+        """``boxes`` (k, 4) of ``survey`` moved onto the label rule; ``image``: the record's :func:`record_image`
+        of ``rows`` rows."""
         return _refined(survey, rows, boxes, image, self.predict)
 
 
 class OnnxBoxRefiner(BoxRefiner):
     """The refiner exported with its cropping (:func:`export_refiner_onnx`), run by ONNX Runtime."""
 
-    def __init__(self, session, provenance: dict | None = None, rescore: float = 0.0):
-        self.session, self.provenance, self.rescore = session, provenance or {}, float(rescore)
+    def __init__(self, session, provenance: dict | None = None):
+        self.session, self.provenance = session, provenance or {}
 
     @classmethod
     def load(cls, path=None) -> "OnnxBoxRefiner":
-        ort = require("onnxruntime")
+        from gpr3d.io.onnxweights import open_session
+
         p = Path(path) if path is not None else DEFAULT_REFINER_ONNX
-        if not p.is_file():
-            raise FormatError(p, "no such ONNX refiner file")
-        opts = ort.SessionOptions()
-        opts.log_severity_level = 3
-        try:
-            sess = ort.InferenceSession(str(p), opts, providers=["CPUExecutionProvider"])
-        except Exception as exc:  # noqa: BLE001 - ORT raises its own exception types
-            raise FormatError(p, f"not a readable ONNX refiner ({type(exc).__name__})") from None
-        meta = sess.get_modelmeta().custom_metadata_map.get(_META)
-        if meta is None:
-            raise FormatError(p, "an ONNX file without gpr3d refiner metadata")
-        meta = json.loads(meta)
+        # one thread: the refiner's crops are small, and a second pool spinning beside the detector's slows it
+        sess, meta = open_session(p, _META, "refiner", threads=1)
         if meta.get("crop") != CROP or meta.get("expand") != EXPAND:
             raise FormatError(p, f"a refiner for {meta.get('crop')} px crops x {meta.get('expand')}, this gpr3d "
                                  f"makes {CROP} px x {EXPAND}")
-        return cls(sess, meta.get("provenance"), rescore=meta.get("rescore", 0.0))
+        return cls(sess, meta.get("provenance"))
 
     def predict(self, image, boxes_px) -> np.ndarray:
         return self.session.run(None, {"image": image, "boxes": boxes_px})[0].astype(float)
@@ -253,14 +226,11 @@ def load_refiner(path=None, *, engine: str = "torch") -> BoxRefiner:
     return BoxRefiner.load(path)
 
 
-def save_refiner(net, path, *, provenance: dict | None = None, rescore: float = 0.0) -> None:
-    """Write a refiner's weights (float16) atomically with its crop settings, provenance and ``rescore``."""
+def save_refiner(net, path, *, provenance: dict | None = None) -> None:
+    """Write a refiner's weights (float16) atomically with its crop settings and provenance."""
     torch = require("torch")
-    outputs = int(net[-1].out_features)
-    if rescore and outputs != 5:
-        raise InvalidDataError("rescore needs a refiner with a quality output")
-    obj = {"format": FORMAT, "version": 1, "crop": CROP, "expand": EXPAND, "outputs": outputs,
-           "rescore": float(rescore), "state_dict": half_state_dict(net), "provenance": provenance or {}}
+    obj = {"format": FORMAT, "version": 1, "crop": CROP, "expand": EXPAND, "state_dict": half_state_dict(net),
+           "provenance": provenance or {}}
     with atomic_path(path, suffix=".pt.part") as tmp:
         torch.save(obj, tmp)
 
@@ -278,11 +248,11 @@ def export_refiner_onnx(weights=None, out=DEFAULT_REFINER_ONNX) -> dict:
 
     src = Path(weights) if weights is not None else DEFAULT_REFINER
     ref = BoxRefiner.load(src)
-    graph = _Graph(ref.net).eval()
+    graph = _graph(ref.net).eval()
     rng = np.random.default_rng(0)
     image = rng.random((1, 3, 64, 300), dtype=np.float32)
     boxes = np.array([[20, 10, 80, 30], [150, 5, 260, 50], [0, 0, 40, 63]], np.float32)
-    meta = {"crop": CROP, "expand": EXPAND, "rescore": ref.rescore, "provenance": ref.provenance, "source_weights": src.name,
+    meta = {"crop": CROP, "expand": EXPAND, "provenance": ref.provenance, "source_weights": src.name,
             "source_sha256": hashlib.sha256(src.read_bytes()).hexdigest()}
     with atomic_path(out, suffix=".onnx.part") as tmp:
         torch.onnx.export(graph, (torch.from_numpy(image), torch.from_numpy(boxes)), str(tmp), opset_version=17,
@@ -295,54 +265,30 @@ def export_refiner_onnx(weights=None, out=DEFAULT_REFINER_ONNX) -> dict:
     return {"file": str(out), "bytes": Path(out).stat().st_size, "max_abs_diff": diff}
 
 
-def _negatives(labels, n, rows, cols, rng):
-    """``n`` boxes anywhere in a ``rows`` x ``cols`` image, sized as ``labels`` are (each size x a log-normal factor)."""
-    pick = labels[rng.integers(0, len(labels), n)]
-    w = (pick[:, 2] - pick[:, 0]) * np.exp(rng.normal(0, 0.3, n))
-    h = (pick[:, 3] - pick[:, 1]) * np.exp(rng.normal(0, 0.3, n))
-    cx, cy = rng.uniform(0, cols, n), rng.uniform(0, rows, n)
-    return np.stack([cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2], axis=1)
-
-
 def train_refiner(samples, *, epochs: int = 9, per_label: int = 24, batch: int = 128, lr: float = 2e-3,
-                  seed: int = 0, quality: bool = False, negatives: float = 0.5, log=None):
+                  seed: int = 0, log=None):
     """A refiner trained on ``samples``: an iterable of ``(image (3, rows, cols), label boxes px (k, 4))``.
 
     Each label gives ``per_label`` boxes drawn about it (:func:`jitter_boxes`), each crop
-    mirrored at random; the target is the label. With ``quality`` the network also learns
-    each box's IoU with its label, and ``negatives`` x ``per_label`` boxes per label drawn
-    anywhere in the image (sized as its labels) teach it what no label holds (their IoU: the
-    best over the labels; their edges learn only where that is at least 0.3). One-cycle
-    AdamW, smooth L1 on the edge moves, binary cross-entropy on the IoU. Returns the network
-    in eval mode.
+    mirrored at random; the target is the label. One-cycle AdamW, smooth L1 on the edge
+    moves. Returns the network in eval mode.
     """
     torch = require("torch")
-    if epochs < 1 or per_label < 1 or batch < 1 or not 0 <= negatives <= 10:
-        raise InvalidDataError(f"epochs, per_label and batch must be positive and negatives in 0..10, got {epochs}, "
-                               f"{per_label}, {batch}, {negatives}")
+    if epochs < 1 or per_label < 1 or batch < 1:
+        raise InvalidDataError(f"epochs, per_label and batch must be positive, got {epochs}, {per_label}, {batch}")
     rng = np.random.default_rng(seed)
     xs, ys = [], []
     for image, labels in samples:
         g = np.asarray(labels, float).reshape(-1, 4)
         if not len(g):
             continue
-        jb, jg = jitter_boxes(g, per_label, rng), np.repeat(g, per_label, axis=0)
-        y = [box_deltas(jb, jg)]
-        if quality:
-            n_neg = int(round(negatives * per_label * len(g)))
-            nb = _negatives(g, n_neg, image.shape[1], image.shape[2], rng)
-            best = np.argmax(pair_iou(nb[:, None, :], g[None, :, :]), axis=1)
-            ng = g[best] if n_neg else np.zeros((0, 4))
-            n_iou = pair_iou(nb, ng)
-            y = [np.concatenate([np.concatenate([box_deltas(jb, jg), pair_iou(jb, jg)[:, None], np.ones((len(jb), 1))], 1),
-                                 np.concatenate([box_deltas(nb, ng), n_iou[:, None], (n_iou >= 0.3)[:, None]], 1)])]
-            jb = np.concatenate([jb, nb])
+        jb = jitter_boxes(g, per_label, rng)
         xs.append(crops(image, jb))
-        ys.append(torch.as_tensor(y[0], dtype=torch.float32))
+        ys.append(torch.as_tensor(box_deltas(jb, np.repeat(g, per_label, axis=0)), dtype=torch.float32))
     if not xs:
         raise InvalidDataError("no labelled boxes to train the refiner on")
     x_all, y_all = torch.cat(xs), torch.cat(ys)
-    net = build_refiner(quality)
+    net = build_refiner()
     torch.manual_seed(seed)
     opt = torch.optim.AdamW(net.parameters(), lr / 2, weight_decay=1e-4)
     n = len(x_all)
@@ -356,14 +302,7 @@ def train_refiner(samples, *, epochs: int = 9, per_label: int = 24, batch: int =
             flip = torch.rand(len(idx)) < 0.5  # mirrored: left and right edges swap, and change sign
             x[flip] = x[flip].flip(-1)
             y[flip, 0], y[flip, 2] = -y_all[idx][flip, 2], -y_all[idx][flip, 0]
-            out = net(x)
-            if quality:
-                w = y[:, 5:6]
-                loss = (torch.nn.functional.smooth_l1_loss(out[:, :4], y[:, :4], beta=0.05, reduction="none") * w).sum() \
-                    / (4 * w.sum()).clamp(min=1) \
-                    + torch.nn.functional.binary_cross_entropy_with_logits(out[:, 4], y[:, 4])
-            else:
-                loss = torch.nn.functional.smooth_l1_loss(out, y, beta=0.05)
+            loss = torch.nn.functional.smooth_l1_loss(net(x), y, beta=0.05)
             opt.zero_grad()
             loss.backward()
             opt.step()

@@ -571,19 +571,9 @@ def export_depthnet_onnx(weights, out) -> dict:
 
 
 def _onnx_session(path: Path):
-    ort = require("onnxruntime")
-    if not path.is_file():
-        raise FormatError(path, "no such DepthNet file")
-    opts = ort.SessionOptions()
-    opts.log_severity_level = 3
-    try:
-        sess = ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
-    except Exception as exc:  # noqa: BLE001 - ORT raises its own exception types
-        raise FormatError(path, f"not a readable ONNX DepthNet ({type(exc).__name__})") from None
-    meta = sess.get_modelmeta().custom_metadata_map.get(_META)
-    if meta is None:
-        raise FormatError(path, "an ONNX file without gpr3d DepthNet metadata")
-    meta = json.loads(meta)
+    from gpr3d.io.onnxweights import open_session
+
+    sess, meta = open_session(path, _META, "DepthNet")
     return sess, DepthConfig(**meta["net"]), meta.get("provenance", {})
 
 
