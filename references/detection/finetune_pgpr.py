@@ -15,6 +15,12 @@ one box regression serves only in part. The stem
 and layer1 stay fixed (``--freeze 2``): a step of 4 windows takes about 1.5 s on 2 cores.
 Resumes after a kill (run the same line again); ``--max-seconds`` bounds one sitting.
 
+``--real 0`` reads no P-GPR label at all: with ``--wall F`` (a share F of the synthetic
+records drawn as handheld wall scans, ``survey_sample(..., profile="wall")``) this trains
+the zero-shot model of issue 29 item 5. ``--only 'AIR_*'`` trains on one radar's pictures
+(the device-held-out split; ``benchmarks/eval_pgpr.py --split train,val --only 'IECAS_*'``
+tests it on the other's).
+
 P-GPR: Yue, Qin, Zhu, Ye, Wang, "P-GPR: a Ground Penetrating Radar Dataset for Pipeline
 Detection", CIKM '26; CC BY 4.0. Weights trained on it carry that credit in their provenance.
 """
@@ -55,26 +61,38 @@ def main(argv=None):
                    help="packed gprMax datasets mixed into the synthetic share (FILE:N holds out its last N), e.g. "
                         "the stage-3 mix datasets/gprmax400.h5:60 and datasets/gprmax_survey_train.h5:40 four times")
     p.add_argument("--packed-fraction", type=float, default=0.6, help="share of the non-P-GPR windows from --packed")
+    p.add_argument("--wall", type=float, default=0.0,
+                   help="share of the synthetic records drawn as handheld wall scans (survey_sample(..., profile='wall'))")
     p.add_argument("--augment", action="store_true",
                    help="stretch the windows along the traces, change their gain and noise (gpr3d.detection.augment)")
     args = p.parse_args(argv)
+    if not 0.0 <= args.wall <= 1.0 or not 0.0 <= args.real <= 1.0:
+        p.error("--wall and --real are shares in 0..1")
+    zero_shot = args.real == 0  # no P-GPR label read: the zero-shot model of issue 29 item 5
     cfg = TrainConfig(out=args.out, init=args.init, kinds=list(CATEGORIES), steps=args.steps, batch=args.batch,
-                      lr=args.lr, warmup=50, labels=str(Path(args.pgpr) / args.split), labels_fraction=args.real,
+                      lr=args.lr, warmup=50, labels=None if zero_shot else str(Path(args.pgpr) / args.split), labels_fraction=args.real,
                       freeze=args.freeze, checkpoint_every=50, labels_pattern=args.only,
                       packed=args.packed or None, packed_fraction=args.packed_fraction,
                       augment=args.augment or None, **PGPR)
-    res = train_detector(cfg, SurveySource(cfg.data_seed), progress=False, max_seconds=args.max_seconds)
+    source = SurveySource(cfg.data_seed)
+    if args.wall:
+        from gpr3d.detection.data import MixedSource
+
+        source = MixedSource(source, SurveySource(cfg.data_seed, profile="wall"), args.wall)
+    res = train_detector(cfg, source, progress=False, max_seconds=args.max_seconds)
     if res["steps"] < cfg.steps:
         print(f"step {res['steps']} of {cfg.steps}; run the same line again to continue")
         return 0
     weights = Path(args.out) / "weights.pt"
     save_weights(res["model"], cfg.model, cfg.window, weights, kinds=res["kinds"],
                  provenance={"name": cfg.model, "command": "python " + " ".join(sys.argv), "config": asdict(cfg),
-                             "train_wall_s": res["wall_s"], "device": "cpu", "credit": PGPR_CREDIT,
+                             "train_wall_s": res["wall_s"], "device": "cpu",
+                             **({} if zero_shot else {"credit": PGPR_CREDIT}),
                              "data": f"{args.real:.0%} P-GPR {args.split} windows"
                                      + (f" ({args.only})" if args.only else "") + "; of the rest, "
                                      + (f"{args.packed_fraction:.0%} packed gprMax records ({' '.join(args.packed)}), "
                                         if args.packed else "") + f"the others survey_sample(seed={cfg.data_seed}, i)"
+                                     + (f" ({args.wall:.0%} of them wall scans, profile 'wall')" if args.wall else "")
                                      + (f"; augmented {cfg.augment}" if cfg.augment else ""),
                              "steps_done": res["steps"]})
     print(json.dumps({"weights": str(weights), "steps": res["steps"], "wall_s": res["wall_s"]}))

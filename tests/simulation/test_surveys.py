@@ -70,3 +70,75 @@ def test_augmented_surveys_are_seeded():
     assert not np.array_equal(a.data[: min(a.n_traces, c.n_traces)], c.data[: min(a.n_traces, c.n_traces)]) \
         or a.shape != c.shape
     assert math.isfinite(float(np.abs(a.data).max()))
+
+
+def test_wall_scenes_follow_their_ranges_and_are_not_the_training_draws():
+    from gpr3d.simulation.surveys import SURVEY_PROFILES, WALL_RANGES
+
+    r, prof = WALL_RANGES, SURVEY_PROFILES["wall"]
+    for i in range(30):
+        s = sample_survey_scene(3, i, profile="wall")
+        assert s.medium.kind == "concrete"
+        assert prof["n_traces"][0] <= s.n_traces <= prof["n_traces"][1]
+        assert r["frequency_hz"][0] - 1e6 <= s.antenna.frequency_hz <= r["frequency_hz"][1] + 1e6
+        assert r["step_m"][0] - 1e-5 <= s.trace_step_m <= r["step_m"][1] + 1e-5
+        assert r["eps_r"][0] <= s.medium.eps_r <= r["eps_r"][1]
+        assert s.time_window >= r["window_s"][0] and s.time_window >= 2 * s.depth_m / s.medium.velocity_m_s
+        bars = sorted((t for t in s.targets if t.kind == "rebar"), key=lambda t: t.x_m)
+        top = min(t.depth_m for t in bars)
+        assert r["cover_m"][0] - 1e-4 <= top <= r["cover_m"][1] + 1e-4
+        first = [t.x_m for t in bars if abs(t.depth_m - top) < 1e-6]
+        assert np.all(np.diff(first) >= 0.95 * r["rebar_spacing_m"][0] - 1e-4)
+        assert s.to_dict() != sample_survey_scene(3, i).to_dict()
+
+
+def test_display_8bit_keeps_the_order_of_amplitudes_in_256_grey_levels_and_clips_the_strongest():
+    from gpr3d.simulation.surveys import display_8bit
+
+    rng = np.random.default_rng(0)
+    data = rng.normal(size=(200, 64))
+    data[:, 5] = 40.0  # a direct wave far above the rest
+    for seed in range(6):
+        out = display_8bit(data, np.random.default_rng(seed))
+        assert np.array_equal(out, np.round(out)) and out.min() >= 1 and out.max() <= 255
+        assert np.all(out[:, 5] == 255)  # saturated: at most 0.6 of the peak is shown
+        for j in (10, 40):  # along one time sample (one gain), grey follows amplitude
+            order = np.argsort(data[:, j], kind="stable")
+            assert np.all(np.diff(out[order, j]) >= 0)
+    zero = display_8bit(np.zeros((4, 8)), np.random.default_rng(1))
+    assert np.all(zero == 128)
+
+
+def test_wall_noise_is_smooth_across_traces_and_lies_in_the_radar_band():
+    from gpr3d.simulation.surveys import _correlated_noise
+
+    f, dt = 1.6e9, 2.5e-11
+    n = _correlated_noise((400, 512), dt, f, np.random.default_rng(2))
+    assert abs(np.std(n) - 1) < 1e-9
+    assert np.abs(n.mean(axis=1)).max() < 1e-9  # no offset in any trace
+    adj = np.mean([np.corrcoef(n[i], n[i + 1])[0, 1] for i in range(0, 398, 7)])
+    assert adj > 0.4
+    spec = np.mean(np.abs(np.fft.rfft(n, axis=1)) ** 2, axis=0)
+    freqs = np.fft.rfftfreq(512, dt)
+    peak = freqs[np.argmax(spec)]
+    assert 0.7 * f < peak < 1.3 * f
+    assert spec[freqs > 4 * f].sum() < 1e-3 * spec.sum()
+
+
+def test_wall_samples_are_labelled_records_mostly_kept_as_8bit_pictures():
+    from gpr3d.simulation.surveys import SurveySource, survey_sample
+
+    kept8 = 0
+    for i in range(8):
+        s, lab = survey_sample(5, i, profile="wall")
+        assert s.n_samples == lab["n_samples"] and s.n_traces == lab["n_traces"]
+        assert (s.n_samples - 1) * s.dt_s >= 5.9e-9
+        assert any(x["kind"] == "rebar" for x in lab["labels"])
+        for x in lab["labels"]:
+            assert -1 <= x["apex_trace"] <= s.n_traces and 0 < x["apex_time_s"] < s.n_samples * s.dt_s
+        kept8 += bool(np.array_equal(s.data, np.round(s.data)) and s.data.min() >= 1 and s.data.max() <= 255)
+    assert 3 <= kept8 <= 8  # 80 % of them on average
+    src = SurveySource(5, profile="wall")
+    assert np.array_equal(src(2)[0].data, survey_sample(5, 2, profile="wall")[0].data)
+    with pytest.raises(ValueError, match="'train' or 'wall'"):
+        SurveySource(5, profile="walls")

@@ -33,7 +33,7 @@ import numpy as np
 
 from gpr3d.simulation.scene import Antenna, Medium, Scene, Stone, Target
 
-__all__ = ["SURVEY_RANGES", "SURVEY_PROFILES", "sample_survey_scene", "sample_gprmax_survey_scene", "synthesize_survey", "survey_sample", "SurveySource"]
+__all__ = ["SURVEY_RANGES", "SURVEY_PROFILES", "WALL_RANGES", "display_8bit", "sample_survey_scene", "sample_gprmax_survey_scene", "synthesize_survey", "survey_sample", "SurveySource"]
 
 SURVEY_RANGES = {
     "concrete": {"frequency_hz": (1.0e9, 2.6e9), "eps_r": (4.0, 12.0), "conductivity_s_m": (0.001, 0.03),
@@ -55,7 +55,16 @@ SURVEY_PROFILES = {
     "gprmax_eval": {"p_concrete": 0.25, "n_traces": (100, 200),
                     "soil_kinds": {"steel_pipe": 0.2, "pvc_pipe": 0.2, "void": 0.2, "tank": 0.4},
                     "soil_n_targets": (4, 9), "concrete_extra": (1, 3), "depth_factor": (1.1, 1.4)},
+    "wall": {"p_concrete": 1.0, "n_traces": (300, 1800), "concrete_extra": (0, 3), "depth_factor": (1.1, 1.8)},
 }
+
+#: "wall": handheld scans of walls as concrete scanners record them (the sizes P-GPR's train
+#: labels show: 1.6 GHz, 256 rows over 8 ns, hyperbolas 40-200 traces wide and their apexes
+#: 0.65-1.7 ns down, bars 50-290 traces apart): fine trace steps, shallow cover, a fixed
+#: window of 6-10 ns, recorded as an 8-bit picture with the direct wave clipped
+WALL_RANGES = dict(SURVEY_RANGES["concrete"], frequency_hz=(1.2e9, 2.0e9), eps_r=(4.0, 10.0), step_m=(0.0006, 0.0025),
+                   rebar_radius_m=(0.004, 0.012), rebar_spacing_m=(0.1, 0.3), cover_m=(0.012, 0.07),
+                   second_layer=0.3, window_s=(6e-9, 10e-9), display=0.8)
 
 #: the most FDTD work (cells x iterations x traces) a "gprmax_eval" scene may cost; dearer draws are redrawn
 GPRMAX_EVAL_MAX_CELL_STEPS = 8e9
@@ -79,9 +88,10 @@ def sample_survey_scene(seed: int, index: int, *, host: str | None = None, profi
     if profile not in SURVEY_PROFILES:
         raise ValueError(f"unknown survey profile {profile!r} (use {', '.join(SURVEY_PROFILES)})")
     prof = SURVEY_PROFILES[profile]
-    rng = _rng(seed, index) if profile == "train" and attempt == 0 else _rng(seed, index, 0xE7A1, attempt)
+    rng = _rng(seed, index) if profile == "train" and attempt == 0 else \
+        _rng(seed, index, 0xE7A1 if profile != "wall" else 0x3A11, attempt)
     host = host or ("concrete" if rng.random() < prof["p_concrete"] else "soil")
-    r = SURVEY_RANGES[host]
+    r = WALL_RANGES if profile == "wall" else SURVEY_RANGES[host]
     f = _log_uniform(rng, *r["frequency_hz"])
     eps = float(rng.uniform(*r["eps_r"]))
     sigma = _log_uniform(rng, *r["conductivity_s_m"])
@@ -115,7 +125,7 @@ def sample_survey_scene(seed: int, index: int, *, host: str | None = None, profi
         deepest = max(t.depth_m + 2 * t.radius_m for t in targets)
         for _ in range(int(rng.integers(prof["concrete_extra"][0], prof["concrete_extra"][1] + 1))):
             # conduits and voids between or below the bars
-            kind = str(rng.choice(["steel_pipe", "pvc_pipe", "void"]))
+            kind = str(rng.choice(["steel_pipe", "pvc_pipe", "void"], p=[0.3, 0.6, 0.1] if profile == "wall" else None))
             t = Target(kind, x_m=round(float(rng.uniform(0, length)), 4),
                        depth_m=round(float(rng.uniform(cover + 0.02, deepest + 0.12)), 4),
                        radius_m=round(float(rng.uniform(0.008, 0.025)), 4))
@@ -151,6 +161,8 @@ def sample_survey_scene(seed: int, index: int, *, host: str | None = None, profi
                   name=f"survey_{host}_{seed}_{index:06d}")
     scene.targets = targets
     scene.time_window_s = 2 * depth_range / v + 2.5 / f
+    if profile == "wall":
+        scene.time_window_s = max(scene.time_window_s, float(rng.uniform(*r["window_s"])))
     if host == "soil":
         for _ in range(int(rng.integers(0, 8))):
             scene.stones.append(Stone(x_m=round(float(rng.uniform(0, length)), 4),
@@ -212,11 +224,15 @@ def _trace_positions(scene: Scene, rng, augment: bool) -> np.ndarray:
     return scene.x_start_m + np.cumsum(steps)
 
 
-def synthesize_survey(scene: Scene, *, seed: int = 0, augment: bool = True, n_samples: int | None = None):
+def synthesize_survey(scene: Scene, *, seed: int = 0, augment: bool = True, n_samples: int | None = None,
+                      wall: bool = False):
     """A recorded-looking B-scan of ``scene`` (forward model) and its labels: ``(Survey, labels dict)``.
 
     With ``augment`` the artefacts listed in the module docstring are drawn from
-    ``seed``; without it the B-scan is the clean forward model at even steps.
+    ``seed``; without it the B-scan is the clean forward model at even steps. ``wall``
+    (with ``augment``): recorded as a handheld wall scanner records (``WALL_RANGES``): a
+    narrower beam, the concrete's aggregate as many weak scatterers, noise correlated from
+    trace to trace, and most often kept as an 8-bit picture (:func:`display_8bit`).
     """
     from gpr3d.core.poses import quat_from_yaw
     from gpr3d.core.survey import Survey
@@ -245,9 +261,17 @@ def synthesize_survey(scene: Scene, *, seed: int = 0, augment: bool = True, n_sa
                   spreading=str(rng.choice(["2d", "3d"])), air_wave=float(rng.uniform(0.2, 2.0)),
                   ground_wave=float(rng.uniform(0.1, 1.0)), clutter=int(rng.integers(0, 30)),
                   clutter_amplitude=float(rng.uniform(0.01, 0.06)))
+        if wall:
+            kw.update(beam_half_angle_deg=float(rng.uniform(20, 45)), clutter=int(rng.integers(60, 300)),
+                      clutter_amplitude=float(rng.uniform(0.02, 0.12)))
     data = forward_model(fs, pos, **kw).astype(np.float64)
     if augment:
         data = _artefacts(data, dt, f, rng)
+        if wall:
+            data = data + _correlated_noise(data.shape, dt, f, rng) * float(rng.uniform(0.02, 0.06)) \
+                * (float(np.percentile(np.abs(data), 99.5)) or 1.0)
+            if rng.random() < WALL_RANGES["display"]:
+                data = display_8bit(data, rng)
     survey = Survey(data=data.astype(np.float32), dt_s=dt, positions_xyz=pos, offset_m=scene.antenna.offset_m,
                     frequency_hz=f, eps_r=scene.medium.eps_r, orientations_quat_wxyz=quat_from_yaw(np.zeros(len(x))),
                     metadata={"format": "forward", "scene": scene.to_dict(), "antenna": "forward model",
@@ -283,20 +307,46 @@ def _artefacts(data: np.ndarray, dt: float, f: float, rng) -> np.ndarray:
     return data
 
 
-def survey_sample(seed: int, index: int, *, host: str | None = None, augment: bool = True):
-    """``(Survey, labels)`` of survey-scale sample ``index``: the detector's training and test source."""
-    scene = sample_survey_scene(seed, index, host=host)
+def _correlated_noise(shape, dt: float, f: float, rng) -> np.ndarray:
+    """Unit-RMS noise in a band about ``f`` (a Gaussian of half its width in frequency) and smooth over a few
+    traces: a wall's texture."""
+    from scipy.ndimage import gaussian_filter1d
+
+    n = gaussian_filter1d(rng.standard_normal(shape), float(rng.uniform(1.0, 6.0)), axis=0, mode="wrap")
+    freqs = np.fft.rfftfreq(shape[1], dt)
+    band = np.exp(-0.5 * ((freqs - f) / (0.5 * f)) ** 2)
+    band[0] = 0.0  # no offset
+    n = np.fft.irfft(np.fft.rfft(n, axis=1) * band, n=shape[1], axis=1)
+    return n / (float(np.std(n)) or 1.0)
+
+
+def display_8bit(data: np.ndarray, rng) -> np.ndarray:
+    """``data`` as an 8-bit grey picture of it holds it: a gain that grows with time (sometimes), clipped at a
+    level that saturates the direct wave (0.15-0.6 of the peak), 256 grey levels about mid-grey."""
+    n_s = data.shape[1]
+    if rng.random() < 0.6:
+        data = data * (1 + rng.uniform(0, 6) * (np.arange(n_s) / n_s) ** rng.uniform(0.7, 2.0))[None, :]
+    level = float(rng.uniform(0.15, 0.6)) * (float(np.abs(data).max()) or 1.0)
+    return np.round(np.clip(data / level, -1.0, 1.0) * 127.0) + 128.0
+
+
+def survey_sample(seed: int, index: int, *, host: str | None = None, augment: bool = True, profile: str = "train"):
+    """``(Survey, labels)`` of survey-scale sample ``index``: the detector's training and test source
+    (``profile="wall"``: P-GPR-like handheld wall scans, ``WALL_RANGES``)."""
+    scene = sample_survey_scene(seed, index, host=host, profile=profile)
     return synthesize_survey(scene, seed=int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0]),
-                             augment=augment)
+                             augment=augment, wall=profile == "wall")
 
 
 class SurveySource:
     """``source(i) -> survey_sample(seed, i)``: a picklable record source for training and evaluation."""
 
-    def __init__(self, seed: int, *, augment: bool = True):
+    def __init__(self, seed: int, *, augment: bool = True, profile: str = "train"):
         if not isinstance(seed, int) or seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-        self.seed, self.augment = seed, augment
+        if profile not in ("train", "wall"):
+            raise ValueError(f"a survey source draws 'train' or 'wall' records, got {profile!r}")
+        self.seed, self.augment, self.profile = seed, augment, profile
 
     def __call__(self, i: int):
-        return survey_sample(self.seed, i, augment=self.augment)
+        return survey_sample(self.seed, i, augment=self.augment, profile=self.profile)
