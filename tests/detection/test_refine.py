@@ -48,8 +48,17 @@ def test_jitter_spreads_boxes_as_the_table_says():
     assert abs(np.std((j[:, 1] - 50.0) / 20.0) - R.JITTER["top"]) < 0.003
     assert abs(np.median((j[:, 3] - 70.0) / 20.0)) < 0.01
     assert np.all(j[:, 3] > j[:, 1])
+    assert abs(np.std((j[:, 3] - 70.0) / 20.0) - R.JITTER["bottom"]) < 0.005
+    # a bottom drawn above the top is held 0.1 of the height and a pixel below it
+    low = R.jitter_boxes(g, 4000, np.random.default_rng(5), spread={"top": 0.0, "bottom": 3.0})
+    gap = low[:, 3] - low[:, 1]
+    assert np.mean(gap <= 3.0 + 1e-9) > 0.2
+    np.testing.assert_allclose(gap.min(), 0.1 * 20 + 1)
     j2 = R.jitter_boxes(g, 10, np.random.default_rng(3), spread={"width": 0.0})
     np.testing.assert_allclose(j2[:, 2] - j2[:, 0], 40.0)
+    two = R.jitter_boxes([[0, 0, 10, 10], [100, 50, 140, 70]], 3, np.random.default_rng(4))  # label by label
+    assert two.shape == (6, 4)
+    assert np.all(np.abs(0.5 * (two[:3, 0] + two[:3, 2]) - 5) < 3) and np.all(np.abs(0.5 * (two[3:, 0] + two[3:, 2]) - 120) < 10)
 
 
 def test_crops_sample_the_region_twice_the_box_about_its_centre():
@@ -66,6 +75,35 @@ def test_crops_sample_the_region_twice_the_box_about_its_centre():
     i = np.arange(R.CROP)
     np.testing.assert_allclose(c[0, 0, 10], x0 + (i + 0.5) * bx - 0.5, atol=1e-4)
     np.testing.assert_allclose(c[0, 1, :, 10], y0 + (i + 0.5) * by - 0.5, atol=1e-4)
+    # a curved image: each bin is the mean of 2 x 2 bilinear samples (roi_align's sampling ratio 2), not of its
+    # centre alone; pixel k holds f(k) = k^2, the samples lie at x0 + i * bx + (j + 0.5) * bx / 2, j = 0, 1
+    image[2] = (np.arange(cols, dtype=np.float32) ** 2)[None, :]
+    got = R.crops(image, box).numpy()[0, 2, 10]
+
+    def lin(x):  # bilinear along x between pixel centres (at k + 0.5)
+        u = x - 0.5
+        k = np.floor(u)
+        return k**2 * (1 - (u - k)) + (k + 1) ** 2 * (u - k)
+
+    want = 0.5 * (lin(x0 + i * bx + 0.25 * bx) + lin(x0 + i * bx + 0.75 * bx))
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-3)
+    # float64 pictures are cropped in float32, as the network computes
+    c64 = R.crops(image.astype(np.float64), box)
+    assert c64.dtype == torch.float32
+    np.testing.assert_array_equal(c64.numpy(), R.crops(image, box).numpy())
+    np.testing.assert_array_equal(R.crops(torch.from_numpy(image), box).numpy(), R.crops(image, box).numpy())
+
+
+def test_the_exported_graph_crops_as_crops_does():
+    """The graph ONNX gets is ``crops`` followed by the network: with a network that only flattens, the graph's
+    output is the crops themselves (a random picture: every sampling setting shows)."""
+    rng = np.random.default_rng(9)
+    image = rng.random((3, 50, 120), dtype=np.float32)
+    boxes = np.array([[10.0, 5.0, 40.0, 20.0], [60.0, 10.0, 117.0, 48.0]], np.float32)
+    g = R._graph(torch.nn.Flatten())
+    with torch.inference_mode():
+        got = g(torch.from_numpy(image[None]), torch.from_numpy(boxes)).numpy()
+    np.testing.assert_allclose(got, R.crops(image, boxes).flatten(1).numpy(), atol=1e-6)
 
 
 def _blob_records(n, rng, rows=64, cols=160):
@@ -108,8 +146,27 @@ def test_train_refiner_refuses_what_it_cannot_train_on(tmp_path):
     one = np.array([[10.0, 8.0, 30.0, 20.0]])
     net = R.train_refiner([(img, np.zeros((0, 4))), (img, one)], epochs=1, per_label=1, batch=1)
     assert net[-1].out_features == 4 and not net.training
-    with pytest.raises(InvalidDataError, match="no labelled boxes"):
+    with pytest.raises(InvalidDataError, match="^no labelled boxes to train the refiner on$"):
         R.train_refiner([(np.zeros((3, 32, 32), np.float32), np.zeros((0, 4)))], epochs=1)
+
+
+def test_training_defaults_are_the_shipped_refiner_s_recipe():
+    """``train_refiner``'s defaults are the recipe the shipped refiner records (9 epochs, 24 boxes a label, seed
+    0) with batch 128 and peak rate 2e-3: a run with them spelled out gives the same weights."""
+    import torch as _torch
+
+    shipped = _torch.load(R.DEFAULT_REFINER, weights_only=False)["provenance"]
+    assert (shipped["epochs"], shipped["per_label"], shipped["seed"]) == (9, 24, 0)
+    rng = np.random.default_rng(1)
+    img = rng.random((3, 40, 90), dtype=np.float32)
+    boxes = np.array([[10.0, 8.0, 30.0, 20.0], [50.0, 5.0, 80.0, 30.0], [40.0, 20.0, 55.0, 36.0]])
+    data = [(img, boxes), (img[:, ::-1].copy(), boxes + 2.0)]  # 144 crops: two batches of the default size
+    a = R.train_refiner(data)
+    b = R.train_refiner(data, epochs=9, per_label=24, batch=128, lr=2e-3, seed=0)
+    c = R.train_refiner(data, epochs=9, per_label=24, batch=128, lr=2e-3, seed=1)
+    for (k, va), vb, vc in zip(a.state_dict().items(), b.state_dict().values(), c.state_dict().values()):
+        assert _torch.equal(va, vb), k
+    assert any(not _torch.equal(va, vc) for va, vc in zip(a.state_dict().values(), c.state_dict().values()))
 
 
 def _survey(n_traces=300, n_samples=128, dt=5e-11):
@@ -203,6 +260,29 @@ def test_the_refiner_sees_the_record_as_the_windows_render_it_and_is_timed():
     assert not np.array_equal(seen[0][0], R.record_image(prepare(s, cfg), "channels"))
 
 
+@pytest.mark.parametrize("style", ["channels", "hot"])
+def test_the_record_image_is_the_detector_s_windows_side_by_side(style):
+    """What the refiner sees is what the detector saw: each window's image is the record image's columns from its
+    first trace (the same record-wide scale), and a record box lands on the same pixels, shifted by that trace."""
+    from gpr3d.detection.windows import WindowConfig, prepare, windows
+
+    s = _survey(n_traces=600)
+    s.data[:300] *= 5.0  # an uneven record: a per-window scale would show
+    cfg = WindowConfig(traces=256, rows=128, overlap=0.25, style=style)
+    proc = prepare(s, cfg)
+    image = R.record_image(proc, style)
+    assert image.shape == (3, 128, 600) and image.dtype == np.float32
+    if style == "channels":
+        np.testing.assert_array_equal(R.record_image(proc), image)  # the default style
+    pm = R.record_pixmap(s, cfg.rows)
+    box = np.array([310.0, 1.5e-9, 352.0, 3.0e-9])
+    for w in windows(s, cfg, processed=proc):
+        np.testing.assert_allclose(image[:, :, w.trace_start : w.trace_start + w.n_traces], w.image[:, :, : w.n_traces],
+                                   atol=1e-6)
+        np.testing.assert_allclose(np.subtract(pm.box_to_px(box), [w.trace_start, 0, w.trace_start, 0]), w.pixmap.box_to_px(box),
+                                   rtol=1e-9, atol=1e-9)
+
+
 def test_weights_round_trip_and_bad_files_are_one_line(tmp_path):
     net = R.build_refiner()
     p = tmp_path / "r.pt"
@@ -222,9 +302,10 @@ def test_weights_round_trip_and_bad_files_are_one_line(tmp_path):
         R.load_refiner(other)
 
 
-def test_onnx_export_gives_pytorch_s_edge_moves(tmp_path):
+def test_onnx_export_gives_pytorch_s_edge_moves(tmp_path, monkeypatch):
     pytest.importorskip("onnx")
     pytest.importorskip("onnxruntime")
+    monkeypatch.chdir(tmp_path)  # nothing but the named files is read or written
     p = tmp_path / "r.pt"
     net = R.build_refiner()
     for m in net.modules():  # a trained-looking network: batch norm statistics not the identity
@@ -244,6 +325,9 @@ def test_onnx_export_gives_pytorch_s_edge_moves(tmp_path):
 
     meta = json.loads(onnx_ref.session.get_modelmeta().custom_metadata_map["gpr3d.refiner"])
     assert meta["source_sha256"] == hashlib.sha256(p.read_bytes()).hexdigest() and meta["source_weights"] == "r.pt"
+    shipped = R.export_refiner_onnx(out=tmp_path / "shipped.onnx")  # no weights named: the shipped refiner's
+    meta = json.loads(R.load_refiner(shipped["file"]).session.get_modelmeta().custom_metadata_map["gpr3d.refiner"])
+    assert meta["source_weights"] == "default_refiner.pt" and shipped["max_abs_diff"] < 1e-3
     rng = np.random.default_rng(2)
     image = rng.random((1, 3, 96, 500), dtype=np.float32)
     boxes = np.array([[100, 20, 160, 50], [400, 0, 499, 95], [3, 40, 9, 44]], np.float32)
@@ -279,6 +363,14 @@ def test_the_shipped_refiner_comes_with_the_shipped_detector_in_either_engine(tm
     boxes = np.array([[50, 30, 150, 80], [600, 100, 690, 200]], np.float32)
     np.testing.assert_allclose(onnx_det.refiner.predict(image, boxes), torch_det.refiner.predict(image, boxes),
                                atol=1e-3)
+    # its session keeps to one thread (a second pool beside the detector's slowed the detector's network)
+    assert onnx_det.refiner.session.get_session_options().intra_op_num_threads == 1
+    # refine() hands either engine float32 pictures and boxes, whatever it is given
+    s = _survey(n_traces=700, n_samples=256)
+    img64 = rng.random((3, 256, 700))
+    rec = np.array([[50.0, 1e-9, 150.0, 3e-9], [600.0, 4e-9, 690.0, 8e-9]])
+    np.testing.assert_allclose(onnx_det.refiner.refine(s, 256, rec, img64), torch_det.refiner.refine(s, 256, rec, img64),
+                               rtol=1e-3, atol=1e-12)
 
 
 @pytest.mark.slow
@@ -314,6 +406,12 @@ def test_pair_iou_against_hand_values_and_broadcast():
     assert m.shape == (3, 3)
     np.testing.assert_allclose(np.diag(m), R.pair_iou(a, b))
     np.testing.assert_allclose(m[0, 1], 8 / 100)  # [2, 1, 6, 3] lies inside the first box
+    # away from the origin, apart on both axes, and smaller than a pixel
+    a = np.array([[10.0, 20.0, 14.0, 23.0], [0.0, 0.0, 1.0, 1.0], [0.1, 0.1, 0.5, 0.5]])
+    b = np.array([[12.0, 21.0, 16.0, 25.0], [3.0, 3.0, 5.0, 5.0], [0.3, 0.3, 0.7, 0.7]])
+    # 2 x 2 = 4 of 12 + 16 - 4; no overlap (not the product of two negative overlaps); 0.04 of 0.28
+    np.testing.assert_allclose(R.pair_iou(a, b), [4 / 24, 0.0, 0.04 / 0.28])
+    np.testing.assert_allclose(R.pair_iou(b, a), R.pair_iou(a, b))
 
 
 def test_onnx_refiner_files_that_are_not_refiners_are_one_line(tmp_path):
@@ -349,8 +447,17 @@ def test_refiner_weights_that_do_not_fit_are_one_line(tmp_path):
     obj = {"format": R.FORMAT, "version": 1, "crop": R.CROP, "expand": R.EXPAND, "outputs": 5, "rescore": 0.5,
            "state_dict": {k: v.half() for k, v in net.state_dict().items()}}
     torch.save(obj, tmp_path / "five.pt")
-    with pytest.raises(FormatError, match=r"five\.pt: weights do not fit the refiner: size mismatch"):
+    with pytest.raises(RuntimeError) as direct:  # what PyTorch says of the same weights
+        R.build_refiner().load_state_dict({k: v.float() for k, v in obj["state_dict"].items()})
+    with pytest.raises(FormatError) as err:
         R.load_refiner(tmp_path / "five.pt")
+    last = str(direct.value).splitlines()[-1].strip()
+    assert "size mismatch" in last and str(err.value) == f"five.pt: weights do not fit the refiner: {last[:160]}"
+    extra = dict(obj, state_dict=dict(R.build_refiner().half().state_dict(), **{"x" * 300: torch.zeros(1)}))
+    torch.save(extra, tmp_path / "long.pt")  # an unexpected key: PyTorch's line is long, ours stops at 160
+    with pytest.raises(FormatError) as err:
+        R.load_refiner(tmp_path / "long.pt")
+    assert len(str(err.value)) == len("long.pt: weights do not fit the refiner: ") + 160
     torch.save(dict(obj, crop=R.CROP, expand=3.0), tmp_path / "x3.pt")
     with pytest.raises(FormatError, match=r"x3\.pt: a refiner for 64 px crops x 3.0, this gpr3d makes 64 px x 2.0"):
         R.load_refiner(tmp_path / "x3.pt")
