@@ -78,7 +78,7 @@ def main(argv=None):
     if args.wall:
         from gpr3d.detection.data import MixedSource
 
-        source = MixedSource(source, SurveySource(cfg.data_seed, profile="wall"), args.wall)
+        source = MixedSource(source, SurveySource(cfg.data_seed, profile="wall"), args.wall, salt=0x315)
     res = train_detector(cfg, source, progress=False, max_seconds=args.max_seconds)
     if res["steps"] < cfg.steps:
         print(f"step {res['steps']} of {cfg.steps}; run the same line again to continue")

@@ -221,3 +221,16 @@ def test_mixed_source_at_its_fraction_exactly():
     i = 0
     u = np.random.default_rng(np.random.SeedSequence([i, 0x313])).random()
     assert MixedSource(lambda k: "first", lambda k: "second", u)(i) == "first"  # u < fraction: strictly
+
+
+def test_nested_mixes_with_their_own_salt_draw_apart_and_the_default_draw_stays():
+    # the draw of the default salt is the one every stored training run made: (i, 0x313)
+    for i in range(30):
+        u = np.random.default_rng(np.random.SeedSequence([i, 0x313])).random()
+        assert MixedSource(lambda k: "a", lambda k: "b", 0.5)(i) == ("b" if u < 0.5 else "a")
+    inner_same = MixedSource(lambda k: "synthetic", lambda k: "packed", 0.5)
+    inner_own = MixedSource(lambda k: "synthetic", lambda k: "packed", 0.5, salt=0x314)
+    same = [MixedSource(inner_same, lambda k: "real", 0.75)(i) for i in range(4000)]
+    own = [MixedSource(inner_own, lambda k: "real", 0.75)(i) for i in range(4000)]
+    assert same.count("packed") == 0  # the fault a shared salt makes: the inner mix sees only u >= 0.75
+    assert abs(own.count("real") / 4000 - 0.75) < 0.03 and abs(own.count("packed") / 4000 - 0.125) < 0.02

@@ -317,11 +317,17 @@ def test_packed_and_user_labels_are_mixed_in(tmp_path, stand_ins, monkeypatch):
     assert [m[0] for m in made] == ["PackedSource", "MixedSource", "RecordsSource", "MixedSource"]
     assert made[0][1:] == ((["a.h5:5", "b.h5"],), {"holdout": 9})
     assert made[1][1][0] == "gen" and isinstance(made[1][1][1], PackedSource) and made[1][1][2] == 0.3
+    assert made[1][2] == {"salt": 0x314}  # inside the labels' mix: a draw of its own
+    assert made[3][2] == {}  # the outer mix: the default draw
     assert made[2][1] == ([("rec", "mine.json", "s_per_px=1e-10,t0_s=0")] * 3,)
     assert isinstance(made[3][1][0], MixedSource) and isinstance(made[3][1][1], RecordsSource)
     assert made[3][1][2] == 0.25
     assert logged == ["3 labelled record(s), 7 box(es) from mine.json: 25% of the windows"]
     assert isinstance(Items.made[-1]["source"], MixedSource)
+    # packed records alone (the stage-3 recipe): the default draw, as that run made it
+    made.clear()
+    train_detector(cfg_for(tmp_path / "alone", steps=1, packed=["a.h5"], packed_fraction=0.6), "gen", progress=False)
+    assert [m[0] for m in made] == ["PackedSource", "MixedSource"] and made[1][2] == {}
 
 
 @pytest.mark.parametrize("opt, lr, wd, cls, want_lr, want_wd, momentum", [

@@ -153,11 +153,15 @@ class RecordsSource:
 
 
 class MixedSource:
-    """``source(i)`` from ``second`` for a seeded ``fraction`` of the indices, else from ``first``."""
+    """``source(i)`` from ``second`` for a seeded ``fraction`` of the indices, else from ``first``.
 
-    def __init__(self, first, second, fraction: float):
-        self.first, self.second, self.fraction = first, second, float(fraction)
+    Each index's draw is seeded by ``(i, salt)``: a mix nested in another must have a salt
+    of its own, or its draw repeats the outer one's and it never picks ``second`` where the
+    outer mix handed it the index (with ``fraction`` below the outer one's)."""
+
+    def __init__(self, first, second, fraction: float, *, salt: int = 0x313):
+        self.first, self.second, self.fraction, self.salt = first, second, float(fraction), int(salt)
 
     def __call__(self, i: int):
-        u = np.random.default_rng(np.random.SeedSequence([int(i), 0x313])).random()
+        u = np.random.default_rng(np.random.SeedSequence([int(i), self.salt])).random()
         return self.second(i) if u < self.fraction else self.first(i)

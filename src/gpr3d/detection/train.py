@@ -198,7 +198,9 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
     if cfg.packed:
         from gpr3d.detection.data import MixedSource, PackedSource
 
-        source = MixedSource(source, PackedSource(cfg.packed, holdout=cfg.packed_holdout), cfg.packed_fraction)
+        # (with labels too the packed mix lies inside theirs: a draw of its own, else it never picks a packed record)
+        source = MixedSource(source, PackedSource(cfg.packed, holdout=cfg.packed_holdout), cfg.packed_fraction,
+                             **({"salt": 0x314} if cfg.labels else {}))
     if cfg.labels:
         from gpr3d.detection.data import MixedSource, RecordsSource
         from gpr3d.io.labelled import read_labelled
