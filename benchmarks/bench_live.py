@@ -27,6 +27,7 @@ if __name__ == "__main__":  # numba reads the thread count at import
 import argparse  # noqa: E402
 import json  # noqa: E402
 import os  # noqa: E402
+import shlex  # noqa: E402
 import socket  # noqa: E402
 import subprocess  # noqa: E402
 import tempfile  # noqa: E402
@@ -100,6 +101,7 @@ def main(argv=None):
     ap.add_argument("--long", type=int, default=25, help="passes of the long replay (0: none)")
     ap.add_argument("--long-rate", type=float, default=800.0)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--live-args", default="", help="more arguments for every gpr3d live run, e.g. '--refiner none'")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     args = ap.parse_args(argv)
     work = Path(tempfile.mkdtemp(prefix="gpr3d-bench-live-"))
@@ -110,14 +112,15 @@ def main(argv=None):
     s.save(work / "survey.h5")
     write_tum(traj, work / "path.tum")
     env = {**os.environ, "NUMBA_NUM_THREADS": str(args.threads)}
+    more = tuple(shlex.split(args.live_args))
     live_run(work, 4000.0, env, "warm", extra=("--no-detect",))  # numba's cache filled: compile apart
     rows = []
     first = None
     for rate in args.rates:
-        r = live_run(work, rate, env, f"rate{rate:g}")
+        r = live_run(work, rate, env, f"rate{rate:g}", extra=more)
         first = first or r
         rows.append((f"replayed at {rate:g} traces/s", r))
-    r = live_run(work, 100000.0, env, "flat_out")
+    r = live_run(work, 100000.0, env, "flat_out", extra=more)
     rows.append(("replayed as fast as it can send", r))
     # the batch volume of the same traces with live's settings
     cfg = json.loads((first["out"] / "config.json").read_text())["config"]
@@ -145,7 +148,7 @@ def main(argv=None):
                   f"{same_grid}, max |live - batch| / max |batch| = {diff:.2e}" if diff is not None else
               f"grids differ: live {vol.grid}, batch {batch.grid}"]
     if args.long:
-        r = live_run(work, args.long_rate, env, "long", loops=args.long + 1)
+        r = live_run(work, args.long_rate, env, "long", loops=args.long + 1, extra=more)
         rss = r["rss_mib"]
         n = len(rss)
         marks = [rss[min(n - 1, int(f * (n - 1)))] for f in (0.1, 0.25, 0.5, 0.75, 1.0)] if n else []

@@ -131,6 +131,8 @@ def one_line_error(capsys, argv, *needles):
     (["detect", DZT, "--out", "{d}/d.json", "--refiner", "{d}/none.pt"], ["none.pt", "no such box refiner weights file"]),
     (["detect", DZT, "--out", "{d}/d.json", "--refiner", "{d}/none.onnx"], ["none.onnx", "no such ONNX refiner file"]),
     (["run", DZT, "--out", "{d}/run", "--refiner", "{d}/none.pt"], ["--refiner", "none.pt: no such file"]),
+    (["live", "tcp://127.0.0.1:1", "--out", "{d}/live", "--refiner", "{d}/none.onnx"],
+     ["none.onnx", "no such ONNX refiner file"]),
 ])
 def test_a_wrong_argument_is_one_line_naming_it_and_leaves_nothing(files, capsys, argv, needles):
     """Each case the issue lists (tracebacks, a hang, wrong results with no error, unhelpful messages)."""

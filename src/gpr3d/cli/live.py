@@ -56,6 +56,8 @@ def add_arguments(sp):
     sp.add_argument("--weights", default=None, help="detector weights (default: the shipped model)")
     sp.add_argument("--score", type=float, default=0.5, help="keep detections scoring at least this (0..1)")
     sp.add_argument("--device", default="cpu", help="cpu (default), cuda, cuda:N")
+    sp.add_argument("--refiner", default="auto", help="box refiner: auto (default: the shipped one with the shipped "
+                    "detector, none with --weights), none, or a refiner's .pt/.onnx file")
     sp.add_argument("--connect-timeout", type=float, default=10.0,
                     help="seconds to keep trying to connect to a tcp:// source (default 10)")
 
@@ -89,7 +91,8 @@ def run(args):
                             "max_depth_m": "--max-depth", "eps_r": "--eps-r"})
     detector = None
     if not args.no_detect:
-        detector, _ = load_models(detector=True, depth="none", weights=args.weights, device=args.device)
+        detector, _ = load_models(detector=True, depth="none", weights=args.weights, device=args.device,
+                                  refiner=args.refiner)
     cfg = LiveConfig(reconstruct=rc, background_window=args.background_window,
                      background_trailing=not args.centred_background, refresh_s=args.refresh,
                      detect=not args.no_detect, score=args.score,
