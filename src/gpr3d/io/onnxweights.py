@@ -57,7 +57,8 @@ def finish_export(path, key: str, meta: dict) -> None:
 
 def open_session(path, key: str, what: str, *, threads: int | None = None, spin: bool = True):
     """``(session, meta)``: an ONNX Runtime CPU session on the gpr3d file ``path`` and the JSON it holds
-    under ``key``; a missing, unreadable or foreign file is one :class:`FormatError` naming ``what``.
+    under ``key``; a missing, unreadable or foreign file is one
+    :class:`~gpr3d.core.errors.FormatError` naming ``what``.
 
     ``threads``: the session's own thread pool (``None``: ONNX Runtime's choice, one per core);
     ``spin=False``: its threads sleep between runs instead of spinning, which leaves the cores
