@@ -228,9 +228,21 @@ def test_nested_mixes_with_their_own_salt_draw_apart_and_the_default_draw_stays(
     for i in range(30):
         u = np.random.default_rng(np.random.SeedSequence([i, 0x313])).random()
         assert MixedSource(lambda k: "a", lambda k: "b", 0.5)(i) == ("b" if u < 0.5 else "a")
-    inner_same = MixedSource(lambda k: "synthetic", lambda k: "packed", 0.5)
     inner_own = MixedSource(lambda k: "synthetic", lambda k: "packed", 0.5, salt=0x314)
-    same = [MixedSource(inner_same, lambda k: "real", 0.75)(i) for i in range(4000)]
+    outer = MixedSource(lambda k: "synthetic", lambda k: "real", 0.75)
+    # the fault a shared salt made: the inner mix saw only indices with the outer draw u >= 0.75, never u < 0.5
+    same = [outer(i) if outer(i) == "real" else MixedSource(lambda k: "synthetic", lambda k: "packed", 0.5)(i)
+            for i in range(4000)]
     own = [MixedSource(inner_own, lambda k: "real", 0.75)(i) for i in range(4000)]
-    assert same.count("packed") == 0  # the fault a shared salt makes: the inner mix sees only u >= 0.75
+    assert same.count("packed") == 0
     assert abs(own.count("real") / 4000 - 0.75) < 0.03 and abs(own.count("packed") / 4000 - 0.125) < 0.02
+
+
+def test_a_nested_mix_with_the_outer_salt_is_refused():
+    inner = MixedSource(lambda k: "synthetic", lambda k: "packed", 0.5)
+    with pytest.raises(ValueError, match="a salt of its own"):
+        MixedSource(inner, lambda k: "real", 0.75)
+    with pytest.raises(ValueError, match="a salt of its own"):  # however deep, on either side
+        MixedSource(lambda k: "real", MixedSource(lambda k: 0, MixedSource(lambda k: 1, lambda k: 2, 0.5, salt=7),
+                                                 0.5, salt=9), 0.5, salt=7)
+    MixedSource(MixedSource(lambda k: 0, lambda k: 1, 0.5, salt=9), lambda k: 2, 0.5)  # salts apart: fine

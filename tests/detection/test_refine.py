@@ -164,9 +164,13 @@ def test_training_defaults_are_the_shipped_refiner_s_recipe():
     a = R.train_refiner(data)
     b = R.train_refiner(data, epochs=9, per_label=24, batch=128, lr=2e-3, seed=0)
     c = R.train_refiner(data, epochs=9, per_label=24, batch=128, lr=2e-3, seed=1)
-    for (k, va), vb, vc in zip(a.state_dict().items(), b.state_dict().values(), c.state_dict().values()):
-        assert _torch.equal(va, vb), k
-    assert any(not _torch.equal(va, vc) for va, vc in zip(a.state_dict().values(), c.state_dict().values()))
+    # (the same run twice agrees to float32 rounding whatever the CPU's kernels; any other recipe moves the
+    # weights by far more: its first step already draws other boxes)
+    def gap(x, y):
+        return max(float((vx.float() - vy.float()).abs().max()) for vx, vy in zip(x.state_dict().values(),
+                                                                                 y.state_dict().values()))
+    assert gap(a, b) < 1e-4
+    assert gap(a, c) > 1e-2
 
 
 def _survey(n_traces=300, n_samples=128, dt=5e-11):
@@ -369,8 +373,15 @@ def test_the_shipped_refiner_comes_with_the_shipped_detector_in_either_engine(tm
     s = _survey(n_traces=700, n_samples=256)
     img64 = rng.random((3, 256, 700))
     rec = np.array([[50.0, 1e-9, 150.0, 3e-9], [600.0, 4e-9, 690.0, 8e-9]])
-    np.testing.assert_allclose(onnx_det.refiner.refine(s, 256, rec, img64), torch_det.refiner.refine(s, 256, rec, img64),
-                               rtol=1e-3, atol=1e-12)
+    pm = R.record_pixmap(s, 256)
+
+    def px(boxes):
+        return np.array([pm.box_to_px(b) for b in boxes])
+
+    # compared in pixels: ONNX Runtime's RoiAlign rounds apart from torchvision's by ~3e-4 of a box side (these
+    # boxes are at most 100 px: 0.03 px), far under the quarter pixel allowed
+    np.testing.assert_allclose(px(onnx_det.refiner.refine(s, 256, rec, img64)),
+                               px(torch_det.refiner.refine(s, 256, rec, img64)), atol=0.25)
 
 
 @pytest.mark.slow

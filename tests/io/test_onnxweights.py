@@ -119,8 +119,11 @@ def test_open_session_returns_the_metadata_and_sets_the_thread_pool(tmp_path):
     np.testing.assert_allclose(sess.run(None, {"x": x})[0], 2 * x)
     opts = sess.get_session_options()
     assert opts.intra_op_num_threads == 0  # ONNX Runtime's own choice
-    with pytest.raises(Exception):  # noqa: B017 - no entry: ORT raises its own error type
-        opts.get_session_config_entry("session.intra_op.allow_spinning")
+    try:  # no entry: ONNX Runtime raises (or, in some versions, answers empty)
+        spinning = opts.get_session_config_entry("session.intra_op.allow_spinning")
+    except Exception:  # noqa: BLE001 - ORT's own error type
+        spinning = None
+    assert spinning != "0"
     quiet, _ = open_session(path, "gpr3d_meta", "thing", threads=1, spin=False)
     opts = quiet.get_session_options()
     assert opts.intra_op_num_threads == 1

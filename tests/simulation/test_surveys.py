@@ -89,7 +89,9 @@ def test_wall_scenes_follow_their_ranges_and_are_not_the_training_draws():
         assert r["cover_m"][0] - 1e-4 <= top <= r["cover_m"][1] + 1e-4
         first = [t.x_m for t in bars if abs(t.depth_m - top) < 1e-6]
         assert np.all(np.diff(first) >= 0.95 * r["rebar_spacing_m"][0] - 1e-4)
-        assert s.to_dict() != sample_survey_scene(3, i).to_dict()
+        assert s.to_dict() != sample_survey_scene(3, i).to_dict() and s.name == f"survey_wall_3_{i:06d}"
+    with pytest.raises(ValueError, match="wall scans are of concrete, got host 'soil'"):
+        sample_survey_scene(3, 0, host="soil", profile="wall")
 
 
 def test_display_8bit_keeps_the_order_of_amplitudes_in_256_grey_levels_and_clips_the_strongest():

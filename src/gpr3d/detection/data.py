@@ -161,6 +161,15 @@ class MixedSource:
 
     def __init__(self, first, second, fraction: float, *, salt: int = 0x313):
         self.first, self.second, self.fraction, self.salt = first, second, float(fraction), int(salt)
+        inner, stack = set(), [first, second]
+        while stack:  # the salts of every mix inside this one
+            m = stack.pop()
+            if isinstance(m, MixedSource):
+                inner.add(m.salt)
+                stack += [m.first, m.second]
+        if self.salt in inner:
+            raise ValueError(f"a mix nested in another needs a salt of its own (both {self.salt:#x}): it would "
+                             "never pick its second source")
 
     def __call__(self, i: int):
         u = np.random.default_rng(np.random.SeedSequence([int(i), self.salt])).random()

@@ -55,7 +55,7 @@ SURVEY_PROFILES = {
     "gprmax_eval": {"p_concrete": 0.25, "n_traces": (100, 200),
                     "soil_kinds": {"steel_pipe": 0.2, "pvc_pipe": 0.2, "void": 0.2, "tank": 0.4},
                     "soil_n_targets": (4, 9), "concrete_extra": (1, 3), "depth_factor": (1.1, 1.4)},
-    "wall": {"p_concrete": 1.0, "n_traces": (300, 1800), "concrete_extra": (0, 3), "depth_factor": (1.1, 1.8)},
+    "wall": {"p_concrete": 1.0, "n_traces": (300, 1800), "concrete_extra": (0, 3)},
 }
 
 #: "wall": handheld scans of walls as concrete scanners record them (the sizes P-GPR's train
@@ -88,6 +88,8 @@ def sample_survey_scene(seed: int, index: int, *, host: str | None = None, profi
     if profile not in SURVEY_PROFILES:
         raise ValueError(f"unknown survey profile {profile!r} (use {', '.join(SURVEY_PROFILES)})")
     prof = SURVEY_PROFILES[profile]
+    if profile == "wall" and host not in (None, "concrete"):
+        raise ValueError(f"wall scans are of concrete, got host {host!r}")
     rng = _rng(seed, index) if profile == "train" and attempt == 0 else \
         _rng(seed, index, 0xE7A1 if profile != "wall" else 0x3A11, attempt)
     host = host or ("concrete" if rng.random() < prof["p_concrete"] else "soil")
@@ -158,7 +160,7 @@ def sample_survey_scene(seed: int, index: int, *, host: str | None = None, profi
     scene = Scene(medium=medium, antenna=Antenna(frequency_hz=round(f, -6), offset_m=round(0.2 * v / f, 4)),
                   width_m=round(length, 4), depth_m=round(depth_range, 4), n_traces=n_traces,
                   trace_step_m=round(step, 5), x_start_m=0.0, seed=int(seed),
-                  name=f"survey_{host}_{seed}_{index:06d}")
+                  name=f"survey_{'wall' if profile == 'wall' else host}_{seed}_{index:06d}")
     scene.targets = targets
     scene.time_window_s = 2 * depth_range / v + 2.5 / f
     if profile == "wall":
@@ -321,8 +323,8 @@ def _correlated_noise(shape, dt: float, f: float, rng) -> np.ndarray:
 
 
 def display_8bit(data: np.ndarray, rng) -> np.ndarray:
-    """``data`` as an 8-bit grey picture of it holds it: a gain that grows with time (sometimes), clipped at a
-    level that saturates the direct wave (0.15-0.6 of the peak), 256 grey levels about mid-grey."""
+    """``data`` as a scanner's 8-bit grey picture shows it: a gain that grows with time (sometimes), clipped at
+    a level that saturates the direct wave (0.15-0.6 of the peak), 256 grey levels about mid-grey (128)."""
     n_s = data.shape[1]
     if rng.random() < 0.6:
         data = data * (1 + rng.uniform(0, 6) * (np.arange(n_s) / n_s) ** rng.uniform(0.7, 2.0))[None, :]
