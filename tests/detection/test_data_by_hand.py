@@ -240,8 +240,13 @@ def test_nested_mixes_with_their_own_salt_draw_apart_and_the_default_draw_stays(
 
 def test_a_nested_mix_with_the_outer_salt_is_refused():
     inner = MixedSource(lambda k: "synthetic", lambda k: "packed", 0.5)
-    with pytest.raises(ValueError, match="a salt of its own"):
+    with pytest.raises(ValueError) as err:
         MixedSource(inner, lambda k: "real", 0.75)
+    assert str(err.value) == ("a mix nested in another needs a salt of its own (both 0x313): it would never pick its "
+                              "second source")
+    with pytest.raises(ValueError, match="both 0x7"):  # the clash beside another nested mix
+        MixedSource(MixedSource(lambda k: 0, lambda k: 1, 0.5, salt=7), MixedSource(lambda k: 2, lambda k: 3, 0.5, salt=9),
+                    0.5, salt=7)
     with pytest.raises(ValueError, match="a salt of its own"):  # however deep, on either side
         MixedSource(lambda k: "real", MixedSource(lambda k: 0, MixedSource(lambda k: 1, lambda k: 2, 0.5, salt=7),
                                                  0.5, salt=9), 0.5, salt=7)
