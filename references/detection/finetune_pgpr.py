@@ -73,13 +73,10 @@ def main(argv=None):
                       lr=args.lr, warmup=50, labels=None if zero_shot else str(Path(args.pgpr) / args.split), labels_fraction=args.real,
                       freeze=args.freeze, checkpoint_every=50, labels_pattern=args.only,
                       packed=args.packed or None, packed_fraction=args.packed_fraction,
-                      augment=args.augment or None, **PGPR)
-    source = SurveySource(cfg.data_seed)
-    if args.wall:
-        from gpr3d.detection.data import MixedSource
-
-        source = MixedSource(source, SurveySource(cfg.data_seed, profile="wall"), args.wall, salt=0x315)
-    res = train_detector(cfg, source, progress=False, max_seconds=args.max_seconds)
+                      augment=args.augment or None, wall_fraction=args.wall, **PGPR)
+    wall = SurveySource(cfg.data_seed, profile="wall") if args.wall else None
+    res = train_detector(cfg, SurveySource(cfg.data_seed), wall_source=wall, progress=False,
+                         max_seconds=args.max_seconds)
     if res["steps"] < cfg.steps:
         print(f"step {res['steps']} of {cfg.steps}; run the same line again to continue")
         return 0

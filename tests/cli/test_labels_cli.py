@@ -92,6 +92,9 @@ def test_eval_detector_on_a_yolo_dataset_matches_the_library(tmp_path):
     (["train", "detector", "--out", "{d}/t", "--freeze", "7"], "--freeze must be an integer in 0..4"),
     (["train", "depthnet", "--out", "{d}/t", "--augment"],
      "--augment is for the detector; DepthNet trains on its records as they are"),
+    (["train", "depthnet", "--out", "{d}/t", "--wall-fraction", "0.5"],
+     "--wall-fraction is for the detector; DepthNet trains on its records as they are"),
+    (["train", "detector", "--out", "{d}/t", "--wall-fraction", "1.5"], "--wall-fraction must lie in 0..1, got 1.5"),
     (["train", "detector", "--out", "{d}/t", "--labels", "{ds}", "--pixel-map", PM, "--labels-frequency", "-3"],
      "frequency -3.0 Hz is not a GPR antenna's"),
 ])

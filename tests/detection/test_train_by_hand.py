@@ -119,8 +119,8 @@ def test_a_whole_run_sees_each_item_once_in_order_and_logs_every_step(tmp_path, 
     ck = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
     assert ck["step"] == 5 and ck["epoch"] == 0 and ck["windows_seen"] == 10 and ck["gpr3d"] == __version__
     assert ck["config"] == asdict(cfg)
-    assert ck["resume_key"] == {k: v for k, v in asdict(cfg).items()
-                                if k not in ("device", "workers", "checkpoint_every", "out")}
+    assert ck["resume_key"] == {k: v for k, v in asdict(cfg).items()  # (no wall share: keys as before it existed)
+                                if k not in ("device", "workers", "checkpoint_every", "out", "wall_fraction")}
     assert torch.equal(ck["model"]["w"], res["model"].w.detach())
     assert ck["optimizer"]["param_groups"][0]["lr"] == pytest.approx(lr_at(5, 1e-3, 2, 5), rel=1e-12)
     assert ck["scheduler"]["last_epoch"] == 5
@@ -178,9 +178,11 @@ def test_settings_that_only_say_how_to_run_may_change_on_resume(tmp_path, stand_
     train_detector(cfg_for(tmp_path, steps=2, checkpoint_every=7, workers=0, device="cpu"), None, progress=False,
                    log=logged.append)
     assert logged == ["resuming from step 1 of 2"]
-    for kw in ({"steps": 3}, {"batch": 3}, {"seed": 4}, {"data_seed": 78}, {"lr": 2e-3}, {"warmup": 1}):
+    for kw in ({"steps": 3}, {"batch": 3}, {"seed": 4}, {"data_seed": 78}, {"lr": 2e-3}, {"warmup": 1},
+               {"wall_fraction": 0.5}):
         with pytest.raises(GPR3DError) as err:
-            train_detector(cfg_for(tmp_path, **{"steps": 2, **kw}), None, progress=False, log=quiet)
+            train_detector(cfg_for(tmp_path, **{"steps": 2, **kw}), None, wall_source="walls", progress=False,
+                           log=quiet)
         assert str(err.value) == (f"{tmp_path / 'run' / 'checkpoint.pt'}: made with other settings; use another --out "
                                   "or delete the checkpoint")
 
@@ -330,6 +332,52 @@ def test_packed_and_user_labels_are_mixed_in(tmp_path, stand_ins, monkeypatch):
     assert [m[0] for m in made] == ["PackedSource", "MixedSource"] and made[1][2] == {}
 
 
+def test_wall_scans_are_mixed_in_first_with_a_draw_of_their_own(tmp_path, stand_ins, monkeypatch):
+    made = []
+
+    class Rec:
+        def __init__(self, *a, **kw):
+            made.append((type(self).__name__, a, kw))
+
+    class PackedSource(Rec):
+        pass
+
+    class MixedSource(Rec):
+        pass
+
+    monkeypatch.setattr(data_mod, "PackedSource", PackedSource)
+    monkeypatch.setattr(data_mod, "MixedSource", MixedSource)
+    cfg = cfg_for(tmp_path, steps=1, wall_fraction=0.4, packed=["a.h5"], packed_fraction=0.6)
+    train_detector(cfg, "gen", wall_source="walls", progress=False, log=quiet)
+    assert [m[0] for m in made] == ["MixedSource", "PackedSource", "MixedSource"]
+    assert made[0][1:] == (("gen", "walls", 0.4), {"salt": 0x315})  # apart from the packed (0x314), labels' (0x313)
+    assert made[2][1][0] is not None and isinstance(made[2][1][0], MixedSource) and made[2][1][2] == 0.6
+    assert Items.made[-1]["source"] is not None and isinstance(Items.made[-1]["source"], MixedSource)
+    ck = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
+    assert ck["resume_key"]["wall_fraction"] == 0.4  # a different share is another run
+    made.clear()  # none asked: the source as given, and no wall source needed
+    train_detector(cfg_for(tmp_path / "none", steps=1), "gen", progress=False, log=quiet)
+    assert made == [] and Items.made[-1]["source"] == "gen"
+
+
+def test_a_wall_share_without_wall_scans_is_refused_before_any_work(tmp_path, stand_ins):
+    with pytest.raises(GPR3DError) as err:
+        train_detector(cfg_for(tmp_path, wall_fraction=0.3), "gen", progress=False, log=quiet)
+    assert str(err.value) == "--wall-fraction 0.3: no wall-scan source was given to draw them from"
+    assert stand_ins["built"] == [] and not (tmp_path / "run").exists()
+
+
+def test_a_run_from_before_the_wall_share_resumes(tmp_path, stand_ins):
+    cfg = cfg_for(tmp_path, steps=2)
+    train_detector(cfg, None, progress=False, log=quiet, max_seconds=0.0)
+    ck_path = tmp_path / "run" / "checkpoint.pt"
+    ck = torch.load(ck_path, weights_only=True)
+    assert "wall_fraction" not in ck["resume_key"]  # what an older gpr3d wrote
+    logged = []
+    train_detector(cfg, None, progress=False, log=logged.append)
+    assert logged == ["resuming from step 1 of 2"]
+
+
 @pytest.mark.parametrize("opt, lr, wd, cls, want_lr, want_wd, momentum", [
     ("adamw", None, None, "AdamW", 1e-3, 1e-4, None),
     ("adamw", 5e-4, 0.0, "AdamW", 5e-4, 0.0, None),
@@ -370,6 +418,8 @@ def test_optimisers_and_their_defaults(tmp_path, opt, lr, wd, cls, want_lr, want
     ({"labels_fraction": -0.5}, "--labels-fraction must lie in 0..1, got -0.5"),
     ({"labels_fraction": 2.0}, "--labels-fraction must lie in 0..1, got 2.0"),
     ({"window": {"rows": 8}}, "window rows must be an integer in 32..2048, got 8"),
+    ({"wall_fraction": -0.1}, "--wall-fraction must lie in 0..1, got -0.1"),
+    ({"wall_fraction": 1.5}, "--wall-fraction must lie in 0..1, got 1.5"),
 ])
 def test_train_config_names_each_wrong_value_in_full(tmp_path, kw, msg):
     with pytest.raises(InvalidDataError) as err:
@@ -383,7 +433,8 @@ def test_train_config_names_each_wrong_value_in_full(tmp_path, kw, msg):
 def test_train_config_edges_that_are_allowed(tmp_path):
     TrainConfig(out=str(tmp_path), steps=1, batch=2, checkpoint_every=1, warmup=1, seed=0, data_seed=0, workers=0,
                 lr=9.99, packed_fraction=0.0, labels_fraction=1.0, packed_holdout=0)
-    TrainConfig(out=str(tmp_path), packed_fraction=1.0, labels_fraction=0.0, lr=1e-9)
+    TrainConfig(out=str(tmp_path), packed_fraction=1.0, labels_fraction=0.0, lr=1e-9, wall_fraction=1.0)
+    assert TrainConfig(out="x").wall_fraction == 0.0
     cfg = TrainConfig(out=str(tmp_path), init="default")
     assert cfg.init == str(weights_mod.DEFAULT_WEIGHTS)
     assert TrainConfig(out=str(tmp_path)).init is None

@@ -36,8 +36,9 @@ def cmd_train_depthnet(args):
 
     if args.records < 1:
         raise GPR3DError(f"--records must be at least 1, got {args.records}")
-    if args.augment:
-        raise GPR3DError("--augment is for the detector; DepthNet trains on its records as they are")
+    if args.augment or args.wall_fraction:
+        raise GPR3DError(f"--{'augment' if args.augment else 'wall-fraction'} is for the detector; DepthNet trains "
+                         "on its records as they are")
     if args.init == "default":
         raise GPR3DError("--init default: the package ships DepthNet as ONNX; start from its PyTorch twin, "
                          "references/depthnet/default_depthnet.pt")
@@ -149,6 +150,9 @@ def add_arguments(sp):
                          "--packed-holdout), e.g. datasets/gprmax400.h5 datasets/gprmax_survey_train.h5:0")
     sp.add_argument("--packed-fraction", type=float, default=0.2, help="share of windows from --packed (0.2)")
     sp.add_argument("--packed-holdout", type=int, default=60, help="last records of --packed kept out (60)")
+    sp.add_argument("--wall-fraction", type=float, default=0.0,
+                    help="detector: share of the synthetic records drawn as handheld concrete wall scans at 1.2-2 "
+                         "GHz (the 'wall' profile of gpr3d.simulation.surveys; 0, the default: none)")
     sp.add_argument("--augment", action="store_true",
                     help="detector: stretch the training windows along the traces (0.7-1.4x), change their gain "
                          "(0.6-1.8x) and add noise (up to 0.15 of the amplitude)")
@@ -177,20 +181,23 @@ def run(args):
                       labels=args.labels, labels_fraction=args.labels_fraction, pixel_map=args.pixel_map,
                       labels_names=_names_list(args.class_names), labels_kinds=args.class_kinds,
                       labels_frequency_hz=args.labels_frequency, kinds=_names_list(args.kinds), freeze=args.freeze,
-                      augment=args.augment or None)
+                      augment=args.augment or None, wall_fraction=args.wall_fraction)
     if cfg.packed:  # a wrong packed file (or hold-out) fails in one line before any model is built
         from gpr3d.detection.data import PackedSource
 
         PackedSource(cfg.packed, holdout=cfg.packed_holdout)
     if cfg.labels:  # a wrong label file fails in one line before any model is built
         _read_labels(args, cfg.labels)
-    res = train_detector(cfg, SurveySource(cfg.data_seed), progress=not args.no_progress,
+    wall = SurveySource(cfg.data_seed, profile="wall") if cfg.wall_fraction else None
+    res = train_detector(cfg, SurveySource(cfg.data_seed), wall_source=wall, progress=not args.no_progress,
                          max_seconds=args.max_seconds)
     weights = Path(args.out) / "weights.pt"
     cmd = "gpr3d " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("gpr3d") else "gpr3d train detector"
     save_weights(res["model"], cfg.model, cfg.window, weights, kinds=res.get("kinds"),
                  provenance={"name": cfg.model, "command": cmd, "config": asdict(cfg), "train_wall_s": res["wall_s"],
-                             "device": cfg.device, "data": f"survey_sample(seed={cfg.data_seed}, i)",
+                             "device": cfg.device,
+                             "data": f"survey_sample(seed={cfg.data_seed}, i)" + (
+                                 f" ({cfg.wall_fraction:.0%} of them profile='wall')" if cfg.wall_fraction else ""),
                              "steps_done": res["steps"], **_labels_provenance(cfg.labels)})
     print(f"trained {cfg.model} for {res['steps']} steps in {res['wall_s']:.0f} s; wrote {weights}")
     return 0

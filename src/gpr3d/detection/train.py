@@ -62,6 +62,9 @@ class TrainConfig:
     #: training windows stretched along the traces, their gain and noise changed (gpr3d.detection.augment):
     #: None: none; True: the default ranges; a dict: Augment's fields
     augment: dict | bool | None = None
+    #: share of the synthetic records drawn from the ``wall_source`` given to :func:`train_detector` (handheld
+    #: concrete wall scans, ``SurveySource(data_seed, profile="wall")`` in ``gpr3d train detector``)
+    wall_fraction: float = 0.0
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -85,6 +88,8 @@ class TrainConfig:
             raise InvalidDataError(f"--packed-holdout must be 0 or more, got {self.packed_holdout!r}")
         if not 0.0 <= self.labels_fraction <= 1.0:
             raise InvalidDataError(f"--labels-fraction must lie in 0..1, got {self.labels_fraction!r}")
+        if not 0.0 <= self.wall_fraction <= 1.0:
+            raise InvalidDataError(f"--wall-fraction must lie in 0..1, got {self.wall_fraction!r}")
         if not isinstance(self.freeze, int) or not 0 <= self.freeze <= 4:
             raise InvalidDataError(f"--freeze must be an integer in 0..4 (backbone stages kept fixed), got {self.freeze!r}")
         if self.kinds is not None:
@@ -144,13 +149,17 @@ def _freeze(model, stages: int) -> None:
             p.requires_grad_(False)
 
 
-def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print,
+def train_detector(cfg: TrainConfig, source, *, wall_source=None, progress: bool = True, log=print,
                    max_seconds: float | None = None) -> dict:
     """Train ``cfg.model`` on windows of ``source(i) -> (Survey, labels)``; returns a summary.
 
-    Resumes from ``cfg.out/checkpoint.pt`` when it exists for the same configuration;
-    ``max_seconds`` stops early (checkpoint saved; running again continues).
+    ``wall_source`` gives ``cfg.wall_fraction`` of the synthetic records (mixed in first, with a draw of its
+    own, so packed records and labels are mixed around it as without it). Resumes from ``cfg.out/checkpoint.pt``
+    when it exists for the same configuration; ``max_seconds`` stops early (checkpoint saved; running again
+    continues).
     """
+    if cfg.wall_fraction and wall_source is None:
+        raise GPR3DError(f"--wall-fraction {cfg.wall_fraction}: no wall-scan source was given to draw them from")
     torch = require("torch")
 
     from gpr3d.detection.data import WindowDataset, collate
@@ -161,6 +170,8 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
     device = resolve_device(cfg.device)
     cfg_dict = asdict(cfg)
     same = {k: v for k, v in cfg_dict.items() if k not in ("device", "workers", "checkpoint_every", "out")}
+    if not cfg.wall_fraction:  # (runs from before the setting resume)
+        del same["wall_fraction"]
     torch.manual_seed(cfg.seed)
     kinds = cfg.kinds
     init = None
@@ -195,6 +206,10 @@ def train_detector(cfg: TrainConfig, source, *, progress: bool = True, log=print
     model.gpr3d_kinds = kinds
     _freeze(model, cfg.freeze)
     model = model.to(device)
+    if cfg.wall_fraction:
+        from gpr3d.detection.data import MixedSource
+
+        source = MixedSource(source, wall_source, cfg.wall_fraction, salt=0x315)
     if cfg.packed:
         from gpr3d.detection.data import MixedSource, PackedSource
 
