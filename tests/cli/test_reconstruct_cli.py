@@ -231,3 +231,30 @@ def test_timings_name_every_stage_of_reconstruct_and_add_up(pipe_survey, tmp_pat
                 "--out", tmp_path / "out3", "--eps-r", "6")
     assert r.returncode == 1 and r.stderr == f"gpr3d: error: --timings {tmp_path}: is a folder; give a file name " \
         "(e.g. timings.json)\n" and not (tmp_path / "out3").exists()
+
+
+def test_the_grid_ends_where_the_signal_does_and_says_so(tmp_path):
+    walk = random_walk(1500, area=((0, 1.0), (0, 1.0)), step_m=0.01, seed=4)
+    scene = ForwardScene(eps_r=6.0, pipes=[Pipe((0.1, 0.5, -0.23), (0.9, 0.5, -0.23), 0.03)])
+    data = forward_model(scene, walk.positions_xyz, walk.orientations_quat_wxyz, offset_m=0.08, frequency_hz=800e6,
+                         n_samples=384, time_window_s=30e-9, air_wave=1.0, ground_wave=0.5, noise=0.02, seed=1)
+    Survey(data=data, dt_s=30e-9 / 384, offset_m=0.08, frequency_hz=800e6, eps_r=6.0).save(tmp_path / "s.h5")
+    write_tum(walk, tmp_path / "w.tum")
+    base = ("reconstruct", tmp_path / "s.h5", "--poses", tmp_path / "w.tum", "--eps-r", "file", "--spacing", "0.04")
+    r = run_cli(*base, "--out", tmp_path / "cut")
+    assert r.returncode == 0, r.stderr
+    depth = json.loads((tmp_path / "cut" / "config.json").read_text())["depth"]
+    assert depth["how"] == "signal" and depth["depth_m"] < 0.65 * depth["record_m"], depth
+    said = [line for line in r.stdout.splitlines() if line.startswith("depth range")]
+    assert said == [f"depth range to {depth['depth_m']:.2f} m of the record's {depth['record_m']:.2f} m: "
+                    f"{depth['why']} (--full-depth images the whole record)"]
+    r = run_cli(*base, "--out", tmp_path / "full", "--full-depth")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "full" / "config.json").read_text())
+    assert doc["depth"]["how"] == "record" and doc["config"]["signal_depth"] is False
+    assert "depth range" not in r.stdout
+    cut = json.loads((tmp_path / "cut" / "targets.json").read_text())["targets"]
+    full = json.loads((tmp_path / "full" / "targets.json").read_text())["targets"]
+    assert [t["kind"] for t in cut] == [t["kind"] for t in full] and "line" in [t["kind"] for t in cut]
+    for a, b in zip(cut, full):
+        np.testing.assert_allclose(a["points_xyz"], b["points_xyz"], atol=0.021)

@@ -12,7 +12,10 @@ class ReconstructConfig:
     eps_r: float | None = None  #: None: the survey's hint
     spacing_m: float = 0.02
     depth_spacing_m: float | None = None
-    max_depth_m: float | None = None  #: None: what the time window reaches
+    max_depth_m: float | None = None  #: None: what the time window reaches (or its signal: ``signal_depth``)
+    #: with no ``max_depth_m``: the grid ends where the traces' signal does (:func:`gpr3d.processing.signal.
+    #: signal_end`: neighbouring traces no longer alike), not at the record's end; False: the whole record
+    signal_depth: bool = True
     pad_m: float = 0.1
     #: voxel centres on whole multiples of the spacing (the grid's corner rounded down to them): the lattice live
     #: mode's tiles share, so that a batch image lands on the same voxels

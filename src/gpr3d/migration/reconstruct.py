@@ -34,7 +34,8 @@ from gpr3d.migration.targets import (
     targets_to_json,
 )
 
-__all__ = ["ProfileFrame", "Reconstruction", "ReconstructConfig", "check_site_settings", "normalise_by_fold",
+__all__ = ["ProfileFrame", "Reconstruction", "ReconstructConfig", "check_site_settings", "grid_depth_m",
+           "normalise_by_fold",
            "reconstruct", "record_depth_m", "time_zero_search_s", "volume_targets", "write_reconstruction"]
 
 
@@ -61,6 +62,8 @@ class Reconstruction:
     #: None: a 3D image on a world grid; a :class:`ProfileFrame`: one straight profile migrated in 2D, the grid's
     #: x running along the line from ``frame.origin_xy`` (ny = 1, y = 0), targets mapped back to the world
     frame: "ProfileFrame | None" = None
+    #: how deep the grid goes and why (:func:`grid_depth_m`; ``config.json``'s ``"depth"``)
+    depth: dict | None = None
 
     def world_points(self, idx) -> np.ndarray:
         """World coordinates ``(n, 3)`` (z = -depth) of voxel indices ``(n, 3)`` (either kind of grid)."""
@@ -148,7 +151,8 @@ def check_config(cfg: ReconstructConfig, names: dict | None = None) -> None:
     number("taper_traces", lo=0.0)
     number("air_gap_m", lo=0.0)
     number("refine_level", lo=0.0, hi=1.0, lo_open=True)
-    for name in ("obliquity", "spreading", "remove_background", "lattice", "background_trailing", "coarse_to_fine"):
+    for name in ("obliquity", "spreading", "remove_background", "lattice", "background_trailing", "coarse_to_fine",
+                 "signal_depth"):
         if not isinstance(getattr(cfg, name), bool):
             bad(name, "true or false")
     if cfg.time_zero not in ("peak", "first_break", "none"):
@@ -252,7 +256,7 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     tx, rx = antenna_positions(s.positions_xyz, s.orientations_quat_wxyz, s.offset_m)
     width = cross_line_extent(s.positions_xyz)
     if cfg.method == "pseudo3d":
-        return _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s)
+        return _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s, log)
     if width < max(2 * cfg.spacing_m, 0.05):
         # one straight profile: a 3D image would mirror every target to both sides of the line; image the
         # vertical plane under the line instead (the same back projection on a grid one cell wide)
@@ -268,7 +272,7 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
                       "other, so the profile is migrated in 2D (the vertical plane under it) and targets crossing it "
                       "come out as points on it", GeometryWarning, stacklevel=2)
     v = velocity_from_eps_r(eps)
-    depth = cfg.max_depth_m or record_depth_m(v, s.n_samples * s.dt_s - s.t0_s, cfg.air_gap_m)
+    depth, depth_info = grid_depth_m(s, cfg, v, positions, log)
     with stage("grid"):
         grid = Grid3D.covering(positions, depth_m=depth, spacing_m=cfg.spacing_m,
                                depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m, lattice=cfg.lattice)
@@ -318,8 +322,16 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     image, fold = out if want_fold else (out, None)
     t_mig = time.perf_counter() - t
     if want_fold:
+        fold_max = None
+        if depth_info["how"] == "signal":
+            # the fold's floor is a share of its largest, which the deeper voxels cut away would have held: taken
+            # from a coarse fold over the whole record's depth, so that the image above stays what it was
+            with stage("fold max"):
+                fold_max = max(float(fold.max()), whole_record_fold_max(op, eps, positions, cfg,
+                                                                        depth_info["record_m"], frame is not None))
+            depth_info["fold_max"] = fold_max
         with stage("fold"):
-            image, noise_map = normalise_by_fold(image, fold, cfg.normalize, noise_map)
+            image, noise_map = normalise_by_fold(image, fold, cfg.normalize, noise_map, fold_max=fold_max)
     with stage("envelope"):
         env = image_envelope(image)
     with stage("targets"):
@@ -337,7 +349,7 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
                           eps_r=float(eps), config=asdict(cfg), n_traces=s.n_traces,
                           timings_s={"prepare": t_prep, "migrate": t_mig},
                           updates_per_s=s.n_traces * grid.size / t_mig if t_mig > 0 else None, frame=frame,
-                          refine=refine)
+                          refine=refine, depth=depth_info)
 
 
 def _refine_plan(cfg, s, v, frame, site, op) -> dict:
@@ -388,7 +400,75 @@ def record_depth_m(v_m_s: float, record_s: float, air_gap_m: float = 0.0) -> flo
     return 0.5 * v_m_s * (record_s - 2 * air_gap_m / C0) * 0.95
 
 
-def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s) -> "Reconstruction":
+def grid_depth_m(s, cfg: ReconstructConfig, v_m_s: float, positions, log=None) -> tuple[float, dict]:
+    """How deep the grid goes, and why: ``cfg.max_depth_m``; else where the signal of the prepared survey ``s``
+    ends (``cfg.signal_depth``, :func:`gpr3d.processing.signal.signal_end`), half its two-way time at ``v_m_s``;
+    else the record's depth (:func:`record_depth_m`). ``positions``: the traces' (their spacing tells whether
+    neighbours can be compared). Returns the depth (m) and ``config.json``'s ``"depth"`` entry."""
+    record = record_depth_m(v_m_s, s.n_samples * s.dt_s - s.t0_s, cfg.air_gap_m)
+    if cfg.max_depth_m:
+        return float(cfg.max_depth_m), {"depth_m": float(cfg.max_depth_m), "record_m": record, "how": "max_depth_m"}
+    info = {"depth_m": record, "record_m": record, "how": "record"}
+    if not cfg.signal_depth:
+        return record, info
+    from gpr3d.migration.refine import dominant_frequency_hz
+    from gpr3d.processing.signal import signal_end
+
+    with stage("signal depth"):
+        f = dominant_frequency_hz(s.data, s.dt_s)
+        step = np.linalg.norm(np.diff(np.asarray(positions, dtype=np.float64)[:, :2], axis=0), axis=1)
+        median_step = float(np.median(step)) if step.size else 0.0
+        if not f > 0:
+            why = "the traces carry no frequency to compare them by"
+        elif median_step > v_m_s / f / 4:
+            why = (f"neighbouring traces lie {median_step * 100:.1f} cm apart, over a quarter wavelength "
+                   f"({v_m_s / f / 4 * 100:.1f} cm): their likeness cannot tell signal from noise")
+        else:
+            end = signal_end(s.data, s.dt_s, f)
+            why = end.reason
+            info["signal"] = end.to_dict()
+            if end.end_s is not None:
+                depth = 0.5 * v_m_s * (end.end_s - s.t0_s - 2 * cfg.air_gap_m / C0)
+                if 0 < depth < record:
+                    info.update(depth_m=depth, how="signal", why=why)
+                    if log:
+                        log(f"depth range to {depth:.2f} m of the record's {record:.2f} m: {why} (--full-depth images "
+                            "the whole record)")
+                    return depth, info
+    info["why"] = why
+    return record, info
+
+
+def whole_record_fold_max(op: BackProjection, eps_r: float, positions, cfg: ReconstructConfig, record_m: float,
+                          profile: bool) -> float:
+    """The largest fold of the grid over the whole record's depth (``record_m``) that ``cfg`` would make, with
+    ``op``'s geometry and weights: found on a grid three times coarser in every direction (about 1/27 of the
+    whole pass's work), then at full resolution in the 7 x 7 x 7 voxels about the coarse maximum."""
+    def covering(k):
+        g = Grid3D.covering(positions, depth_m=record_m, spacing_m=k * cfg.spacing_m,
+                            depth_spacing_m=k * (cfg.depth_spacing_m or cfg.spacing_m), pad_m=cfg.pad_m,
+                            lattice=cfg.lattice)
+        return replace(g, y0=0.0, ny=1) if profile else g
+
+    def fold_on(g):
+        twin = BackProjection(g, op.tx, op.rx, dt_s=op.dt, n_samples=op.n_samples, t0_s=op.t0, eps_r=eps_r,
+                              aperture_deg=cfg.aperture_deg, obliquity=op.obliquity, spreading=op.spreading,
+                              air_gap_m=op.air_gap, engine=cfg.engine)
+        return twin.adjoint(np.zeros((op.n_traces, op.n_samples), np.float32), with_fold=True)[1]
+
+    coarse, full = covering(3), covering(1)
+    fold = fold_on(coarse)
+    i, j, k = np.unravel_index(int(np.argmax(fold)), fold.shape)
+    near = {}
+    for axis, at, n in (("x", coarse.x0 + i * coarse.dx, full.nx), ("y", coarse.y0 + j * coarse.dy, full.ny),
+                        ("d", coarse.d0 + k * coarse.dd, full.nd)):
+        o, step = getattr(full, axis + "0"), getattr(full, "dd" if axis == "d" else "d" + axis)
+        lo = min(max(int(round((at - o) / step)) - 3, 0), max(n - 7, 0))
+        near.update({axis + "0": o + lo * step, "n" + axis: min(7, n)})
+    return max(float(fold.max()), float(fold_on(replace(full, **near)).max()))
+
+
+def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s, log=None) -> "Reconstruction":
     """``reconstruct`` with ``method="pseudo3d"``: the lines of a grid survey migrated one by one (2D Kirchhoff),
     their envelopes interpolated between lines; the same target extraction."""
     from gpr3d.migration.traditional import pseudo3d, survey_lines
@@ -404,7 +484,7 @@ def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s) -> "Reconstruction"
         raise InvalidDataError(f"pseudo-3D needs two lines at least, the survey has {len(lines)}: migrate one "
                                "profile with 'gpr3d migrate', or use method 'backprojection'")
     v = velocity_from_eps_r(eps)
-    depth = cfg.max_depth_m or record_depth_m(v, s.n_samples * s.dt_s - s.t0_s, cfg.air_gap_m)
+    depth, depth_info = grid_depth_m(s, cfg, v, s.positions_xyz, log)
     grid = Grid3D.covering(s.positions_xyz, depth_m=depth, spacing_m=cfg.spacing_m,
                            depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m, lattice=cfg.lattice)
     check_grid_fits(grid)
@@ -426,7 +506,7 @@ def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s) -> "Reconstruction"
     return Reconstruction(image=env, envelope=env, noise_map=noise_map, fold=None, grid=grid, targets=targets,
                           eps_r=float(eps), config=asdict(cfg), n_traces=s.n_traces,
                           timings_s={"prepare": t_prep, "migrate": t_mig},
-                          updates_per_s=None)
+                          updates_per_s=None, depth=depth_info)
 
 
 def write_reconstruction(result: "Reconstruction", out_dir, *, source: str = "") -> list[str]:
@@ -451,6 +531,6 @@ def write_reconstruction(result: "Reconstruction", out_dir, *, source: str = "")
                                                        "config": result.config, "grid": g.to_dict(),
                                                        "frame": None if result.frame is None
                                                        else result.frame.to_dict(),
-                                                       "refine": result.refine,
+                                                       "refine": result.refine, "depth": result.depth,
                                                        "timings_s": result.timings_s}, indent=1))
     return sorted(p.name for p in out.iterdir())

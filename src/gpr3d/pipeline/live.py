@@ -24,7 +24,8 @@ takes them in batches:
 At the end (the stream's end mark, ``until_idle_s`` without a new trace, or Ctrl-C) the volume over every antenna
 position is put together from the tiles and finished exactly as ``gpr3d reconstruct`` finishes its own (fold
 normalisation, envelope, targets): with the settings written to ``config.json`` (``time_zero_s``,
-``background_window``, ``background_trailing``, ``lattice``) a batch ``reconstruct`` of the same traces gives the
+``background_window``, ``background_trailing``, ``lattice``, ``signal_depth`` off: the whole record's depth, or
+``max_depth_m``) a batch ``reconstruct`` of the same traces gives the
 same volume, to float rounding. A survey whose volume would exceed ``final_volume_voxels`` keeps its tiles in
 ``OUT/tiles`` and the last refresh's targets in ``OUT/live.json`` instead.
 """
@@ -491,7 +492,8 @@ class LiveReconstruction:
             raise GPR3DError("live mode migrates by back projection (--method backprojection)")
         self.rc = replace(rc, eps_r=float(eps), lattice=True, background_window=cfg.background_window,
                           background_trailing=cfg.background_trailing, remove_background=True,
-                          coarse_to_fine=False)  # (every voxel is migrated as the traces come)
+                          coarse_to_fine=False,  # (every voxel is migrated as the traces come)
+                          signal_depth=False)  # (where the signal ends is not known before the survey does)
         check_config(self.rc)
         self.eps = float(eps)
         self.v = velocity_from_eps_r(self.eps)
