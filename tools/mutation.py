@@ -60,6 +60,7 @@ MODULES = {
     "processing.picking": ["tests/processing"],
     "processing.image": ["tests/processing/test_image.py", "tests/detection/test_windows_by_hand.py"],
     "processing.analytic": ["tests/processing/test_analytic.py"],
+    "processing.signal": ["tests/processing/test_signal.py"],
     "migration.operator": None,
     "migration.masking": ["tests/migration/test_masking.py"],
     "migration.velocity": ["tests/migration/test_velocity.py", "-k", "not oblique"],

@@ -131,8 +131,23 @@ def test_the_envelope_of_float64_input_is_float32():
     img = np.broadcast_to(np.cos(2 * np.pi * z / 8.0), (2, 3, 64)).astype(np.float64)
     env = image_envelope(img)
     assert env.dtype == np.float32
-    np.testing.assert_allclose(env[:, :, 16:48], 1.0, atol=1e-3)
+    # (a cosine cut off at both ends: its envelope ripples by a few hundredths away from them)
+    np.testing.assert_allclose(env[:, :, 16:48], 1.0, atol=0.03)
     np.testing.assert_allclose(image_envelope(img, chunk_voxels=1), env)  # one x column per slab
+
+
+def test_the_bottom_of_a_column_does_not_wrap_onto_its_top():
+    from scipy.signal import hilbert
+
+    rng = np.random.default_rng(8)
+    z = np.arange(120)
+    col = np.cos(2 * np.pi * z / 9.0) * np.exp(-(((z - 30) / 6.0) ** 2))  # a target at 30
+    img = np.broadcast_to(col, (2, 2, 120)).astype(np.float32).copy()
+    img[:, :, 80:] += rng.standard_normal((2, 2, 40)).astype(np.float32)  # noise as strong deep down
+    alone = np.abs(hilbert(col[:60], N=1024))[:10]  # the top's envelope with nothing below the target
+    padded = image_envelope(img)[0, 0, :10]
+    wrapped = np.abs(hilbert(img[0, 0]))[:10]  # the transform without zeros: the bottom wraps onto the top
+    assert np.abs(padded - alone).max() < 0.05 < 0.5 < np.abs(wrapped - alone).max()
 
 
 def test_no_clutter_is_an_infinite_ratio():
@@ -144,4 +159,7 @@ def test_the_envelope_in_slabs_of_a_wide_image():
     img = rng.standard_normal((5, 70, 16)).astype(np.float32)  # more y columns than depths
     from scipy.signal import hilbert
 
-    np.testing.assert_allclose(image_envelope(img, chunk_voxels=2000), np.abs(hilbert(img, axis=2)), atol=1e-5)
+    # each column followed by zeros to 2 x 16 = 32 samples (no wrap of its bottom onto its top), as scipy pads to N
+    want = np.abs(hilbert(img, N=32, axis=2))[:, :, :16]
+    np.testing.assert_allclose(image_envelope(img, chunk_voxels=2000), want, atol=1e-5)
+    assert np.abs(np.abs(hilbert(img, axis=2)) - want).max() > 0.05  # (the unpadded transform differs)

@@ -5,7 +5,7 @@ import pytest
 from scipy.ndimage import uniform_filter1d
 from scipy.signal import hilbert
 
-from gpr3d.processing.analytic import analytic, hilbert_envelope, running_mean
+from gpr3d.processing.analytic import analytic, fast_length, hilbert_envelope, running_mean
 
 
 @pytest.mark.parametrize("n", [1, 2, 3, 4, 7, 8, 33, 64])
@@ -97,3 +97,27 @@ def test_running_mean_types_and_limits():
     assert running_mean(np.ones((2, 0), np.int16), 3, axis=1).dtype == np.float64
     with pytest.raises(ValueError, match="at least 1, not 0"):
         running_mean(np.ones(4), 0)
+
+
+@pytest.mark.parametrize("m, n", [(7, 8), (16, 32), (29, 60), (5, 5)])
+def test_zero_padding_equals_scipy_with_n_cut_back(m, n):
+    x = np.random.default_rng(m).standard_normal((3, m))
+    got = analytic(x, axis=1, n=n)
+    assert got.shape == (3, m)
+    np.testing.assert_allclose(got, hilbert(x, N=n, axis=1)[:, :m], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(hilbert_envelope(x.T, axis=0, n=n), np.abs(hilbert(x, N=n, axis=1)[:, :m]).T,
+                               atol=1e-12)
+    with pytest.raises(ValueError, match=f"the FFT's length {m - 1} is shorter than the {m} samples"):
+        analytic(x, axis=1, n=m - 1)
+
+
+def test_fast_lengths_are_the_smallest_5_smooth_ones():
+    def smooth(k):
+        for p in (2, 3, 5):
+            while k % p == 0:
+                k //= p
+        return k == 1
+
+    for m in range(1, 400):
+        want = next(k for k in range(m, 4 * m + 2) if smooth(k))
+        assert fast_length(m) == want, m

@@ -65,18 +65,22 @@ def masked_migration(op, data, mask):
 def image_envelope(image: np.ndarray, *, chunk_voxels: int = 4_000_000) -> np.ndarray:
     """Instantaneous amplitude of a migrated image along depth (Hilbert transform per column).
 
-    Works on slabs of about ``chunk_voxels`` voxels, so the complex temporaries stay small
+    Each column is followed by zeros to at least twice its length (:func:`~gpr3d.processing.analytic.fast_length`)
+    before the transform, so that the bottom of a column does not wrap onto its top (the voxels below one reach it
+    as the Hilbert transform's 1 / distance, not through the wrap): the shallow voxels' envelope hardly depends on
+    how deep the grid goes. Works on slabs of about ``chunk_voxels`` voxels, so the complex temporaries stay small
     (a 1e8-voxel image needs its own size again, not the 16x of one whole transform).
     """
     # (the analytic signal on NumPy's FFT, as scipy.signal.hilbert makes it: scipy.signal, with the scipy.stats it
     # pulls in, takes longer to import than a whole reconstruction's envelope takes)
-    from gpr3d.processing.analytic import hilbert_envelope
+    from gpr3d.processing.analytic import fast_length, hilbert_envelope
 
     img = np.asarray(image, dtype=np.float32)
     out = np.empty_like(img)
-    step = max(1, chunk_voxels // max(img.shape[1] * img.shape[2], 1))
+    n = fast_length(2 * img.shape[2])
+    step = max(1, chunk_voxels // max(img.shape[1] * n, 1))
     for i in range(0, img.shape[0], step):
-        out[i : i + step] = hilbert_envelope(img[i : i + step], axis=2)
+        out[i : i + step] = hilbert_envelope(img[i : i + step], axis=2, n=n)
     return out
 
 

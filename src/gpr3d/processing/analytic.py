@@ -17,20 +17,45 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["analytic", "hilbert_envelope", "running_mean"]
+__all__ = ["analytic", "fast_length", "hilbert_envelope", "running_mean"]
 
 
-def analytic(x, axis: int = -1) -> np.ndarray:
-    """Analytic signal of real ``x`` along ``axis`` (complex; float32 input stays single precision)."""
+def fast_length(m: int) -> int:
+    """The smallest length >= ``m`` with no prime factor above 5 (where the FFT is fastest)."""
+    m = max(int(m), 1)
+    best = None
+    p5 = 1
+    while p5 < 2 * m:
+        p35 = p5
+        while p35 < 2 * m:
+            k = p35
+            while k < m:
+                k *= 2
+            best = k if best is None else min(best, k)
+            p35 *= 3
+        p5 *= 5
+    return best
+
+
+def analytic(x, axis: int = -1, n: int | None = None) -> np.ndarray:
+    """Analytic signal of real ``x`` along ``axis`` (complex; float32 input stays single precision).
+
+    ``n``: the FFT's length, at least the samples': the samples are followed by zeros up to it and the result is
+    cut back to their length, so that the transform does not wrap one end of the axis onto the other (``2 x`` the
+    samples rules it out; ``scipy.signal.hilbert(x, N=n)`` cut to the samples' length is the same)."""
     x = np.asarray(x)
     if np.iscomplexobj(x):
         raise ValueError("the analytic signal is made from real samples")
     if x.dtype != np.float32:
         x = x.astype(np.float64)
-    n = x.shape[axis]
-    if n < 1:
+    m = x.shape[axis]
+    if m < 1:
         raise ValueError("the analytic signal needs at least one sample along its axis")
-    spec = np.fft.fft(x, axis=axis)
+    if n is None:
+        n = m
+    elif n < m:
+        raise ValueError(f"the FFT's length {n} is shorter than the {m} samples")
+    spec = np.fft.fft(x, n=n, axis=axis)
     h = np.zeros(n, dtype=x.dtype)
     h[0] = 1.0
     half = (n + 1) // 2  # positive frequencies are bins 1 .. half-1; an even n has a Nyquist bin at n // 2
@@ -39,12 +64,13 @@ def analytic(x, axis: int = -1) -> np.ndarray:
         h[n // 2] = 1.0
     shape = [1] * x.ndim
     shape[axis] = n
-    return np.fft.ifft(spec * h.reshape(shape), axis=axis)
+    out = np.fft.ifft(spec * h.reshape(shape), axis=axis)
+    return out if n == m else np.take(out, np.arange(m), axis=axis)
 
 
-def hilbert_envelope(x, axis: int = -1) -> np.ndarray:
-    """Instantaneous amplitude ``|analytic(x)|`` along ``axis``."""
-    return np.abs(analytic(x, axis=axis))
+def hilbert_envelope(x, axis: int = -1, n: int | None = None) -> np.ndarray:
+    """Instantaneous amplitude ``|analytic(x, axis, n)|`` along ``axis``."""
+    return np.abs(analytic(x, axis=axis, n=n))
 
 
 def running_mean(x, size: int, axis: int = -1) -> np.ndarray:
