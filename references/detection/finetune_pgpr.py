@@ -63,6 +63,8 @@ def main(argv=None):
     p.add_argument("--packed-fraction", type=float, default=0.6, help="share of the non-P-GPR windows from --packed")
     p.add_argument("--wall", type=float, default=0.0,
                    help="share of the synthetic records drawn as handheld wall scans (survey_sample(..., profile='wall'))")
+    p.add_argument("--wall-ringing", type=float, default=0.0,
+                   help="share of the wall scans whose echoes ring (gpr3d.simulation.surveys.echo_ringing)")
     p.add_argument("--augment", action="store_true",
                    help="stretch the windows along the traces, change their gain and noise (gpr3d.detection.augment)")
     args = p.parse_args(argv)
@@ -74,7 +76,7 @@ def main(argv=None):
                       freeze=args.freeze, checkpoint_every=50, labels_pattern=args.only,
                       packed=args.packed or None, packed_fraction=args.packed_fraction,
                       augment=args.augment or None, wall_fraction=args.wall, **PGPR)
-    wall = SurveySource(cfg.data_seed, profile="wall") if args.wall else None
+    wall = SurveySource(cfg.data_seed, profile="wall", ringing=args.wall_ringing) if args.wall else None
     res = train_detector(cfg, SurveySource(cfg.data_seed), wall_source=wall, progress=False,
                          max_seconds=args.max_seconds)
     if res["steps"] < cfg.steps:
@@ -89,7 +91,9 @@ def main(argv=None):
                                      + (f" ({args.only})" if args.only else "") + "; of the rest, "
                                      + (f"{args.packed_fraction:.0%} packed gprMax records ({' '.join(args.packed)}), "
                                         if args.packed else "") + f"the others survey_sample(seed={cfg.data_seed}, i)"
-                                     + (f" ({args.wall:.0%} of them wall scans, profile 'wall')" if args.wall else "")
+                                     + (f" ({args.wall:.0%} of them wall scans, profile 'wall'"
+                                        + (f", {args.wall_ringing:.0%} of those ringing" if args.wall_ringing else "")
+                                        + ")" if args.wall else "")
                                      + (f"; augmented {cfg.augment}" if cfg.augment else ""),
                              "steps_done": res["steps"]})
     print(json.dumps({"weights": str(weights), "steps": res["steps"], "wall_s": res["wall_s"]}))

@@ -155,6 +155,10 @@ def test_demo_end_to_end(tmp_path):
     assert summary["stages"]["reconstruction"]["excess_fraction"] < 0.25
     rtm = summary["stages"]["synthetic"]["rtm"]  # the wave-equation step focuses each point target
     assert len(rtm["focus_error_m"]) == 2 and max(rtm["focus_error_m"]) <= 2 * rtm["cell_m"]
+    # the depth range reconstruct would choose: the demo's clutter is coherent to the record's end (nothing cut)
+    depth = summary["stages"]["reconstruction"]["depth_range"]
+    assert depth["how"] == "record" and depth["why"] == "the signal reaches the record's end"
+    assert depth["depth_m"] == depth["record_m"] == pytest.approx(0.5 * 0.95 * 299792458.0 / 3 * 37.1e-9, abs=0.02)
     rec_tiles = summary["stages"]["reconstruction"]["tiles"]  # site tiles give the one-pass volume exactly
     assert rec_tiles["equal_to_one_pass"] and rec_tiles["n"] > 1
     c2f = summary["stages"]["reconstruction"]["coarse_to_fine"]  # the same targets from part of the work

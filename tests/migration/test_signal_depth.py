@@ -60,10 +60,10 @@ def test_a_shallow_pipe_under_a_long_record_gets_a_shallow_grid_and_the_same_ima
                     "(--full-depth images the whole record)"]
     nd = cut.grid.nd
     # each voxel's sum does not depend on how deep the grid goes, and the fold's floor is the whole record's (its
-    # largest fold found again): the same image, to 0.2 % of its peak
+    # largest fold found again): the same image, to float rounding
     ref = np.abs(full.image[:, :, :nd]).max()
-    assert np.abs(cut.image - full.image[:, :, :nd]).max() < 2e-3 * ref
-    assert cut.depth["fold_max"] == pytest.approx(float(full.fold.max()), rel=0.01)
+    assert np.abs(cut.image - full.image[:, :, :nd]).max() < 1e-5 * ref
+    assert cut.depth["fold_max"] == pytest.approx(float(full.fold.max()), rel=1e-6)
     assert float(cut.fold.max()) < 0.6 * cut.depth["fold_max"]  # (the cut grid's own: far from it)
     # the envelope along depth (a transform of each whole column) moves by a few hundredths of its peak at the ends
     # of the columns, at most a hundredth where the pipe is (every voxel over the target threshold)
@@ -122,3 +122,55 @@ def test_when_the_record_is_kept_whole_and_why(noisy):
     # an air gap takes its two-way time off
     depth_air, _ = grid_depth_m(prepared, ReconstructConfig(air_gap_m=0.1), v, noisy.positions_xyz)
     assert depth - depth_air == pytest.approx(0.5 * v * 2 * 0.1 / 299792458.0)
+
+
+@pytest.mark.parametrize("kw", [{}, {"air_gap_m": 0.05}, {"aperture_deg": 30.0}, {"obliquity": False},
+                                {"depth_spacing_m": 0.02}])
+def test_the_fold_s_floor_is_the_whole_record_s(noisy, kw):
+    cut = reconstruct(noisy, ReconstructConfig(spacing_m=0.03, **kw))
+    full = reconstruct(noisy, ReconstructConfig(spacing_m=0.03, signal_depth=False, **kw))
+    assert cut.depth["how"] == "signal" and cut.grid.nd < full.grid.nd
+    # found on voxels of the whole-record grid (every third, then all about the 16 largest of those): its largest
+    assert cut.depth["fold_max"] == pytest.approx(float(full.fold.max()), rel=1e-6)
+    assert cut.depth["fold_max"] > 1.3 * float(cut.fold.max())  # (the cut grid's own would be a lower floor)
+
+
+def test_the_depth_s_other_reasons_in_full(noisy):
+    v = velocity_from_eps_r(EPS)
+    prepared = noisy.time_zero(method="peak", search_s=10e-9).remove_background()
+    record = 0.5 * v * (prepared.n_samples * prepared.dt_s - prepared.t0_s) * 0.95
+    assert grid_depth_m(prepared, ReconstructConfig(max_depth_m=0.9), v, noisy.positions_xyz) == (
+        0.9, {"depth_m": 0.9, "record_m": pytest.approx(record), "how": "max_depth_m"})
+    # silence: no frequency to size the windows by
+    quiet = prepared.replace(data=np.zeros_like(prepared.data))
+    depth, info = grid_depth_m(quiet, ReconstructConfig(), v, noisy.positions_xyz)
+    assert info == {"depth_m": depth, "record_m": depth, "how": "record",
+                    "why": "the traces carry no frequency to compare them by"}
+    # a quarter wavelength: traces just inside it are compared, just outside it not
+    from gpr3d.migration.refine import dominant_frequency_hz
+
+    quarter = v / dominant_frequency_hz(prepared.data, prepared.dt_s) / 4
+    step = float(np.median(np.linalg.norm(np.diff(noisy.positions_xyz[:, :2], axis=0), axis=1)))
+    for scale, how in ((0.9, "signal"), (1.1, "record")):
+        pos = noisy.positions_xyz * (scale * quarter / step)
+        depth, info = grid_depth_m(prepared, ReconstructConfig(), v, pos)
+        assert info["how"] == how, (scale, info)
+    assert info["why"] == (f"neighbouring traces lie {1.1 * quarter * 100:.1f} cm apart, over a quarter wavelength "
+                           f"({quarter * 100:.1f} cm): their likeness cannot tell signal from noise")
+    # time zero later than the first sample: the depth counts from it
+    late = prepared.replace(t0_s=1e-9)
+    d0, _ = grid_depth_m(prepared, ReconstructConfig(), v, noisy.positions_xyz)
+    d1, _ = grid_depth_m(late, ReconstructConfig(), v, noisy.positions_xyz)
+    assert d0 - d1 == pytest.approx(0.5 * v * 1e-9)
+
+
+def test_the_signal_s_stages_are_timed(noisy):
+    from gpr3d.core.timing import collect
+
+    with collect(compile_times=False) as t:
+        reconstruct(noisy, ReconstructConfig(spacing_m=0.05))
+    assert list(t.seconds) == ["prepare", "signal depth", "grid", "migrate", "fold max", "fold", "envelope",
+                               "targets"]
+    with collect(compile_times=False) as t:
+        reconstruct(noisy, ReconstructConfig(spacing_m=0.05, signal_depth=False))
+    assert list(t.seconds) == ["prepare", "grid", "migrate", "fold", "envelope", "targets"]

@@ -13,6 +13,7 @@ from gpr3d.processing import signal as S
 DT = 0.1e-9
 F = 500e6  # a window: 2 periods = 4 ns = 40 samples
 W = 40
+SIX_SIGMA = 6 / math.sqrt(48 * W)  # noise's spread in a run of 48 pairs: 0.137, above the 0.1 floor
 
 
 def _ricker(t, f):
@@ -110,6 +111,10 @@ def test_records_that_are_not_cut():
     ((np.zeros(10), DT, F), r"data must be \(n_traces, n_samples\), got shape \(10,\)"),
     ((np.zeros((30, 200)), 0.0, F), "dt_s and frequency_hz must be positive, got 0.0 and"),
     ((np.zeros((30, 200)), DT, float("nan")), "dt_s and frequency_hz must be positive"),
+    ((np.zeros((30, 200)), DT, float("inf")), "dt_s and frequency_hz must be positive"),
+    ((np.zeros((30, 200)), DT, 0.0), "dt_s and frequency_hz must be positive"),
+    ((np.zeros((30, 200)), float("inf"), F), "dt_s and frequency_hz must be positive"),
+    ((np.zeros((30, 200)), -DT, F), "dt_s and frequency_hz must be positive"),
 ])
 def test_wrong_arguments_are_named(args, msg):
     with pytest.raises(ValueError, match=msg):
@@ -135,3 +140,79 @@ def test_real_recordings_noise_after_the_signal_and_correlated_noise_to_the_end(
     # the 50 MHz line's noise is alike from trace to trace (r ~ 0.65 to the end): not cut
     end, _ = end_of(REAL / "gprpy_sns_50MHz" / "XLINE00.DT1")
     assert end.end_s is None and end.reason == "the signal reaches the record's end"
+
+
+def test_runs_of_trace_pairs_by_hand():
+    # 8 traces (7 pairs) of 2 samples, runs of 3 pairs: pairs 0-2 and 3-6 (the last run takes the short remainder)
+    data = np.array([[1, 2], [1, 2], [1, 2], [2, -1], [1, 0], [1, 0], [0, 0], [0, 0]], float)
+    got = S.window_coherence(data, 2, block=3)
+    a, b = data[:-1], data[1:]
+
+    def r(pairs):
+        c = (a[pairs] * b[pairs]).sum()
+        p = ((a[pairs] ** 2).sum() + (b[pairs] ** 2).sum()) / 2
+        return c / p
+
+    np.testing.assert_allclose(got, [[r(slice(0, 3))], [r(slice(3, 7))]], rtol=1e-6)
+    assert got.shape == (2, 1)
+    # 6 pairs in runs of 2: three runs, however few samples the traces have
+    assert S.window_coherence(np.ones((7, 3)), 4, block=2).shape == (3, 1)
+    # fewer pairs than a run: one run, pooled over all
+    np.testing.assert_allclose(S.window_coherence(data, 2, block=50), [S.window_coherence(data, 2)], rtol=1e-6)
+    # no energy at all: 0
+    assert S.window_coherence(np.zeros((3, 4)), 2).tolist() == [0.0, 0.0]
+
+
+def _blocks(n_traces, n_windows, signal_windows, seed=0):
+    """Traces alike (the same random wiggle in each) in ``signal_windows`` windows of W samples, independent noise
+    elsewhere: coherence 1 there and about 0 elsewhere."""
+    rng = np.random.default_rng(seed)
+    data = rng.standard_normal((n_traces, n_windows * W))
+    common = rng.standard_normal(n_windows * W)
+    for k in signal_windows:
+        data[:, k * W:(k + 1) * W] = common[k * W:(k + 1) * W]
+    return data
+
+
+def test_the_end_window_by_window():
+    # alike in windows 0..5: the three-window average lifts window 6 (1/3), not 7; the margin adds two
+    end = S.signal_end(_blocks(200, 15, range(6)), DT, F)
+    assert end.end_s == pytest.approx((6 + 1 + S.MARGIN_WINDOWS) * W * DT)
+    # the signal to window 11 of 15: the end would fall on the record's end exactly: not cut
+    end = S.signal_end(_blocks(200, 15, range(12)), DT, F)
+    assert end.end_s is None and end.reason == "the signal reaches the record's end"
+    # ... to window 10: cut one window before it
+    assert S.signal_end(_blocks(200, 15, range(11)), DT, F).end_s == pytest.approx(14 * W * DT)
+    assert S.signal_end(_blocks(200, 15, range(6)), DT, F).to_dict() == {
+        "end_s": pytest.approx(9 * W * DT), "window_samples": W, "threshold": pytest.approx(SIX_SIGMA),
+        "reason": f"no signal above the noise after {9 * W * DT * 1e9:.1f} ns (coherence of neighbouring traces "
+                  f"<= {SIX_SIGMA:.2f})"}
+
+
+def test_the_threshold_of_one_run_counts_its_pairs():
+    end = S.signal_end(_blocks(30, 15, range(3)), DT, F)  # 29 pairs in one run
+    assert end.threshold == pytest.approx(S.NOISE_SIGMAS / math.sqrt(29 * W))  # 0.176, above MIN_COHERENCE
+    assert end.coherence.shape == (1, 15)
+    end = S.signal_end(_blocks(200, 15, range(3)), DT, F)  # runs of 48: 6 sigma = 0.137
+    assert end.threshold == pytest.approx(SIX_SIGMA)
+    assert end.coherence.shape == (4, 15)
+
+
+def test_windows_and_the_shortest_record_judged():
+    # a window is two periods, four samples at the least
+    assert S.signal_end(_record(), DT, 2 / (3 * DT)).window_samples == 4
+    assert S.signal_end(_record(), DT, 2 / (7 * DT)).window_samples == 7
+    # three windows: judged; one sample fewer: too few
+    judged = S.signal_end(_blocks(100, 3, range(1)), DT, F)
+    assert "too few" not in judged.reason and judged.coherence.shape == (2, 3)  # (99 pairs: runs of 48 and 51)
+    few = S.signal_end(_blocks(100, 3, range(1))[:, :-1], DT, F)
+    assert few.reason == f"100 traces of {3 * W - 1} samples are too few to tell signal from noise"
+    assert few.window_samples == W and math.isnan(few.threshold) and few.coherence.size == 0
+    # a frequency so low that a window outlasts the record: too few, not an error
+    assert S.signal_end(_record(), DT, 0.5).end_s is None
+    noise = S.signal_end(np.random.default_rng(3).standard_normal((400, 600)), DT, F)
+    assert noise.window_samples == W and noise.threshold == pytest.approx(SIX_SIGMA)
+    assert noise.coherence.shape == (8, 15)
+    whole = S.signal_end(_record(last_event_s=58e-9), DT, F)
+    assert whole.window_samples == W and whole.threshold == pytest.approx(SIX_SIGMA)
+    assert whole.coherence.shape == (8, 15)

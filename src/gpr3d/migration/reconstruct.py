@@ -443,7 +443,7 @@ def whole_record_fold_max(op: BackProjection, eps_r: float, positions, cfg: Reco
                           profile: bool) -> float:
     """The largest fold of the grid over the whole record's depth (``record_m``) that ``cfg`` would make, with
     ``op``'s geometry and weights: found on a grid three times coarser in every direction (about 1/27 of the
-    whole pass's work), then at full resolution in the 7 x 7 x 7 voxels about the coarse maximum."""
+    whole pass's work), then at full resolution in the 7 x 7 x 7 voxels about each of its 16 largest."""
     def covering(k):
         g = Grid3D.covering(positions, depth_m=record_m, spacing_m=k * cfg.spacing_m,
                             depth_spacing_m=k * (cfg.depth_spacing_m or cfg.spacing_m), pad_m=cfg.pad_m,
@@ -458,14 +458,19 @@ def whole_record_fold_max(op: BackProjection, eps_r: float, positions, cfg: Reco
 
     coarse, full = covering(3), covering(1)
     fold = fold_on(coarse)
-    i, j, k = np.unravel_index(int(np.argmax(fold)), fold.shape)
-    near = {}
-    for axis, at, n in (("x", coarse.x0 + i * coarse.dx, full.nx), ("y", coarse.y0 + j * coarse.dy, full.ny),
-                        ("d", coarse.d0 + k * coarse.dd, full.nd)):
-        o, step = getattr(full, axis + "0"), getattr(full, "dd" if axis == "d" else "d" + axis)
-        lo = min(max(int(round((at - o) / step)) - 3, 0), max(n - 7, 0))
-        near.update({axis + "0": o + lo * step, "n" + axis: min(7, n)})
-    return max(float(fold.max()), float(fold_on(replace(full, **near)).max()))
+    best = float(fold.max())
+    # the fold is broad and flat near its largest (several near-equal summits): each of the coarse grid's 16
+    # largest voxels is looked at again at full resolution, in the 7 x 7 x 7 voxels about it
+    for flat in np.argsort(fold, axis=None)[::-1][:16]:
+        i, j, k = np.unravel_index(int(flat), fold.shape)
+        near = {}
+        for axis, at, n in (("x", coarse.x0 + i * coarse.dx, full.nx), ("y", coarse.y0 + j * coarse.dy, full.ny),
+                            ("d", coarse.d0 + k * coarse.dd, full.nd)):
+            o, step = getattr(full, axis + "0"), getattr(full, "dd" if axis == "d" else "d" + axis)
+            lo = min(max(int(round((at - o) / step)) - 3, 0), max(n - 7, 0))
+            near.update({axis + "0": o + lo * step, "n" + axis: min(7, n)})
+        best = max(best, float(fold_on(replace(full, **near)).max()))
+    return best
 
 
 def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s, log=None) -> "Reconstruction":

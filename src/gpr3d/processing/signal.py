@@ -80,9 +80,9 @@ def window_coherence(data: np.ndarray, w: int, block: int | None = None) -> np.n
     if block is None:
         cross, power = cross.sum(axis=0), power.sum(axis=0)
     else:
-        starts = np.arange(0, max(a.shape[0] - block, 0) + 1, block) if a.shape[0] >= 2 * block else np.array([0])
-        cross, power = np.add.reduceat(cross, starts, axis=0), np.add.reduceat(power, starts, axis=0)
-    return np.divide(cross, power, out=np.zeros(cross.shape), where=power > 0)
+        starts = np.arange(0, max(a.shape[0] - block + 1, 1), block)
+        cross, power = np.add.reduceat(cross, starts), np.add.reduceat(power, starts)
+    return cross / np.maximum(power, np.finfo(np.float64).tiny)  # (no energy: no cross term either, 0)
 
 
 def signal_end(data: np.ndarray, dt_s: float, frequency_hz: float) -> SignalEnd:

@@ -33,7 +33,7 @@ import numpy as np
 
 from gpr3d.simulation.scene import Antenna, Medium, Scene, Stone, Target
 
-__all__ = ["SURVEY_RANGES", "SURVEY_PROFILES", "WALL_RANGES", "display_8bit", "sample_survey_scene", "sample_gprmax_survey_scene", "synthesize_survey", "survey_sample", "SurveySource"]
+__all__ = ["SURVEY_RANGES", "SURVEY_PROFILES", "WALL_RANGES", "display_8bit", "echo_ringing", "sample_survey_scene", "sample_gprmax_survey_scene", "synthesize_survey", "survey_sample", "SurveySource"]
 
 SURVEY_RANGES = {
     "concrete": {"frequency_hz": (1.0e9, 2.6e9), "eps_r": (4.0, 12.0), "conductivity_s_m": (0.001, 0.03),
@@ -227,14 +227,15 @@ def _trace_positions(scene: Scene, rng, augment: bool) -> np.ndarray:
 
 
 def synthesize_survey(scene: Scene, *, seed: int = 0, augment: bool = True, n_samples: int | None = None,
-                      wall: bool = False):
+                      wall: bool = False, ringing: float = 0.0):
     """A recorded-looking B-scan of ``scene`` (forward model) and its labels: ``(Survey, labels dict)``.
 
     With ``augment`` the artefacts listed in the module docstring are drawn from
     ``seed``; without it the B-scan is the clean forward model at even steps. ``wall``
     (with ``augment``): recorded as a handheld wall scanner records (``WALL_RANGES``): a
     narrower beam, the concrete's aggregate as many weak scatterers, noise correlated from
-    trace to trace, and most often kept as an 8-bit picture (:func:`display_8bit`).
+    trace to trace, and most often kept as an 8-bit picture (:func:`display_8bit`); ``ringing``: the share of
+    wall records whose every echo rings (:func:`echo_ringing`, a draw of its own: 0 leaves the records as they were).
     """
     from gpr3d.core.poses import quat_from_yaw
     from gpr3d.core.survey import Survey
@@ -267,6 +268,11 @@ def synthesize_survey(scene: Scene, *, seed: int = 0, augment: bool = True, n_sa
             kw.update(beam_half_angle_deg=float(rng.uniform(20, 45)), clutter=int(rng.integers(60, 300)),
                       clutter_amplitude=float(rng.uniform(0.02, 0.12)))
     data = forward_model(fs, pos, **kw).astype(np.float64)
+    if augment and wall:
+        # (a draw of its own: the records' other draws stay what they were without it)
+        ring_rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA07]))
+        if ring_rng.random() < ringing:
+            data = echo_ringing(data, dt, f, ring_rng)
     if augment:
         data = _artefacts(data, dt, f, rng)
         if wall:
@@ -309,6 +315,25 @@ def _artefacts(data: np.ndarray, dt: float, f: float, rng) -> np.ndarray:
     return data
 
 
+def echo_ringing(data: np.ndarray, dt: float, f: float, rng) -> np.ndarray:
+    """Every echo of ``data`` followed by the antenna's ringing: each trace convolved with ``delta(t) + g sin(2 pi
+    f_r (t - t1)) exp(-(t - t1) / tau)`` for ``t >= t1`` (one period of ``f`` after the echo's peak), ``f_r``
+    0.7-1.3 ``f``, ``tau`` 1-4 periods, ``g`` such that an echo at ``f_r`` rings at 0.3-0.8 of its amplitude: the
+    parallel copies of each hyperbola a few periods below it
+    that a handheld scanner's pictures show under every bar (and that their labels leave out)."""
+    n_s = data.shape[1]
+    fr, tau, a = f * rng.uniform(0.7, 1.3), rng.uniform(1.0, 4.0) / f, rng.uniform(0.3, 0.8)
+    t = np.arange(n_s) * dt - 1.0 / f
+    tail = np.where(t >= 0, np.sin(2 * np.pi * fr * t) * np.exp(-np.maximum(t, 0) / tau), 0.0)
+    # scaled so that an echo at f_r rings at a of its own amplitude (the tail's gain at f_r is 1 then)
+    gain = abs(np.sum(tail * np.exp(-2j * np.pi * fr * np.arange(n_s) * dt)))
+    kernel = a * tail / (gain or 1.0)
+    kernel[0] += 1.0
+    m = 2 * n_s
+    spec = np.fft.rfft(data, m, axis=1) * np.fft.rfft(kernel, m)[None, :]
+    return np.fft.irfft(spec, m, axis=1)[:, :n_s]
+
+
 def _correlated_noise(shape, dt: float, f: float, rng) -> np.ndarray:
     """Unit-RMS noise in a band about ``f`` (a Gaussian of half its width in frequency) and smooth over a few
     traces: a wall's texture."""
@@ -332,23 +357,27 @@ def display_8bit(data: np.ndarray, rng) -> np.ndarray:
     return np.round(np.clip(data / level, -1.0, 1.0) * 127.0) + 128.0
 
 
-def survey_sample(seed: int, index: int, *, host: str | None = None, augment: bool = True, profile: str = "train"):
+def survey_sample(seed: int, index: int, *, host: str | None = None, augment: bool = True, profile: str = "train",
+                  ringing: float = 0.0):
     """``(Survey, labels)`` of survey-scale sample ``index``: the detector's training and test source
-    (``profile="wall"``: P-GPR-like handheld wall scans, ``WALL_RANGES``)."""
+    (``profile="wall"``: P-GPR-like handheld wall scans, ``WALL_RANGES``; ``ringing``: the share of those whose
+    echoes ring, :func:`echo_ringing`)."""
     scene = sample_survey_scene(seed, index, host=host, profile=profile)
     return synthesize_survey(scene, seed=int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0]),
-                             augment=augment, wall=profile == "wall")
+                             augment=augment, wall=profile == "wall", ringing=ringing)
 
 
 class SurveySource:
     """``source(i) -> survey_sample(seed, i)``: a picklable record source for training and evaluation."""
 
-    def __init__(self, seed: int, *, augment: bool = True, profile: str = "train"):
+    def __init__(self, seed: int, *, augment: bool = True, profile: str = "train", ringing: float = 0.0):
         if not isinstance(seed, int) or seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
         if profile not in ("train", "wall"):
             raise ValueError(f"a survey source draws 'train' or 'wall' records, got {profile!r}")
-        self.seed, self.augment, self.profile = seed, augment, profile
+        if not 0.0 <= ringing <= 1.0 or (ringing and profile != "wall"):
+            raise ValueError(f"ringing is a share (0..1) of wall records, got {ringing!r} for profile {profile!r}")
+        self.seed, self.augment, self.profile, self.ringing = seed, augment, profile, ringing
 
     def __call__(self, i: int):
-        return survey_sample(self.seed, i, augment=self.augment, profile=self.profile)
+        return survey_sample(self.seed, i, augment=self.augment, profile=self.profile, ringing=self.ringing)
