@@ -144,3 +144,50 @@ def test_wall_samples_are_labelled_records_mostly_kept_as_8bit_pictures():
     assert np.array_equal(src(2)[0].data, survey_sample(5, 2, profile="wall")[0].data)
     with pytest.raises(ValueError, match="'train' or 'wall'"):
         SurveySource(5, profile="walls")
+
+
+def test_echo_ringing_follows_each_echo_by_its_decaying_copies():
+    from gpr3d.simulation.surveys import echo_ringing
+
+    f, dt, n = 1.6e9, 1e-11, 600
+    data = np.zeros((2, n))
+    data[0, 100] = 1.0  # an impulse: the output is the kernel itself
+    data[1, 300] = -2.0
+    rng_a, rng_b = np.random.default_rng(4), np.random.default_rng(4)
+    out = echo_ringing(data, dt, f, rng_a)
+    fr, tau, a = f * rng_b.uniform(0.7, 1.3), rng_b.uniform(1.0, 4.0) / f, rng_b.uniform(0.3, 0.8)
+    # the kernel by hand: the impulse, then after one period of f a sinusoid at fr decaying over tau
+    t = np.arange(n) * dt - 1 / f
+    tail = np.where(t >= 0, np.sin(2 * np.pi * fr * t) * np.exp(-np.clip(t, 0, None) / tau), 0.0)
+    gain = abs(np.sum(tail * np.exp(-2j * np.pi * fr * np.arange(n) * dt)))
+    kernel = a * tail / gain
+    kernel[0] += 1
+    np.testing.assert_allclose(out[0, 100:], kernel[: n - 100], atol=1e-12)
+    np.testing.assert_allclose(out[0, :100], 0.0, atol=1e-12)  # nothing before the echo
+    np.testing.assert_allclose(out[1, 300:], -2 * kernel[: n - 300], atol=1e-12)  # linear, shift-invariant
+    # a long echo at fr: its steady state is the echo times 1 + a e^(i phase), the tail's response at fr of
+    # magnitude a (its phase the tail's own, from the sum over the kernel)
+    m = 4000
+    burst = np.zeros((1, m))
+    burst[0, :2000] = np.sin(2 * np.pi * fr * np.arange(2000) * dt)
+    rung = echo_ringing(burst, dt, f, np.random.default_rng(4))
+    t = np.arange(m) * dt - 1 / f
+    tail = np.where(t >= 0, np.sin(2 * np.pi * fr * t) * np.exp(-np.clip(t, 0, None) / tau), 0.0)
+    h = np.sum(tail * np.exp(-2j * np.pi * fr * np.arange(m) * dt))
+    assert np.abs(rung[0, 1500:2000]).max() == pytest.approx(abs(1 + a * h / abs(h)), rel=0.02)
+
+
+def test_ringing_is_a_share_of_wall_records_drawn_apart():
+    from gpr3d.simulation.surveys import SurveySource, survey_sample
+
+    rung = sum(not np.array_equal(survey_sample(5, i, profile="wall", ringing=0.5)[0].data,
+                                  survey_sample(5, i, profile="wall")[0].data) for i in range(8))
+    assert 1 <= rung <= 7  # about half
+    every = [survey_sample(5, i, profile="wall", ringing=1.0) for i in range(2)]
+    for i, (s, lab) in enumerate(every):  # the labels and the records' other draws stay
+        s0, lab0 = survey_sample(5, i, profile="wall")
+        assert lab == lab0 and s.data.shape == s0.data.shape and not np.array_equal(s.data, s0.data)
+    assert np.array_equal(SurveySource(5, profile="wall", ringing=1.0)(1)[0].data, every[1][0].data)
+    for bad in (dict(profile="wall", ringing=1.5), dict(profile="train", ringing=0.5)):
+        with pytest.raises(ValueError, match="ringing is a share"):
+            SurveySource(5, **bad)
