@@ -1,5 +1,3 @@
-import sys
+from gpr3d.cli.main import entry
 
-from gpr3d.cli.main import main
-
-sys.exit(main())
+entry()

@@ -119,5 +119,28 @@ def main(argv=None) -> int:
         return 130
 
 
+def leave(rc: int) -> None:
+    """End the process with status ``rc``: at once (``os._exit``, after flushing the output) when nothing is left
+    to finish, no thread but this one that is not a daemon and no ``multiprocessing`` child, so that the
+    interpreter's teardown (numba's thread pool, every module's clean-up: about 0.3 s a command on a 2-core host,
+    ``benchmarks/results/bench_stages.md``) is not waited for; otherwise, or with ``GPR3D_FAST_EXIT=0``, as
+    usual. Every file gpr3d writes is complete (and renamed into place) before its command returns."""
+    import os
+    import threading
+
+    sys.stdout.flush()
+    sys.stderr.flush()
+    busy = [t for t in threading.enumerate() if t is not threading.main_thread() and t.is_alive() and not t.daemon]
+    mp = sys.modules.get("multiprocessing")
+    if not busy and not (mp and mp.active_children()) and os.environ.get("GPR3D_FAST_EXIT", "1") != "0":
+        os._exit(int(rc))
+    sys.exit(rc)
+
+
+def entry() -> None:
+    """The ``gpr3d`` console command: :func:`main`, then :func:`leave`."""
+    leave(main())
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()
