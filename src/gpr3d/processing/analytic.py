@@ -69,8 +69,34 @@ def analytic(x, axis: int = -1, n: int | None = None) -> np.ndarray:
 
 
 def hilbert_envelope(x, axis: int = -1, n: int | None = None) -> np.ndarray:
-    """Instantaneous amplitude ``|analytic(x, axis, n)|`` along ``axis``."""
-    return np.abs(analytic(x, axis=axis, n=n))
+    """Instantaneous amplitude ``|analytic(x, axis, n)|`` along ``axis``.
+
+    Made as ``sqrt(x^2 + H(x)^2)`` with the Hilbert transform ``H`` by the real FFT (the spectrum's positive
+    frequencies turned by -90 degrees, DC and Nyquist left out): the analytic signal's imaginary part, for half the
+    work of its complex transforms."""
+    x = np.asarray(x)
+    if np.iscomplexobj(x):
+        raise ValueError("the analytic signal is made from real samples")
+    if x.dtype != np.float32:
+        x = x.astype(np.float64)
+    m = x.shape[axis]
+    if m < 1:
+        raise ValueError("the analytic signal needs at least one sample along its axis")
+    if n is None:
+        n = m
+    elif n < m:
+        raise ValueError(f"the FFT's length {n} is shorter than the {m} samples")
+    spec = np.fft.rfft(x, n=n, axis=axis)
+    turn = np.full(spec.shape[axis], -1j, dtype=spec.dtype)
+    turn[0] = 0.0
+    if n % 2 == 0:
+        turn[-1] = 0.0
+    shape = [1] * x.ndim
+    shape[axis] = turn.size
+    h = np.fft.irfft(spec * turn.reshape(shape), n=n, axis=axis)
+    if n != m:
+        h = np.take(h, np.arange(m), axis=axis)
+    return np.sqrt(x * x + h * h)
 
 
 def running_mean(x, size: int, axis: int = -1) -> np.ndarray:
