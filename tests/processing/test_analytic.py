@@ -121,3 +121,17 @@ def test_fast_lengths_are_the_smallest_5_smooth_ones():
     for m in range(1, 400):
         want = next(k for k in range(m, 4 * m + 2) if smooth(k))
         assert fast_length(m) == want, m
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("m, n", [(8, None), (9, None), (8, 20), (9, 27), (1, None)])
+def test_the_envelope_by_the_real_fft_equals_the_analytic_signal_s_magnitude(dtype, m, n):
+    x = np.random.default_rng(m).standard_normal((4, m)).astype(dtype)
+    got = hilbert_envelope(x, axis=1, n=n)
+    assert got.dtype == dtype and got.shape == x.shape
+    want = np.abs(hilbert(x.astype(np.float64), N=n or m, axis=1)[:, :m])
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-5 if dtype == np.float32 else 1e-12)
+    for bad, msg in ((x + 1j, "made from real samples"), (np.zeros((3, 0)), "at least one sample"),
+                     (x, f"the FFT's length {m - 1} is shorter")):
+        with pytest.raises(ValueError, match=msg):
+            hilbert_envelope(bad, axis=1, n=m - 1 if "FFT" in msg else None)

@@ -37,12 +37,8 @@ def fast_length(m: int) -> int:
     return best
 
 
-def analytic(x, axis: int = -1, n: int | None = None) -> np.ndarray:
-    """Analytic signal of real ``x`` along ``axis`` (complex; float32 input stays single precision).
-
-    ``n``: the FFT's length, at least the samples': the samples are followed by zeros up to it and the result is
-    cut back to their length, so that the transform does not wrap one end of the axis onto the other (``2 x`` the
-    samples rules it out; ``scipy.signal.hilbert(x, N=n)`` cut to the samples' length is the same)."""
+def _real_samples(x, axis: int, n: int | None):
+    """``x`` as float32 (kept) or float64, its length along ``axis`` and the FFT's length (checked)."""
     x = np.asarray(x)
     if np.iscomplexobj(x):
         raise ValueError("the analytic signal is made from real samples")
@@ -55,6 +51,16 @@ def analytic(x, axis: int = -1, n: int | None = None) -> np.ndarray:
         n = m
     elif n < m:
         raise ValueError(f"the FFT's length {n} is shorter than the {m} samples")
+    return x, m, n
+
+
+def analytic(x, axis: int = -1, n: int | None = None) -> np.ndarray:
+    """Analytic signal of real ``x`` along ``axis`` (complex; float32 input stays single precision).
+
+    ``n``: the FFT's length, at least the samples': the samples are followed by zeros up to it and the result is
+    cut back to their length, so that the transform does not wrap one end of the axis onto the other (``2 x`` the
+    samples rules it out; ``scipy.signal.hilbert(x, N=n)`` cut to the samples' length is the same)."""
+    x, m, n = _real_samples(x, axis, n)
     spec = np.fft.fft(x, n=n, axis=axis)
     h = np.zeros(n, dtype=x.dtype)
     h[0] = 1.0
@@ -69,31 +75,13 @@ def analytic(x, axis: int = -1, n: int | None = None) -> np.ndarray:
 
 
 def hilbert_envelope(x, axis: int = -1, n: int | None = None) -> np.ndarray:
-    """Instantaneous amplitude ``|analytic(x, axis, n)|`` along ``axis``.
+    """Instantaneous amplitude ``|analytic(x, axis, n)|`` along ``axis`` (float32 input stays float32).
 
-    Made as ``sqrt(x^2 + H(x)^2)`` with the Hilbert transform ``H`` by the real FFT (the spectrum's positive
-    frequencies turned by -90 degrees, DC and Nyquist left out): the analytic signal's imaginary part, for half the
-    work of its complex transforms."""
-    x = np.asarray(x)
-    if np.iscomplexobj(x):
-        raise ValueError("the analytic signal is made from real samples")
-    if x.dtype != np.float32:
-        x = x.astype(np.float64)
-    m = x.shape[axis]
-    if m < 1:
-        raise ValueError("the analytic signal needs at least one sample along its axis")
-    if n is None:
-        n = m
-    elif n < m:
-        raise ValueError(f"the FFT's length {n} is shorter than the {m} samples")
-    spec = np.fft.rfft(x, n=n, axis=axis)
-    turn = np.full(spec.shape[axis], -1j, dtype=spec.dtype)
-    turn[0] = 0.0
-    if n % 2 == 0:
-        turn[-1] = 0.0
-    shape = [1] * x.ndim
-    shape[axis] = turn.size
-    h = np.fft.irfft(spec * turn.reshape(shape), n=n, axis=axis)
+    Made as ``sqrt(x^2 + H(x)^2)``, the Hilbert transform ``H`` (the analytic signal's imaginary part) by the real
+    FFT: the spectrum turned by -90 degrees (``irfft`` drops the imaginary part this gives the DC and Nyquist
+    bins, as the analytic signal leaves them out), half the work of the complex transforms."""
+    x, m, n = _real_samples(x, axis, n)
+    h = np.fft.irfft(np.fft.rfft(x, n=n, axis=axis) * np.complex64(-1j), n=n, axis=axis)
     if n != m:
         h = np.take(h, np.arange(m), axis=axis)
     return np.sqrt(x * x + h * h)
