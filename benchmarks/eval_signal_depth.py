@@ -14,7 +14,7 @@ Surveys:
   no truth, so the two target lists are compared with each other.
 
 Each at ``reconstruct``'s defaults (the true eps_r given; 2 cm voxels on soil, 1 cm on slabs) with
-``signal_depth=False`` (the whole record) and with the default ``signal_depth=True``. Per survey: the record's and
+``signal_depth=False`` (the whole record, the default) and with ``signal_depth=True``. Per survey: the record's and
 the signal's depth, the migration's seconds (the signal's including its coarse whole-record fold), the targets'
 scores, and the largest change of the envelope on the voxels where the whole record's reaches the targets'
 threshold (``threshold`` x the 99.5th percentile of its column maxima), as a share of its peak.
@@ -61,7 +61,7 @@ def compare(name, s, pipes, cfg: ReconstructConfig, log):
     from dataclasses import replace
 
     full, full_mig, full_wall = timed(s, replace(cfg, signal_depth=False))
-    cut, cut_mig, cut_wall = timed(s, cfg)
+    cut, cut_mig, cut_wall = timed(s, replace(cfg, signal_depth=True))
     nd = cut.grid.nd
     assert cut.grid.nd <= full.grid.nd and (cut.grid.nx, cut.grid.ny) == (full.grid.nx, full.grid.ny)
     ref = float(np.percentile(full.envelope.max(axis=2), 99.5))
@@ -135,8 +135,8 @@ def main(argv=None):
     synth = [r for r in rows if r["full"].get("completeness") is not None]
     full_s, cut_s = sum(r["full_s"] for r in rows), sum(r["cut_s"] for r in rows)
     lines = [f"Host CPU: {cpu_name()}, {args.threads} threads; `reconstruct` at its defaults (true eps_r; 2 cm voxels "
-             f"on soil, 1 cm on slabs) over the whole record (`signal_depth=False`) and to the signal's end (the "
-             f"default); the 8000-trace L-pipe survey as it is and with 1 % noise, eval_scenes seeds {args.seeds} "
+             f"on soil, 1 cm on slabs) over the whole record (`signal_depth=False`, the default) and to the "
+             f"signal's end (`--signal-depth`); the 8000-trace L-pipe survey as it is and with 1 % noise, eval_scenes seeds {args.seeds} "
              f"(10,000 traces each){', the real 100 MHz grid' if args.real else ''}", "",
              f"Migration (with the signal's search and the coarse whole-record fold): {full_s:.1f} s -> {cut_s:.1f} s "
              f"({cut_s / full_s:.2f}x) over all {len(rows)} surveys; targets the same (to the centimetre) in "

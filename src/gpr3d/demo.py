@@ -322,14 +322,15 @@ def _reconstruction_stage(out: Path, log) -> dict:
         f"overshoot {est_['excess_fraction'] * 100:.0f} % of the true length ({tru_['n_targets']} targets, "
         f"{tru_['false_lines']} false lines, {tru_['false_points']} false points, {tru_['excess_fraction'] * 100:.0f} % "
         "from the true poses)")
-    # the depth range: gpr3d reconstruct's grid ends where the signal does (the demo images to 0.8 m, its pipes')
+    # the depth range that gpr3d reconstruct --signal-depth would choose (the demo images to 0.8 m, its pipes')
     from gpr3d.core.units import velocity_from_eps_r
     from gpr3d.migration.reconstruct import grid_depth_m, time_zero_search_s
 
     prepared = survey.time_zero(method="peak", search_s=time_zero_search_s(survey)).remove_background()
-    _, depth = grid_depth_m(prepared, ReconstructConfig(), velocity_from_eps_r(survey.eps_r), survey.positions_xyz)
-    log(f"      depth range: {depth['why']}; gpr3d reconstruct would image to {depth['depth_m']:.2f} m of the record's "
-        f"{depth['record_m']:.2f} m (the demo to 0.8 m, its pipes' depth)")
+    _, depth = grid_depth_m(prepared, ReconstructConfig(signal_depth=True), velocity_from_eps_r(survey.eps_r),
+                            survey.positions_xyz)
+    log(f"      depth range: {depth['why']}; gpr3d reconstruct --signal-depth would image to {depth['depth_m']:.2f} m "
+        f"of the record's {depth['record_m']:.2f} m (the demo to 0.8 m, its pipes' depth)")
     # site scale: the same survey in tiles, each from only the traces whose cone reaches it (gpr3d reconstruct
     # --tile / --workers); the volume must be the one-pass volume bit for bit
     from gpr3d.migration.sitetiles import plan_tiles

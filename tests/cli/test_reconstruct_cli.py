@@ -241,14 +241,14 @@ def test_the_grid_ends_where_the_signal_does_and_says_so(tmp_path):
     Survey(data=data, dt_s=30e-9 / 384, offset_m=0.08, frequency_hz=800e6, eps_r=6.0).save(tmp_path / "s.h5")
     write_tum(walk, tmp_path / "w.tum")
     base = ("reconstruct", tmp_path / "s.h5", "--poses", tmp_path / "w.tum", "--eps-r", "file", "--spacing", "0.04")
-    r = run_cli(*base, "--out", tmp_path / "cut")
+    r = run_cli(*base, "--out", tmp_path / "cut", "--signal-depth")
     assert r.returncode == 0, r.stderr
     depth = json.loads((tmp_path / "cut" / "config.json").read_text())["depth"]
     assert depth["how"] == "signal" and depth["depth_m"] < 0.65 * depth["record_m"], depth
     said = [line for line in r.stdout.splitlines() if line.startswith("depth range")]
     assert said == [f"depth range to {depth['depth_m']:.2f} m of the record's {depth['record_m']:.2f} m: "
-                    f"{depth['why']} (--full-depth images the whole record)"]
-    r = run_cli(*base, "--out", tmp_path / "full", "--full-depth")
+                    f"{depth['why']} (--signal-depth)"]
+    r = run_cli(*base, "--out", tmp_path / "full")  # the default: the whole record
     assert r.returncode == 0, r.stderr
     doc = json.loads((tmp_path / "full" / "config.json").read_text())
     assert doc["depth"]["how"] == "record" and doc["config"]["signal_depth"] is False

@@ -43,7 +43,7 @@ def noisy():
 
 def test_a_shallow_pipe_under_a_long_record_gets_a_shallow_grid_and_the_same_image(noisy, tmp_path):
     said = []
-    cfg = ReconstructConfig(spacing_m=0.03)
+    cfg = ReconstructConfig(spacing_m=0.03, signal_depth=True)
     cut = reconstruct(noisy, cfg, log=said.append)
     full = reconstruct(noisy, ReconstructConfig(spacing_m=0.03, signal_depth=False), log=said.append)
     v = velocity_from_eps_r(EPS)
@@ -57,7 +57,7 @@ def test_a_shallow_pipe_under_a_long_record_gets_a_shallow_grid_and_the_same_ima
     assert cut.grid.depth[-1] <= d["depth_m"] + 1e-9 and cut.grid.depth[-1] > d["depth_m"] - cut.grid.dd - 1e-9
     assert (cut.grid.nx, cut.grid.ny, cut.grid.d0) == (full.grid.nx, full.grid.ny, full.grid.d0)
     assert said == [f"depth range to {d['depth_m']:.2f} m of the record's {d['record_m']:.2f} m: {d['why']} "
-                    "(--full-depth images the whole record)"]
+                    "(--signal-depth)"]
     nd = cut.grid.nd
     # each voxel's sum does not depend on how deep the grid goes, and the fold's floor is the whole record's (its
     # largest fold found again): the same image, to float rounding
@@ -88,8 +88,8 @@ def test_the_depth_follows_the_signal_not_a_fixed_share(noisy):
                           pos, q, offset_m=0.05, frequency_hz=800e6, n_samples=NS, time_window_s=WINDOW,
                           air_wave=0.0, ground_wave=0.0)
     deeper = deeper.replace(data=deeper.data + pipe2)
-    a = reconstruct(noisy, ReconstructConfig(spacing_m=0.05)).depth
-    b = reconstruct(deeper, ReconstructConfig(spacing_m=0.05)).depth
+    a = reconstruct(noisy, ReconstructConfig(spacing_m=0.05, signal_depth=True)).depth
+    b = reconstruct(deeper, ReconstructConfig(spacing_m=0.05, signal_depth=True)).depth
     assert b["how"] == "signal" and b["depth_m"] > 1.0 > a["depth_m"] + 0.1, (a, b)
 
 
@@ -102,32 +102,35 @@ def test_when_the_record_is_kept_whole_and_why(noisy):
     # asked not to
     depth, info = grid_depth_m(prepared, ReconstructConfig(signal_depth=False), v, noisy.positions_xyz)
     assert info == {"depth_m": depth, "record_m": depth, "how": "record"}
+    assert ReconstructConfig().signal_depth is False  # (asked for: the default images the whole record)
+    assert grid_depth_m(prepared, ReconstructConfig(), v, noisy.positions_xyz) == (depth, info)
     # a record that ends within the pipe's echo: nothing to cut
     short = prepared.replace(data=prepared.data[:, :100])
-    depth, info = grid_depth_m(short, ReconstructConfig(), v, noisy.positions_xyz)
+    depth, info = grid_depth_m(short, ReconstructConfig(signal_depth=True), v, noisy.positions_xyz)
     assert info["how"] == "record" and info["why"] == "the signal reaches the record's end"
     # traces too far apart for neighbours to be compared (20 cm: over a quarter of the 15 cm wavelength)
     sparse = prepared.replace(positions_xyz=prepared.positions_xyz * 10)
-    depth, info = grid_depth_m(sparse, ReconstructConfig(), v, sparse.positions_xyz)
+    depth, info = grid_depth_m(sparse, ReconstructConfig(signal_depth=True), v, sparse.positions_xyz)
     assert info["how"] == "record" and info["why"].startswith("neighbouring traces lie 20.0 cm apart, over a quarter")
     said = []
-    grid_depth_m(prepared, ReconstructConfig(), v, noisy.positions_xyz, said.append)
+    grid_depth_m(prepared, ReconstructConfig(signal_depth=True), v, noisy.positions_xyz, said.append)
     assert len(said) == 1 and said[0].startswith("depth range to ")
     # the signal's end as signal_end finds it, at half the two-way time
     from gpr3d.migration.refine import dominant_frequency_hz
 
     end = signal_end(prepared.data, prepared.dt_s, dominant_frequency_hz(prepared.data, prepared.dt_s))
-    depth, info = grid_depth_m(prepared, ReconstructConfig(), v, noisy.positions_xyz)
+    depth, info = grid_depth_m(prepared, ReconstructConfig(signal_depth=True), v, noisy.positions_xyz)
     assert depth == pytest.approx(0.5 * v * (end.end_s - prepared.t0_s)) and info["signal"] == end.to_dict()
     # an air gap takes its two-way time off
-    depth_air, _ = grid_depth_m(prepared, ReconstructConfig(air_gap_m=0.1), v, noisy.positions_xyz)
+    depth_air, _ = grid_depth_m(prepared, ReconstructConfig(air_gap_m=0.1, signal_depth=True), v,
+                                noisy.positions_xyz)
     assert depth - depth_air == pytest.approx(0.5 * v * 2 * 0.1 / 299792458.0)
 
 
 @pytest.mark.parametrize("kw", [{}, {"air_gap_m": 0.05}, {"aperture_deg": 30.0}, {"obliquity": False},
                                 {"depth_spacing_m": 0.02}])
 def test_the_fold_s_floor_is_the_whole_record_s(noisy, kw):
-    cut = reconstruct(noisy, ReconstructConfig(spacing_m=0.03, **kw))
+    cut = reconstruct(noisy, ReconstructConfig(spacing_m=0.03, **kw, signal_depth=True))
     full = reconstruct(noisy, ReconstructConfig(spacing_m=0.03, signal_depth=False, **kw))
     assert cut.depth["how"] == "signal" and cut.grid.nd < full.grid.nd
     # found on voxels of the whole-record grid (every third, then all about the 16 largest of those): its largest
@@ -143,7 +146,7 @@ def test_the_depth_s_other_reasons_in_full(noisy):
         0.9, {"depth_m": 0.9, "record_m": pytest.approx(record), "how": "max_depth_m"})
     # silence: no frequency to size the windows by
     quiet = prepared.replace(data=np.zeros_like(prepared.data))
-    depth, info = grid_depth_m(quiet, ReconstructConfig(), v, noisy.positions_xyz)
+    depth, info = grid_depth_m(quiet, ReconstructConfig(signal_depth=True), v, noisy.positions_xyz)
     assert info == {"depth_m": depth, "record_m": depth, "how": "record",
                     "why": "the traces carry no frequency to compare them by"}
     # a quarter wavelength: traces just inside it are compared, just outside it not
@@ -153,14 +156,14 @@ def test_the_depth_s_other_reasons_in_full(noisy):
     step = float(np.median(np.linalg.norm(np.diff(noisy.positions_xyz[:, :2], axis=0), axis=1)))
     for scale, how in ((0.9, "signal"), (1.1, "record")):
         pos = noisy.positions_xyz * (scale * quarter / step)
-        depth, info = grid_depth_m(prepared, ReconstructConfig(), v, pos)
+        depth, info = grid_depth_m(prepared, ReconstructConfig(signal_depth=True), v, pos)
         assert info["how"] == how, (scale, info)
     assert info["why"] == (f"neighbouring traces lie {1.1 * quarter * 100:.1f} cm apart, over a quarter wavelength "
                            f"({quarter * 100:.1f} cm): their likeness cannot tell signal from noise")
     # time zero later than the first sample: the depth counts from it
     late = prepared.replace(t0_s=1e-9)
-    d0, _ = grid_depth_m(prepared, ReconstructConfig(), v, noisy.positions_xyz)
-    d1, _ = grid_depth_m(late, ReconstructConfig(), v, noisy.positions_xyz)
+    d0, _ = grid_depth_m(prepared, ReconstructConfig(signal_depth=True), v, noisy.positions_xyz)
+    d1, _ = grid_depth_m(late, ReconstructConfig(signal_depth=True), v, noisy.positions_xyz)
     assert d0 - d1 == pytest.approx(0.5 * v * 1e-9)
 
 
@@ -168,7 +171,7 @@ def test_the_signal_s_stages_are_timed(noisy):
     from gpr3d.core.timing import collect
 
     with collect(compile_times=False) as t:
-        reconstruct(noisy, ReconstructConfig(spacing_m=0.05))
+        reconstruct(noisy, ReconstructConfig(spacing_m=0.05, signal_depth=True))
     assert list(t.seconds) == ["prepare", "signal depth", "grid", "migrate", "fold max", "fold", "envelope",
                                "targets"]
     with collect(compile_times=False) as t:

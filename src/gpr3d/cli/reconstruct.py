@@ -49,10 +49,11 @@ def add_arguments(sp):
     rc = _reconstruct_defaults()
     sp.add_argument("--spacing", type=float, default=rc.spacing_m, help=f"voxel size in metres (default {rc.spacing_m:g})")
     sp.add_argument("--max-depth", type=float, default=rc.max_depth_m,
-                    help="deepest voxel (m; default: where the signal ends, see --full-depth)")
-    sp.add_argument("--full-depth", action="store_true",
-                    help="image the whole time window (default: the grid ends where neighbouring traces stop "
-                         "looking alike, the noise alone left; config.json's 'depth' says where and why)")
+                    help="deepest voxel (m; default: what the time window reaches)")
+    sp.add_argument("--signal-depth", action="store_true",
+                    help="end the grid where the signal ends: where neighbouring traces stop looking alike, the "
+                         "noise alone left (config.json's 'depth' says where and why; for records much deeper "
+                         "than their signal)")
     sp.add_argument("--aperture", type=float, default=rc.aperture_deg,
                     help=f"beam half-angle in degrees (0: none; default {rc.aperture_deg:g})")
     sp.add_argument("--threshold", type=float, default=rc.threshold,
@@ -109,8 +110,8 @@ def run(args):
         # a tile of a few voxels spends its time on its margins (0.0001 m once ran 41,000 one-voxel tiles)
         _in_range(args.tile, "--tile", 10 * args.spacing, 1e5, f"a tile side in metres, at least 10 voxels of "
                                                                 f"--spacing {args.spacing:g}")
-    if args.full_depth and args.max_depth is not None:
-        raise GPR3DError("give --max-depth or --full-depth, not both")
+    if args.signal_depth and args.max_depth is not None:
+        raise GPR3DError("give --max-depth or --signal-depth, not both")
     if args.refine_level is not None and not args.coarse_to_fine:
         raise GPR3DError("--refine-level sets how coarse-to-fine imaging refines: give --coarse-to-fine with it")
     engine = _migration_engine(args.engine, args.device)
@@ -118,7 +119,7 @@ def run(args):
                     aperture_deg=None if args.aperture == 0 else args.aperture, threshold=args.threshold,
                     min_line_m=args.min_line, engine=engine, time_zero="none" if args.no_time_zero else "peak",
                     min_target_depth_m=args.min_depth, method=args.method, air_gap_m=args.air_gap,
-                    coarse_to_fine=args.coarse_to_fine, signal_depth=not args.full_depth,
+                    coarse_to_fine=args.coarse_to_fine, signal_depth=args.signal_depth,
                     refine_level=ReconstructConfig.refine_level if args.refine_level is None else args.refine_level)
     check_config(ReconstructConfig(**settings, **site), names=_RECONSTRUCT_FLAGS)  # one line, before any work
     eps_given = _eps_argument(args.eps_r)

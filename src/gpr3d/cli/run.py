@@ -44,9 +44,9 @@ def add_arguments(sp):
     rc = _reconstruct_defaults()
     sp.add_argument("--spacing", type=float, default=rc.spacing_m, help=f"voxel size (m; default {rc.spacing_m:g})")
     sp.add_argument("--max-depth", type=float, default=rc.max_depth_m,
-                    help="deepest voxel (m; default: where the signal ends, see --full-depth)")
-    sp.add_argument("--full-depth", action="store_true",
-                    help="image the whole time window (default: the grid ends where the signal does)")
+                    help="deepest voxel (m; default: what the time window reaches)")
+    sp.add_argument("--signal-depth", action="store_true",
+                    help="end the grid where the signal ends (neighbouring traces no longer alike)")
     add_detector_args(sp)
 
 
@@ -55,11 +55,11 @@ def run(args):
     from gpr3d.pipeline.run import RunConfig, run_pipeline
 
     eps = _eps_argument(args.eps_r)
-    if args.full_depth and args.max_depth is not None:
-        raise GPR3DError("give --max-depth or --full-depth, not both")
+    if args.signal_depth and args.max_depth is not None:
+        raise GPR3DError("give --max-depth or --signal-depth, not both")
     settings = {"spacing_m": args.spacing, "max_depth_m": args.max_depth}
-    if args.full_depth:
-        settings["signal_depth"] = False
+    if args.signal_depth:
+        settings["signal_depth"] = True
     if args.device != "cpu":  # (the networks and the migration on the GPU)
         settings["engine"] = _migration_engine(None, args.device)
     check_config(ReconstructConfig(**settings), names={"spacing_m": "--spacing", "max_depth_m": "--max-depth"})

@@ -14,8 +14,10 @@ class ReconstructConfig:
     depth_spacing_m: float | None = None
     max_depth_m: float | None = None  #: None: what the time window reaches (or its signal: ``signal_depth``)
     #: with no ``max_depth_m``: the grid ends where the traces' signal does (:func:`gpr3d.processing.signal.
-    #: signal_end`: neighbouring traces no longer alike), not at the record's end; False: the whole record
-    signal_depth: bool = True
+    #: signal_end`: neighbouring traces no longer alike), not at the record's end. Off by default: on 13 simulated
+    #: scenes and a real grid it saved no time overall and changed the targets of 2 scenes
+    #: (``benchmarks/results/signal_depth.md``); worth it on records much deeper than their signal
+    signal_depth: bool = False
     pad_m: float = 0.1
     #: voxel centres on whole multiples of the spacing (the grid's corner rounded down to them): the lattice live
     #: mode's tiles share, so that a batch image lands on the same voxels

@@ -432,8 +432,7 @@ def grid_depth_m(s, cfg: ReconstructConfig, v_m_s: float, positions, log=None) -
                 if 0 < depth < record:
                     info.update(depth_m=depth, how="signal", why=why)
                     if log:
-                        log(f"depth range to {depth:.2f} m of the record's {record:.2f} m: {why} (--full-depth images "
-                            "the whole record)")
+                        log(f"depth range to {depth:.2f} m of the record's {record:.2f} m: {why} (--signal-depth)")
                     return depth, info
     info["why"] = why
     return record, info
