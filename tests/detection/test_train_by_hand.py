@@ -288,29 +288,42 @@ def test_init_weights_start_the_model_or_are_refused(tmp_path, stand_ins, monkey
     assert str(err.value) == "--init w.pt: its weights do not fit 'ssdlite'"
 
 
-def test_packed_and_user_labels_are_mixed_in(tmp_path, stand_ins, monkeypatch):
-    made = []
+class _Rec:
+    """A stand-in record source: notes how it was made in ``made``."""
 
-    class Rec:
-        def __init__(self, *a, **kw):
-            made.append((type(self).__name__, a, kw))
+    made: list = []
 
-    class PackedSource(Rec):
-        pass
+    def __init__(self, *a, **kw):
+        _Rec.made.append((type(self).__name__, a, kw))
 
-    class MixedSource(Rec):
-        pass
 
-    class RecordsSource(Rec):
-        def __init__(self, records):
-            super().__init__(records)
-            self.records, self.n_boxes = records, 7
+class PackedSource(_Rec):
+    pass
 
+
+class MixedSource(_Rec):
+    pass
+
+
+class RecordsSource(_Rec):
+    def __init__(self, records):
+        super().__init__(records)
+        self.records, self.n_boxes = records, 7
+
+
+@pytest.fixture
+def sources(monkeypatch):
+    """The data module's sources replaced by stand-ins; returns the list of what was made, in order."""
+    _Rec.made = []
+    for cls in (PackedSource, MixedSource, RecordsSource):
+        monkeypatch.setattr(data_mod, cls.__name__, cls)
+    return _Rec.made
+
+
+def test_packed_and_user_labels_are_mixed_in(tmp_path, stand_ins, sources, monkeypatch):
+    made = sources
     import gpr3d.io.userlabels as userlabels
 
-    monkeypatch.setattr(data_mod, "PackedSource", PackedSource)
-    monkeypatch.setattr(data_mod, "MixedSource", MixedSource)
-    monkeypatch.setattr(data_mod, "RecordsSource", RecordsSource)
     monkeypatch.setattr(userlabels, "read_user_labels", lambda path, pixel_map=None: [("rec", path, pixel_map)] * 3)
     logged = []
     cfg = cfg_for(tmp_path, steps=1, packed=["a.h5:5", "b.h5"], packed_fraction=0.3, packed_holdout=9,
@@ -332,21 +345,8 @@ def test_packed_and_user_labels_are_mixed_in(tmp_path, stand_ins, monkeypatch):
     assert [m[0] for m in made] == ["PackedSource", "MixedSource"] and made[1][2] == {}
 
 
-def test_wall_scans_are_mixed_in_first_with_a_draw_of_their_own(tmp_path, stand_ins, monkeypatch):
-    made = []
-
-    class Rec:
-        def __init__(self, *a, **kw):
-            made.append((type(self).__name__, a, kw))
-
-    class PackedSource(Rec):
-        pass
-
-    class MixedSource(Rec):
-        pass
-
-    monkeypatch.setattr(data_mod, "PackedSource", PackedSource)
-    monkeypatch.setattr(data_mod, "MixedSource", MixedSource)
+def test_wall_scans_are_mixed_in_first_with_a_draw_of_their_own(tmp_path, stand_ins, sources):
+    made = sources
     cfg = cfg_for(tmp_path, steps=1, wall_fraction=0.4, packed=["a.h5"], packed_fraction=0.6)
     train_detector(cfg, "gen", wall_source="walls", progress=False, log=quiet)
     assert [m[0] for m in made] == ["MixedSource", "PackedSource", "MixedSource"]
