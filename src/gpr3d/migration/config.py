@@ -13,8 +13,8 @@ class ReconstructConfig:
     spacing_m: float = 0.02
     depth_spacing_m: float | None = None
     max_depth_m: float | None = None  #: None: what the time window reaches (or its signal: ``signal_depth``)
-    #: with no ``max_depth_m``: the grid ends where the traces' signal does (:func:`gpr3d.processing.signal.
-    #: signal_end`: neighbouring traces no longer alike), not at the record's end. Off by default: on 13 simulated
+    #: with no ``max_depth_m``: the grid ends where the traces' signal does (neighbouring traces no longer alike:
+    #: :func:`gpr3d.processing.signal.signal_end`), not at the record's end. Off by default: on 13 simulated
     #: scenes and a real grid it saved no time overall and changed the targets of 2 scenes
     #: (``benchmarks/results/signal_depth.md``); worth it on records much deeper than their signal
     signal_depth: bool = False
