@@ -70,6 +70,25 @@ def test_shipped_onnx_is_the_shipped_weights_and_detects_the_same():
         assert abs(x["score"] - y["score"]) < 2e-3 and x["apex_trace"] == y["apex_trace"]
 
 
+def test_a_detector_sharing_the_cores_stops_spinning_and_detects_the_same():
+    """Live mode's detector: its session's threads sleep between runs (ONNX Runtime's session option), and the
+    boxes are what they were."""
+    from gpr3d.simulation.surveys import survey_sample
+
+    det = OnnxDetector.load()
+    s, _ = survey_sample(777, 5)
+    before = det.detect(s, score_threshold=0.3)["targets"]
+    with pytest.raises(Exception, match="allow_spinning"):  # (not set: ONNX Runtime's default, spinning)
+        det.session.get_session_options().get_session_config_entry("session.intra_op.allow_spinning")
+    det.share_cores()
+    assert det.session.get_session_options().get_session_config_entry("session.intra_op.allow_spinning") == "0"
+    after = det.detect(s, score_threshold=0.3)["targets"]
+    assert len(after) == len(before) > 0
+    for x, y in zip(before, after):
+        assert x["box"] == y["box"] and x["score"] == y["score"]
+    Detector.load().share_cores()  # (the torch engine: nothing to change)
+
+
 def test_runtime_choice_and_wrong_files(tmp_path):
     assert isinstance(load_detector(), OnnxDetector)  # the shipped model on the CPU: ONNX Runtime
     assert type(load_detector(engine="torch")) is Detector

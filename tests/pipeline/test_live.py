@@ -263,12 +263,16 @@ class _Spans:
 
         self.window = SimpleNamespace(traces=traces, overlap=overlap)
         self.spans = []
+        self.shared = 0
 
-    def detect(self, survey, *, score_threshold, input_name):
+    def share_cores(self):
+        self.shared += 1
+
+    def detect(self, survey, *, score_threshold, input_name=None):
         n = survey.n_traces
         self.spans.append((int(survey.data[0, 2]), n))  # (samples 0 and 1 are a DZT's counter and mark)
         mid = n // 2
-        return {"targets": [{"box": [mid - 1.0, 1e-9, mid + 1.0, 2e-9], "score": 0.5 + survey.data[0, 0] / 1e4,
+        return {"targets": [{"box": [mid - 1.0, 1e-9, mid + 1.0, 2e-9], "score": 0.5 + float(survey.data[0, 0]) / 1e4,
                              "apex_trace": mid, "apex_time_s": 1.2e-9, "kind": "target", "kind_score": None}]}
 
 
@@ -306,6 +310,78 @@ def test_detection_runs_on_every_window_once_as_it_fills(tmp_path):
         (40.0, 0.2)]
 
 
+def test_a_detector_behind_thins_its_windows_then_skips_ahead_and_yields_to_waiting_traces(tmp_path):
+    header = StreamHeader(n_samples=16, dt_s=1e-10, eps_r=4.0)
+
+    def live_with(n, backlog):
+        det = _Spans()
+        live = LiveReconstruction(header, LiveConfig(reconstruct=ReconstructConfig(aperture_deg=45.0),
+                                                     time_zero_traces=4, background_window=4, detect_backlog=backlog),
+                                  tmp_path, detector=det)
+        data = np.tile(np.arange(n, dtype=np.float32)[:, None], (1, 16))
+        live.add(data, np.c_[np.linspace(0, 0.6, n), np.zeros((n, 2)), np.tile([1, 0, 0, 0], (n, 1))])
+        return live, det
+
+    # 30 traces waiting, at most 16 behind (twice the 8-trace window): without overlap while over 16 behind
+    # ([0, 8) and [8, 16)), then every 4 again ([16, 24), [20, 28)); nothing skipped
+    live, det = live_with(30, 16)
+    assert live._detect(False, 0) == 4 and det.spans == [(0, 8), (8, 8), (16, 8), (20, 8)]
+    assert (live.detect_thinned, live.detect_skipped) == (2, 0)
+    assert live.raw_tail.first == 24 - 8  # (the traces before the last window's reach are gone)
+    # 60 waiting, over twice 16 behind: skip to the newest 16 ([44, 60), on the windows' steps); 44 traces unseen
+    live, det = live_with(60, 16)
+    assert live._detect(False, 0) == 3 and det.spans == [(44, 8), (48, 8), (52, 8)]
+    assert (live.detect_thinned, live.detect_skipped) == (0, 44)
+    assert live._detect(True, 60) == 0  # (the last window ended at the last trace: none more at the end)
+    # a refresh is due and traces wait in the reader: the detector waits for the next step (the targets first)
+    live, det = live_with(30, 4096)
+    live.waiting = lambda: True
+    assert live.last_refresh is None and live._detect(False, 0) == 0 and det.spans == []
+    live.waiting = lambda: False
+    assert live._detect(False, 0) == 6 and det.spans[-1] == (20, 8) and live.detect_thinned == 0
+
+
+def test_live_mode_asks_its_detector_to_share_the_cores_and_detects_every_window(survey, tmp_path):
+    det = _Spans(traces=64)
+    cfg = _cfg(until_idle_s=2.5)
+    cfg.detect = True
+    data = survey.data.copy()
+    data[:, 2] = np.arange(survey.n_traces)  # (what _Spans reads a window's first trace by)
+    ticks = iter(range(1000))
+    summary = run_live(_Scripted(survey.replace(data=data), 0, 3), tmp_path, cfg, detector=det, log=None,
+                       poll_s=0.0, clock=lambda: float(next(ticks)), reader_thread=False)
+    assert det.shared == 1  # before the first window (the warm-up's)
+    n = survey.n_traces  # windows every 32 traces, and one over the last 64 at the end
+    assert [a for a, _ in det.spans[1:]] == [*range(0, n - 64 + 1, 32), n - 64] and summary.detect_skipped == 0
+
+
+def test_the_window_buffer_keeps_rows_by_their_numbers():
+    from gpr3d.pipeline.live import _Window
+
+    rng = np.random.default_rng(5)
+    buf, ref, first, peak = _Window(3), [], 0, 0
+    for _ in range(400):  # appends of up to 700 rows (the buffer grows and compacts), drops from the front
+        k = int(rng.integers(0, 700))
+        rows = rng.normal(size=(k, 3)).astype(np.float32)
+        buf.append(rows)
+        ref.extend(rows)
+        peak = max(peak, len(ref) - first)
+        drop = first + int(rng.integers(0, len(ref) - first + 1))
+        buf.drop_before(drop)
+        first = max(first, drop)
+        assert (buf.first, buf.end, len(buf)) == (first, len(ref), len(ref) - first)
+        a = first + int(rng.integers(0, len(ref) - first + 1))
+        np.testing.assert_array_equal(buf.rows(a, len(ref)), np.array(ref[a:], np.float32).reshape(-1, 3))
+    # compacted: its size follows the most rows kept at once, not all rows ever appended
+    assert len(buf._a) <= 2 * peak < len(ref) / 20
+    buf.drop_before(0)  # (before the first kept: nothing)
+    assert buf.first == first
+    with pytest.raises(IndexError, match=f"rows {first - 1}\\.\\.{len(ref)} asked of rows {first}"):
+        buf.rows(first - 1, len(ref))
+    with pytest.raises(IndexError):
+        buf.rows(first, len(ref) + 1)
+
+
 class _Scripted:
     """A source that gives nothing for ``wait`` polls, then the survey in ``batches`` polls, then nothing."""
 
@@ -328,16 +404,34 @@ class _Scripted:
         pass
 
 
-def test_the_idle_clock_and_the_rate_start_at_the_first_trace(survey, tmp_path):
-    """A clock that ticks one second a call: the first trace comes at 6 s (five polls found nothing), the last at
-    8 s; with 2.5 s of idleness allowed the run ends at 11 s and is timed at 12 s. The rate counts from the first
-    trace to the end less the idle wait (12 - 6 - 2.5 = 3.5 s), the lag from the newest trace (12 - 8 - 2.5 s)."""
+def test_the_idle_clock_and_the_rate_start_at_the_first_trace(survey, tmp_path, monkeypatch):
+    """A clock that ticks one second a call (each poll reads it, and each step that did some work once more):
+    five polls find nothing, traces come at 6, 8 and 10 s, the step after the last ends at 11 s; with 2.5 s of
+    idleness allowed the run ends at 13 s, and its final step reads 14 and 15 s. The lag: the work on the
+    newest trace ended 1 s after it came, and the final step took 1 s (2 s); the rate counts from the first trace
+    to the newest plus the lag (10 - 6 + 2 = 6 s): the idle wait is neither lag nor work."""
     ticks = iter(range(1000))
     summary = run_live(_Scripted(survey, 5, 3), tmp_path, _cfg(until_idle_s=2.5, start_timeout_s=5.5),
                        log=None, poll_s=0.0, clock=lambda: float(next(ticks)), reader_thread=False)
     assert summary.n_traces == survey.n_traces
-    assert summary.wall_s == 3.5 and summary.traces_per_s == survey.n_traces / 3.5
-    assert summary.lag_s == 1.5
+    assert summary.lag_s == 2.0
+    assert summary.wall_s == 6.0 and summary.traces_per_s == survey.n_traces / 6.0
+    # work that goes on into the idle wait (a detector's backlog, say) is lag: two more steps work after the last
+    # trace, ending at 13 and 15 s; the idle clock (from the newest trace) ends the run after the second, and the
+    # final step reads 16 and 17 s: lag 15 - 10 + 1 s
+    step, calls = LiveReconstruction.step, []
+
+    def busy_step(self, *, ended=False):
+        done = step(self, ended=ended)
+        calls.append(self.n_in)
+        return done or int(not ended and calls.count(survey.n_traces) in (2, 3))
+
+    monkeypatch.setattr(LiveReconstruction, "step", busy_step)
+    ticks = iter(range(1000))
+    summary = run_live(_Scripted(survey, 5, 3), tmp_path / "w", _cfg(until_idle_s=2.5, start_timeout_s=5.5),
+                       log=None, poll_s=0.0, clock=lambda: float(next(ticks)), reader_thread=False)
+    assert summary.lag_s == 15.0 - 10.0 + 1.0 and summary.wall_s == 10.0 - 6.0 + 6.0
+    monkeypatch.undo()
     # nothing at all within start_timeout_s: one line naming it
     ticks = iter(range(1000))
     with pytest.raises(GPR3DError, match="no traces arrived in 4.5 s"):

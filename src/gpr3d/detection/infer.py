@@ -105,6 +105,10 @@ class Detector:
         """The target kinds the network names (label ``k + 1`` is ``kinds[k]``); ``None``: one class."""
         return getattr(self.model, "gpr3d_kinds", None)
 
+    def share_cores(self) -> None:
+        """Leave the cores to other work between runs: the ONNX engine's threads stop spinning
+        (:meth:`gpr3d.detection.ort.OnnxDetector.share_cores`); nothing to change here."""
+
     def predict_windows(self, images: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
         """Raw network output per window image ``(3, rows, traces)``: ``(boxes px (k, 4), scores (k,))``."""
         return [(b, s) for b, s, _, _ in self.predict_windows_kinds(images)]

@@ -138,6 +138,15 @@ class OnnxDetector(Detector):
         return cls(sess, WindowConfig(**meta["window"]), provenance=meta.get("provenance", {}), path=p,
                    kinds=meta.get("kinds"))
 
+    def share_cores(self) -> None:
+        """Let the session's threads sleep between runs instead of spinning on the cores (ONNX Runtime's habit):
+        live mode runs the migration's threads between windows, and a spinning pool takes cores from them
+        (``benchmarks/results/bench_live.md``: 80,000 traces at 800/s, 2 cores, kept up with only so). A lone
+        detector gains nothing from it: its windows follow one another."""
+        from gpr3d.io.onnxweights import open_session
+
+        self.session, _ = open_session(self.path, _META, "detector", spin=False)
+
     def predict_windows_kinds(self, images: list[np.ndarray]) -> list[tuple]:
         from gpr3d.detection.infer import _kept
 

@@ -73,6 +73,9 @@ class LiveConfig:
     start_timeout_s: float | None = 60.0  #: give up when no trace at all has come for this long (None: wait)
     #: the most traces migrated in one go: a backlog is worked off in such batches, a refresh between them when due
     max_batch: int = 256
+    #: the most raw traces the detector may fall behind by before it takes windows without overlap (twice as many:
+    #: it skips ahead); they wait in memory
+    detect_backlog: int = 4096
     #: traces gathered before a migration (each costs a grid over the batch's reach: 16-trace batches measured
     #: 1.1 ms a trace, 100-trace ones 0.44 ms); a due refresh migrates whatever is waiting first
     min_batch: int = 128
@@ -96,6 +99,9 @@ class LiveSummary:
     n_detections: int
     files: list = field(default_factory=list)
     final_volume: bool = True
+    #: the detector behind: windows it took without overlap, and traces no window saw (``LiveConfig.detect_backlog``)
+    detect_thinned: int = 0
+    detect_skipped: int = 0
 
     def line(self) -> str:
         return f"{self.n_traces} traces, {self.traces_per_s:.0f} traces/s, lag {self.lag_s:.2f} s"
@@ -472,6 +478,55 @@ class _Rows:
         return self.n
 
 
+class _Window:
+    """Rows numbered from ``first`` on (float32, ``width`` wide): appended at the end, forgotten from the front
+    (:meth:`drop_before`), read by their numbers (:meth:`rows`). Both are amortised O(rows moved): the buffer
+    doubles when full, and the rows still kept move to its front when they would fit its first half again. (A
+    concatenation at every arrival copies every row kept at every arrival: where detection fell behind, the
+    rows kept grew with the backlog and each arrival's copy with them.)"""
+
+    def __init__(self, width: int, rows=None, first: int = 0):
+        self._a = np.zeros((1024, width), np.float32)
+        self._lo = self._hi = 0
+        self.first = first  #: the number of the first row kept
+        if rows is not None:
+            self.append(rows)
+
+    @property
+    def end(self) -> int:
+        """One past the number of the last row."""
+        return self.first + self._hi - self._lo
+
+    def __len__(self) -> int:
+        return self._hi - self._lo
+
+    def append(self, rows) -> None:
+        rows = np.asarray(rows, np.float32)
+        k, n = len(rows), self._hi - self._lo
+        if self._hi + k > len(self._a):
+            if 2 * (n + k) <= len(self._a):
+                self._a[:n] = self._a[self._lo: self._hi]  # (numpy copies overlapping slices correctly)
+            else:
+                grown = np.zeros((2 * (n + k), self._a.shape[1]), np.float32)
+                grown[:n] = self._a[self._lo: self._hi]
+                self._a = grown
+            self._lo, self._hi = 0, n
+        self._a[self._hi: self._hi + k] = rows
+        self._hi += k
+
+    def drop_before(self, i: int) -> None:
+        """Forget the rows numbered below ``i``."""
+        i = min(max(int(i), self.first), self.end)
+        self._lo += i - self.first
+        self.first = i
+
+    def rows(self, a: int, b: int) -> np.ndarray:
+        """Rows ``a`` .. ``b - 1`` by number (a view: valid until the next :meth:`append`)."""
+        if a < self.first or b > self.end or a > b:
+            raise IndexError(f"rows {a}..{b} asked of rows {self.first}..{self.end}")
+        return self._a[self._lo + a - self.first: self._lo + b - self.first]
+
+
 class LiveReconstruction:
     """The state of a live run: feed it batches of raw traces with poses (:meth:`add`), call :meth:`step` to
     process what is ready, :meth:`finish` at the end."""
@@ -510,8 +565,7 @@ class LiveReconstruction:
         self.raw_pending: list = []  # raw traces waiting for time zero
         self.n_in = 0
         # cut traces from index `cut_first` on (kept while the background window may still need them)
-        self.cut = np.zeros((0, header.n_samples), np.float32)
-        self.cut_first = 0
+        self.cut = _Window(header.n_samples)
         self.n_final = 0  # traces migrated
         self._poses = _Rows(7)  # every trace's pose (x y z qw qx qy qz): the final grid covers them all
         self._arrival = _Rows(1)  # the monotonic time each trace arrived
@@ -522,15 +576,19 @@ class LiveReconstruction:
         self.fold_max = 0.0
         self.grid_base = None
         # detection: raw traces kept for the next window
-        self.raw_tail = np.zeros((0, header.n_samples), np.float32)
-        self.raw_tail_first = 0
-        self.next_window = 0
+        self.raw_tail = _Window(header.n_samples)
+        self.next_window = 0  # where the next window starts
+        self.det_end = 0  # where the last window ended
+        self.detect_thinned = 0  # windows taken without overlap (the detector behind)
+        self.detect_skipped = 0  # traces no window saw (the detector far behind)
         self.detections: list = []
         self._det_window: list = []  # the window each kept detection came from (its first trace)
         self.targets: list = []
         self.latencies: list = []
         #: called before a refresh to add the traces that came meanwhile (run_live: what the reader has queued)
         self.intake = None
+        #: whether traces wait to be taken in (run_live: the reader's queue): the detector then yields to a due refresh
+        self.waiting = None
         self.last_refresh = None  # when the last refresh started
         self.refresh_costs: list = []  # how long the last few refreshes took (s)
         self.n_refreshed = 0  # traces migrated at the last refresh
@@ -584,13 +642,13 @@ class LiveReconstruction:
         self._arrival.append(np.full(k, now))
         self.n_in += k
         if self.detector is not None:
-            self.raw_tail = np.concatenate([self.raw_tail, data])
+            self.raw_tail.append(data)
         if self.t0_s is None:
             self.raw_pending.append(data)
             if self.n_in >= self.cfg.time_zero_traces:
                 self._fix_time_zero()
         else:
-            self.cut = np.concatenate([self.cut, self._cut(data)])
+            self.cut.append(self._cut(data))
 
     def _fix_time_zero(self):
         from gpr3d.core.survey import Survey
@@ -610,7 +668,7 @@ class LiveReconstruction:
         self.rc = replace(self.rc, time_zero_s=t0)
         self.n_out = int(np.floor(self.h.n_samples - 1 - t0 / self.h.dt_s + 1e-9)) + 1
         self._setup_grid()
-        self.cut = self._cut(raw)
+        self.cut = _Window(self.n_out, self._cut(raw))
         self.log(f"time zero {t0 * 1e9:.3f} ns (from the first {len(raw)} traces); eps_r {self.eps:g}; "
                  f"depth {self.depth_m:.2f} m")
 
@@ -622,7 +680,7 @@ class LiveReconstruction:
     def _readiness(self, ended: bool):
         """``(n_cut, ready, short)``: the traces cut so far, those whose background is final, and whether a centred
         window spans the whole survey so far."""
-        n_cut = self.cut_first + len(self.cut)
+        n_cut = self.cut.end
         ready = n_cut if ended else n_cut - self.h2
         short = not self.cfg.background_trailing and n_cut < self.cfg.background_window
         if short and not ended:
@@ -677,7 +735,7 @@ class LiveReconstruction:
             hi = min(n_cut, b + self.h2)
             # the batch's background on a slice holding every trace the rows' windows span: the same numbers (the
             # slice's ends pad only where the survey's own do); a survey shorter than the window loses its mean
-            x = self.cut[lo - self.cut_first: hi - self.cut_first]
+            x = self.cut.rows(lo, hi)
             if short:
                 traces = remove_background(x)
             else:
@@ -687,10 +745,7 @@ class LiveReconstruction:
             self._migrate(traces, self.poses[a:b])
             self.n_final = b
             done += b - a
-            keep_from = max(0, self.n_final - self.h1)
-            if keep_from > self.cut_first:
-                self.cut = self.cut[keep_from - self.cut_first:]
-                self.cut_first = keep_from
+            self.cut.drop_before(self.n_final - self.h1)
             self._evict()
             if refresh and self.n_final < ready and self._refresh_due():
                 self.refresh()
@@ -768,33 +823,46 @@ class LiveReconstruction:
     def _detect(self, ended, ready):
         """Every full window not yet detected, one by one (a window's detections do not depend on how the
         traces arrived: the detector prepares each window on its own; one call a window costs what one call over
-        several does, measured), until a refresh is due for traces up to ``ready`` (the rest wait for the next
-        step); at the end, one window over the last traces. Returns how many windows ran."""
+        several does, measured), until a refresh is due for traces up to ``ready`` or for traces waiting in the
+        reader (those wait for the next step); at the end, one window over the last traces. Returns how many
+        windows ran.
+
+        A detector that cannot keep up falls behind by at most ``2 x detect_backlog`` traces (the raw traces it
+        has yet to see are held in memory): beyond ``detect_backlog`` it takes windows without overlap (each trace
+        once), beyond twice that it skips ahead to the newest ``detect_backlog`` traces; both are counted
+        (``detect_thinned`` windows, ``detect_skipped`` traces seen by no window) and reported."""
         win = self.detector.window.traces
         step = max(1, int(round(win * (1 - self.detector.window.overlap))))
-        n = self.raw_tail_first + len(self.raw_tail)
+        backlog = max(int(self.cfg.detect_backlog), 2 * win)
+        n = self.raw_tail.end
         ran = 0
         while n - self.next_window >= win:
-            if not ended and ready > self.n_refreshed and self._refresh_due():
+            if not ended and self._refresh_due() and (ready > self.n_refreshed or self._waiting()):
                 break
+            if n - self.next_window > 2 * backlog:
+                start = (n - backlog) // step * step
+                self.detect_skipped += max(0, start - self.det_end)
+                self.next_window = start
             self._detect_span(self.next_window, self.next_window + win)
-            self.next_window += step
+            self.det_end = self.next_window + win
+            thin = n - self.next_window > backlog
+            self.detect_thinned += thin
+            self.next_window += win if thin else step
             ran += 1
-        covered = self.next_window - step + win if self.next_window else 0
-        if ended and n > covered:
+        if ended and n > self.det_end:
             self._detect_span(max(0, n - win), n)
-            self.next_window = n
+            self.det_end = self.next_window = n
             ran += 1
-        keep = max(0, self.next_window - step)  # the last window at the end may reach back one step
-        if keep > self.raw_tail_first:
-            self.raw_tail = self.raw_tail[keep - self.raw_tail_first:]
-            self.raw_tail_first = keep
+        self.raw_tail.drop_before(self.next_window - win)  # (the last window at the end may reach back)
         return ran
+
+    def _waiting(self) -> bool:
+        return bool(self.waiting is not None and self.waiting())
 
     def _detect_span(self, a, b):
         from gpr3d.core.survey import Survey
 
-        data = self.raw_tail[a - self.raw_tail_first: b - self.raw_tail_first]
+        data = self.raw_tail.rows(a, b)
         s = Survey(data=data, dt_s=self.h.dt_s, frequency_hz=self.h.frequency_hz, offset_m=self.h.offset_m)
         found = self.detector.detect(s, score_threshold=self.cfg.score, input_name=self.h.name)
         for t in found["targets"]:
@@ -923,6 +991,7 @@ class LiveReconstruction:
         return {"n_traces_in": self.n_in, "n_traces_migrated": self.n_final,
                 "time_zero_s": self.t0_s, "eps_r": self.eps,
                 "tiles_in_memory": len(self.tiles), "tiles_on_disk": len(self.on_disk),
+                "detect_thinned": self.detect_thinned, "detect_skipped": self.detect_skipped,
                 "targets": targets_to_json(self.targets), "detections": self.detections, "config": asdict(self.rc)}
 
     def _write_status(self):
@@ -997,6 +1066,7 @@ def _warm_up(cfg: LiveConfig, detector) -> None:
                    obliquity=rc.obliquity, spreading=rc.spreading, engine=rc.engine).adjoint(
         np.zeros((2, 64), np.float32), with_fold=True)
     if detector is not None and cfg.detect:
+        detector.share_cores()  # (a pool spinning between windows takes the cores the migration runs on)
         detector.detect(Survey(data=np.zeros((detector.window.traces, 64), np.float32), dt_s=1e-10),
                         score_threshold=1.0)
     from gpr3d.migration.masking import image_envelope  # (scipy.signal: a second to import, on the first refresh)
@@ -1054,6 +1124,7 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     t_first = None  # the first trace's arrival: the idle clock and the rate start there
     last_new = t_start
     newest_arrival = None
+    worked_until = None  # when the last step that did some work ended
     idle = interrupted = False
     reader = SourceReader(source, clock=clock) if reader_thread else None
 
@@ -1079,8 +1150,11 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
                 live = LiveReconstruction(source.header, cfg, out, detector=detector, log=log)
                 if reader is not None:
                     live.intake = lambda: add(reader.take())  # (a due refresh takes in what came meanwhile)
+                    live.waiting = lambda: reader.waiting
             add(batches)
             worked = live.step() if live is not None else 0
+            if worked:
+                worked_until = clock()
             if ended:
                 break
             if reader is not None:
@@ -1119,18 +1193,26 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
         raise GPR3DError(f"{where}: no traces arrived{why}")
     if getattr(source, "skipped", 0):
         log(f"{source.skipped:,} traces outside the poses' time span left out")
+    t_last = clock()
     live.step(ended=True)
     t_end = clock()
-    waited = cfg.until_idle_s if idle else 0.0  # the idle wait that ended the run is neither lag nor work
-    lag = max(0.0, t_end - newest_arrival - waited)
-    busy = max(t_end - t_first - waited, 1e-9)
+    # the lag: from the newest trace's arrival to the end of the work on it. An idle wait ended the run: the
+    # work went on into it as long as steps did some (a detector's backlog, say), and the rest of it is neither
+    # lag nor work; otherwise the run ended when the stream did, and everything since counts
+    done = max(worked_until or newest_arrival, newest_arrival) if idle else t_last
+    lag = max(0.0, done - newest_arrival) + (t_end - t_last)
+    busy = max(newest_arrival - t_first + lag, 1e-9)
     result = live.finish(source=str(getattr(source.header, "name", "")))
     lat = np.asarray(live.latencies) if live.latencies else np.zeros(1)
     summary = LiveSummary(n_traces=live.n_final, wall_s=busy, traces_per_s=live.n_final / busy,
                           lag_s=lag, latency_s={"median": float(np.median(lat)),
                                                 "p99": float(np.percentile(lat, 99)), "max": float(lat.max())},
                           peak_tiles=live.peak_tiles, n_targets=len(live.targets),
-                          n_detections=len(live.detections), final_volume=result is not None)
+                          n_detections=len(live.detections), final_volume=result is not None,
+                          detect_thinned=live.detect_thinned, detect_skipped=live.detect_skipped)
+    if live.detect_thinned or live.detect_skipped:
+        log(f"the detector fell behind: {live.detect_thinned} windows without overlap, {live.detect_skipped:,} traces "
+            f"seen by no window (LiveConfig.detect_backlog: {cfg.detect_backlog:,} traces)")
     st = live.status()
     st["summary"] = asdict(summary)
     atomic_write_text(out / "live.json", json.dumps(st, indent=1))
