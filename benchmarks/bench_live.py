@@ -136,13 +136,15 @@ def main(argv=None):
              f"random-motion survey served by `gpr3d replay` over TCP (poses in the stream), default settings "
              f"(3 x 3 x 2 cm voxels to {batch.grid.depth[-1]:.2f} m, 50 deg aperture, detection on)", "",
              "| run | traces | traces/s | lag at the end (s) | trace-to-target latency median / p99 / max (s) | "
-             "tiles in memory at most | peak RSS (MiB) | targets | detections |", "|---|---|---|---|---|---|---|---|---|"]
+             "tiles in memory at most | peak RSS (MiB) | targets | detections | detector behind: windows without "
+             "overlap / traces no window saw |", "|---|---|---|---|---|---|---|---|---|---|"]
     for name, r in rows:
         peak = max((m for _, m in r["rss_mib"]), default=float("nan"))
         lines.append(f"| {name} | {r['n_traces']} | {r['traces_per_s']:.0f} | {r['lag_s']:.2f} | "
                      f"{r['latency_s']['median']:.2f} / {r['latency_s']['p99']:.2f} / {r['latency_s']['max']:.2f} | "
                      f"{r['peak_tiles']} | "
-                     f"{peak:.0f} | {r['n_targets']} | {r['n_detections']} |")
+                     f"{peak:.0f} | {r['n_targets']} | {r['n_detections']} | {r.get('detect_thinned', 0)} / "
+                     f"{r.get('detect_skipped', 0)} |")
     lines += ["", f"Final volume against the batch `reconstruct` of the same traces with live's settings "
                   f"({batch.grid.nx} x {batch.grid.ny} x {batch.grid.nd}, batch {t_batch:.1f} s in-process): same grid "
                   f"{same_grid}, max |live - batch| / max |batch| = {diff:.2e}" if diff is not None else
@@ -156,7 +158,9 @@ def main(argv=None):
                       f"each 5 m further along x): {r['traces_per_s']:.0f} traces/s, lag {r['lag_s']:.2f} s, latency "
                       f"median {r['latency_s']['median']:.2f} s / p99 {r['latency_s']['p99']:.2f} s / max "
                       f"{r['latency_s']['max']:.2f} s, at most "
-                      f"{r['peak_tiles']} tiles in memory; final volume written: {r['final_volume']}", "",
+                      f"{r['peak_tiles']} tiles in memory, {r['n_detections']} detections (detector behind: "
+                      f"{r.get('detect_thinned', 0)} windows without overlap, {r.get('detect_skipped', 0)} traces "
+                      f"no window saw); final volume written: {r['final_volume']}", "",
                   "| time (s) | " + " | ".join(f"{t:.0f}" for t, _ in marks) + " |",
                   "|---|" + "---|" * len(marks),
                   "| resident memory (MiB) | " + " | ".join(f"{m:.0f}" for _, m in marks) + " |",
