@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.trajectory import Trajectory
 from gpr3d.pose.eskf import EskfConfig, _Filter, camera_to_imu_motion, fuse
-from gpr3d.pose.imu import ImuNoise, ImuSamples, so3_exp, so3_log
+from gpr3d.pose.imu import GRAVITY, ImuNoise, ImuSamples, so3_exp, so3_log
 from gpr3d.pose.metrics import nees, nees_bounds
 from gpr3d.pose.rig import RigConfig, nees_runs, simulate_rig
 
@@ -260,3 +260,80 @@ def test_keyframe_odometry_fuses_and_holds_a_standing_cart():
             assert out[kf] < 0.005 * run.path_length_m
     assert out[0.1] < 0.6 * out[None], out
     assert moved[0.1] < min(0.01, 0.5 * moved[None]), moved
+
+
+def test_the_filter_fed_as_the_data_come_gives_what_fuse_gives_and_its_poses_are_final_as_it_goes():
+    """IMU, odometry (keyframes, a tracking gap, lagging the IMU by 0.3 s) and a wheel (lagging by 0.5 s: a frame
+    waits for the wheel's distance up to it) fed in uneven chunks, the
+    filter run between them: the poses it has passed never change afterwards, it keeps within the odometry's lag of
+    the data, and at the end everything equals ``fuse`` (no smoothing) fed all at once, to the last bit."""
+    from dataclasses import fields
+
+    from gpr3d.pose.eskf import ForwardFusion
+
+    run = simulate_rig(RigConfig(duration_s=16.0, vo_keyframe_m=0.1, vo_gap=(8.0, 1.0)), seed=3)
+    assert run.vo.keyframes
+    cfg = run.filter_config(flat_ground_sigma_m=0.01)
+    wt, wd = run.wheel()
+    ref = fuse(run.imu, run.vo, cfg, wheel=(wt, wd))
+    imu, vo = run.imu, run.vo
+    ff = ForwardFusion(cfg, rate_hz=imu.rate_hz, wheel=True)
+    rng = np.random.default_rng(0)
+    fed = {"imu": 0, "vo": 0, "wheel": 0}
+    t, seen, lags = imu.t_s[0], 0, []
+    while t < imu.t_s[-1] + 1.0:
+        t += rng.uniform(0.01, 0.4)
+        ni, nv, nw = (int(np.searchsorted(a, x, side="right")) for a, x in
+                      ((imu.t_s, t), (vo.t_s + cfg.camera_time_offset_s, t - 0.3), (wt, t - 0.5)))
+        ff.add_imu(imu.t_s[fed["imu"]:ni], imu.accel[fed["imu"]:ni], imu.gyro[fed["imu"]:ni])
+        a = fed["vo"]
+        ff.add_frames(vo.t_s[a:nv], vo.R[a:nv], vo.p[a:nv], vo.cov[a:nv], vo.valid[a:nv], vo.ref[a:nv])
+        ff.add_wheel(wt[fed["wheel"]:nw], wd[fed["wheel"]:nw])
+        fed.update(imu=ni, vo=nv, wheel=nw)
+        ff.run()
+        n = ff.n_done
+        assert n >= seen
+        np.testing.assert_array_equal(ff.out["p"][:n], ref.p[:n])  # final: what the whole run gives there
+        if nv < vo.t_s.size and n:
+            lags.append(t - imu.t_s[n - 1])
+        seen = n
+    # (the wheel's lag, a frame period, a chunk)
+    assert seen > 0.9 * imu.t_s.size and max(lags) < 0.5 + 0.2 + 0.4
+    got = ff.finish()
+    for f in fields(got):
+        np.testing.assert_array_equal(np.asarray(getattr(got, f.name)), np.asarray(getattr(ref, f.name)),
+                                      err_msg=f.name)
+
+
+def test_forward_fusion_names_wrong_input_in_one_line():
+    from gpr3d.pose.eskf import ForwardFusion
+
+    with pytest.raises(InvalidDataError, match="rate_hz must be a positive IMU sample rate, got 0"):
+        ForwardFusion(rate_hz=0)
+    ff = ForwardFusion(rate_hz=200.0)
+    g = np.tile([0.0, 0.0, 9.81], (3, 1))
+    ff.add_imu([0.0, 0.005, 0.01], g, np.zeros((3, 3)))
+    with pytest.raises(InvalidDataError, match=r"IMU: timestamps must increase \(at 0.010000 s after 0.010000 s\)"):
+        ff.add_imu([0.01], g[:1], np.zeros((1, 3)))
+    with pytest.raises(InvalidDataError, match="IMU: 2 times for 1 forces and 1 rates"):
+        ff.add_imu([0.02, 0.03], g[:1], np.zeros((1, 3)))
+    with pytest.raises(InvalidDataError, match="IMU samples from 3 on hold NaN/inf"):
+        ff.add_imu([0.02], [[0.0, np.nan, 9.81]], np.zeros((1, 3)))
+    assert ff.imu_t.n == 3  # (nothing of a refused chunk kept)
+    eye = np.tile(np.eye(3), (2, 1, 1))
+    with pytest.raises(InvalidDataError, match="visual odometry ref: frame 1 refers to itself or a later frame"):
+        ff.add_frames([0.0, 0.1], eye, np.zeros((2, 3)), np.tile(np.eye(6), (2, 1, 1)), ref=[-1, 1])
+    with pytest.raises(InvalidDataError, match="wheel readings for a fusion made without a wheel"):
+        ff.add_wheel([0.0], [0.0])
+    fw = ForwardFusion(rate_hz=200.0, wheel=True)
+    fw.add_wheel([0.0, 0.1], [0.0, 0.2])
+    with pytest.raises(InvalidDataError, match="wheel: the distance decreases"):
+        fw.add_wheel([0.2], [0.1])
+    with pytest.raises(InvalidDataError, match="no IMU samples came"):
+        ForwardFusion(rate_hz=200.0).finish()
+    # IMU alone, told no odometry comes: it runs as the samples come (after the still start's alignment)
+    still = ForwardFusion(EskfConfig(init_still_s=0.1), rate_hz=200.0)
+    still.end_frames()
+    n = 100
+    still.add_imu(np.arange(n) / 200.0, np.tile([0.0, 0.0, GRAVITY], (n, 1)), np.zeros((n, 3)))
+    assert still.run() == n and np.abs(still.out["p"][:]).max() < 1e-9

@@ -217,7 +217,7 @@ def test_the_still_start_gives_roll_pitch_and_the_gyro_bias():
     f = np.tile(R0.T @ np.array([0.0, 0.0, GRAVITY]), (n, 1)) + rng.normal(0, 0.01, (n, 3))
     g = np.array([0.01, -0.02, 0.005]) + rng.normal(0, 0.001, (n, 3))
     imu = ImuSamples(t, f, g)
-    R, bg = eskf._align(imu, 0.5)
+    R, bg = eskf._align(imu.t_s, imu.accel, imu.gyro, 0.5)
     sel = t <= 0.5
     u = f[sel].mean(0) / np.linalg.norm(f[sel].mean(0))
     want = Rotation.from_euler("ZYX", [0.0, math.atan2(-u[0], math.hypot(u[1], u[2])), math.atan2(u[1], u[2])])
@@ -226,12 +226,12 @@ def test_the_still_start_gives_roll_pitch_and_the_gyro_bias():
     np.testing.assert_allclose(bg, g[sel].mean(0), rtol=1e-12)
     with pytest.raises(InvalidDataError, match=r"^gravity alignment needs at least 10 IMU samples in the first "
                                                r"0.04 s$"):
-        eskf._align(imu, 0.04)  # 9 samples
-    assert eskf._align(imu, 0.045)[0].shape == (3, 3)  # 10 samples are enough
+        eskf._align(imu.t_s, imu.accel, imu.gyro, 0.04)  # 9 samples
+    assert eskf._align(imu.t_s, imu.accel, imu.gyro, 0.045)[0].shape == (3, 3)  # 10 samples are enough
     shaken = ImuSamples(t, f + rng.normal(0, 1.0, (n, 3)), g)
     with pytest.raises(InvalidDataError, match=r"^the cart is not still in the first 0.5 s \(accelerometer spread "
                                                r"1\.\d\d m/s\^2\): start the recording at rest, or lower init_still_s$"):
-        eskf._align(shaken, 0.5)
+        eskf._align(shaken.t_s, shaken.accel, shaken.gyro, 0.5)
 
 
 def test_camera_motion_to_imu_motion_and_its_covariance_by_derivatives():
@@ -389,10 +389,10 @@ def test_the_still_start_allows_an_accelerometer_spread_of_half_a_metre_per_seco
         f[:, 2] = GRAVITY
         imu = ImuSamples(t, f, np.zeros((10, 3)))
         if still:
-            assert eskf._align(imu, 1.0)[0].shape == (3, 3)
+            assert eskf._align(imu.t_s, imu.accel, imu.gyro, 1.0)[0].shape == (3, 3)
         else:
             with pytest.raises(InvalidDataError, match=r"accelerometer spread 1\.00 m/s\^2"):
-                eskf._align(imu, 1.0)
+                eskf._align(imu.t_s, imu.accel, imu.gyro, 1.0)
 
 
 def test_the_antenna_trajectory_carries_the_lever_arm_and_the_mount_rotation_by_hand():

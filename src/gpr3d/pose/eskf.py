@@ -26,7 +26,7 @@ from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.trajectory import Trajectory
 from gpr3d.pose.imu import GRAVITY, ImuNoise, ImuSamples, RelativePoses, skew, so3_exp, so3_log
 
-__all__ = ["EskfConfig", "FusionResult", "fuse", "camera_to_imu_motion"]
+__all__ = ["EskfConfig", "ForwardFusion", "FusionResult", "fuse", "camera_to_imu_motion"]
 
 P_, V_, TH_, BA_, BG_ = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
 CP_, CTH_ = slice(15, 18), slice(18, 21)  # the clone's position and attitude errors
@@ -338,12 +338,12 @@ def _rts(nodes: list) -> tuple[list, list, list, list]:
     return xs, Ps, eps, dlt
 
 
-def _align(imu: ImuSamples, still_s: float) -> tuple[np.ndarray, np.ndarray]:
+def _align(t_s, accel, gyro, still_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Roll and pitch from gravity, and the gyro bias, over the still first ``still_s`` seconds."""
-    sel = imu.t_s <= imu.t_s[0] + still_s
+    sel = t_s <= t_s[0] + still_s
     if sel.sum() < 10:
         raise InvalidDataError(f"gravity alignment needs at least 10 IMU samples in the first {still_s:g} s")
-    f = imu.accel[sel]
+    f = accel[sel]
     spread = float(np.linalg.norm(f.std(0)))
     if spread > 0.5:
         raise InvalidDataError(f"the cart is not still in the first {still_s:g} s (accelerometer spread "
@@ -352,7 +352,262 @@ def _align(imu: ImuSamples, still_s: float) -> tuple[np.ndarray, np.ndarray]:
     pitch = np.arctan2(-u[0], np.hypot(u[1], u[2]))
     roll = np.arctan2(u[1], u[2])
     R0 = Rotation.from_euler("ZYX", [0.0, pitch, roll]).as_matrix()
-    return R0, imu.gyro[sel].mean(0)
+    return R0, gyro[sel].mean(0)
+
+
+class _Grow:
+    """Rows appended to arrays that double when full (amortised O(rows added))."""
+
+    def __init__(self, *shape, dtype=float):
+        self.a = np.zeros((64, *shape), dtype)
+        self.n = 0
+
+    def add(self, rows) -> None:
+        rows = np.asarray(rows, self.a.dtype).reshape(-1, *self.a.shape[1:])
+        if self.n + len(rows) > len(self.a):
+            grown = np.zeros((2 * (self.n + len(rows)), *self.a.shape[1:]), self.a.dtype)
+            grown[: self.n] = self.a[: self.n]
+            self.a = grown
+        self.a[self.n: self.n + len(rows)] = rows
+        self.n += len(rows)
+
+    def __getitem__(self, key):
+        return self.a[: self.n][key]
+
+
+class ForwardFusion:
+    """The filter of :func:`fuse` run as the data come: IMU samples, odometry frames and survey wheel distances
+    fed in chunks of any size, each stream in time order (:meth:`add_imu`, :meth:`add_frames`,
+    :meth:`add_wheel`), and :meth:`run` between them. The filter moves on as far as what has come allows: past
+    an IMU sample once every odometry frame up to it has come (a frame after it, or :meth:`end_frames`), a frame
+    once the next frame has come (whether it refers to the same keyframe decides the clone), and the wheel's
+    distance up to the frame. The poses at the IMU samples it has passed (:attr:`n_done`) are final: fed
+    everything and finished, it gives what :func:`fuse` without smoothing gives, to the last bit.
+
+    ``rate_hz``: the IMU's sample rate (the zero-velocity test's window and noise levels; :func:`fuse` gives the
+    record's median rate). ``wheel``: survey wheel distances will come. ``nodes``: record the smoother's nodes
+    (:func:`fuse`'s ``smooth``).
+    """
+
+    def __init__(self, cfg: EskfConfig | None = None, *, rate_hz: float, wheel: bool = False, nodes: bool = False):
+        self.cfg = cfg = cfg or EskfConfig()
+        if not (np.isfinite(rate_hz) and rate_hz > 0):
+            raise InvalidDataError(f"rate_hz must be a positive IMU sample rate, got {rate_hz!r}")
+        self.rate_hz = float(rate_hz)
+        self.imu_t, self.accel, self.gyro = _Grow(), _Grow(3), _Grow(3)
+        self.vo_t, self.vo_R, self.vo_p = _Grow(), _Grow(3, 3), _Grow(3)
+        self.vo_cov, self.vo_valid, self.vo_ref = _Grow(6, 6), _Grow(dtype=bool), _Grow(dtype=int)
+        self.wheel = (_Grow(), _Grow()) if wheel else None
+        self.frames_ended = self.wheel_ended = self.imu_ended = False
+        self.flt = None
+        self._nodes = nodes
+        self.gate = float(chi2.ppf(cfg.gate_prob, 6))
+        self.win = max(3, int(round(cfg.zupt_window_s * self.rate_hz)))
+        self.sa = cfg.imu_noise.accel_noise * np.sqrt(self.rate_hz)
+        self.sg = cfg.imu_noise.gyro_noise * np.sqrt(self.rate_hz)
+        self.out = {k: _Grow(*shape) for k, shape in (("p", (3,)), ("v", (3,)), ("R", (3, 3)), ("ba", (3,)),
+                                                        ("bg", (3,)))}
+        self.frame = {k: _Grow(*shape) for k, shape in (("t", ()), ("cov", (6, 6)), ("idx", ()), ("p", (3,)),
+                                                          ("R", (3, 3)), ("used", ()), ("rejected", ()))}
+        self.zupts: list = []
+        self.vo_speed = np.inf
+        self.clone_frame, self.clone_t = -1, None  # the frame (and its IMU time) the filter's clone was taken at
+        self.since_key = (np.nan, np.zeros(3))  # (camera time, IMU motion from the live keyframe) of the last frame
+        self.k = 0  # the next odometry frame to look at
+        self.fi = 0  # odometry frames used so far (those within the IMU's span)
+        self.i = 0  # the IMU interval [i, i + 1] the filter is in
+        self.t_now = None
+
+    @property
+    def n_done(self) -> int:
+        """The IMU samples whose poses are final."""
+        return self.out["p"].n
+
+    def add_imu(self, t_s, accel, gyro) -> None:
+        """IMU samples: times (s, increasing, after those given before), specific forces (m/s^2) and angular
+        rates (rad/s) in the IMU frame."""
+        t = np.asarray(t_s, float).reshape(-1)
+        a, g = np.asarray(accel, float).reshape(-1, 3), np.asarray(gyro, float).reshape(-1, 3)
+        if not (len(a) == len(g) == len(t)):
+            raise InvalidDataError(f"IMU: {len(t)} times for {len(a)} forces and {len(g)} rates")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(a)) and np.all(np.isfinite(g))):
+            raise InvalidDataError(f"IMU samples from {self.imu_t.n} on hold NaN/inf")
+        _after(t, self.imu_t, "IMU")
+        self.imu_t.add(t)
+        self.accel.add(a)
+        self.gyro.add(g)
+
+    def add_frames(self, t_s, R, p, cov, valid=None, ref=None) -> None:
+        """Odometry frames (as :class:`~gpr3d.core.inertial.RelativePoses`' entries, numbered on from those given
+        before; ``ref`` by those numbers, default the frame before): a non-finite motion is a failed frame."""
+        t = np.asarray(t_s, float).reshape(-1)
+        n, k0 = t.size, self.vo_t.n
+        R = np.asarray(R, float).reshape(n, 3, 3)
+        p, cov = np.asarray(p, float).reshape(n, 3), np.asarray(cov, float).reshape(n, 6, 6)
+        valid = np.ones(n, bool) if valid is None else np.asarray(valid, bool).reshape(n)
+        ref = np.arange(k0, k0 + n) - 1 if ref is None else np.asarray(ref, int).reshape(n)
+        if not np.all(np.isfinite(t)):
+            raise InvalidDataError(f"visual odometry: frame times from {k0} on hold NaN/inf")
+        _after(t, self.vo_t, "visual odometry")
+        if np.any(ref >= np.arange(k0, k0 + n)):
+            raise InvalidDataError(f"visual odometry ref: frame {k0 + int(np.argmax(ref >= np.arange(k0, k0 + n)))} "
+                                   "refers to itself or a later frame")
+        ok = np.isfinite(R).all((1, 2)) & np.isfinite(p).all(1) & np.isfinite(cov).all((1, 2))
+        self.vo_t.add(t)
+        self.vo_R.add(R)
+        self.vo_p.add(p)
+        self.vo_cov.add(cov)
+        self.vo_valid.add(valid & ok & (np.arange(k0, k0 + n) > 0))
+        self.vo_ref.add(ref)
+
+    def add_wheel(self, t_s, distance_m) -> None:
+        """Survey wheel readings: times (s on the IMU clock, increasing) and forward distances (m, not
+        decreasing)."""
+        if self.wheel is None:
+            raise InvalidDataError("wheel readings for a fusion made without a wheel (wheel=True)")
+        t, dist = np.asarray(t_s, float).reshape(-1), np.asarray(distance_m, float).reshape(-1)
+        if t.size != dist.size or not np.all(np.isfinite(dist)) or not np.all(np.isfinite(t)):
+            raise InvalidDataError("wheel: give (times, distances) of one length, times increasing, no NaN")
+        _after(t, self.wheel[0], "wheel")
+        if np.any(np.diff(np.r_[self.wheel[1][-1:], dist]) < -1e-9):
+            raise InvalidDataError("wheel: the distance decreases; pass the wheel's forward count")
+        self.wheel[0].add(t)
+        self.wheel[1].add(dist)
+
+    def end_frames(self) -> None:
+        """No more odometry frames will come (none at all: call it first)."""
+        self.frames_ended = True
+
+    def _start(self) -> bool:
+        t = self.imu_t[:]
+        if not t.size or (t[-1] <= t[0] + self.cfg.init_still_s and not self.imu_ended):
+            return False  # (the still start's alignment needs all of its samples)
+        R0, bg0 = _align(t, self.accel[:], self.gyro[:], self.cfg.init_still_s)
+        self.flt = _Filter(self.cfg, R0, bg0)
+        if self._nodes:
+            self.flt.nodes = []
+        self.t_now = self.clone_t = t[0]
+        self._record()
+        return True
+
+    def _record(self):
+        f = self.flt
+        for k, v in (("p", f.p), ("v", f.v), ("R", f.R), ("ba", f.ba), ("bg", f.bg)):
+            self.out[k].add(v)
+
+    def _step_to(self, t_target):
+        dt = t_target - self.t_now
+        if dt > 0:
+            i, j = self.i, min(self.i + 1, self.imu_t.n - 1)
+            self.flt.propagate(0.5 * (self.accel[i] + self.accel[j]), 0.5 * (self.gyro[i] + self.gyro[j]), dt)
+            self.t_now = t_target
+
+    def _frame_ready(self, k) -> bool:
+        # the next frame's reference (the clone) and the wheel's distance up to this frame must be known
+        if not (k + 1 < self.vo_t.n or self.frames_ended):
+            return False
+        if self.wheel is None or self.wheel_ended:
+            return True
+        wt = self.wheel[0]
+        return wt.n > 0 and wt[-1] >= self.vo_t[k] + self.cfg.camera_time_offset_s
+
+    def run(self) -> int:
+        """Move the filter on as far as what has come allows; returns how many more IMU samples are final."""
+        before = self.n_done
+        if self.flt is None and not self._start():
+            return 0
+        cfg, flt, off = self.cfg, self.flt, self.cfg.camera_time_offset_s
+        t0 = self.imu_t[0]
+        while self.i + 1 < self.imu_t.n:
+            i = self.i
+            t_next = self.imu_t[i + 1]
+            # the odometry frames up to t_next (those before the first IMU sample are not used)
+            while self.k < self.vo_t.n and self.vo_t[self.k] + off <= t_next:
+                k = self.k
+                ftk = self.vo_t[k] + off
+                if ftk < t0:
+                    self.k += 1
+                    continue
+                if not self._frame_ready(k):
+                    return self.n_done - before
+                self._frame(k, ftk, i)
+                self.k += 1
+            if self.k >= self.vo_t.n and not self.frames_ended:
+                return self.n_done - before  # (a frame before t_next may yet come)
+            self._step_to(t_next)
+            win = self.win
+            if cfg.zupt and self.vo_speed < cfg.zupt_speed_m_s and i + 1 >= win:
+                a = self.accel[i + 2 - win: i + 2]
+                g = self.gyro[i + 2 - win: i + 2]
+                if np.all(a.std(0) < 3 * self.sa) and np.all(g.std(0) < 3 * self.sg):
+                    flt.node_prior(t_next, i)
+                    flt.update_still(cfg.zupt_sigma_m_s)
+                    flt.node_posterior(clone_follows=False, frame=False)
+                    self.zupts.append(t_next)
+            self._record()
+            self.i += 1
+        return self.n_done - before
+
+    def _frame(self, k, ftk, i):
+        cfg, flt = self.cfg, self.flt
+        self._step_to(ftk)
+        flt.node_prior(ftk, i)
+        ref = self.vo_ref
+        used = rejected = False
+        if self.vo_valid[k] and self.fi > 0 and self.clone_frame == ref[k]:
+            R_b, p_b, cov_b = camera_to_imu_motion(self.vo_R[k], self.vo_p[k], self.vo_cov[k] * cfg.vo_cov_scale,
+                                                   cfg.imu_T_camera)
+            used = flt.update_relative(R_b, p_b, cov_b, self.gate)
+            rejected = not used
+            if used:  # the speed over the last frame interval, through the keyframe's motion at the frame before
+                # (a mean over a longer window lags where a still cart sets off: zero-velocity updates then
+                # pull a moving cart to rest, and the covariance turns overconfident)
+                t_j, p_j = self.since_key
+                self.vo_speed = np.linalg.norm(p_b - p_j) / (self.vo_t[k] - t_j)
+                self.since_key = (self.vo_t[k], p_b)
+            else:
+                self.vo_speed = np.inf
+        else:
+            self.vo_speed = np.inf
+        # the filter's clone stays at the live keyframe: it moves on unless the next frame refers to that keyframe
+        # too (frame to frame: always)
+        reclone = k + 1 >= self.vo_t.n or ref[k + 1] != self.clone_frame
+        if self.wheel is not None and self.fi > 0:
+            d0, d1 = np.interp([self.clone_t, ftk], self.wheel[0][:], self.wheel[1][:])
+            flt.update_forward(d1 - d0, cfg.wheel_sigma_frac * (d1 - d0) + cfg.wheel_sigma_m)
+        if cfg.flat_ground_sigma_m is not None:
+            flt.update_height(cfg.flat_ground_sigma_m)
+        flt.node_posterior(clone_follows=reclone, frame=True)
+        if reclone:
+            flt.clone()
+            self.clone_frame, self.clone_t = k, ftk
+            self.since_key = (self.vo_t[k], np.zeros(3))
+        fr = self.frame
+        for key, v in (("t", ftk), ("cov", flt.pose_cov()), ("idx", i + 1), ("p", flt.p), ("R", flt.R),
+                       ("used", used), ("rejected", rejected)):
+            fr[key].add(v)
+        self.fi += 1
+
+    def finish(self) -> FusionResult:
+        """Every stream ended: the filter run to the last IMU sample (frames after it are not used); the result
+        over every IMU sample."""
+        self.frames_ended = self.wheel_ended = self.imu_ended = True
+        if self.imu_t.n == 0:
+            raise InvalidDataError("no IMU samples came")
+        self.run()
+        o, fr = self.out, self.frame
+        return FusionResult(self.imu_t[:], o["p"][:], o["v"][:], o["R"][:], o["ba"][:], o["bg"][:], fr["t"][:],
+                            fr["cov"][:], fr["idx"][:].astype(int), fr["p"][:], fr["R"][:], fr["used"][:].astype(bool),
+                            fr["rejected"][:].astype(bool), np.asarray(self.zupts, dtype=float),
+                            self.cfg.imu_T_antenna)
+
+
+def _after(t, before: _Grow, what: str) -> None:
+    """``t`` increases, and after the times ``before`` holds."""
+    full = np.r_[before[-1:], t]
+    if np.any(np.diff(full) <= 0):
+        k = int(np.argmax(np.diff(full) <= 0))
+        raise InvalidDataError(f"{what}: timestamps must increase (at {full[k + 1]:.6f} s after {full[k]:.6f} s)")
 
 
 def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = None, *,
@@ -393,91 +648,16 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
             raise InvalidDataError("wheel: give (times, distances) of one length, times increasing, no NaN")
         if np.any(np.diff(wd) < -1e-9):
             raise InvalidDataError("wheel: the distance decreases; pass the wheel's forward count")
-    R0, bg0 = _align(imu, cfg.init_still_s)
-    flt = _Filter(cfg, R0, bg0)
-    gate = float(chi2.ppf(cfg.gate_prob, 6))
-    n = imu.t_s.size
+    ff = ForwardFusion(cfg, rate_hz=imu.rate_hz, wheel=wheel is not None, nodes=smooth)
+    ff.add_imu(imu.t_s, imu.accel, imu.gyro)
     if vo is not None:
-        ft = vo.t_s + cfg.camera_time_offset_s
-        keep = (ft >= imu.t_s[0]) & (ft <= imu.t_s[-1])
-        frames = np.nonzero(keep)[0]
-    else:
-        ft, frames = np.zeros(0), np.zeros(0, int)
-    out_p, out_v, out_R = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3, 3))
-    out_ba, out_bg = np.empty((n, 3)), np.empty((n, 3))
-    m = frames.size
-    f_cov, f_idx, f_p, f_R = np.zeros((m, 6, 6)), np.zeros(m, int), np.zeros((m, 3)), np.zeros((m, 3, 3))
-    used, rejected = np.zeros(m, bool), np.zeros(m, bool)
-    win = max(3, int(round(cfg.zupt_window_s * imu.rate_hz)))
-    sa = cfg.imu_noise.accel_noise * np.sqrt(imu.rate_hz)
-    sg = cfg.imu_noise.gyro_noise * np.sqrt(imu.rate_hz)
-    vo_speed = np.inf
-    clone_frame, clone_t = -1, imu.t_s[0]  # the frame (and its IMU time) the filter's clone was taken at
-    since_key = (np.nan, np.zeros(3))  # (camera time, IMU motion from the live keyframe) of the last frame
-    zupts = []
-    fi = 0
-    t_now = imu.t_s[0]
-
-    def record(i):
-        out_p[i], out_v[i], out_R[i], out_ba[i], out_bg[i] = flt.p, flt.v, flt.R, flt.ba, flt.bg
-
-    def step_to(t_target, i):
-        nonlocal t_now
-        dt = t_target - t_now
-        if dt > 0:
-            j = min(i + 1, n - 1)
-            flt.propagate(0.5 * (imu.accel[i] + imu.accel[j]), 0.5 * (imu.gyro[i] + imu.gyro[j]), dt)
-            t_now = t_target
-
-    if smooth:
-        flt.nodes = []
-    record(0)
-    for i in range(n - 1):
-        t_next = imu.t_s[i + 1]
-        while fi < m and ft[frames[fi]] <= t_next:
-            k = frames[fi]
-            step_to(ft[k], i)
-            flt.node_prior(ft[k], i)
-            if vo.valid[k] and fi > 0 and clone_frame == vo.ref[k]:
-                R_b, p_b, cov_b = camera_to_imu_motion(vo.R[k], vo.p[k], vo.cov[k] * cfg.vo_cov_scale, cfg.imu_T_camera)
-                ok = flt.update_relative(R_b, p_b, cov_b, gate)
-                used[fi], rejected[fi] = ok, not ok
-                if ok:  # the speed over the last frame interval, through the keyframe's motion at the frame before
-                    # (a mean over a longer window lags where a still cart sets off: zero-velocity updates then
-                    # pull a moving cart to rest, and the covariance turns overconfident)
-                    t_j, p_j = since_key
-                    vo_speed = np.linalg.norm(p_b - p_j) / (vo.t_s[k] - t_j)
-                    since_key = (vo.t_s[k], p_b)
-                else:
-                    vo_speed = np.inf
-            else:
-                vo_speed = np.inf
-            # the filter's clone stays at the live keyframe: it moves on unless the next frame refers to that keyframe
-            # too (frame to frame: always)
-            reclone = k + 1 >= vo.ref.size or vo.ref[k + 1] != clone_frame
-            if wheel is not None and fi > 0:
-                d0, d1 = np.interp([clone_t, ft[k]], wt, wd)
-                flt.update_forward(d1 - d0, cfg.wheel_sigma_frac * (d1 - d0) + cfg.wheel_sigma_m)
-            if cfg.flat_ground_sigma_m is not None:
-                flt.update_height(cfg.flat_ground_sigma_m)
-            flt.node_posterior(clone_follows=reclone, frame=True)
-            if reclone:
-                flt.clone()
-                clone_frame, clone_t = k, ft[k]
-                since_key = (vo.t_s[k], np.zeros(3))
-            f_cov[fi] = flt.pose_cov()
-            f_idx[fi], f_p[fi], f_R[fi] = i + 1, flt.p, flt.R
-            fi += 1
-        step_to(t_next, i)
-        if cfg.zupt and vo_speed < cfg.zupt_speed_m_s and i + 1 >= win:
-            a = imu.accel[i + 2 - win : i + 2]
-            g = imu.gyro[i + 2 - win : i + 2]
-            if np.all(a.std(0) < 3 * sa) and np.all(g.std(0) < 3 * sg):
-                flt.node_prior(t_next, i)
-                flt.update_still(cfg.zupt_sigma_m_s)
-                flt.node_posterior(clone_follows=False, frame=False)
-                zupts.append(t_next)
-        record(i + 1)
+        ff.add_frames(vo.t_s, vo.R, vo.p, vo.cov, vo.valid, vo.ref)
+    if wheel is not None:
+        ff.add_wheel(wt, wd)
+    res = ff.finish()
+    flt, n = ff.flt, imu.t_s.size
+    out_p, out_v, out_R, out_ba, out_bg = res.p, res.v, res.R, res.accel_bias, res.gyro_bias
+    f_p, f_R, f_cov = res.frame_p, res.frame_R, res.frame_cov
     if smooth and flt.nodes:
         xs, Ps, eps, dlt = _rts(flt.nodes)
         tn = np.array([nd["t"] for nd in flt.nodes])
@@ -505,5 +685,4 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
             J[3:, 3:] = np.eye(3)
             idx = np.r_[6:9, 0:3]
             f_cov[fi_] = J @ Ps[q][np.ix_(idx, idx)] @ J.T
-    return FusionResult(imu.t_s, out_p, out_v, out_R, out_ba, out_bg, ft[frames], f_cov, f_idx, f_p, f_R, used, rejected,
-                        np.asarray(zupts, dtype=float), cfg.imu_T_antenna)
+    return res
