@@ -13,7 +13,7 @@ import pytest
 
 from gpr3d.io.hdf5 import write_survey
 from gpr3d.io.trajectory import Trajectory, write_tum
-from tests.pipeline.test_live import survey  # noqa: F401  (the fixture)
+from tests.pipeline.test_live import fused_bag, survey  # noqa: F401  (the fixtures)
 
 
 def _free_port():
@@ -68,6 +68,12 @@ def test_replay_into_live_prints_traces_rate_and_lag(survey, tmp_path):  # noqa:
     (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "-1", "--no-detect"], "--dt must be ns"),
     (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "0.1", "--speed", "-2", "--no-detect"], "--speed must be"),
     (["live", "{tmp}/missing.bag", "--out", "{tmp}/o", "--dt", "0.1", "--no-detect"], "no such bag"),
+    (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "0.1", "--rig", "r.json", "--still", "2", "--no-detect"],
+     "--rig, --still are for --fuse (a bag's poses fused from its IMU and odometry)"),
+    (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "0.1", "--fuse", "--still", "0", "--no-detect"],
+     "--still must be"),
+    (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "0.1", "--fuse", "--pose-topic", "/o", "--no-detect"],
+     "poses fused from the IMU and odometry (--fuse) or given (--pose-topic): give one"),
     (["replay", "{tmp}/x.h5", "--to", "tcp://127.0.0.1:1"], "give --rate"),
     (["replay", "{tmp}/x.h5", "--to", "out.dzt", "--rate", "5"], "replays a DZT recording into a .DZT file"),
     (["replay", "{tmp}/x.h5", "--to", "tcp://h:1", "--rate", "5", "--loops", "0"], "--loops must be at least 1"),
@@ -99,3 +105,14 @@ def test_live_replays_a_ros_bag_given_its_sample_interval_and_topics(survey, tmp
     assert re.fullmatch(rf"{survey.n_traces} traces, \d+ traces/s, lag \d+\.\d\d s", out[-1]), out[-1]
     cfg = json.loads((tmp_path / "live" / "config.json").read_text())["config"]
     assert cfg["eps_r"] == EPS and cfg["background_window"] == 32
+
+
+def test_live_fuses_a_bag_s_poses_as_the_replay_comes(fused_bag, tmp_path, capsys):  # noqa: F811
+    from gpr3d.cli.main import main
+    from tests.pipeline.test_live import DT, EPS
+
+    code = main(["live", str(fused_bag / "run"), "--dt", str(DT * 1e9), "--fuse", "--rig", str(fused_bag / "rig.json"),
+                 "--still", "1", "--speed", "0", "--eps-r", str(EPS), "--offset", "0.05", "--no-detect",
+                 "--background-window", "32", "--aperture", "45", "--out", str(tmp_path / "live")])
+    out = capsys.readouterr().out.strip().splitlines()
+    assert code == 0 and re.fullmatch(r"350 traces, \d+ traces/s, lag \d+\.\d\d s", out[-1]), out[-1]

@@ -734,3 +734,90 @@ def test_a_long_step_is_not_idleness_while_traces_wait_in_the_reader(survey, tmp
     monkeypatch.setattr(LiveReconstruction, "step", slow_step)
     summary = run_live(_Paced(survey), tmp_path, _cfg(until_idle_s=1.0), log=None)
     assert summary.n_traces == survey.n_traces
+
+
+@pytest.fixture(scope="module")
+def fused_bag(tmp_path_factory):
+    """A synthetic cart's run as a ROS 2 bag: ``/imu``, ``/odometry`` (the camera's poses, lost frames left out)
+    and ``/gpr/traces`` every 0.04 s from 1.5 s (the pipe scene recorded along the antenna's true path), with
+    its rig file."""
+    pytest.importorskip("rosbags")
+    from gpr3d.io.rosbag import write_bag
+    from gpr3d.pipeline.poses import write_rig_recordings
+    from gpr3d.pose.rig import RigConfig, simulate_rig
+
+    run = simulate_rig(RigConfig(duration_s=16.0, vo_gap=(9.0, 0.5)), seed=4)
+    folder = tmp_path_factory.mktemp("fusedbag")
+    write_rig_recordings(run, folder)
+    from gpr3d.io.trajectory import read_tum
+
+    cam, truth = read_tum(folder / "odometry.tum"), read_tum(folder / "truth.tum")
+    t = np.arange(1.5, 15.5, 0.04)
+    at = truth.at(t)
+    p0 = at.positions_xyz.mean(axis=0)
+    scene = ForwardScene(eps_r=EPS, pipes=[Pipe((p0[0] - 3, p0[1], -0.22), (p0[0] + 3, p0[1], -0.22), 0.02)])
+    data = forward_model(scene, at.positions_xyz, at.orientations_quat_wxyz, offset_m=0.05, frequency_hz=800e6,
+                         n_samples=128, time_window_s=12e-9, air_wave=1.0, ground_wave=0.5, noise=0.01)
+    write_bag(folder / "run", imu=run.imu, trajectory=cam, traces=(t, data))
+    return folder
+
+
+def test_a_bag_s_poses_fused_as_the_replay_comes_are_the_batch_fusion_s(fused_bag, tmp_path):
+    from gpr3d.pipeline.poses import fuse_recordings
+
+    bag, rig = fused_bag / "run", fused_bag / "rig.json"
+    ref = fuse_recordings(bag=bag, rig=rig, log=None).trajectory  # (the filter alone: no smoothing)
+    # as fast as it reads: every trace, each with the batch fusion's pose at its stamp
+    src = BagSource(bag, dt_s=DT, speed=None, fuse={"rig": rig})
+    data, poses, times = src.poll()
+    assert src.ended and len(times) == 350 and src.skipped == 0
+    want = ref.at(times)
+    np.testing.assert_allclose(poses[:, :3], want.positions_xyz, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.abs(np.sum(poses[:, 3:] * want.orientations_quat_wxyz, axis=1)), 1.0, atol=1e-12)
+    # at its own pace: a trace is given once the replay clock and the filter have both passed its stamp, and the
+    # filter keeps up within the odometry's frame interval (15 Hz) and a poll
+    now = [0.0]
+    src = BagSource(bag, dt_s=DT, speed=1.0, fuse={"rig": rig, "still_s": 1.0}, clock=lambda: now[0])
+    got, late = [], []
+    while not src.ended:
+        out = src.poll()  # (None until the first trace is given: no header yet)
+        t = out[2] if out is not None else np.zeros(0)
+        p = out[1] if out is not None else None
+        bag_now = 1.5 + now[0]
+        f = src.fused  # (fed nothing stamped after the replay's clock)
+        assert (f.ni == 0 or f.imu.t_s[f.ni - 1] <= bag_now) and (f.nv == 0 or f.vo.t_s[f.nv - 1] <= bag_now)
+        if len(t):
+            assert t.max() <= min(bag_now, src.fused.until)
+            np.testing.assert_allclose(p[:, :3], ref.at(t).positions_xyz, rtol=0, atol=1e-9)
+            got.extend(t)
+        nxt = src._next[0] if src._next is not None else None
+        if nxt is not None and nxt <= bag_now:
+            late.append((nxt, bag_now - nxt))  # a trace the clock has passed, waiting for the filter
+        now[0] += 0.05
+    assert len(got) == 350
+    # (where odometry lost track, 9.0-9.5 s, the filter waits for the next frame: it cannot know none is coming)
+    gap = np.array([w for t, w in late if 9.0 - 0.1 <= t <= 9.5 + 1 / 15])
+    rest = np.array([w for t, w in late if not 9.0 - 0.1 <= t <= 9.5 + 1 / 15])
+    assert rest.max() < 1 / 15 + 0.05 + 1e-9 and 0.3 < gap.max() < 0.5 + 1 / 15 + 0.1
+    src.close()
+    # fused poses with given ones: one line
+    with pytest.raises(GPR3DError, match=r"poses fused from the IMU and odometry \(--fuse\) or given \(--pose-topic\)"):
+        BagSource(bag, dt_s=DT, fuse={}, pose_topic="/odometry")
+
+
+def test_live_on_a_fused_bag_equals_the_batch_volume_with_those_poses(fused_bag, tmp_path):
+    from gpr3d.io.rosbag import iter_bag_traces
+
+    bag = fused_bag / "run"
+    source = open_source(bag, offset_m=0.05, frequency_hz=800e6,
+                         bag={"dt_s": DT, "speed": None, "eps_r": EPS, "fuse": {"rig": fused_bag / "rig.json"}})
+    summary = run_live(source, tmp_path / "out", _cfg(), log=None)
+    assert summary.n_traces == 350
+    from gpr3d.pipeline.poses import fuse_recordings
+
+    stamps = np.array([t for t, _ in iter_bag_traces(bag)])
+    traces = np.concatenate([tr for _, tr in iter_bag_traces(bag)])
+    at = fuse_recordings(bag=bag, rig=fused_bag / "rig.json", log=None).trajectory.at(stamps)
+    survey = Survey(data=traces, dt_s=DT, offset_m=0.05, frequency_hz=800e6, eps_r=EPS,
+                    positions_xyz=at.positions_xyz, orientations_quat_wxyz=at.orientations_quat_wxyz)
+    _batch_equals_live(survey, tmp_path / "out")

@@ -310,30 +310,92 @@ def test_forward_fusion_names_wrong_input_in_one_line():
 
     with pytest.raises(InvalidDataError, match="rate_hz must be a positive IMU sample rate, got 0"):
         ForwardFusion(rate_hz=0)
+    with pytest.raises(InvalidDataError, match="got nan"):
+        ForwardFusion(rate_hz=np.nan)
     ff = ForwardFusion(rate_hz=200.0)
-    g = np.tile([0.0, 0.0, 9.81], (3, 1))
+    g = np.tile([0.0, 0.0, GRAVITY], (3, 1))
     ff.add_imu([0.0, 0.005, 0.01], g, np.zeros((3, 3)))
-    with pytest.raises(InvalidDataError, match=r"IMU: timestamps must increase \(at 0.010000 s after 0.010000 s\)"):
-        ff.add_imu([0.01], g[:1], np.zeros((1, 3)))
-    with pytest.raises(InvalidDataError, match="IMU: 2 times for 1 forces and 1 rates"):
-        ff.add_imu([0.02, 0.03], g[:1], np.zeros((1, 3)))
-    with pytest.raises(InvalidDataError, match="IMU samples from 3 on hold NaN/inf"):
-        ff.add_imu([0.02], [[0.0, np.nan, 9.81]], np.zeros((1, 3)))
+    for args, message in [
+            (([0.01], g[:1], np.zeros((1, 3))), r"^IMU: timestamps must increase \(at 0.010000 s after 0.010000 s\)$"),
+            (([0.02, 0.03], g[:1], np.zeros((2, 3))), r"^IMU forces: expected shape \(2, 3\), got \(1, 3\)$"),
+            (([0.02], g[:1], np.zeros(3)), r"^IMU rates: expected shape \(1, 3\), got \(3,\)$"),
+            (([0.02], [[0.0, np.nan, 9.81]], np.zeros((1, 3))), "^IMU samples from 3 on hold NaN/inf$"),
+            (([0.02], g[:1], [[0.0, np.inf, 0.0]]), "^IMU samples from 3 on hold NaN/inf$"),
+            (([np.nan], g[:1], np.zeros((1, 3))), "^IMU times hold NaN/inf$")]:
+        with pytest.raises(InvalidDataError, match=message):
+            ff.add_imu(*args)
     assert ff.imu_t.n == 3  # (nothing of a refused chunk kept)
-    eye = np.tile(np.eye(3), (2, 1, 1))
-    with pytest.raises(InvalidDataError, match="visual odometry ref: frame 1 refers to itself or a later frame"):
-        ff.add_frames([0.0, 0.1], eye, np.zeros((2, 3)), np.tile(np.eye(6), (2, 1, 1)), ref=[-1, 1])
-    with pytest.raises(InvalidDataError, match="wheel readings for a fusion made without a wheel"):
+    eye, c6 = np.tile(np.eye(3), (2, 1, 1)), np.tile(np.eye(6), (2, 1, 1))
+    for kw, message in [
+            (dict(ref=[-1, 1]), "^visual odometry ref: frame 1 refers to itself or a later frame$"),
+            (dict(R=eye[:1]), r"^visual odometry R: expected shape \(2, 3, 3\), got \(1, 3, 3\)$"),
+            (dict(p=np.zeros(3)), r"^visual odometry p: expected shape \(2, 3\), got \(3,\)$"),
+            (dict(cov=c6[:, :3]), r"^visual odometry cov: expected shape \(2, 6, 6\), got \(2, 3, 6\)$"),
+            (dict(valid=[True]), r"^visual odometry valid: expected shape \(2,\), got \(1,\)$"),
+            (dict(ref=[-1, 0, 1]), r"^visual odometry ref: expected shape \(2,\), got \(3,\)$"),
+            (dict(t_s=[0.1, 0.1]), r"^visual odometry: timestamps must increase \(at 0.100000 s after 0.100000 s\)$")]:
+        args = {"t_s": [0.0, 0.1], "R": eye, "p": np.zeros((2, 3)), "cov": c6, **kw}
+        with pytest.raises(InvalidDataError, match=message):
+            ff.add_frames(**args)
+    assert ff.vo_t.n == 0
+    # frames in chunks: numbered on, each referring to the one before unless told; a non-finite motion, and
+    # frame 0 (whose motion is from nothing), are failed frames
+    bad = eye.copy()
+    bad[1, 0, 0] = np.nan
+    ff.add_frames([0.0, 0.1], eye, np.zeros((2, 3)), c6)
+    ff.add_frames([0.2, 0.3], bad, np.zeros((2, 3)), c6, valid=[True, True], ref=[1, 1])
+    assert ff.vo_ref[:].tolist() == [-1, 0, 1, 1] and ff.vo_valid[:].tolist() == [False, True, True, False]
+    with pytest.raises(InvalidDataError, match=r"^wheel readings for a fusion made without a wheel \(wheel=True\)$"):
         ff.add_wheel([0.0], [0.0])
     fw = ForwardFusion(rate_hz=200.0, wheel=True)
     fw.add_wheel([0.0, 0.1], [0.0, 0.2])
-    with pytest.raises(InvalidDataError, match="wheel: the distance decreases"):
-        fw.add_wheel([0.2], [0.1])
-    with pytest.raises(InvalidDataError, match="no IMU samples came"):
+    for args, message in [(([0.2], [0.1]), "^wheel: the distance decreases; pass the wheel's forward count$"),
+                          (([0.2], [np.nan]), "^wheel distances hold NaN/inf$"),
+                          (([0.2, 0.3], [0.3]), r"^wheel distances: expected shape \(2,\), got \(1,\)$"),
+                          (([0.1], [0.3]), r"^wheel: timestamps must increase \(at 0.100000 s after 0.100000 s\)$")]:
+        with pytest.raises(InvalidDataError, match=message):
+            fw.add_wheel(*args)
+    fw.add_wheel([0.2], [0.2])  # (standing still: the same distance again)
+    assert fw.wheel[1][:].tolist() == [0.0, 0.2, 0.2]
+    with pytest.raises(InvalidDataError, match="^no IMU samples came$"):
         ForwardFusion(rate_hz=200.0).finish()
-    # IMU alone, told no odometry comes: it runs as the samples come (after the still start's alignment)
-    still = ForwardFusion(EskfConfig(init_still_s=0.1), rate_hz=200.0)
-    still.end_frames()
+    with pytest.raises(InvalidDataError, match="^wheel: two readings at least$"):
+        fuse(ImuSamples(np.arange(300) / 200.0, np.tile([0.0, 0.0, GRAVITY], (300, 1)), np.zeros((300, 3))),
+             None, wheel=([0.0], [0.0]))
+
+
+def test_forward_fusion_waits_for_the_still_start_then_runs_as_samples_come_and_gives_antenna_poses():
+    from gpr3d.pose.eskf import ForwardFusion
+
+    cfg = EskfConfig(init_still_s=0.1, imu_T_antenna=np.array([[1.0, 0, 0, 0.3], [0, 1, 0, 0], [0, 0, 1, -0.2],
+                                                                 [0, 0, 0, 1]]))
     n = 100
-    still.add_imu(np.arange(n) / 200.0, np.tile([0.0, 0.0, GRAVITY], (n, 1)), np.zeros((n, 3)))
-    assert still.run() == n and np.abs(still.out["p"][:]).max() < 1e-9
+    t, f, w = np.arange(n) / 200.0, np.tile([0.0, 0.0, GRAVITY], (n, 1)), np.zeros((n, 3))
+    f[:, 0] += np.where(t > 0.2, 0.4, 0.0)  # (a push along x after the still start)
+    ff = ForwardFusion(cfg, rate_hz=200.0)
+    ff.end_frames()  # (no odometry will come)
+    ff.add_imu(t[:21], f[:21], w[:21])  # up to 0.1 s: the still start's alignment may need more of it
+    assert ff.run() == 0 and ff.n_done == 0 and ff.flt is None
+    ff.add_imu(t[21:60], f[21:60], w[21:60])
+    assert ff.run() == 60 and ff.run() == 0  # (everything that came, once)
+    ff.add_imu(t[60:], f[60:], w[60:])
+    assert ff.run() == n - 60
+    res = ff.finish()
+    ref = fuse(ImuSamples(t, f, w), None, cfg)
+    np.testing.assert_array_equal(res.p, ref.p)
+    assert res.p[-1, 0] > 1e-3  # (it moved)
+    # the antenna's poses between the final samples: what the whole result's antenna trajectory gives there
+    q = np.array([0.0, 0.0123, 0.25, 0.4949])
+    want = ref.antenna_trajectory().at(q)
+    got = ff.antenna_at(q)
+    np.testing.assert_allclose(got.positions_xyz, want.positions_xyz, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got.orientations_quat_wxyz, want.orientations_quat_wxyz, rtol=0, atol=1e-12)
+    assert np.abs(got.positions_xyz[0] - [0.3, 0.0, -0.2]).max() < 1e-3  # (the mount: 0.3 m ahead, 0.2 m down)
+    np.testing.assert_allclose(ff.antenna_at([0.4949]).positions_xyz, want.positions_xyz[-1:], rtol=0, atol=1e-12)
+    last = ref.antenna_trajectory().at([0.495])  # (the last sample itself)
+    np.testing.assert_allclose(ff.antenna_at([0.495]).positions_xyz, last.positions_xyz, rtol=0, atol=1e-12)
+    with pytest.raises(InvalidDataError, match=r"^poses asked for outside the final ones \(their span: "
+                                               r"0.000000..0.495000 s\)$"):
+        ff.antenna_at([0.496])
+    with pytest.raises(InvalidDataError, match=r"their span: none yet"):
+        ForwardFusion(rate_hz=200.0).antenna_at([0.0])

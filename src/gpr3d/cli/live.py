@@ -9,15 +9,17 @@ NAME = "live"
 HELP = "live 3D: migrate traces as a radar delivers them, targets refreshed while surveying"
 EPILOG = ("examples:\n  gpr3d live tcp://127.0.0.1:5600 --out site --eps-r 9\n"
           "  gpr3d live LINE.DZT --poses LINE.tum --out site --eps-r 6 --until-idle 10\n"
-          "  gpr3d live run.bag --dt 0.1 --trace-topic /gpr/traces --pose-topic /odometry --out site --eps-r 6\n\n"
+          "  gpr3d live run.bag --dt 0.1 --trace-topic /gpr/traces --pose-topic /odometry --out site --eps-r 6\n"
+          "  gpr3d live run.bag --dt 0.1 --fuse --rig rig.json --out site --eps-r 6   # poses fused as they come\n\n"
           "SOURCE: tcp://HOST:PORT (the trace stream of docs/CONVENTIONS.md: each trace with its pose), a DZT\n"
           "file the radar is writing with --poses, a TUM file written beside it, or a ROS bag (.bag, or a ROS 2\n"
           "bag folder) replayed at its own pace: a trace topic (a header and a float array named trace, samples\n"
-          "or data), poses from a pose topic or --poses. Refreshed while running:\n"
+          "or data), poses from a pose topic, --poses, or fused from its IMU and odometry topics (--fuse).\n"
+          "Refreshed while running:\n"
           "OUT/live.json (traces, targets, detections); at the end: volume.h5, volume.vti, targets.json,\n"
           "config.json (a batch 'gpr3d reconstruct' with its settings gives the same volume), detections.json.\n"
-          "The last line: N traces, R traces/s, lag L s (how long after the newest trace arrived the last\n"
-          "was migrated).")
+          "The last line: N traces, R traces/s, lag L s (how long after the newest trace arrived the work\n"
+          "on it ended).")
 
 
 def add_arguments(sp):
@@ -29,6 +31,16 @@ def add_arguments(sp):
     sp.add_argument("--dt", type=float, default=None, help="a bag's sample interval in ns (its messages carry none)")
     sp.add_argument("--trace-topic", default=None, help="a bag's GPR trace topic (default: the one such topic)")
     sp.add_argument("--pose-topic", default=None, help="a bag's pose topic (default: the one such topic)")
+    sp.add_argument("--fuse", action="store_true",
+                    help="a bag's poses fused from its IMU and odometry topics as the replay comes to them (the "
+                         "filter of 'gpr3d pose fuse', no smoothing) instead of a pose topic")
+    sp.add_argument("--imu-topic", default=None, help="with --fuse: the bag's IMU topic (default: the one)")
+    sp.add_argument("--odometry-topic", default=None,
+                    help="with --fuse: the bag's odometry (camera pose) topic (default: the one)")
+    sp.add_argument("--rig", default=None, help="with --fuse: the rig file (JSON: imu_T_camera, imu_T_antenna, "
+                                                "camera_time_offset_s)")
+    sp.add_argument("--still", type=float, default=1.0,
+                    help="with --fuse: seconds the cart stands at the start (default 1)")
     sp.add_argument("--samples-per-trace", type=int, default=None,
                     help="a bag's messages hold several traces of this many samples (default: one a message)")
     sp.add_argument("--speed", type=float, default=1.0,
@@ -108,6 +120,14 @@ def run(args):
     for name in ("trace_topic", "pose_topic", "samples_per_trace"):
         if getattr(args, name) is not None:
             bag[name] = getattr(args, name)
+    fuse = {k: getattr(args, k) for k in ("imu_topic", "odometry_topic", "rig") if getattr(args, k) is not None}
+    stray = [k for k in (*fuse, *(["still"] if args.still != 1.0 else []))]
+    if stray and not args.fuse:
+        raise GPR3DError(f"{', '.join('--' + k.replace('_', '-') for k in stray)} are for --fuse (a bag's poses "
+                         "fused from its IMU and odometry)")
+    if args.fuse:
+        _in_range(args.still, "--still", 0.05, 600, "seconds")
+        bag["fuse"] = {**fuse, "still_s": args.still}
     source = open_source(args.source, poses=args.poses, channel=args.channel, offset_m=args.offset,
                          connect_s=args.connect_timeout, bag=bag or None)
     summary = run_live(source, args.out, cfg, detector=detector, log=print)

@@ -219,18 +219,71 @@ class FileSource:
         pass
 
 
+class _FusedPoses:
+    """The antenna's poses fused from a bag's IMU and odometry topics as the replay comes to them
+    (:class:`~gpr3d.pose.eskf.ForwardFusion`: the IMU propagates, the odometry's camera poses, taken frame to
+    frame, correct; no smoothing): :meth:`feed_to` gives the filter what is stamped up to a bag time, and poses are
+    given where the filter has passed (:attr:`until`). With the same settings ``gpr3d pose fuse --bag`` (no
+    ``--smooth``) gives the same poses."""
+
+    def __init__(self, bag, *, imu_topic=None, odometry_topic=None, rig=None, still_s: float = 1.0):
+        from gpr3d.io.inertial import read_rig, relative_from_camera_poses
+        from gpr3d.io.rosbag import read_bag_imu, read_bag_trajectory
+        from gpr3d.pose.eskf import EskfConfig, ForwardFusion
+
+        self.imu = read_bag_imu(bag, imu_topic)
+        self.vo = relative_from_camera_poses(read_bag_trajectory(bag, odometry_topic))
+        self.cfg = EskfConfig(init_still_s=still_s, **(read_rig(rig) if rig else {}))
+        self.ff = ForwardFusion(self.cfg, rate_hz=self.imu.rate_hz)
+        self.first_s, self.last_s = float(self.imu.t_s[0]), float(self.imu.t_s[-1])  #: the poses' span
+        self.ni = self.nv = 0
+        self.done = False
+
+    @property
+    def until(self) -> float:
+        """The bag time up to which the poses are final."""
+        n = self.ff.n_done
+        return float(self.imu.t_s[n - 1]) if n >= 2 else -math.inf
+
+    def feed_to(self, t: float) -> None:
+        if self.done:
+            return
+        imu, vo, ff = self.imu, self.vo, self.ff
+        ni = int(np.searchsorted(imu.t_s, t, side="right"))
+        nv = int(np.searchsorted(vo.t_s, t, side="right"))
+        if ni > self.ni:
+            ff.add_imu(imu.t_s[self.ni:ni], imu.accel[self.ni:ni], imu.gyro[self.ni:ni])
+        if nv > self.nv:
+            a = self.nv
+            ff.add_frames(vo.t_s[a:nv], vo.R[a:nv], vo.p[a:nv], vo.cov[a:nv], vo.valid[a:nv], vo.ref[a:nv])
+        self.ni, self.nv = ni, nv
+        if ni == imu.t_s.size and nv == vo.t_s.size:
+            ff.finish()  # (everything came: the filter runs to the last sample)
+            self.done = True
+        else:
+            ff.run()
+
+    def at(self, times) -> np.ndarray:
+        at = self.ff.antenna_at(times)
+        return np.c_[at.positions_xyz, at.orientations_quat_wxyz]
+
+
 class BagSource:
     """A ROS 1 or ROS 2 bag replayed at its own pace (``speed`` times it; None: as fast as it reads): the traces of
     a GPR trace topic (:func:`gpr3d.io.rosbag.iter_bag_traces`), each with the antenna's pose interpolated at its
     stamp from a pose topic of the same bag (PoseStamped, PoseWithCovarianceStamped, Odometry) or a TUM file.
     A trace is given once the replay clock has passed its stamp and the first pose after it (as a radar and a pose
     filter deliver them live); traces outside the poses' time span are left out and counted (``skipped``). The
-    bag's trace messages carry no sample interval: ``dt_s`` is required."""
+    bag's trace messages carry no sample interval: ``dt_s`` is required.
+
+    ``fuse`` (a dict: ``imu_topic``, ``odometry_topic``, ``rig``, ``still_s``; any may be left out) fuses the
+    poses from the bag's IMU and odometry as the replay comes to them instead (:class:`_FusedPoses`): a trace is
+    then given once the filter has passed its stamp."""
 
     def __init__(self, bag, *, dt_s: float, trace_topic: str | None = None, pose_topic: str | None = None,
                  poses=None, samples_per_trace: int | None = None, speed: float | None = 1.0,
                  offset_m: float = 0.0, frequency_hz: float | None = None, eps_r: float | None = None,
-                 clock=time.monotonic):
+                 clock=time.monotonic, fuse: dict | None = None):
         from gpr3d.io.rosbag import iter_bag_traces, read_bag_trajectory
 
         if not (isinstance(dt_s, (int, float)) and math.isfinite(dt_s) and 0 < dt_s < 1e-6):
@@ -239,16 +292,23 @@ class BagSource:
             raise GPR3DError(f"the replay speed must be a positive number, got {speed!r}")
         if poses is not None and pose_topic is not None:
             raise GPR3DError(f"{bag}: poses from a TUM file (--poses) or from the bag's {pose_topic}: give one")
+        if fuse is not None and (poses is not None or pose_topic is not None):
+            raise GPR3DError(f"{bag}: poses fused from the IMU and odometry (--fuse) or given "
+                             f"({'--poses' if poses is not None else '--pose-topic'}): give one")
         self._traces = iter_bag_traces(bag, trace_topic, samples_per_trace=samples_per_trace)  # (checked now)
-        if poses is not None:
+        self.fused = self.trajectory = None
+        if fuse is not None:
+            self.fused = _FusedPoses(bag, **fuse)
+        elif poses is not None:
             from gpr3d.io.trajectory import read_tum
 
             self.trajectory = read_tum(poses)
         else:
             self.trajectory = read_bag_trajectory(bag, pose_topic)
-        ts = self.trajectory.timestamps_s
-        if ts.size < 2 or np.any(np.diff(ts) <= 0):
-            raise GPR3DError(f"{poses or bag}: the poses' stamps must increase strictly (two poses at least)")
+        if self.trajectory is not None:
+            ts = self.trajectory.timestamps_s
+            if ts.size < 2 or np.any(np.diff(ts) <= 0):
+                raise GPR3DError(f"{poses or bag}: the poses' stamps must increase strictly (two poses at least)")
         self.path = str(bag)
         self.dt_s, self.speed, self.clock = float(dt_s), speed, clock
         self.offset_m, self.frequency_hz, self.eps_r = offset_m, frequency_hz, eps_r
@@ -258,8 +318,16 @@ class BagSource:
         self.ended = False
         self.skipped = 0  #: traces outside the poses' time span
 
+    def _span(self) -> tuple:
+        if self.fused is not None:
+            return self.fused.first_s, self.fused.last_s
+        return float(self.trajectory.timestamps_s[0]), float(self.trajectory.timestamps_s[-1])
+
     def _due(self, t: float) -> float:
-        """The bag time at which a trace stamped ``t`` can be given: once the first pose after it has come."""
+        """The bag time at which a trace stamped ``t`` can be given: once the first pose after it has come (fused
+        poses: once the replay has passed it, and the filter too)."""
+        if self.fused is not None:
+            return t
         ts = self.trajectory.timestamps_s
         return max(t, float(ts[min(int(np.searchsorted(ts, t)), ts.size - 1)]))
 
@@ -278,12 +346,18 @@ class BagSource:
                 self._start = (self._due(t), now)
             if self.speed is not None and (self._due(t) - self._start[0]) / self.speed > now - self._start[1]:
                 break  # not yet
+            first, last = self._span()
+            if self.fused is not None and first <= t <= last:
+                if self.fused.until < t:  # the filter first takes in what the replay has passed
+                    self.fused.feed_to(math.inf if self.speed is None else
+                                       self._start[0] + (now - self._start[1]) * self.speed)
+                if self.fused.until < t:
+                    break  # the filter has not passed it yet
             self._next = None
             if self.header is None:
                 self.header = StreamHeader(n_samples=tr.shape[1], dt_s=self.dt_s, frequency_hz=self.frequency_hz,
                                            offset_m=self.offset_m, eps_r=self.eps_r, name=self.path)
-            ts = self.trajectory.timestamps_s
-            if not ts[0] <= t <= ts[-1]:
+            if not first <= t <= last:
                 self.skipped += len(tr)
                 continue
             times.extend([t] * len(tr))
@@ -293,6 +367,8 @@ class BagSource:
         if not rows:
             return np.zeros((0, self.header.n_samples), np.float32), np.zeros((0, 7)), np.zeros(0)
         data = np.concatenate(rows)  # (one width: iter_bag_traces holds every message to the first's)
+        if self.fused is not None:
+            return data, self.fused.at(times), np.asarray(times)
         at = self.trajectory.at(np.asarray(times))
         return data, np.c_[at.positions_xyz, at.orientations_quat_wxyz], np.asarray(times)
 

@@ -106,11 +106,15 @@ class FusionResult:
 
     def antenna_trajectory(self) -> Trajectory:
         """Antenna poses (world from antenna) at the IMU times, as a :class:`~gpr3d.core.trajectory.Trajectory`."""
-        Ta = self.imu_T_antenna
-        R = self.R @ Ta[:3, :3]
-        p = self.p + self.R @ Ta[:3, 3]
-        q = Rotation.from_matrix(R).as_quat()[:, [3, 0, 1, 2]]
-        return Trajectory(self.t_s, p, q)
+        return _antenna(self.t_s, self.R, self.p, self.imu_T_antenna)
+
+
+def _antenna(t_s, R_imu, p_imu, imu_T_antenna) -> Trajectory:
+    Ta = imu_T_antenna
+    R = R_imu @ Ta[:3, :3]
+    p = p_imu + R_imu @ Ta[:3, 3]
+    q = Rotation.from_matrix(R).as_quat()[:, [3, 0, 1, 2]]
+    return Trajectory(t_s, p, q)
 
 
 def camera_to_imu_motion(R_c, p_c, cov_c, imu_T_camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -426,11 +430,9 @@ class ForwardFusion:
     def add_imu(self, t_s, accel, gyro) -> None:
         """IMU samples: times (s, increasing, after those given before), specific forces (m/s^2) and angular
         rates (rad/s) in the IMU frame."""
-        t = np.asarray(t_s, float).reshape(-1)
-        a, g = np.asarray(accel, float).reshape(-1, 3), np.asarray(gyro, float).reshape(-1, 3)
-        if not (len(a) == len(g) == len(t)):
-            raise InvalidDataError(f"IMU: {len(t)} times for {len(a)} forces and {len(g)} rates")
-        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(a)) and np.all(np.isfinite(g))):
+        t = _rows(t_s, None, (), "IMU times")
+        a, g = _rows(accel, t.size, (3,), "IMU forces"), _rows(gyro, t.size, (3,), "IMU rates")
+        if not (np.isfinite(a).all() and np.isfinite(g).all()):
             raise InvalidDataError(f"IMU samples from {self.imu_t.n} on hold NaN/inf")
         _after(t, self.imu_t, "IMU")
         self.imu_t.add(t)
@@ -440,24 +442,22 @@ class ForwardFusion:
     def add_frames(self, t_s, R, p, cov, valid=None, ref=None) -> None:
         """Odometry frames (as :class:`~gpr3d.core.inertial.RelativePoses`' entries, numbered on from those given
         before; ``ref`` by those numbers, default the frame before): a non-finite motion is a failed frame."""
-        t = np.asarray(t_s, float).reshape(-1)
-        n, k0 = t.size, self.vo_t.n
-        R = np.asarray(R, float).reshape(n, 3, 3)
-        p, cov = np.asarray(p, float).reshape(n, 3), np.asarray(cov, float).reshape(n, 6, 6)
-        valid = np.ones(n, bool) if valid is None else np.asarray(valid, bool).reshape(n)
-        ref = np.arange(k0, k0 + n) - 1 if ref is None else np.asarray(ref, int).reshape(n)
-        if not np.all(np.isfinite(t)):
-            raise InvalidDataError(f"visual odometry: frame times from {k0} on hold NaN/inf")
+        t = _rows(t_s, None, (), "visual odometry times")
+        n, k = t.size, np.arange(self.vo_t.n, self.vo_t.n + t.size)
+        R, p, cov = _rows(R, n, (3, 3), "visual odometry R"), _rows(p, n, (3,), "visual odometry p"), \
+            _rows(cov, n, (6, 6), "visual odometry cov")
+        valid = np.ones(n, bool) if valid is None else _rows(valid, n, (), "visual odometry valid").astype(bool)
+        ref = k - 1 if ref is None else _rows(ref, n, (), "visual odometry ref").astype(int)
         _after(t, self.vo_t, "visual odometry")
-        if np.any(ref >= np.arange(k0, k0 + n)):
-            raise InvalidDataError(f"visual odometry ref: frame {k0 + int(np.argmax(ref >= np.arange(k0, k0 + n)))} "
-                                   "refers to itself or a later frame")
+        if np.any(ref >= k):
+            raise InvalidDataError(f"visual odometry ref: frame {k[np.argmax(ref >= k)]} refers to itself or a "
+                                   "later frame")
         ok = np.isfinite(R).all((1, 2)) & np.isfinite(p).all(1) & np.isfinite(cov).all((1, 2))
         self.vo_t.add(t)
         self.vo_R.add(R)
         self.vo_p.add(p)
         self.vo_cov.add(cov)
-        self.vo_valid.add(valid & ok & (np.arange(k0, k0 + n) > 0))
+        self.vo_valid.add(valid & ok & (k > 0))
         self.vo_ref.add(ref)
 
     def add_wheel(self, t_s, distance_m) -> None:
@@ -465,9 +465,10 @@ class ForwardFusion:
         decreasing)."""
         if self.wheel is None:
             raise InvalidDataError("wheel readings for a fusion made without a wheel (wheel=True)")
-        t, dist = np.asarray(t_s, float).reshape(-1), np.asarray(distance_m, float).reshape(-1)
-        if t.size != dist.size or not np.all(np.isfinite(dist)) or not np.all(np.isfinite(t)):
-            raise InvalidDataError("wheel: give (times, distances) of one length, times increasing, no NaN")
+        t = _rows(t_s, None, (), "wheel times")
+        dist = _rows(distance_m, t.size, (), "wheel distances")
+        if not np.isfinite(dist).all():
+            raise InvalidDataError("wheel distances hold NaN/inf")
         _after(t, self.wheel[0], "wheel")
         if np.any(np.diff(np.r_[self.wheel[1][-1:], dist]) < -1e-9):
             raise InvalidDataError("wheel: the distance decreases; pass the wheel's forward count")
@@ -588,6 +589,20 @@ class ForwardFusion:
             fr[key].add(v)
         self.fi += 1
 
+    def antenna_at(self, t_s) -> Trajectory:
+        """The antenna's poses at the times ``t_s`` (within the final samples' span), interpolated between the
+        final poses about them (as :meth:`FusionResult.antenna_trajectory` then
+        :meth:`~gpr3d.core.trajectory.Trajectory.at` give them)."""
+        t_s = np.asarray(t_s, float).reshape(-1)
+        n = self.n_done
+        t = self.imu_t[:n]
+        if not t_s.size or n < 2 or t_s.min() < t[0] or t_s.max() > t[-1]:
+            span = f"{t[0]:.6f}..{t[-1]:.6f} s" if n else "none yet"
+            raise InvalidDataError(f"poses asked for outside the final ones (their span: {span})")
+        lo = min(max(int(np.searchsorted(t, t_s.min(), side="right")) - 1, 0), n - 2)
+        hi = max(min(int(np.searchsorted(t, t_s.max(), side="left")) + 1, n), lo + 2)
+        return _antenna(t[lo:hi], self.out["R"][lo:hi], self.out["p"][lo:hi], self.cfg.imu_T_antenna).at(t_s)
+
     def finish(self) -> FusionResult:
         """Every stream ended: the filter run to the last IMU sample (frames after it are not used); the result
         over every IMU sample."""
@@ -600,6 +615,18 @@ class ForwardFusion:
                             fr["cov"][:], fr["idx"][:].astype(int), fr["p"][:], fr["R"][:], fr["used"][:].astype(bool),
                             fr["rejected"][:].astype(bool), np.asarray(self.zupts, dtype=float),
                             self.cfg.imu_T_antenna)
+
+
+def _rows(x, n, shape: tuple, what: str) -> np.ndarray:
+    """``x`` as floats of shape ``(n, *shape)`` (``n`` None: any number of rows, times: finite)."""
+    a = np.asarray(x, float)
+    if n is None:
+        a = a.reshape(-1)
+        if not np.isfinite(a).all():
+            raise InvalidDataError(f"{what} hold NaN/inf")
+    elif a.shape != (n, *shape):
+        raise InvalidDataError(f"{what}: expected shape {(n, *shape)}, got {a.shape}")
+    return a
 
 
 def _after(t, before: _Grow, what: str) -> None:
@@ -641,18 +668,14 @@ def fuse(imu: ImuSamples, vo: RelativePoses | None, cfg: EskfConfig | None = Non
         A wheel record whose times and distances differ in length, are not increasing, hold NaN, or whose
         distance decreases.
     """
-    cfg = cfg or EskfConfig()
-    if wheel is not None:
-        wt, wd = (np.asarray(a, dtype=float).reshape(-1) for a in wheel)
-        if wt.size != wd.size or wt.size < 2 or np.any(np.diff(wt) <= 0) or not np.all(np.isfinite(wd)):
-            raise InvalidDataError("wheel: give (times, distances) of one length, times increasing, no NaN")
-        if np.any(np.diff(wd) < -1e-9):
-            raise InvalidDataError("wheel: the distance decreases; pass the wheel's forward count")
     ff = ForwardFusion(cfg, rate_hz=imu.rate_hz, wheel=wheel is not None, nodes=smooth)
     ff.add_imu(imu.t_s, imu.accel, imu.gyro)
     if vo is not None:
         ff.add_frames(vo.t_s, vo.R, vo.p, vo.cov, vo.valid, vo.ref)
     if wheel is not None:
+        wt, wd = wheel
+        if np.size(wt) < 2:
+            raise InvalidDataError("wheel: two readings at least")
         ff.add_wheel(wt, wd)
     res = ff.finish()
     flt, n = ff.flt, imu.t_s.size
