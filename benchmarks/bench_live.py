@@ -94,6 +94,51 @@ def live_run(work: Path, rate: float, env: dict, name: str, *, loops: int = 1, e
     return summary
 
 
+def fused_bag(work: Path, rate: float, n: int) -> tuple[Path, Path]:
+    """A cart's run as a ROS 2 bag for ``gpr3d live --fuse``: ``/imu`` (200 Hz), ``/odometry`` (the camera's
+    poses, 15 Hz) and ``/gpr/traces``: ``n`` traces at ``rate`` a second from the end of the still start, the
+    benchmark's scene recorded along the antenna's true path; with its rig file."""
+    from gpr3d.io.rosbag import write_bag
+    from gpr3d.io.trajectory import read_tum
+    from gpr3d.pipeline.poses import write_rig_recordings
+    from gpr3d.pose.rig import RigConfig, simulate_rig
+
+    still = 3.0
+    run = simulate_rig(RigConfig(duration_s=still + n / rate + 1.0, area=((0.0, 4.0), (0.0, 4.0)),
+                                 turn_rate_rad_s=1.0, still_start_s=still), seed=1)
+    folder = work / "fused"
+    write_rig_recordings(run, folder)
+    t = still + np.arange(n) / rate
+    at = read_tum(folder / "truth.tum").at(t)
+    data = forward_model(scene(), at.positions_xyz, at.orientations_quat_wxyz, offset_m=OFFSET, frequency_hz=F,
+                         n_samples=NS, time_window_s=WINDOW, air_wave=1.0, ground_wave=0.5)
+    write_bag(folder / "run", imu=run.imu, trajectory=read_tum(folder / "odometry.tum"), traces=(t, data))
+    return folder / "run", folder / "rig.json"
+
+
+def bag_run(work: Path, bag: Path, rig: Path, env: dict, extra=()) -> dict:
+    out = work / "bag_fused"
+    log = open(work / "bag_fused.log", "w")  # noqa: SIM115 - closed below
+    live = subprocess.Popen([sys.executable, "-m", "gpr3d", "live", bag, "--dt", str(WINDOW / NS * 1e9), "--fuse",
+                             "--rig", rig, "--still", "2", "--eps-r", str(EPS), "--offset", str(OFFSET),
+                             "--out", out, "--until-idle", "3", *extra], env=env, stdout=log,
+                            stderr=subprocess.STDOUT, text=True)
+    samples = []
+    t = time.perf_counter()
+    while live.poll() is None:
+        m = rss_mib(live.pid)
+        if m is not None:
+            samples.append((time.perf_counter() - t, m))
+        time.sleep(1.0)
+    log.close()
+    stdout = (work / "bag_fused.log").read_text()
+    if live.returncode != 0:
+        raise SystemExit(f"gpr3d live --fuse failed: {stdout.strip()[-2000:]}")
+    summary = json.loads((out / "live.json").read_text())["summary"]
+    summary["rss_mib"] = samples
+    return summary
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--traces", type=int, default=8000)
@@ -101,6 +146,8 @@ def main(argv=None):
     ap.add_argument("--long", type=int, default=25, help="passes of the long replay (0: none)")
     ap.add_argument("--long-rate", type=float, default=800.0)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--bag-rate", type=float, default=800.0,
+                    help="a ROS bag of as many traces at this rate, its poses fused by live mode (--fuse; 0: none)")
     ap.add_argument("--live-args", default="", help="more arguments for every gpr3d live run, e.g. '--refiner none'")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     args = ap.parse_args(argv)
@@ -122,6 +169,10 @@ def main(argv=None):
         rows.append((f"replayed at {rate:g} traces/s", r))
     r = live_run(work, 100000.0, env, "flat_out", extra=more)
     rows.append(("replayed as fast as it can send", r))
+    if args.bag_rate:
+        bag, rig = fused_bag(work, args.bag_rate, args.traces)
+        rows.append((f"ROS bag at {args.bag_rate:g} traces/s (its own pace), poses fused from its IMU (200 Hz) and "
+                     "odometry (15 Hz) as they come (`--fuse`)", bag_run(work, bag, rig, env, extra=more)))
     # the batch volume of the same traces with live's settings
     cfg = json.loads((first["out"] / "config.json").read_text())["config"]
     survey = s.replace(positions_xyz=traj.positions_xyz, orientations_quat_wxyz=traj.orientations_quat_wxyz)

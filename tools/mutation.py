@@ -79,7 +79,7 @@ MODULES = {
     # the packages beside the pipeline: each module with the test files that import it (less the slow training,
     # ROS-bag and CLI ones that only pass through)
     "pose.eskf": ["tests/pose/test_eskf_by_hand.py", "tests/pose/test_eskf_driver_by_hand.py", "tests/pose/test_eskf.py", "-k",
-                  "by_hand or noise_free or bad_inputs or bridges or camera_motion"], "pose.sync": ["tests/pose/test_sync.py"],
+                  "by_hand or noise_free or bad_inputs or bridges or camera_motion or forward_fusion or fed_as"], "pose.sync": ["tests/pose/test_sync.py"],
     "pose.metrics": ["tests/pose/test_metrics.py"],
     "detection.models": ["tests/detection/test_models_by_hand.py", "tests/detection/test_kinds.py"],
     "detection.kindheads": ["tests/detection/test_kinds.py"],
