@@ -277,8 +277,8 @@ class BagSource:
     bag's trace messages carry no sample interval: ``dt_s`` is required.
 
     ``fuse`` (a dict: ``imu_topic``, ``odometry_topic``, ``rig``, ``still_s``; any may be left out) fuses the
-    poses from the bag's IMU and odometry as the replay comes to them instead (:class:`_FusedPoses`): a trace is
-    then given once the filter has passed its stamp."""
+    poses from the bag's IMU and odometry as the replay comes to them instead
+    (:class:`~gpr3d.pose.eskf.ForwardFusion`): a trace is then given once the filter has passed its stamp."""
 
     def __init__(self, bag, *, dt_s: float, trace_topic: str | None = None, pose_topic: str | None = None,
                  poses=None, samples_per_trace: int | None = None, speed: float | None = 1.0,
@@ -496,7 +496,7 @@ def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 
         How long a ``tcp://`` source keeps trying to connect (s).
     bag : dict, optional
         A bag's settings for :class:`BagSource` (``dt_s``, ``trace_topic``, ``pose_topic``, ``samples_per_trace``,
-        ``speed``, ``eps_r``).
+        ``speed``, ``eps_r``, ``fuse``).
 
     Returns
     -------
