@@ -63,34 +63,37 @@ def rss_mib(pid: int) -> float | None:
     return None
 
 
+def run_live_process(work: Path, name: str, source, env: dict, args=()) -> dict:
+    """``gpr3d live SOURCE --out WORK/NAME --until-idle 3 ARGS`` in a process of its own, its resident memory
+    sampled every second; its summary (``live.json``) with ``rss_mib`` (time, MiB), ``last_line`` and ``out``."""
+    out = work / name
+    t = time.perf_counter()
+    # (its progress lines to a file: a pipe nobody reads while it runs would fill and stall it)
+    with open(work / f"{name}.log", "w") as log:
+        live = subprocess.Popen([sys.executable, "-m", "gpr3d", "live", source, "--out", out, "--until-idle", "3",
+                                 *args], env=env, stdout=log, stderr=subprocess.STDOUT, text=True)
+        samples = []
+        while live.poll() is None:
+            m = rss_mib(live.pid)
+            if m is not None:
+                samples.append((time.perf_counter() - t, m))
+            time.sleep(1.0)
+    stdout = (work / f"{name}.log").read_text()
+    if live.returncode != 0:
+        raise SystemExit(f"gpr3d live failed: {stdout.strip()[-2000:]}")
+    summary = json.loads((out / "live.json").read_text())["summary"]
+    summary.update(rss_mib=samples, last_line=stdout.strip().splitlines()[-1], out=out)
+    return summary
+
+
 def live_run(work: Path, rate: float, env: dict, name: str, *, loops: int = 1, extra=()) -> dict:
     port = free_port()
-    out = work / name
     server = subprocess.Popen([sys.executable, "-m", "gpr3d", "replay", work / "survey.h5", "--poses",
                                work / "path.tum", "--to", f"tcp://127.0.0.1:{port}", "--rate", str(rate),
                                "--loops", str(loops), "--loop-shift", "5"], env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    t = time.perf_counter()
-    # (its progress lines to a file: a pipe nobody reads while it runs would fill and stall it)
-    log = open(work / f"{name}.log", "w")  # noqa: SIM115 - closed below
-    live = subprocess.Popen([sys.executable, "-m", "gpr3d", "live", f"tcp://127.0.0.1:{port}", "--out", out,
-                             "--until-idle", "3", *extra], env=env, stdout=log, stderr=subprocess.STDOUT, text=True)
-    samples = []
-    while live.poll() is None:
-        m = rss_mib(live.pid)
-        if m is not None:
-            samples.append((time.perf_counter() - t, m))
-        time.sleep(1.0)
-    live.wait()
-    log.close()
-    stdout = (work / f"{name}.log").read_text()
+    summary = run_live_process(work, name, f"tcp://127.0.0.1:{port}", env, extra)
     server.wait(timeout=60)
-    if live.returncode != 0:
-        raise SystemExit(f"gpr3d live failed: {stdout.strip()[-2000:]}")
-    summary = json.loads((out / "live.json").read_text())["summary"]
-    summary["rss_mib"] = samples
-    summary["last_line"] = stdout.strip().splitlines()[-1]
-    summary["out"] = out
     return summary
 
 
@@ -117,26 +120,9 @@ def fused_bag(work: Path, rate: float, n: int) -> tuple[Path, Path]:
 
 
 def bag_run(work: Path, bag: Path, rig: Path, env: dict, extra=()) -> dict:
-    out = work / "bag_fused"
-    log = open(work / "bag_fused.log", "w")  # noqa: SIM115 - closed below
-    live = subprocess.Popen([sys.executable, "-m", "gpr3d", "live", bag, "--dt", str(WINDOW / NS * 1e9), "--fuse",
-                             "--rig", rig, "--still", "2", "--eps-r", str(EPS), "--offset", str(OFFSET),
-                             "--out", out, "--until-idle", "3", *extra], env=env, stdout=log,
-                            stderr=subprocess.STDOUT, text=True)
-    samples = []
-    t = time.perf_counter()
-    while live.poll() is None:
-        m = rss_mib(live.pid)
-        if m is not None:
-            samples.append((time.perf_counter() - t, m))
-        time.sleep(1.0)
-    log.close()
-    stdout = (work / "bag_fused.log").read_text()
-    if live.returncode != 0:
-        raise SystemExit(f"gpr3d live --fuse failed: {stdout.strip()[-2000:]}")
-    summary = json.loads((out / "live.json").read_text())["summary"]
-    summary["rss_mib"] = samples
-    return summary
+    return run_live_process(work, "bag_fused", bag, env, ["--dt", str(WINDOW / NS * 1e9), "--fuse", "--rig", rig,
+                                                          "--still", "2", "--eps-r", str(EPS), "--offset",
+                                                          str(OFFSET), *extra])
 
 
 def main(argv=None):
