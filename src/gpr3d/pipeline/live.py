@@ -44,6 +44,7 @@ import numpy as np
 from gpr3d.core.atomic import atomic_write_text
 from gpr3d.core.errors import GPR3DError, InvalidDataError
 from gpr3d.core.grid import Grid3D
+from gpr3d.core.rows import GrowingRows
 from gpr3d.core.units import velocity_from_eps_r
 from gpr3d.io.stream import GrowingDZT, GrowingTUM, StreamDecoder, StreamHeader
 
@@ -530,30 +531,6 @@ def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 
 
 # -- the engine ----------------------------------------------------------------------------------------------------
 
-class _Rows:
-    """Rows appended at the end of a buffer that doubles when full (appending is amortised O(rows added), where
-    concatenating onto an array copies everything each time)."""
-
-    def __init__(self, width: int):
-        self._a = np.zeros((1024, width))
-        self.n = 0
-
-    def append(self, rows) -> None:
-        rows = np.asarray(rows, float).reshape(-1, self._a.shape[1])
-        if self.n + len(rows) > len(self._a):
-            grown = np.zeros((max(2 * len(self._a), self.n + len(rows)), self._a.shape[1]))
-            grown[: self.n] = self._a[: self.n]
-            self._a = grown
-        self._a[self.n: self.n + len(rows)] = rows
-        self.n += len(rows)
-
-    def __getitem__(self, key):
-        return self._a[: self.n][key]
-
-    def __len__(self) -> int:
-        return self.n
-
-
 class _Window:
     """Rows numbered from ``first`` on (float32, ``width`` wide): appended at the end, forgotten from the front
     (:meth:`drop_before`), read by their numbers (:meth:`rows`). Both are amortised O(rows moved): the buffer
@@ -643,8 +620,8 @@ class LiveReconstruction:
         # cut traces from index `cut_first` on (kept while the background window may still need them)
         self.cut = _Window(header.n_samples)
         self.n_final = 0  # traces migrated
-        self._poses = _Rows(7)  # every trace's pose (x y z qw qx qy qz): the final grid covers them all
-        self._arrival = _Rows(1)  # the monotonic time each trace arrived
+        self._poses = GrowingRows(7)  # every trace's pose (x y z qw qx qy qz): the final grid covers them all
+        self._arrival = GrowingRows(1)  # the monotonic time each trace arrived
         self.tiles: dict = {}  # (a, b) -> [image, fold]
         self.dirty: set = set()  # the tiles traces were added to since the last refresh
         self.on_disk: set = set()

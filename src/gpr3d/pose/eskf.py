@@ -23,6 +23,7 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from gpr3d.core.errors import InvalidDataError
+from gpr3d.core.rows import GrowingRows
 from gpr3d.core.trajectory import Trajectory
 from gpr3d.pose.imu import GRAVITY, ImuNoise, ImuSamples, RelativePoses, skew, so3_exp, so3_log
 
@@ -359,26 +360,6 @@ def _align(t_s, accel, gyro, still_s: float) -> tuple[np.ndarray, np.ndarray]:
     return R0, gyro[sel].mean(0)
 
 
-class _Grow:
-    """Rows appended to arrays that double when full (amortised O(rows added))."""
-
-    def __init__(self, *shape, dtype=float):
-        self.a = np.zeros((64, *shape), dtype)
-        self.n = 0
-
-    def add(self, rows) -> None:
-        rows = np.asarray(rows, self.a.dtype).reshape(-1, *self.a.shape[1:])
-        if self.n + len(rows) > len(self.a):
-            grown = np.zeros((2 * (self.n + len(rows)), *self.a.shape[1:]), self.a.dtype)
-            grown[: self.n] = self.a[: self.n]
-            self.a = grown
-        self.a[self.n: self.n + len(rows)] = rows
-        self.n += len(rows)
-
-    def __getitem__(self, key):
-        return self.a[: self.n][key]
-
-
 class ForwardFusion:
     """The filter of :func:`fuse` run as the data come: IMU samples, odometry frames and survey wheel distances
     fed in chunks of any size, each stream in time order (:meth:`add_imu`, :meth:`add_frames`,
@@ -398,10 +379,10 @@ class ForwardFusion:
         if not (np.isfinite(rate_hz) and rate_hz > 0):
             raise InvalidDataError(f"rate_hz must be a positive IMU sample rate, got {rate_hz!r}")
         self.rate_hz = float(rate_hz)
-        self.imu_t, self.accel, self.gyro = _Grow(), _Grow(3), _Grow(3)
-        self.vo_t, self.vo_R, self.vo_p = _Grow(), _Grow(3, 3), _Grow(3)
-        self.vo_cov, self.vo_valid, self.vo_ref = _Grow(6, 6), _Grow(dtype=bool), _Grow(dtype=int)
-        self.wheel = (_Grow(), _Grow()) if wheel else None
+        self.imu_t, self.accel, self.gyro = GrowingRows(), GrowingRows(3), GrowingRows(3)
+        self.vo_t, self.vo_R, self.vo_p = GrowingRows(), GrowingRows(3, 3), GrowingRows(3)
+        self.vo_cov, self.vo_valid, self.vo_ref = GrowingRows(6, 6), GrowingRows(dtype=bool), GrowingRows(dtype=int)
+        self.wheel = (GrowingRows(), GrowingRows()) if wheel else None
         self.frames_ended = self.wheel_ended = self.imu_ended = False
         self.flt = None
         self._nodes = nodes
@@ -409,9 +390,9 @@ class ForwardFusion:
         self.win = max(3, int(round(cfg.zupt_window_s * self.rate_hz)))
         self.sa = cfg.imu_noise.accel_noise * np.sqrt(self.rate_hz)
         self.sg = cfg.imu_noise.gyro_noise * np.sqrt(self.rate_hz)
-        self.out = {k: _Grow(*shape) for k, shape in (("p", (3,)), ("v", (3,)), ("R", (3, 3)), ("ba", (3,)),
+        self.out = {k: GrowingRows(*shape) for k, shape in (("p", (3,)), ("v", (3,)), ("R", (3, 3)), ("ba", (3,)),
                                                         ("bg", (3,)))}
-        self.frame = {k: _Grow(*shape) for k, shape in (("t", ()), ("cov", (6, 6)), ("idx", ()), ("p", (3,)),
+        self.frame = {k: GrowingRows(*shape) for k, shape in (("t", ()), ("cov", (6, 6)), ("idx", ()), ("p", (3,)),
                                                           ("R", (3, 3)), ("used", ()), ("rejected", ()))}
         self.zupts: list = []
         self.vo_speed = np.inf
@@ -435,9 +416,9 @@ class ForwardFusion:
         if not (np.isfinite(a).all() and np.isfinite(g).all()):
             raise InvalidDataError(f"IMU samples from {self.imu_t.n} on hold NaN/inf")
         _after(t, self.imu_t, "IMU")
-        self.imu_t.add(t)
-        self.accel.add(a)
-        self.gyro.add(g)
+        self.imu_t.append(t)
+        self.accel.append(a)
+        self.gyro.append(g)
 
     def add_frames(self, t_s, R, p, cov, valid=None, ref=None) -> None:
         """Odometry frames (as :class:`~gpr3d.core.inertial.RelativePoses`' entries, numbered on from those given
@@ -453,12 +434,12 @@ class ForwardFusion:
             raise InvalidDataError(f"visual odometry ref: frame {k[np.argmax(ref >= k)]} refers to itself or a "
                                    "later frame")
         ok = np.isfinite(R).all((1, 2)) & np.isfinite(p).all(1) & np.isfinite(cov).all((1, 2))
-        self.vo_t.add(t)
-        self.vo_R.add(R)
-        self.vo_p.add(p)
-        self.vo_cov.add(cov)
-        self.vo_valid.add(valid & ok & (k > 0))
-        self.vo_ref.add(ref)
+        self.vo_t.append(t)
+        self.vo_R.append(R)
+        self.vo_p.append(p)
+        self.vo_cov.append(cov)
+        self.vo_valid.append(valid & ok & (k > 0))
+        self.vo_ref.append(ref)
 
     def add_wheel(self, t_s, distance_m) -> None:
         """Survey wheel readings: times (s on the IMU clock, increasing) and forward distances (m, not
@@ -472,8 +453,8 @@ class ForwardFusion:
         _after(t, self.wheel[0], "wheel")
         if np.any(np.diff(np.r_[self.wheel[1][-1:], dist]) < -1e-9):
             raise InvalidDataError("wheel: the distance decreases; pass the wheel's forward count")
-        self.wheel[0].add(t)
-        self.wheel[1].add(dist)
+        self.wheel[0].append(t)
+        self.wheel[1].append(dist)
 
     def end_frames(self) -> None:
         """No more odometry frames will come (none at all: call it first)."""
@@ -494,7 +475,7 @@ class ForwardFusion:
     def _record(self):
         f = self.flt
         for k, v in (("p", f.p), ("v", f.v), ("R", f.R), ("ba", f.ba), ("bg", f.bg)):
-            self.out[k].add(v)
+            self.out[k].append(v)
 
     def _step_to(self, t_target):
         dt = t_target - self.t_now
@@ -586,7 +567,7 @@ class ForwardFusion:
         fr = self.frame
         for key, v in (("t", ftk), ("cov", flt.pose_cov()), ("idx", i + 1), ("p", flt.p), ("R", flt.R),
                        ("used", used), ("rejected", rejected)):
-            fr[key].add(v)
+            fr[key].append(v)
         self.fi += 1
 
     def antenna_at(self, t_s) -> Trajectory:
@@ -629,7 +610,7 @@ def _rows(x, n, shape: tuple, what: str) -> np.ndarray:
     return a
 
 
-def _after(t, before: _Grow, what: str) -> None:
+def _after(t, before: GrowingRows, what: str) -> None:
     """``t`` increases, and after the times ``before`` holds."""
     full = np.r_[before[-1:], t]
     if np.any(np.diff(full) <= 0):
