@@ -107,7 +107,7 @@ def fused_bag(work: Path, rate: float, n: int) -> tuple[Path, Path]:
     from gpr3d.pose.rig import RigConfig, simulate_rig
 
     still = 3.0
-    run = simulate_rig(RigConfig(duration_s=still + n / rate + 1.0, area=((0.0, 4.0), (0.0, 4.0)),
+    run = simulate_rig(RigConfig(duration_s=still + max(n / rate + 1.0, 10.0), area=((0.0, 4.0), (0.0, 4.0)),
                                  turn_rate_rad_s=1.0, still_start_s=still), seed=1)
     folder = work / "fused"
     write_rig_recordings(run, folder)

@@ -84,8 +84,9 @@ def test_a_detector_sharing_the_cores_stops_spinning_and_detects_the_same():
     assert det.session.get_session_options().get_session_config_entry("session.intra_op.allow_spinning") == "0"
     after = det.detect(s, score_threshold=0.3)["targets"]
     assert len(after) == len(before) > 0
-    for x, y in zip(before, after):
-        assert x["box"] == y["box"] and x["score"] == y["score"]
+    for x, y in zip(before, after):  # (the same graph and threads: only float rounding may differ, on any CPU)
+        np.testing.assert_allclose(x["box"], y["box"], rtol=1e-6, atol=1e-3 * s.dt_s)
+        assert abs(x["score"] - y["score"]) < 1e-5 and x["apex_trace"] == y["apex_trace"]
     Detector.load().share_cores()  # (the torch engine: nothing to change)
 
 

@@ -312,6 +312,12 @@ def test_forward_fusion_names_wrong_input_in_one_line():
         ForwardFusion(rate_hz=0)
     with pytest.raises(InvalidDataError, match="got nan"):
         ForwardFusion(rate_hz=np.nan)
+    with pytest.raises(InvalidDataError, match="got '200'"):
+        ForwardFusion(rate_hz="200")
+    in_g = ForwardFusion(EskfConfig(init_still_s=0.1), rate_hz=200.0)  # forces in g, not m/s^2: named at the start
+    in_g.add_imu(np.arange(40) / 200.0, np.tile([0.0, 0.0, 1.0], (40, 1)), np.zeros((40, 3)))
+    with pytest.raises(InvalidDataError, match=r"^IMU forces: median magnitude 1 is not in m/s\^2 \(in g\? "):
+        in_g.run()
     ff = ForwardFusion(rate_hz=200.0)
     g = np.tile([0.0, 0.0, GRAVITY], (3, 1))
     ff.add_imu([0.0, 0.005, 0.01], g, np.zeros((3, 3)))
@@ -357,6 +363,12 @@ def test_forward_fusion_names_wrong_input_in_one_line():
             fw.add_wheel(*args)
     fw.add_wheel([0.2], [0.2])  # (standing still: the same distance again)
     assert fw.wheel[1][:].tolist() == [0.0, 0.2, 0.2]
+    short = ForwardFusion(EskfConfig(init_still_s=2.0), rate_hz=200.0)
+    short.add_imu(np.arange(100) / 200.0, np.tile([0.0, 0.0, GRAVITY], (100, 1)), np.zeros((100, 3)))
+    assert short.run() == 0  # (the still start may go on)
+    with pytest.raises(InvalidDataError, match=r"^the still start \(2 s: init_still_s, --still\) is longer than "
+                                               r"the IMU record \(0.495 s\)$"):
+        short.finish()
     with pytest.raises(InvalidDataError, match="^no IMU samples came$"):
         ForwardFusion(rate_hz=200.0).finish()
     with pytest.raises(InvalidDataError, match="^wheel: two readings at least$"):
@@ -399,3 +411,26 @@ def test_forward_fusion_waits_for_the_still_start_then_runs_as_samples_come_and_
         ff.antenna_at([0.496])
     with pytest.raises(InvalidDataError, match=r"their span: none yet"):
         ForwardFusion(rate_hz=200.0).antenna_at([0.0])
+
+
+def test_frames_wait_for_the_wheel_until_it_is_said_to_be_over():
+    from gpr3d.pose.eskf import ForwardFusion
+
+    run = simulate_rig(RigConfig(duration_s=12.0), seed=2)
+    cfg = run.filter_config()
+    wt, wd = run.wheel()
+    imu, vo = run.imu, run.vo
+    ff = ForwardFusion(cfg, rate_hz=imu.rate_hz, wheel=True)
+    ff.add_imu(imu.t_s, imu.accel, imu.gyro)
+    ff.add_frames(vo.t_s, vo.R, vo.p, vo.cov, vo.valid, vo.ref)
+    ff.end_frames()
+    stop = int(np.searchsorted(wt, 8.0))
+    ff.add_wheel(wt[:stop], wd[:stop])  # the wheel stops reporting at 8 s
+    ff.run()
+    held = ff.n_done
+    assert 8.0 - 1 / 15 < imu.t_s[held - 1] < 8.0 + 1 / 15 and held < imu.t_s.size  # (later frames wait for it)
+    ff.end_wheel()
+    ff.run()
+    assert ff.n_done == imu.t_s.size  # (no stall: the last reading holds)
+    ref = fuse(imu, vo, cfg, wheel=(wt[:stop], wd[:stop]))
+    np.testing.assert_array_equal(ff.out["p"][:], ref.p)

@@ -39,7 +39,7 @@ def add_arguments(sp):
                     help="with --fuse: the bag's odometry (camera pose) topic (default: the one)")
     sp.add_argument("--rig", default=None, help="with --fuse: the rig file (JSON: imu_T_camera, imu_T_antenna, "
                                                 "camera_time_offset_s)")
-    sp.add_argument("--still", type=float, default=1.0,
+    sp.add_argument("--still", type=float, default=None,
                     help="with --fuse: seconds the cart stands at the start (default 1)")
     sp.add_argument("--samples-per-trace", type=int, default=None,
                     help="a bag's messages hold several traces of this many samples (default: one a message)")
@@ -120,14 +120,15 @@ def run(args):
     for name in ("trace_topic", "pose_topic", "samples_per_trace"):
         if getattr(args, name) is not None:
             bag[name] = getattr(args, name)
-    fuse = {k: getattr(args, k) for k in ("imu_topic", "odometry_topic", "rig") if getattr(args, k) is not None}
-    stray = [k for k in (*fuse, *(["still"] if args.still != 1.0 else []))]
-    if stray and not args.fuse:
-        raise GPR3DError(f"{', '.join('--' + k.replace('_', '-') for k in stray)} are for --fuse (a bag's poses "
+    fuse = {k: getattr(args, k) for k in ("imu_topic", "odometry_topic", "rig", "still")
+            if getattr(args, k) is not None}
+    if fuse and not args.fuse:
+        raise GPR3DError(f"{', '.join('--' + k.replace('_', '-') for k in fuse)} are for --fuse (a bag's poses "
                          "fused from its IMU and odometry)")
     if args.fuse:
-        _in_range(args.still, "--still", 0.05, 600, "seconds")
-        bag["fuse"] = {**fuse, "still_s": args.still}
+        still = fuse.pop("still", 1.0)
+        _in_range(still, "--still", 0.05, 600, "seconds")
+        bag["fuse"] = {**fuse, "still_s": still}
     source = open_source(args.source, poses=args.poses, channel=args.channel, offset_m=args.offset,
                          connect_s=args.connect_timeout, bag=bag or None)
     summary = run_live(source, args.out, cfg, detector=detector, log=print)

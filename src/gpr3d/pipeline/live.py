@@ -538,10 +538,10 @@ class _Window:
     concatenation at every arrival copies every row kept at every arrival: where detection fell behind, the
     rows kept grew with the backlog and each arrival's copy with them.)"""
 
-    def __init__(self, width: int, rows=None, first: int = 0):
+    def __init__(self, width: int, rows=None):
         self._a = np.zeros((1024, width), np.float32)
         self._lo = self._hi = 0
-        self.first = first  #: the number of the first row kept
+        self.first = 0  #: the number of the first row kept
         if rows is not None:
             self.append(rows)
 
@@ -617,7 +617,7 @@ class LiveReconstruction:
         self.n_out = None
         self.raw_pending: list = []  # raw traces waiting for time zero
         self.n_in = 0
-        # cut traces from index `cut_first` on (kept while the background window may still need them)
+        # the traces cut at time zero, by number (kept while the background window may still need them)
         self.cut = _Window(header.n_samples)
         self.n_final = 0  # traces migrated
         self._poses = GrowingRows(7)  # every trace's pose (x y z qw qx qy qz): the final grid covers them all
@@ -1177,7 +1177,7 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     t_first = None  # the first trace's arrival: the idle clock and the rate start there
     last_new = t_start
     newest_arrival = None
-    worked_until = None  # when the last step that did some work ended
+    worked_until = -math.inf  # when the last step that did some work ended
     idle = interrupted = False
     reader = SourceReader(source, clock=clock) if reader_thread else None
 
@@ -1252,7 +1252,7 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     # the lag: from the newest trace's arrival to the end of the work on it. An idle wait ended the run: the
     # work went on into it as long as steps did some (a detector's backlog, say), and the rest of it is neither
     # lag nor work; otherwise the run ended when the stream did, and everything since counts
-    done = max(worked_until or newest_arrival, newest_arrival) if idle else t_last
+    done = max(worked_until, newest_arrival) if idle else t_last
     lag = max(0.0, done - newest_arrival) + (t_end - t_last)
     busy = max(newest_arrival - t_first + lag, 1e-9)
     result = live.finish(source=str(getattr(source.header, "name", "")))

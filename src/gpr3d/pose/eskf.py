@@ -376,7 +376,7 @@ class ForwardFusion:
 
     def __init__(self, cfg: EskfConfig | None = None, *, rate_hz: float, wheel: bool = False, nodes: bool = False):
         self.cfg = cfg = cfg or EskfConfig()
-        if not (np.isfinite(rate_hz) and rate_hz > 0):
+        if not (isinstance(rate_hz, (int, float, np.number)) and np.isfinite(rate_hz) and rate_hz > 0):
             raise InvalidDataError(f"rate_hz must be a positive IMU sample rate, got {rate_hz!r}")
         self.rate_hz = float(rate_hz)
         self.imu_t, self.accel, self.gyro = GrowingRows(), GrowingRows(3), GrowingRows(3)
@@ -460,10 +460,22 @@ class ForwardFusion:
         """No more odometry frames will come (none at all: call it first)."""
         self.frames_ended = True
 
+    def end_wheel(self) -> None:
+        """No more wheel readings will come: frames after the last one no longer wait for them (the wheel's
+        distance is held at its last reading)."""
+        self.wheel_ended = True
+
     def _start(self) -> bool:
         t = self.imu_t[:]
         if not t.size or (t[-1] <= t[0] + self.cfg.init_still_s and not self.imu_ended):
             return False  # (the still start's alignment needs all of its samples)
+        if t[-1] < t[0] + self.cfg.init_still_s:
+            raise InvalidDataError(f"the still start ({self.cfg.init_still_s:g} s: init_still_s, --still) is longer "
+                                   f"than the IMU record ({t[-1] - t[0]:.3g} s)")
+        g = float(np.median(np.linalg.norm(self.accel[:], axis=1)))
+        if not 2.0 < g < 40.0:  # (m/s^2: at rest an IMU reads about 9.8; fuse's ImuSamples checks the same)
+            hint = " (in g? multiply by 9.80665)" if 0.2 < g < 4 else ""
+            raise InvalidDataError(f"IMU forces: median magnitude {g:.3g} is not in m/s^2{hint}")
         R0, bg0 = _align(t, self.accel[:], self.gyro[:], self.cfg.init_still_s)
         self.flt = _Filter(self.cfg, R0, bg0)
         if self._nodes:
