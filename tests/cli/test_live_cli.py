@@ -13,7 +13,7 @@ import pytest
 
 from gpr3d.io.hdf5 import write_survey
 from gpr3d.io.trajectory import Trajectory, write_tum
-from tests.pipeline.test_live import fused_bag, survey  # noqa: F401  (the fixtures)
+from tests.pipeline.test_live import fused_bag, rig_run, survey  # noqa: F401  (the fixtures)
 
 
 def _free_port():
@@ -69,7 +69,17 @@ def test_replay_into_live_prints_traces_rate_and_lag(survey, tmp_path):  # noqa:
     (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "0.1", "--speed", "-2", "--no-detect"], "--speed must be"),
     (["live", "{tmp}/missing.bag", "--out", "{tmp}/o", "--dt", "0.1", "--no-detect"], "no such bag"),
     (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "0.1", "--rig", "r.json", "--still", "2", "--no-detect"],
-     "--rig, --still are for --fuse (a bag's poses fused from its IMU and odometry)"),
+     "--rig, --still are for --fuse (poses fused from an IMU and odometry)"),
+    (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--fuse", "--imu-topic", "/imu", "--no-detect"],
+     "--imu-topic are for a ROS bag"),
+    (["live", "{tmp}/x.DZT", "--poses", "{tmp}/p.tum", "--out", "{tmp}/o", "--fuse", "--no-detect"],
+     "--fuse is for a ROS bag or a tcp:// stream carrying IMU samples"),
+    (["replay", "{tmp}/x.h5", "--to", "tcp://h:1", "--rate", "5", "--odometry", "o.tum"],
+     "--odometry and --wheel go with --imu"),
+    (["replay", "{tmp}/x.DZT", "--to", "{tmp}/y.DZT", "--rate", "5", "--imu", "i.csv"],
+     "--imu, --odometry and --wheel are for --to tcp://"),
+    (["replay", "{tmp}/x.h5", "--to", "tcp://h:1", "--rate", "5", "--imu", "i.csv", "--loops", "2"],
+     "--loops: a replay with sensor records (--imu) plays once"),
     (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "0.1", "--fuse", "--still", "0", "--no-detect"],
      "--still must be"),
     (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "0.1", "--fuse", "--pose-topic", "/o", "--no-detect"],
@@ -116,3 +126,35 @@ def test_live_fuses_a_bag_s_poses_as_the_replay_comes(fused_bag, tmp_path, capsy
                  "--background-window", "32", "--aperture", "45", "--out", str(tmp_path / "live")])
     out = capsys.readouterr().out.strip().splitlines()
     assert code == 0 and re.fullmatch(r"350 traces, \d+ traces/s, lag \d+\.\d\d s", out[-1]), out[-1]
+
+
+@pytest.mark.slow  # (two processes start gpr3d: seconds each)
+def test_replay_sends_a_cart_s_sensors_and_live_fuses_its_poses_from_them(rig_run, tmp_path):  # noqa: F811
+    folder, _, survey = rig_run
+    write_survey(survey, tmp_path / "s.h5")
+    port = _free_port()
+    server = subprocess.Popen([sys.executable, "-m", "gpr3d", "replay", tmp_path / "s.h5", "--imu", folder / "imu.csv",
+                               "--odometry", folder / "odometry.tum", "--wheel", folder / "wheel.csv",
+                               "--to", f"tcp://127.0.0.1:{port}", "--speed", "20"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        r = run_cli("live", f"tcp://127.0.0.1:{port}", "--fuse", "--rig", folder / "rig.json", "--out",
+                    tmp_path / "live", "--no-detect", "--background-window", "32", "--until-idle", "3")
+    finally:
+        out, err = server.communicate(timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert server.returncode == 0, err
+    assert f"sent {survey.n_traces} traces" in out and "at 500 traces/s" in out  # (25 a second in the record)
+    last = r.stdout.strip().splitlines()[-1]
+    assert re.fullmatch(rf"{survey.n_traces} traces, \d+ traces/s, lag \d+\.\d\d s", last), last
+    from gpr3d.io.volume import read_volume
+    from gpr3d.pipeline.poses import fuse_recordings
+
+    # the volume spans the cart's fused path, the pipe found (where, in the fusion's world: tests/pipeline)
+    at = fuse_recordings(imu=folder / "imu.csv", odometry=folder / "odometry.tum", wheel=folder / "wheel.csv",
+                         rig=folder / "rig.json", log=None).trajectory.at(survey.timestamps_s)
+    g = read_volume(tmp_path / "live" / "volume.h5").grid
+    lo, hi = at.positions_xyz.min(axis=0), at.positions_xyz.max(axis=0)
+    assert g.x0 <= lo[0] + 0.03 and g.x0 + (g.nx - 1) * g.dx >= hi[0] - 0.03
+    assert g.y0 <= lo[1] + 0.03 and g.y0 + (g.ny - 1) * g.dy >= hi[1] - 0.03
+    assert [t["kind"] for t in json.loads((tmp_path / "live" / "targets.json").read_text())["targets"]] == ["line"]

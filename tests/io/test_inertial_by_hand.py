@@ -144,3 +144,34 @@ def test_bytes_that_are_not_utf8_in_a_column_not_read_do_no_harm(tmp_path):
     p.write_bytes(b"t,distance,note\n0,0,caf\xe9\n1,0.5,\xff\xfe\n")
     t, d = read_wheel_csv(p)
     assert t.tolist() == [0.0, 1.0] and d.tolist() == [0.0, 0.5]
+
+
+@pytest.mark.parametrize("cuts", [[1, 2, 3, 4, 5], [3], [6]])
+def test_camera_motions_as_they_come_are_the_batch_ones_and_judge_gaps_by_the_intervals_so_far(cuts):
+    from scipy.spatial.transform import Rotation
+
+    from gpr3d.core.trajectory import Trajectory
+    from gpr3d.io.inertial import CameraMotions
+
+    t = np.array([0.0, 0.1, 0.2, 0.3, 0.45, 0.76, 0.86, 1.5])
+    yaw = np.deg2rad([0, 10, 20, 30, 40, 50, 55, 70])
+    q = Rotation.from_euler("z", yaw[:, None]).as_quat()[:, [3, 0, 1, 2]]
+    p = np.stack([np.arange(8) * 0.2, np.sin(np.arange(8)), np.zeros(8)], 1)
+    batch = relative_from_camera_poses(Trajectory(t, p, q))
+    cm = CameraMotions()
+    parts = [cm.add(t[a:b], p[a:b], q[a:b]) for a, b in zip([0, *cuts], [*cuts, 8])]
+    tt, R, pr, cov, valid = (np.concatenate(x) for x in zip(*parts))
+    np.testing.assert_array_equal(tt, t)
+    np.testing.assert_allclose(R, batch.R, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(pr, batch.p, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(cov, batch.cov, rtol=1e-12, atol=0)
+    # the batch judges by the whole record's median (0.1 s); as they come, by the intervals up to each frame:
+    # the first (0.1) is its own median; 0.31 s after four of 0.1 and one of 0.15 is a gap, as is 0.64 s
+    assert batch.valid.tolist() == [False, True, True, True, True, False, True, False]
+    assert valid.tolist() == [False, True, True, True, True, False, True, False]
+    # where the rate rises later, the two differ: 0.16 s after 0.1 is within 1.5x of the median so far (0.13 s),
+    # beyond 1.5x the whole record's (0.075 s)
+    t = [0.0, 0.1, 0.26, 0.31, 0.36]
+    assert relative_from_camera_poses(Trajectory(t, p[:5], q[:5])).valid.tolist() == [False, True, False, True, True]
+    _, _, _, _, v = CameraMotions(gap_factor=1.5).add(t, p[:5], q[:5])
+    assert v.tolist() == [False, True, True, True, True]

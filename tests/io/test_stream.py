@@ -15,8 +15,11 @@ from gpr3d.io.stream import (
     GrowingTUM,
     StreamDecoder,
     StreamHeader,
+    encode_camera_pose,
     encode_header,
+    encode_imu,
     encode_trace,
+    encode_wheel,
 )
 from tests.io.makers import write_dzt
 
@@ -150,3 +153,82 @@ def test_a_bad_pose_line_is_named(tmp_path, line, message):
     p.write_text(line)
     with pytest.raises(FormatError, match=message):
         GrowingTUM(p).poll()
+
+
+# -- sensor messages beside the traces ---------------------------------------------------------------------------
+
+SENSED = StreamHeader(n_samples=5, dt_s=1e-10, sensors=("imu", "odometry", "wheel"), imu_rate_hz=200.0)
+
+
+def _sensor_stream(n=4):
+    """A stream of traces without poses, IMU samples, camera poses and wheel readings interleaved; with the
+    rows each kind should decode to."""
+    poses, samples = _traces(n)
+    rng = np.random.default_rng(1)
+    imu = np.c_[0.1 * np.arange(2 * n), rng.normal(size=(2 * n, 6)) + [0, 0, 9.8, 0, 0, 0]]
+    q = rng.normal(size=(n, 4))
+    cam = np.c_[0.2 * np.arange(n) + 0.05, rng.normal(size=(n, 3)), q / np.linalg.norm(q, axis=1, keepdims=True)]
+    wheel = np.c_[0.2 * np.arange(n) + 0.01, np.cumsum(rng.uniform(0, 0.1, n))]
+    b = encode_header(SENSED)
+    for i in range(n):
+        b += encode_imu(imu[2 * i, 0], imu[2 * i, 1:4], imu[2 * i, 4:]) + encode_wheel(*wheel[i])
+        b += encode_trace(i, 0.2 * i, np.full(7, np.nan), samples[i])
+        b += encode_camera_pose(cam[i, 0], cam[i, 1:]) + encode_imu(imu[2 * i + 1, 0], imu[2 * i + 1, 1:4],
+                                                                    imu[2 * i + 1, 4:])
+    return b + END, {"imu": imu, "odometry": cam, "wheel": wheel}, samples
+
+
+@pytest.mark.parametrize("piece", [1, 13, 10000])
+def test_sensor_messages_decode_by_kind_beside_traces_without_poses(piece):
+    raw, want, samples = _sensor_stream()
+    dec = StreamDecoder()
+    traces, got = [], {k: [] for k in want}
+    for i in range(0, len(raw), piece):
+        traces += dec.feed(raw[i:i + piece])
+        if dec.header is not None:
+            for k, v in dec.take_sensors().items():
+                got[k].append(v)
+    assert dec.header == SENSED and dec.ended
+    assert dec.header.to_dict()["sensors"] == ["imu", "odometry", "wheel"]
+    for k in want:  # (the camera's quaternions made unit once more: to rounding)
+        np.testing.assert_allclose(np.concatenate(got[k]), want[k], rtol=0, atol=1e-15)
+    assert dec.take_sensors() == {"imu": pytest.approx(np.zeros((0, 7))), "odometry": pytest.approx(np.zeros((0, 8))),
+                                  "wheel": pytest.approx(np.zeros((0, 2)))}
+    np.testing.assert_array_equal(np.stack([t.samples for t in traces]), samples)
+    assert all(np.isnan(t.pose).all() for t in traces) and [t.time_s for t in traces] == [0.0, 0.2, 0.4, 0.6000000000000001]
+
+
+def test_the_sensor_layouts_are_the_documented_ones():
+    assert struct.unpack("<4s7d", encode_imu(1.5, [1, 2, 3], [4, 5, 6])) == (b"IMU_", 1.5, 1, 2, 3, 4, 5, 6)
+    assert struct.unpack("<4s8d", encode_camera_pose(2.5, [1, 2, 3, 1, 0, 0, 0])) == (b"CAMP", 2.5, 1, 2, 3, 1, 0, 0, 0)
+    assert struct.unpack("<4s2d", encode_wheel(3.5, 0.25)) == (b"WHEL", 3.5, 0.25)
+
+
+def _sensed(*parts, header=SENSED):
+    return encode_header(header) + b"".join(parts)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: _sensed(encode_wheel(1, 0), header=StreamHeader(n_samples=5, dt_s=1e-10, sensors=("imu",))),
+     r"wheel reading 0: a WHEL message the header's sensors \(\['imu'\]\) do not declare"),
+    (lambda: _sensed(encode_imu(0, [0, 0, 9.8], [0, 0, 0]), header=HEADER), "IMU sample 0: a IMU_ message"),
+    (lambda: _sensed(encode_imu(0, [0, 0, np.nan], [0, 0, 0])), "IMU sample 0: not finite"),
+    (lambda: _sensed(encode_imu(1, [0, 0, 9.8], [0, 0, 0]), encode_imu(1, [0, 0, 9.8], [0, 0, 0])),
+     r"IMU sample 1: its time 1 s is not after the one before \(1 s\)"),
+    (lambda: _sensed(encode_camera_pose(0, [0, 0, 0, 1, 1, 0, 0])), "camera pose 0: its orientation is not a unit"),
+    (lambda: _sensed(encode_trace(0, 0, [np.nan] * 7, np.zeros(5)), header=HEADER), "trace 0: its pose or time is not"),
+    (lambda: _sensed(encode_trace(0, 0, [np.nan, 0, 0, 1, 0, 0, 0], np.zeros(5))), "trace 0: its pose or time is not"),
+    (lambda: _header(b'{"n_samples":4,"dt_s":1e-9,"sensors":["odometry"]}'), r"lack 'imu'"),
+    (lambda: _header(b'{"n_samples":4,"dt_s":1e-9,"sensors":["imu","imu"]}'), "distinct names out of imu, odometry"),
+    (lambda: _header(b'{"n_samples":4,"dt_s":1e-9,"sensors":"imu"}'), "header sensors must be a list"),
+    (lambda: _header(b'{"n_samples":4,"dt_s":1e-9,"sensors":["imu"],"imu_rate_hz":0}'), "imu_rate_hz must be"),
+])
+def test_a_broken_sensor_message_is_named_in_one_line(make, message):
+    with pytest.raises(FormatError, match=message):
+        StreamDecoder().feed(make())
+
+
+def test_a_camera_pose_s_quaternion_is_made_unit():
+    dec = StreamDecoder()
+    dec.feed(_sensed(encode_camera_pose(0, [0, 0, 0, 1.0005, 0, 0, 0])))
+    np.testing.assert_array_equal(dec.take_sensors()["odometry"], [[0, 0, 0, 0, 1, 0, 0, 0]])

@@ -737,28 +737,40 @@ def test_a_long_step_is_not_idleness_while_traces_wait_in_the_reader(survey, tmp
 
 
 @pytest.fixture(scope="module")
-def fused_bag(tmp_path_factory):
-    """A synthetic cart's run as a ROS 2 bag: ``/imu``, ``/odometry`` (the camera's poses, lost frames left out)
-    and ``/gpr/traces`` every 0.04 s from 1.5 s (the pipe scene recorded along the antenna's true path), with
-    its rig file."""
-    pytest.importorskip("rosbags")
-    from gpr3d.io.rosbag import write_bag
+def rig_run(tmp_path_factory):
+    """A synthetic cart's run: its sensors' files (``imu.csv``, ``odometry.tum``: the camera's poses, lost frames
+    left out, ``wheel.csv``, ``rig.json``, ``truth.tum``) and a Survey of traces every 0.04 s from 1.5 s (the pipe
+    scene recorded along the antenna's true path; trace times on the IMU clock, no poses)."""
     from gpr3d.pipeline.poses import write_rig_recordings
     from gpr3d.pose.rig import RigConfig, simulate_rig
 
     run = simulate_rig(RigConfig(duration_s=16.0, vo_gap=(9.0, 0.5)), seed=4)
-    folder = tmp_path_factory.mktemp("fusedbag")
+    folder = tmp_path_factory.mktemp("rigrun")
     write_rig_recordings(run, folder)
     from gpr3d.io.trajectory import read_tum
 
-    cam, truth = read_tum(folder / "odometry.tum"), read_tum(folder / "truth.tum")
+    truth = read_tum(folder / "truth.tum")
     t = np.arange(1.5, 15.5, 0.04)
     at = truth.at(t)
     p0 = at.positions_xyz.mean(axis=0)
     scene = ForwardScene(eps_r=EPS, pipes=[Pipe((p0[0] - 3, p0[1], -0.22), (p0[0] + 3, p0[1], -0.22), 0.02)])
     data = forward_model(scene, at.positions_xyz, at.orientations_quat_wxyz, offset_m=0.05, frequency_hz=800e6,
                          n_samples=128, time_window_s=12e-9, air_wave=1.0, ground_wave=0.5, noise=0.01)
-    write_bag(folder / "run", imu=run.imu, trajectory=cam, traces=(t, data))
+    return folder, run, Survey(data=data, dt_s=DT, offset_m=0.05, frequency_hz=800e6, eps_r=EPS, timestamps_s=t)
+
+
+@pytest.fixture(scope="module")
+def fused_bag(rig_run):
+    """The cart's run as a ROS 2 bag: ``/imu``, ``/odometry`` (the camera's poses) and ``/gpr/traces``, with its
+    rig file beside it."""
+    pytest.importorskip("rosbags")
+    from gpr3d.io.rosbag import write_bag
+    from gpr3d.io.trajectory import read_tum
+
+    folder, run, survey = rig_run
+    if not (folder / "run").exists():
+        write_bag(folder / "run", imu=run.imu, trajectory=read_tum(folder / "odometry.tum"),
+                  traces=(survey.timestamps_s, survey.data))
     return folder
 
 
@@ -821,3 +833,190 @@ def test_live_on_a_fused_bag_equals_the_batch_volume_with_those_poses(fused_bag,
     survey = Survey(data=traces, dt_s=DT, offset_m=0.05, frequency_hz=800e6, eps_r=EPS,
                     positions_xyz=at.positions_xyz, orientations_quat_wxyz=at.orientations_quat_wxyz)
     _batch_equals_live(survey, tmp_path / "out")
+
+
+# -- poses fused from a TCP stream's sensor messages -----------------------------------------------------------------
+
+class _FakeSocket:
+    """Bytes a TCP source reads: what was put in since the last read, then 'nothing now'."""
+
+    def __init__(self):
+        self.pending = bytearray()
+        self.closed = False
+
+    def recv(self, n):
+        if not self.pending:
+            if self.closed:
+                return b""
+            raise BlockingIOError
+        out = bytes(self.pending[:n])
+        del self.pending[:n]
+        return out
+
+    def close(self):
+        pass
+
+
+def _messages(survey, sensors):
+    """The stream's messages after its header, in time order: ``[(time, bytes), ...]`` (traces without poses)."""
+    from gpr3d.io.stream import encode_camera_pose, encode_imu, encode_trace, encode_wheel
+
+    out = [(t, encode_trace(i, t, np.full(7, np.nan), survey.data[i])) for i, t in enumerate(survey.timestamps_s)]
+    out += [(r[0], encode_imu(r[0], r[1:4], r[4:7])) for r in sensors["imu"]]
+    out += [(r[0], encode_camera_pose(r[0], r[1:8])) for r in sensors.get("odometry", ())]
+    out += [(r[0], encode_wheel(r[0], r[1])) for r in sensors.get("wheel", ())]
+    return sorted(out, key=lambda m: m[0])
+
+
+def test_a_stream_s_poses_fused_as_its_sensor_messages_come_are_the_batch_fusion_s(rig_run):
+    from gpr3d.io.stream import encode_header
+    from gpr3d.pipeline.live import TCPSource
+    from gpr3d.pipeline.poses import fuse_recordings
+    from gpr3d.pipeline.replay import read_sensors
+
+    folder, _, survey = rig_run
+    files = {"imu": folder / "imu.csv", "odometry": folder / "odometry.tum", "wheel": folder / "wheel.csv"}
+    sensors = read_sensors(**files)
+    ref = fuse_recordings(**files, rig=folder / "rig.json", log=None).trajectory  # (no smoothing)
+    header = StreamHeader(n_samples=128, dt_s=DT, sensors=("imu", "odometry", "wheel"))
+    src = TCPSource("127.0.0.1", 1, fuse={"rig": folder / "rig.json"})
+    src.sock = sock = _FakeSocket()
+    sock.pending += encode_header(header)
+    msgs = _messages(survey, sensors)
+    got, waits, k = [], [], 0
+    for now in np.arange(0.0, 16.2, 0.1):  # the messages stamped up to `now`, then a poll
+        while k < len(msgs) and msgs[k][0] <= now:
+            sock.pending += msgs[k][1]
+            k += 1
+        out = src.poll()
+        if out is not None and len(out[2]):
+            data, poses, times = out
+            assert times.max() <= now  # (nothing given before it happened)
+            want = ref.at(times)
+            np.testing.assert_allclose(poses[:, :3], want.positions_xyz, rtol=0, atol=1e-9)
+            np.testing.assert_allclose(np.abs(np.sum(poses[:, 3:] * want.orientations_quat_wxyz, axis=1)), 1.0,
+                                       atol=1e-12)
+            np.testing.assert_array_equal(data, survey.data[len(got):len(got) + len(times)])
+            got.extend(times)
+        waits += [(t, now - t) for t in survey.timestamps_s[len(got):] if t <= now]  # (come, not yet given)
+    sock.pending += b"END!"
+    out = src.poll()
+    got.extend(out[2])
+    assert src.ended and src.skipped == 0
+    np.testing.assert_array_equal(got, survey.timestamps_s)
+    # a trace waits for the next camera frame (15 Hz) and the poll (0.1 s); where odometry lost track (9.0-9.5 s)
+    # until the next frame after the gap
+    gap = np.array([w for t, w in waits if 9.0 - 0.1 <= t <= 9.5 + 1 / 15])
+    rest = np.array([w for t, w in waits if not 9.0 - 0.1 <= t <= 9.5 + 1 / 15])
+    assert rest.max() < 1 / 15 + 0.1 + 1e-9 and 0.3 < gap.max() < 0.5 + 1 / 15 + 0.1
+
+
+def test_live_over_tcp_with_poses_fused_from_the_stream_equals_the_batch_volume(rig_run, tmp_path):
+    from gpr3d.pipeline.poses import fuse_recordings
+    from gpr3d.pipeline.replay import read_sensors
+
+    folder, _, survey = rig_run
+    files = {"imu": folder / "imu.csv", "odometry": folder / "odometry.tum"}
+    th, port = _serve(survey, 2500.0, sensors=read_sensors(**files))
+    source = open_source(f"tcp://127.0.0.1:{port}", fuse={"rig": folder / "rig.json", "still_s": 1.0})
+    summary = run_live(source, tmp_path / "out", _cfg(), log=None)
+    th.join(10)
+    assert summary.n_traces == survey.n_traces and source.skipped == 0
+    at = fuse_recordings(**files, rig=folder / "rig.json", log=None).trajectory.at(survey.timestamps_s)
+    posed = Survey(data=survey.data, dt_s=DT, offset_m=0.05, frequency_hz=800e6, eps_r=EPS,
+                   positions_xyz=at.positions_xyz, orientations_quat_wxyz=at.orientations_quat_wxyz)
+    _batch_equals_live(posed, tmp_path / "out")
+
+
+def test_traces_outside_the_imu_s_span_are_left_out_and_counted(rig_run):
+    from gpr3d.io.stream import encode_header
+    from gpr3d.pipeline.live import TCPSource
+    from gpr3d.pipeline.replay import read_sensors
+
+    folder, _, survey = rig_run
+    sensors = read_sensors(folder / "imu.csv")
+    imu = sensors["imu"]
+    sensors["imu"] = imu[(imu[:, 0] >= 0.0) & (imu[:, 0] <= 10.0)]  # (traces run 1.5 to 15.46 s)
+    src = TCPSource("127.0.0.1", 1, fuse={})
+    src.sock = sock = _FakeSocket()
+    sock.pending += encode_header(StreamHeader(n_samples=128, dt_s=DT, sensors=("imu",)))
+    sock.pending += b"".join(m for _, m in _messages(survey, sensors)) + b"END!"
+    _, _, times = src.poll()
+    assert src.ended and times.max() <= 10.0 and len(times) + src.skipped == survey.n_traces
+    assert len(times) == np.count_nonzero(survey.timestamps_s <= 10.0)
+
+
+def _one_poll(header, *messages, fuse=None):
+    from gpr3d.io.stream import encode_header
+    from gpr3d.pipeline.live import TCPSource
+
+    src = TCPSource("127.0.0.1", 1, fuse=fuse)
+    src.sock = sock = _FakeSocket()
+    sock.pending += encode_header(header) + b"".join(messages)
+    return src.poll()
+
+
+def test_fusion_a_stream_cannot_give_is_named_in_one_line(tmp_path):
+    from gpr3d.io.stream import encode_imu, encode_trace
+
+    plain = StreamHeader(n_samples=4, dt_s=DT)
+    sensed = StreamHeader(n_samples=4, dt_s=DT, sensors=("imu",))
+    unposed = encode_trace(0, 1.0, np.full(7, np.nan), np.zeros(4))
+    with pytest.raises(GPR3DError, match=r"^tcp://127.0.0.1:1: --fuse needs IMU samples in the stream; its header "
+                                         r"declares none \(sensors\)$"):
+        _one_poll(plain, fuse={})
+    with pytest.raises(GPR3DError, match=r"^tcp://127.0.0.1:1: trace 0 carries no pose .*: give --fuse"):
+        _one_poll(sensed, unposed)
+    with pytest.raises(GPR3DError, match=r"^tcp://127.0.0.1:1: the stream ended after 1 IMU sample\(s\): too few"):
+        _one_poll(sensed, encode_imu(0.0, [0, 0, 9.8], [0, 0, 0]), unposed, b"END!", fuse={})
+    with pytest.raises(GPR3DError, match=r"^tcp://127.0.0.1:1: trace 1: its time runs backwards"):
+        _one_poll(sensed, unposed, encode_trace(1, 0.5, np.full(7, np.nan), np.zeros(4)), fuse={})
+    imu_g = [encode_imu(0.01 * i, [0, 0, 1.0], [0, 0, 0]) for i in range(300)]  # (forces in g)
+    with pytest.raises(GPR3DError, match=r"^tcp://127.0.0.1:1: IMU forces: median magnitude 1 is not in m/s\^2 "
+                                         r"\(in g\? multiply by 9.80665\)$"):
+        _one_poll(sensed, *imu_g, fuse={})
+    with pytest.raises(GPR3DError, match=r"^--imu-topic are for a ROS bag$"):
+        open_source("tcp://127.0.0.1:5600", fuse={"imu_topic": "/imu"})
+    with pytest.raises(GPR3DError, match=r"--fuse is for a ROS bag or a tcp:// stream carrying IMU samples"):
+        open_source(tmp_path / "LINE.DZT", poses=tmp_path / "p.tum", fuse={})
+
+
+def test_a_replay_with_sensors_sends_each_message_at_its_time_and_checks_its_inputs(rig_run):
+    from gpr3d.io.stream import StreamDecoder
+    from gpr3d.pipeline.replay import read_sensors
+
+    folder, _, survey = rig_run
+    sensors = read_sensors(folder / "imu.csv", folder / "odometry.tum", folder / "wheel.csv")
+    th, port = _serve(survey, 2500.0, sensors=sensors)
+    import socket as _socket
+    import struct
+
+    raw = bytearray()
+    with _socket.create_connection(("127.0.0.1", port)) as s:
+        while b := s.recv(1 << 16):
+            raw += b
+    th.join(10)
+    dec = StreamDecoder()
+    traces = dec.feed(bytes(raw))
+    assert dec.ended and dec.header.sensors == ("imu", "odometry", "wheel")
+    assert dec.header.imu_rate_hz == pytest.approx(1 / np.median(np.diff(sensors["imu"][:, 0])), rel=1e-12)
+    np.testing.assert_array_equal([t.time_s for t in traces], survey.timestamps_s)
+    for k, v in dec.take_sensors().items():
+        np.testing.assert_allclose(v, sensors[k], rtol=0, atol=1e-15)
+    # the messages, walked in the order sent: every kind's times interleaved in one time order
+    sizes = {b"TRCE": 76 + 4 * 128, b"IMU_": 60, b"CAMP": 68, b"WHEL": 20}
+    at = 12 + struct.unpack("<I", raw[8:12])[0]
+    when = []
+    while raw[at:at + 4] != b"END!":
+        tag = bytes(raw[at:at + 4])
+        when.append(struct.unpack_from("<d", raw, at + (12 if tag == b"TRCE" else 4))[0])
+        at += sizes[tag]
+    assert len(when) == survey.n_traces + sum(len(v) for v in sensors.values())
+    assert np.all(np.diff(when) >= 0)
+    with pytest.raises(GPR3DError, match="plays once"):
+        replay_to_tcp(survey, 0, rate=100.0, loops=2, sensors=sensors)
+    with pytest.raises(GPR3DError, match="must include the IMU"):
+        replay_to_tcp(survey, 0, rate=100.0, sensors={"odometry": sensors["odometry"]})
+    untimed = Survey(data=survey.data, dt_s=DT)
+    with pytest.raises(GPR3DError, match="carry no increasing times"):
+        replay_to_tcp(untimed, 0, rate=100.0, sensors=sensors)

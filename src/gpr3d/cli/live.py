@@ -10,8 +10,10 @@ HELP = "live 3D: migrate traces as a radar delivers them, targets refreshed whil
 EPILOG = ("examples:\n  gpr3d live tcp://127.0.0.1:5600 --out site --eps-r 9\n"
           "  gpr3d live LINE.DZT --poses LINE.tum --out site --eps-r 6 --until-idle 10\n"
           "  gpr3d live run.bag --dt 0.1 --trace-topic /gpr/traces --pose-topic /odometry --out site --eps-r 6\n"
-          "  gpr3d live run.bag --dt 0.1 --fuse --rig rig.json --out site --eps-r 6   # poses fused as they come\n\n"
-          "SOURCE: tcp://HOST:PORT (the trace stream of docs/CONVENTIONS.md: each trace with its pose), a DZT\n"
+          "  gpr3d live run.bag --dt 0.1 --fuse --rig rig.json --out site --eps-r 6   # poses fused as they come\n"
+          "  gpr3d live tcp://127.0.0.1:5600 --fuse --rig rig.json --out site   # from the stream's IMU and odometry\n\n"
+          "SOURCE: tcp://HOST:PORT (the trace stream of docs/CONVENTIONS.md: each trace with its pose, or with\n"
+          "--fuse its IMU and odometry messages), a DZT\n"
           "file the radar is writing with --poses, a TUM file written beside it, or a ROS bag (.bag, or a ROS 2\n"
           "bag folder) replayed at its own pace: a trace topic (a header and a float array named trace, samples\n"
           "or data), poses from a pose topic, --poses, or fused from its IMU and odometry topics (--fuse).\n"
@@ -32,8 +34,9 @@ def add_arguments(sp):
     sp.add_argument("--trace-topic", default=None, help="a bag's GPR trace topic (default: the one such topic)")
     sp.add_argument("--pose-topic", default=None, help="a bag's pose topic (default: the one such topic)")
     sp.add_argument("--fuse", action="store_true",
-                    help="a bag's poses fused from its IMU and odometry topics as the replay comes to them (the "
-                         "filter of 'gpr3d pose fuse', no smoothing) instead of a pose topic")
+                    help="the antenna's poses fused as they come (the filter of 'gpr3d pose fuse', no smoothing): "
+                         "from a bag's IMU and odometry topics, or a tcp:// stream's IMU, camera pose and wheel "
+                         "messages")
     sp.add_argument("--imu-topic", default=None, help="with --fuse: the bag's IMU topic (default: the one)")
     sp.add_argument("--odometry-topic", default=None,
                     help="with --fuse: the bag's odometry (camera pose) topic (default: the one)")
@@ -123,14 +126,14 @@ def run(args):
     fuse = {k: getattr(args, k) for k in ("imu_topic", "odometry_topic", "rig", "still")
             if getattr(args, k) is not None}
     if fuse and not args.fuse:
-        raise GPR3DError(f"{', '.join('--' + k.replace('_', '-') for k in fuse)} are for --fuse (a bag's poses "
-                         "fused from its IMU and odometry)")
+        raise GPR3DError(f"{', '.join('--' + k.replace('_', '-') for k in fuse)} are for --fuse (poses fused from "
+                         "an IMU and odometry)")
     if args.fuse:
         still = fuse.pop("still", 1.0)
         _in_range(still, "--still", 0.05, 600, "seconds")
-        bag["fuse"] = {**fuse, "still_s": still}
+        fuse["still_s"] = still
     source = open_source(args.source, poses=args.poses, channel=args.channel, offset_m=args.offset,
-                         connect_s=args.connect_timeout, bag=bag or None)
+                         connect_s=args.connect_timeout, bag=bag or None, fuse=fuse if args.fuse else None)
     summary = run_live(source, args.out, cfg, detector=detector, log=print)
     print(f"{summary.n_targets} targets, {summary.n_detections} detections; trace-to-target latency median "
           f"{summary.latency_s['median']:.2f} s, max {summary.latency_s['max']:.2f} s; at most {summary.peak_tiles} "

@@ -10,9 +10,13 @@ from gpr3d.core.errors import GPR3DError
 NAME = "replay"
 HELP = "replay a recording as a radar delivers it (a TCP trace stream, or a DZT file that grows)"
 EPILOG = ("examples:\n  gpr3d replay survey.h5 --poses path.tum --to tcp://127.0.0.1:5600 --rate 800\n"
-          "  gpr3d replay LINE.DZT --poses LINE.tum --to live/LINE.DZT --poses-out live/LINE.tum --speed 4\n\n"
+          "  gpr3d replay LINE.DZT --poses LINE.tum --to live/LINE.DZT --poses-out live/LINE.tum --speed 4\n"
+          "  gpr3d replay run.h5 --imu imu.csv --odometry odometry.tum --to tcp://127.0.0.1:5600 --speed 1\n\n"
           "--rate: traces per second; --speed N: N times the recording's own rate (a DZT's scans per second).\n"
-          "To tcp://: serves the first client that connects (gpr3d live tcp://HOST:PORT).")
+          "To tcp://: serves the first client that connects (gpr3d live tcp://HOST:PORT). With --imu (and\n"
+          "--odometry, --wheel: the files 'gpr3d pose fuse' reads) the stream carries those records too, each\n"
+          "message at its time among the traces' (the recording's trace times, on the IMU clock), for\n"
+          "'gpr3d live --fuse'.")
 
 
 def add_arguments(sp):
@@ -26,6 +30,10 @@ def add_arguments(sp):
     sp.add_argument("--loop-shift", type=float, default=0.0,
                     help="move each further pass this far along x (m): a long survey from a short one")
     sp.add_argument("--accept-timeout", type=float, default=60.0, help="seconds to wait for a client (tcp)")
+    sp.add_argument("--imu", default=None, help="tcp: IMU samples to send beside the traces (CSV: t, ax, ay, az, gx, "
+                                                "gy, gz)")
+    sp.add_argument("--odometry", default=None, help="tcp, with --imu: camera poses to send (TUM, EuRoC or CSV)")
+    sp.add_argument("--wheel", default=None, help="tcp, with --imu: survey wheel readings to send (CSV: t, distance)")
 
 
 def _check_rate(args):
@@ -44,7 +52,7 @@ def _rate(args, own_rate):
 
 
 def run(args):
-    from gpr3d.pipeline import attach_trajectory, read_recording, replay_to_dzt, replay_to_tcp
+    from gpr3d.pipeline import attach_trajectory, read_recording, read_sensors, replay_to_dzt, replay_to_tcp
 
     _check_rate(args)
     if args.loops < 1:
@@ -52,12 +60,19 @@ def run(args):
     if not math.isfinite(args.loop_shift):
         raise GPR3DError("--loop-shift must be a finite number of metres")
     _in_range(args.accept_timeout, "--accept-timeout", 0.1, 86400, "seconds")
+    if (args.odometry or args.wheel) and not args.imu:
+        raise GPR3DError("--odometry and --wheel go with --imu (a pose filter propagates with the IMU)")
+    if args.imu and args.loops != 1:
+        raise GPR3DError("--loops: a replay with sensor records (--imu) plays once")
+    if args.imu and not args.to.startswith("tcp://"):
+        raise GPR3DError("--imu, --odometry and --wheel are for --to tcp:// (a growing DZT carries traces only)")
     if args.to.startswith("tcp://"):
         if args.poses_out:
             raise GPR3DError("--poses-out is for --to FILE.DZT: a tcp:// stream carries each trace's pose")
         host, _, port = args.to[6:].rpartition(":")
         if not host or not port.isdigit() or not 0 <= int(port) < 65536:
             raise GPR3DError(f"--to {args.to}: expected tcp://HOST:PORT with a port in 0..65535")
+        sensors = read_sensors(args.imu, args.odometry, args.wheel) if args.imu else None
         survey = read_recording(args.input)
         if args.poses:
             survey = attach_trajectory(survey, args.poses, source=str(args.input))
@@ -67,7 +82,7 @@ def run(args):
             own = (survey.n_traces - 1) / span if span > 0 else None
         rate = _rate(args, own)
         n = replay_to_tcp(survey, int(port), host=host, rate=rate, loops=args.loops, loop_shift_m=args.loop_shift,
-                          accept_s=args.accept_timeout,
+                          accept_s=args.accept_timeout, sensors=sensors,
                           on_listen=lambda p: print(f"serving {survey.n_traces * args.loops} traces on "
                                                     f"tcp://{host}:{p} at {rate:g} traces/s", flush=True),
                           log=print)

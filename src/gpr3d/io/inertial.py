@@ -25,7 +25,7 @@ from gpr3d.core.trajectory import Trajectory
 from gpr3d.io._common import check_file
 
 __all__ = ["read_imu_csv", "write_imu_csv", "read_wheel_csv", "write_wheel_csv", "read_rig", "write_rig",
-           "relative_from_camera_poses"]
+           "relative_from_camera_poses", "CameraMotions"]
 
 IMU_COLUMNS = ("t", "ax", "ay", "az", "gx", "gy", "gz")
 
@@ -135,6 +135,21 @@ def write_rig(path, *, imu_T_camera, imu_T_antenna, camera_time_offset_s: float)
                                         "camera_time_offset_s": camera_time_offset_s}, indent=1))
 
 
+def _motions(R, p):
+    """The motions from each camera pose to the next (``R``: ``(n, 3, 3)``, ``p``: ``(n, 3)``): ``n - 1`` rotations
+    and translations (in the earlier frame)."""
+    return np.einsum("nji,njk->nik", R[:-1], R[1:]), np.einsum("nji,nj->ni", R[:-1], p[1:] - p[:-1])
+
+
+def _motion_cov(p_rel, rot_sigma_deg, trans_frac, trans_floor_m):
+    """The motions' covariances: rotation per axis; translation a share of the step plus a floor."""
+    st = trans_frac * np.linalg.norm(p_rel, axis=1) + trans_floor_m
+    cov = np.zeros((len(p_rel), 6, 6))
+    cov[:, :3, :3] = np.eye(3) * np.deg2rad(rot_sigma_deg) ** 2
+    cov[:, 3:, 3:] = np.eye(3)[None] * (st**2)[:, None, None]
+    return cov
+
+
 def relative_from_camera_poses(traj: Trajectory, *, rot_sigma_deg: float = 0.03, trans_frac: float = 0.01,
                                trans_floor_m: float = 5e-4, gap_factor: float = 1.5):
     """Frame-to-frame camera motions (:class:`gpr3d.core.inertial.RelativePoses`) from odometry's camera poses.
@@ -149,17 +164,50 @@ def relative_from_camera_poses(traj: Trajectory, *, rot_sigma_deg: float = 0.03,
     if t.size < 2:
         raise InvalidDataError("odometry holds fewer than two frames")
     R = Rotation.from_quat(traj.orientations_quat_wxyz[:, [1, 2, 3, 0]]).as_matrix()
-    p = traj.positions_xyz
     n = t.size
     R_rel = np.tile(np.eye(3), (n, 1, 1))
     p_rel = np.zeros((n, 3))
-    cov = np.tile(np.eye(6), (n, 1, 1))
-    R_rel[1:] = np.einsum("nji,njk->nik", R[:-1], R[1:])
-    p_rel[1:] = np.einsum("nji,nj->ni", R[:-1], p[1:] - p[:-1])
-    st = trans_frac * np.linalg.norm(p_rel, axis=1) + trans_floor_m
-    sr = np.deg2rad(rot_sigma_deg)
-    cov[:, :3, :3] = np.eye(3) * sr**2
-    cov[:, 3:, 3:] = np.eye(3)[None] * (st**2)[:, None, None]
+    R_rel[1:], p_rel[1:] = _motions(R, traj.positions_xyz)
+    cov = _motion_cov(p_rel, rot_sigma_deg, trans_frac, trans_floor_m)
     dt = np.diff(t)
     valid = np.concatenate([[False], dt <= gap_factor * np.median(dt)])
     return RelativePoses(t, R_rel, p_rel, cov, valid)
+
+
+class CameraMotions:
+    """:func:`relative_from_camera_poses` for camera poses that come as the survey runs: :meth:`add` takes the
+    next frames and gives their motions from the frame before. A frame interval longer than ``gap_factor``
+    times the median of the intervals up to it is lost tracking (the whole record's median decides in the
+    batch function: the same where the frame rate is steady)."""
+
+    def __init__(self, *, rot_sigma_deg: float = 0.03, trans_frac: float = 0.01, trans_floor_m: float = 5e-4,
+                 gap_factor: float = 1.5):
+        self.sigma = (rot_sigma_deg, trans_frac, trans_floor_m)
+        self.gap_factor = gap_factor
+        self._last = None  # (t, R, p) of the newest frame
+        self._dts: list = []  # the frame intervals so far, sorted
+
+    def add(self, t_s, positions_xyz, quats_wxyz):
+        """``(t, R, p, cov, valid)`` of the frames given (times increasing, after those given before; unit
+        quaternions ``qw qx qy qz``), as :meth:`gpr3d.pose.eskf.ForwardFusion.add_frames` takes them."""
+        import bisect
+
+        t = np.asarray(t_s, float).reshape(-1)
+        n = t.size
+        R = Rotation.from_quat(np.asarray(quats_wxyz, float).reshape(n, 4)[:, [1, 2, 3, 0]]).as_matrix()
+        p = np.asarray(positions_xyz, float).reshape(n, 3)
+        valid = np.zeros(n, bool)
+        R_rel, p_rel = np.tile(np.eye(3), (n, 1, 1)), np.zeros((n, 3))
+        if n:
+            tt, RR, pp = (t, R, p) if self._last is None else (np.r_[self._last[0], t], np.r_[self._last[1][None], R],
+                                                               np.r_[self._last[2][None], p])
+            m = len(tt) - 1
+            if m:
+                R_rel[n - m:], p_rel[n - m:] = _motions(RR, pp)
+            for k, dt in enumerate(np.diff(tt)):
+                bisect.insort(self._dts, dt)
+                d = self._dts
+                med = d[len(d) // 2] if len(d) % 2 else 0.5 * (d[len(d) // 2 - 1] + d[len(d) // 2])
+                valid[n - m + k] = dt <= self.gap_factor * med
+            self._last = (t[-1], R[-1], p[-1])
+        return t, R_rel, p_rel, _motion_cov(p_rel, *self.sigma), valid

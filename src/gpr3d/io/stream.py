@@ -10,6 +10,14 @@ The stream format (``docs/CONVENTIONS.md``, "Live trace stream"), little-endian:
   quaternion), then ``n_samples`` ``float32`` samples;
 - at the end (optional: a closed connection ends the stream too), the 4 bytes ``END!``.
 
+A stream may also carry what a pose filter needs, declared in the header's ``sensors`` (a list of ``"imu"``,
+``"odometry"``, ``"wheel"``, with ``"imu"`` among them): IMU samples (``IMU_``, a ``float64`` time on the IMU
+clock, three of specific force in m/s^2 and three of angular rate in rad/s, IMU frame), the visual odometry's
+camera poses (``CAMP``, a ``float64`` time on the camera clock, then ``x y z qw qx qy qz`` in the odometry's world)
+and survey wheel readings (``WHEL``, a ``float64`` time on the IMU clock and the forward distance, m), each kind in
+time order, all interleaved with the traces as they happen. The traces' times are then on the IMU clock, and their
+poses may be left out (seven NaN): ``gpr3d live --fuse`` fuses them.
+
 :class:`StreamDecoder` takes bytes as they come and gives whole traces; :func:`encode_header`,
 :func:`encode_trace` and ``END`` write the format. :class:`GrowingDZT` and :class:`GrowingTUM` read a DZT
 recording and a TUM trajectory that a radar and a pose filter are still writing: each ``poll()`` gives what has
@@ -28,13 +36,17 @@ import numpy as np
 
 from gpr3d.core.errors import FormatError
 
-__all__ = ["END", "HEADER_MAGIC", "GrowingDZT", "GrowingTUM", "StreamDecoder", "StreamHeader", "Trace",
-           "encode_header", "encode_trace"]
+__all__ = ["END", "HEADER_MAGIC", "SENSORS", "GrowingDZT", "GrowingTUM", "StreamDecoder", "StreamHeader", "Trace",
+           "encode_camera_pose", "encode_header", "encode_imu", "encode_trace", "encode_wheel"]
 
 HEADER_MAGIC = b"GPR3DTR1"
 TRACE_TAG = b"TRCE"
 END = b"END!"  #: the end mark
 _TRACE = struct.Struct("<4sQd7d")  # tag, index, time, x y z qw qx qy qz
+#: the sensor messages a stream may carry: the header's name, its tag and its float64 fields after the tag
+SENSORS = {"imu": (b"IMU_", 7), "odometry": (b"CAMP", 8), "wheel": (b"WHEL", 2)}
+_SENSOR_OF_TAG = {tag: (name, struct.Struct(f"<4s{n}d")) for name, (tag, n) in SENSORS.items()}
+_SENSOR_WORDS = {"imu": "IMU sample", "odometry": "camera pose", "wheel": "wheel reading"}
 MAX_HEADER_BYTES = 1 << 20
 MAX_SAMPLES = 1 << 20
 
@@ -49,9 +61,15 @@ class StreamHeader:
     offset_m: float = 0.0
     eps_r: float | None = None
     name: str = "stream"
+    sensors: tuple = ()  #: the sensor messages that come beside the traces (names of :data:`SENSORS`)
+    imu_rate_hz: float | None = None  #: the IMU's sample rate (else the filter takes its still start's)
 
     def to_dict(self) -> dict:
-        return {k: v for k, v in self.__dict__.items() if v is not None}
+        d = {k: v for k, v in self.__dict__.items() if v is not None}
+        d["sensors"] = list(self.sensors)
+        if not self.sensors:
+            del d["sensors"]
+        return d
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "stream") -> "StreamHeader":
@@ -73,14 +91,22 @@ class StreamHeader:
                                          f"got {value!r}")
             return float(value)
 
+        sensors = d.get("sensors", [])
+        if not isinstance(sensors, list) or not all(isinstance(x, str) and x in SENSORS for x in sensors) \
+                or len(set(sensors)) != len(sensors):
+            raise FormatError(where, f"header sensors must be a list of distinct names out of {', '.join(SENSORS)}, "
+                                     f"got {sensors!r}")
+        if sensors and "imu" not in sensors:
+            raise FormatError(where, f"header sensors {sensors} lack 'imu' (a pose filter propagates with it)")
         return cls(n_samples=n, dt_s=number("dt_s", dt), frequency_hz=number("frequency_hz", d.get("frequency_hz")),
                    offset_m=number("offset_m", d.get("offset_m", 0.0), open_lo=False),
-                   eps_r=number("eps_r", d.get("eps_r"), lo=1.0, open_lo=False), name=str(d.get("name", "stream")))
+                   eps_r=number("eps_r", d.get("eps_r"), lo=1.0, open_lo=False), name=str(d.get("name", "stream")),
+                   sensors=tuple(sensors), imu_rate_hz=number("imu_rate_hz", d.get("imu_rate_hz")))
 
 
 @dataclass
 class Trace:
-    """One trace of a stream: its index, time (s), pose ``[x y z qw qx qy qz]`` and samples."""
+    """One trace of a stream: its index, time (s), pose ``[x y z qw qx qy qz]`` (NaN: none given) and samples."""
 
     index: int
     time_s: float
@@ -100,16 +126,76 @@ def encode_trace(index: int, time_s: float, pose, samples) -> bytes:
     return _TRACE.pack(TRACE_TAG, int(index), float(time_s), *p) + np.asarray(samples, "<f4").tobytes()
 
 
+def encode_imu(time_s: float, accel, gyro) -> bytes:
+    """One IMU sample's bytes: time (s, IMU clock), specific force (m/s^2) and angular rate (rad/s)."""
+    return _sensor("imu", time_s, np.r_[np.asarray(accel, float).reshape(3), np.asarray(gyro, float).reshape(3)])
+
+
+def encode_camera_pose(time_s: float, pose) -> bytes:
+    """One odometry frame's bytes: time (s, camera clock) and the camera's pose ``x y z qw qx qy qz``."""
+    return _sensor("odometry", time_s, np.asarray(pose, float).reshape(7))
+
+
+def encode_wheel(time_s: float, distance_m: float) -> bytes:
+    """One survey wheel reading's bytes: time (s, IMU clock) and forward distance (m)."""
+    return _sensor("wheel", time_s, [float(distance_m)])
+
+
+def _sensor(name, time_s, values) -> bytes:
+    tag, _ = SENSORS[name]
+    return _SENSOR_OF_TAG[tag][1].pack(tag, float(time_s), *values)
+
+
 @dataclass
 class StreamDecoder:
-    """Bytes in (:meth:`feed`), whole traces out; :class:`~gpr3d.core.errors.FormatError` names the first thing
-    that breaks the format (a wrong opening, a trace out of order, a non-finite sample or pose)."""
+    """Bytes in (:meth:`feed`), whole traces out, and the sensor messages by kind (:meth:`take_sensors`);
+    :class:`~gpr3d.core.errors.FormatError` names the first thing that breaks the format (a wrong opening, a trace
+    out of order, a non-finite sample or pose, a sensor message the header did not declare or out of time
+    order)."""
 
     where: str = "stream"
     header: StreamHeader | None = None
     ended: bool = False
     next_index: int = 0
     _buf: bytearray = field(default_factory=bytearray)
+    _sensors: dict = field(default_factory=dict)  # name -> rows not yet taken
+    _counts: dict = field(default_factory=dict)  # name -> (messages so far, the last one's time)
+
+    def take_sensors(self) -> dict:
+        """The sensor messages decoded since the last call, by kind: ``"imu"`` ``(k, 7)`` rows ``t ax ay az gx gy
+        gz``, ``"odometry"`` ``(k, 8)`` ``t x y z qw qx qy qz`` (unit quaternions), ``"wheel"`` ``(k, 2)`` ``t
+        distance``; every kind the header declares is there (``k`` may be 0)."""
+        out = {}
+        for name in (self.header.sensors if self.header is not None else ()):
+            rows = self._sensors.pop(name, [])
+            out[name] = np.asarray(rows, float).reshape(-1, SENSORS[name][1])
+        return out
+
+    def _sensor_message(self, tag) -> bool:
+        """Decode the sensor message at the buffer's start; False: not all of it is there yet."""
+        name, st = _SENSOR_OF_TAG[tag]
+        what = _SENSOR_WORDS[name]
+        n, last = self._counts.get(name, (0, -math.inf))
+        if name not in self.header.sensors:
+            raise FormatError(self.where, f"{what} {n}: a {tag.decode()} message the header's sensors "
+                                          f"({list(self.header.sensors)}) do not declare")
+        if len(self._buf) < st.size:
+            return False
+        v = np.asarray(st.unpack_from(self._buf)[1:])
+        if not np.all(np.isfinite(v)):
+            raise FormatError(self.where, f"{what} {n}: not finite")
+        if v[0] <= last:
+            raise FormatError(self.where, f"{what} {n}: its time {v[0]:.9g} s is not after the one before "
+                                          f"({last:.9g} s)")
+        if name == "odometry":
+            norm = np.linalg.norm(v[4:])
+            if abs(norm - 1.0) > 1e-3:
+                raise FormatError(self.where, f"{what} {n}: its orientation is not a unit quaternion (norm {norm:.4g})")
+            v[4:] /= norm
+        self._sensors.setdefault(name, []).append(v)
+        self._counts[name] = (n + 1, v[0])
+        del self._buf[:st.size]
+        return True
 
     def feed(self, data: bytes) -> list[Trace]:
         if self.ended and data:
@@ -145,6 +231,10 @@ class StreamDecoder:
                     raise FormatError(self.where, "bytes after the end mark END!")
                 self._buf.clear()
                 return out
+            if tag in _SENSOR_OF_TAG:
+                if not self._sensor_message(tag):
+                    return out
+                continue
             if tag != TRACE_TAG:
                 raise FormatError(self.where, f"trace {self.next_index}: expected TRCE or END!, got {tag!r}")
             size = _TRACE.size + 4 * self.header.n_samples
@@ -156,9 +246,10 @@ class StreamDecoder:
                                               "reordered traces)")
             samples = np.frombuffer(bytes(self._buf[_TRACE.size:size]), "<f4").astype(np.float32)
             pose = np.asarray(pose)
-            if not (np.all(np.isfinite(pose)) and math.isfinite(t)):
+            unposed = bool(self.header.sensors) and np.all(np.isnan(pose))  # (poses to be fused)
+            if not ((unposed or np.all(np.isfinite(pose))) and math.isfinite(t)):
                 raise FormatError(self.where, f"trace {index}: its pose or time is not finite")
-            if abs(np.linalg.norm(pose[3:]) - 1.0) > 1e-3:
+            if not unposed and abs(np.linalg.norm(pose[3:]) - 1.0) > 1e-3:
                 raise FormatError(self.where, f"trace {index}: its orientation is not a unit quaternion "
                                               f"(norm {np.linalg.norm(pose[3:]):.4g})")
             if not np.all(np.isfinite(samples)):

@@ -112,14 +112,25 @@ class LiveSummary:
 
 class TCPSource:
     """Traces with poses from a TCP server speaking the :mod:`gpr3d.io.stream` format (a radar's bridge, or
-    ``gpr3d replay --to tcp://...``). Connects on the first poll, trying again until ``connect_s`` have passed."""
+    ``gpr3d replay --to tcp://...``). Connects on the first poll, trying again until ``connect_s`` have passed.
 
-    def __init__(self, host: str, port: int, *, connect_s: float = 10.0):
+    ``fuse`` (a dict: ``rig``, ``still_s``; either may be left out) fuses the antenna's poses from the stream's
+    sensor messages (its IMU samples, and the camera poses and wheel readings its header declares) as they come
+    (:class:`~gpr3d.pose.eskf.ForwardFusion`, no smoothing): a trace is given once the filter has passed its time;
+    traces outside the IMU's span are left out and counted (``skipped``). Without it the sensor messages are
+    read and let go, and every trace must carry its pose."""
+
+    def __init__(self, host: str, port: int, *, connect_s: float = 10.0, fuse: dict | None = None):
         self.host, self.port = host, int(port)
         self.connect_s = connect_s
-        self.decoder = StreamDecoder(where=f"tcp://{host}:{port}")
+        self.where = f"tcp://{host}:{port}"
+        self.decoder = StreamDecoder(where=self.where)
         self.sock = None
         self._t_start = None
+        self.fuse = fuse
+        self.fused = None  #: the :class:`_StreamFusion` once the header has come (with ``fuse``)
+        self._held = []  # traces waiting for the filter to pass their times
+        self.skipped = 0  #: traces outside the IMU's span (with ``fuse``)
 
     @property
     def header(self) -> StreamHeader | None:
@@ -127,7 +138,7 @@ class TCPSource:
 
     @property
     def ended(self) -> bool:
-        return self.decoder.ended
+        return self.decoder.ended and not self._held
 
     def _connect(self) -> bool:
         if self._t_start is None:
@@ -136,7 +147,7 @@ class TCPSource:
             s = socket.create_connection((self.host, self.port), timeout=1.0)
         except OSError as exc:
             if time.monotonic() - self._t_start > self.connect_s:
-                raise GPR3DError(f"tcp://{self.host}:{self.port}: no connection after {self.connect_s:g} s "
+                raise GPR3DError(f"{self.where}: no connection after {self.connect_s:g} s "
                                  f"({exc.strerror or exc})") from None
             return False
         s.setblocking(False)
@@ -166,7 +177,45 @@ class TCPSource:
         traces = self.decoder.feed(b"".join(chunks))
         if closed and not self.decoder.ended:
             self.decoder.close()
-        return _stack(traces, self.decoder.header)
+        header = self.decoder.header
+        if header is None:
+            return None
+        sensors = self.decoder.take_sensors()  # (taken either way: nothing piles up)
+        if self.fuse is None:
+            for t in traces:
+                if np.isnan(t.pose[0]):
+                    raise GPR3DError(f"{self.where}: trace {t.index} carries no pose (the stream's poses are to be "
+                                     "fused from its sensors): give --fuse (and --rig)")
+            return _stack(traces, header)
+        return self._fused(traces, sensors, header)
+
+    def _fused(self, traces, sensors, header):
+        if self.fused is None:
+            if "imu" not in header.sensors:
+                raise GPR3DError(f"{self.where}: --fuse needs IMU samples in the stream; its header declares none "
+                                 "(sensors)")
+            self.fused = _StreamFusion(header, where=self.where, **self.fuse)
+        f = self.fused
+        if traces:
+            t = np.array([tr.time_s for tr in traces])
+            last = self._held[-1].time_s if self._held else -math.inf
+            if np.any(np.diff(np.r_[last, t]) < 0):
+                raise GPR3DError(f"{self.where}: trace {traces[int(np.argmax(np.diff(np.r_[last, t]) < 0))].index}: "
+                                 "its time runs backwards (fused poses need the traces in time order)")
+        self._held += traces
+        f.add(sensors, ended=self.decoder.ended)
+        give = []
+        until = f.until
+        while self._held and (self._held[0].time_s <= until or self.decoder.ended):
+            tr = self._held.pop(0)
+            if f.first_s <= tr.time_s <= until:
+                give.append(tr)
+            else:
+                self.skipped += 1
+        if not give:
+            return np.zeros((0, header.n_samples), np.float32), np.zeros((0, 7)), np.zeros(0)
+        times = np.array([tr.time_s for tr in give])
+        return np.stack([tr.samples for tr in give]), f.at(times), times
 
     def close(self) -> None:
         if self.sock is not None:
@@ -263,6 +312,85 @@ class _FusedPoses:
             self.done = True
         else:
             ff.run()
+
+    def at(self, times) -> np.ndarray:
+        at = self.ff.antenna_at(times)
+        return np.c_[at.positions_xyz, at.orientations_quat_wxyz]
+
+
+class _StreamFusion:
+    """The antenna's poses fused from a trace stream's sensor messages as they come (:class:`TCPSource` with
+    ``fuse``): IMU samples, the odometry's camera poses taken frame to frame
+    (:class:`~gpr3d.io.inertial.CameraMotions`) and wheel readings, as the header declares them, fed to
+    :class:`~gpr3d.pose.eskf.ForwardFusion`. The IMU's rate is the header's ``imu_rate_hz``, else the median
+    interval of the samples of the still start (which the filter waits for anyway)."""
+
+    def __init__(self, header: StreamHeader, *, where: str = "stream", rig=None, still_s: float = 1.0):
+        from gpr3d.io.inertial import CameraMotions, read_rig
+        from gpr3d.pose.eskf import EskfConfig
+
+        self.where = where
+        self.cfg = EskfConfig(init_still_s=still_s, **(read_rig(rig) if rig else {}))
+        self.rate_hz = header.imu_rate_hz
+        self.sensors = header.sensors
+        self.motions = CameraMotions()
+        self.ff = None
+        self._early = {name: [] for name in self.sensors}  # what came before the filter could be made
+        self.first_s = math.inf  #: the first IMU sample's time (traces before it have no pose)
+
+    def _make(self, ended: bool) -> bool:
+        from gpr3d.pose.eskf import ForwardFusion
+
+        imu = np.concatenate(self._early["imu"]) if self._early["imu"] else np.zeros((0, 7))
+        if ended and len(imu) < 2:
+            raise GPR3DError(f"{self.where}: the stream ended after {len(imu)} IMU sample(s): too few to fuse poses")
+        if self.rate_hz is None:
+            if len(imu) < 2 or (imu[-1, 0] - imu[0, 0] < self.cfg.init_still_s and not ended):
+                return False
+            self.rate_hz = float(1.0 / np.median(np.diff(imu[:, 0])))
+        self.ff = ForwardFusion(self.cfg, rate_hz=self.rate_hz, wheel="wheel" in self.sensors)
+        if "odometry" not in self.sensors:
+            self.ff.end_frames()
+        early, self._early = self._early, None
+        self._feed({name: np.concatenate(rows) if rows else np.zeros((0, 1)) for name, rows in early.items()})
+        return True
+
+    def _feed(self, sensors: dict) -> None:
+        ff = self.ff
+        imu, cam, wheel = sensors.get("imu"), sensors.get("odometry"), sensors.get("wheel")
+        if imu is not None and len(imu):
+            self.first_s = min(self.first_s, float(imu[0, 0]))
+            ff.add_imu(imu[:, 0], imu[:, 1:4], imu[:, 4:7])
+        if cam is not None and len(cam):
+            t, R, p, cov, valid = self.motions.add(cam[:, 0], cam[:, 1:4], cam[:, 4:8])
+            ff.add_frames(t, R, p, cov, valid)
+        if wheel is not None and len(wheel):
+            ff.add_wheel(wheel[:, 0], wheel[:, 1])
+
+    def add(self, sensors: dict, *, ended: bool = False) -> None:
+        """Take the sensor messages that came (:meth:`gpr3d.io.stream.StreamDecoder.take_sensors`) and move the
+        filter on; ``ended``: none will follow (the filter runs to the last IMU sample)."""
+        try:
+            if self.ff is None:
+                for name, rows in sensors.items():
+                    if len(rows):
+                        self._early[name].append(rows)
+                if not self._make(ended):
+                    return
+            else:
+                self._feed(sensors)
+            if ended:
+                self.ff.finish()
+            else:
+                self.ff.run()
+        except InvalidDataError as exc:
+            raise GPR3DError(f"{self.where}: {exc}") from None
+
+    @property
+    def until(self) -> float:
+        """The time up to which the poses are final."""
+        n = self.ff.n_done if self.ff is not None else 0
+        return float(self.ff.imu_t[n - 1]) if n >= 2 else -math.inf
 
     def at(self, times) -> np.ndarray:
         at = self.ff.antenna_at(times)
@@ -476,7 +604,8 @@ def _bag_flags(bag: dict) -> str:
 
 
 def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 0.0,
-                frequency_hz: float | None = None, connect_s: float = 10.0, bag: dict | None = None):
+                frequency_hz: float | None = None, connect_s: float = 10.0, bag: dict | None = None,
+                fuse: dict | None = None):
     """The source of a live run.
 
     Parameters
@@ -498,6 +627,9 @@ def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 
     bag : dict, optional
         A bag's settings for :class:`BagSource` (``dt_s``, ``trace_topic``, ``pose_topic``, ``samples_per_trace``,
         ``speed``, ``eps_r``, ``fuse``).
+    fuse : dict, optional
+        Fuse the antenna's poses as they come (``rig``, ``still_s``; a bag's also ``imu_topic``,
+        ``odometry_topic``): from a bag's IMU and odometry topics, or from a ``tcp://`` stream's sensor messages.
 
     Returns
     -------
@@ -509,6 +641,12 @@ def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 
     GPR3DError
         A malformed ``tcp://`` address, ``poses`` with a stream, a file that is no DZT, or a DZT without poses.
     """
+    if fuse is not None:
+        fuse = dict(fuse)
+        topics = sorted(k for k in fuse if k.endswith("_topic"))
+        if topics and (str(source).startswith("tcp://") or not (Path(source).suffix.lower() == ".bag"
+                                                                or (Path(source) / "metadata.yaml").is_file())):
+            raise GPR3DError(f"{', '.join('--' + k.replace('_', '-') for k in topics)} are for a ROS bag")
     if str(source).startswith("tcp://"):
         host, _, port = str(source)[6:].rpartition(":")
         if not host or not port.isdigit() or not 0 < int(port) < 65536:
@@ -517,15 +655,20 @@ def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 
             raise GPR3DError("--poses is for a growing file: a tcp:// stream carries each trace's pose")
         if bag:
             raise GPR3DError(f"{source}: {_bag_flags(bag)} are for a ROS bag (a .bag file or a ROS 2 bag folder)")
-        return TCPSource(host, int(port), connect_s=connect_s)
+        return TCPSource(host, int(port), connect_s=connect_s, fuse=fuse)
     p = Path(source)
     if p.suffix.lower() == ".bag" or (p / "metadata.yaml").is_file():
         settings = dict(bag or {})
+        if fuse is not None:
+            settings["fuse"] = fuse
         if "dt_s" not in settings:
             raise GPR3DError(f"{source}: a bag's traces carry no sample interval: give it (--dt, in ns)")
         return BagSource(p, poses=poses, offset_m=offset_m, frequency_hz=frequency_hz, **settings)
     if bag:
         raise GPR3DError(f"{source}: {_bag_flags(bag)} are for a ROS bag (a .bag file or a ROS 2 bag folder)")
+    if fuse is not None:
+        raise GPR3DError(f"{source}: --fuse is for a ROS bag or a tcp:// stream carrying IMU samples (a growing "
+                         "file's poses come from --poses)")
     return FileSource(source, poses, channel=channel, offset_m=offset_m, frequency_hz=frequency_hz)
 
 

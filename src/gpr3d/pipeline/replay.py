@@ -6,7 +6,9 @@
   them), and with ``poses_out`` its poses appended to a TUM file in step.
 
 ``loops`` plays the recording several times, each pass moved ``loop_shift_m`` further along x (a long survey from a
-short one: the cart never comes back).
+short one: the cart never comes back). With ``sensors`` (:func:`read_sensors`: an IMU record, camera poses, wheel
+readings) the stream carries them too, every message at its own time among the traces' (on the IMU clock), for
+``gpr3d live --fuse``.
 """
 
 from __future__ import annotations
@@ -19,9 +21,10 @@ from pathlib import Path
 import numpy as np
 
 from gpr3d.core.errors import GPR3DError
-from gpr3d.io.stream import END, StreamHeader, encode_header, encode_trace
+from gpr3d.io.stream import (END, StreamHeader, encode_camera_pose, encode_header, encode_imu, encode_trace,
+                             encode_wheel)
 
-__all__ = ["pace", "replay_to_dzt", "replay_to_tcp"]
+__all__ = ["pace", "pace_at", "read_sensors", "replay_to_dzt", "replay_to_tcp"]
 
 
 def pace(n: int, rate: float, *, batch_s: float = 0.01, clock=time.monotonic, sleep=time.sleep):
@@ -29,16 +32,74 @@ def pace(n: int, rate: float, *, batch_s: float = 0.01, clock=time.monotonic, sl
     (in steps of about ``batch_s``; a consumer that falls behind gets larger ranges, never a drift)."""
     if not (rate > 0 and math.isfinite(rate)):
         raise GPR3DError(f"the replay rate must be a positive number of traces per second, got {rate!r}")
+    yield from pace_at(np.arange(n) / rate, batch_s=batch_s, clock=clock, sleep=sleep)  # item i is due at i / rate
+
+
+def pace_at(due_s, *, batch_s: float = 0.01, clock=time.monotonic, sleep=time.sleep):
+    """:func:`pace` for items due at the given times (s from the start, not decreasing)."""
+    due_s = np.asarray(due_s, float)
+    n = due_s.size
     t0 = clock()
     a = 0
     while a < n:
         elapsed = clock() - t0
-        due = min(n, int(elapsed * rate) + 1)  # item i is due at i / rate
+        due = int(np.searchsorted(due_s, elapsed, side="right"))
         if due <= a:
-            sleep(max(0.0, min(batch_s, a / rate - elapsed)))
+            sleep(max(0.0, min(batch_s, due_s[a] - elapsed)))
             continue
         yield a, due
         a = due
+
+
+def read_sensors(imu, odometry=None, wheel=None) -> dict:
+    """A cart's sensor records as a stream carries them (``"imu"``: ``(k, 7)`` ``t ax ay az gx gy gz``,
+    ``"odometry"``: ``(k, 8)`` ``t x y z qw qx qy qz``, ``"wheel"``: ``(k, 2)`` ``t distance``): the files
+    ``gpr3d pose fuse`` reads (IMU CSV, camera poses as TUM/EuRoC/CSV, wheel CSV)."""
+    from gpr3d.io.inertial import read_imu_csv, read_wheel_csv
+    from gpr3d.io.trajectory import read_trajectory
+
+    m = read_imu_csv(imu)
+    out = {"imu": np.c_[m.t_s, m.accel, m.gyro]}
+    if odometry is not None:
+        tr = read_trajectory(odometry)
+        out["odometry"] = np.c_[tr.timestamps_s, tr.positions_xyz, tr.orientations_quat_wxyz]
+    if wheel is not None:
+        t, d = read_wheel_csv(wheel)
+        out["wheel"] = np.c_[t, d]
+    return out
+
+
+_ENCODERS = {"imu": lambda r: encode_imu(r[0], r[1:4], r[4:7]), "odometry": lambda r: encode_camera_pose(r[0], r[1:8]),
+             "wheel": lambda r: encode_wheel(r[0], r[1])}
+
+
+def _serve_with_sensors(conn, survey, poses, sensors: dict, speed: float, log) -> tuple[int, bool]:
+    """Send the traces and the sensor messages in time order, each when due at ``speed`` times the record's pace:
+    ``(traces sent, whether all went: the client stayed)``."""
+    times = np.asarray(survey.timestamps_s, float)
+    kinds = [("trace", times)] + [(k, np.asarray(v, float)[:, 0]) for k, v in sensors.items()]
+    when = np.concatenate([t for _, t in kinds])
+    kind = np.concatenate([np.full(t.size, j) for j, (_, t) in enumerate(kinds)])
+    row = np.concatenate([np.arange(t.size) for _, t in kinds])
+    order = np.argsort(when, kind="stable")
+    when, kind, row = when[order], kind[order], row[order]
+    sent = 0
+    for a, b in pace_at((when - when[0]) / speed):
+        buf = bytearray()
+        for j, r in zip(kind[a:b], row[a:b]):
+            if j == 0:
+                buf += encode_trace(r, times[r], poses[r], survey.data[r])
+            else:
+                name = kinds[j][0]
+                buf += _ENCODERS[name](sensors[name][r])
+        try:
+            conn.sendall(buf)
+        except (BrokenPipeError, ConnectionResetError):
+            if log:
+                log(f"the client left after {sent} traces")
+            return sent, False
+        sent += int(np.count_nonzero(kind[a:b] == 0))
+    return sent, True
 
 
 def _poses(survey) -> np.ndarray:
@@ -52,7 +113,8 @@ def _poses(survey) -> np.ndarray:
 
 
 def replay_to_tcp(survey, port: int, *, host: str = "127.0.0.1", rate: float, loops: int = 1,
-                  loop_shift_m: float = 0.0, accept_s: float = 30.0, on_listen=None, log=None) -> int:
+                  loop_shift_m: float = 0.0, accept_s: float = 30.0, on_listen=None, log=None,
+                  sensors: dict | None = None) -> int:
     """Serve ``survey`` with its poses to the first client that connects, at ``rate`` traces per second.
 
     Parameters
@@ -75,6 +137,11 @@ def replay_to_tcp(survey, port: int, *, host: str = "127.0.0.1", rate: float, lo
         Called with the port once the server listens.
     log : callable, optional
         A line when the client leaves early.
+    sensors : dict, optional
+        Sensor records to send beside the traces (:func:`read_sensors`; ``"imu"`` at least): every message at its
+        time among the traces' (the survey's ``timestamps_s``, on the IMU clock), the whole paced so that the
+        traces come at ``rate`` on average; the traces' poses are sent where the survey has them (else NaN: to be
+        fused). One pass only.
 
     Returns
     -------
@@ -84,13 +151,33 @@ def replay_to_tcp(survey, port: int, *, host: str = "127.0.0.1", rate: float, lo
     Raises
     ------
     GPR3DError
-        A survey without poses, a rate that is no positive number, or no client in ``accept_s``.
+        A survey without poses (and no ``sensors``), a rate that is no positive number, no client in
+        ``accept_s``; with ``sensors``: traces without times, no IMU record, ``loops``.
     """
-    poses = _poses(survey)
     n = survey.n_traces
+    speed = None
+    if sensors is not None:
+        if "imu" not in sensors:
+            raise GPR3DError("the sensors sent beside the traces must include the IMU's")
+        if loops != 1:
+            raise GPR3DError("a replay with sensor records plays once (no --loops)")
+        t = survey.timestamps_s
+        if t is None or n < 2 or not np.all(np.diff(t) >= 0) or t[-1] <= t[0]:
+            raise GPR3DError("the recording's traces carry no increasing times to place them among the sensor "
+                             "records (on the IMU clock)")
+        if not (rate > 0 and math.isfinite(rate)):
+            raise GPR3DError(f"the replay rate must be a positive number of traces per second, got {rate!r}")
+        speed = rate * (t[-1] - t[0]) / (n - 1)
+        poses = _poses(survey) if survey.positions_xyz is not None else np.full((n, 7), np.nan)
+        imu_t = np.asarray(sensors["imu"], float)[:, 0]
+        rate_hz = float(1.0 / np.median(np.diff(imu_t))) if imu_t.size > 1 else None
+    else:
+        poses = _poses(survey)
+        rate_hz = None
     header = StreamHeader(n_samples=survey.n_samples, dt_s=survey.dt_s, frequency_hz=survey.frequency_hz,
                           offset_m=survey.offset_m, eps_r=survey.eps_r,
-                          name=str(survey.metadata.get("path", "replay")))
+                          name=str(survey.metadata.get("path", "replay")),
+                          sensors=tuple(sensors) if sensors else (), imu_rate_hz=rate_hz)
     try:
         srv = socket.create_server((host, port))
     except OSError as exc:
@@ -105,6 +192,11 @@ def replay_to_tcp(survey, port: int, *, host: str = "127.0.0.1", rate: float, lo
             raise GPR3DError(f"tcp://{host}:{srv.getsockname()[1]}: no client connected in {accept_s:g} s") from None
         with conn:
             conn.sendall(encode_header(header))
+            if sensors is not None:
+                sent, whole = _serve_with_sensors(conn, survey, poses, sensors, speed, log)
+                if whole:
+                    _end(conn)
+                return sent
             sent = 0
             t_rel = np.arange(n * loops) / rate
             for a, b in pace(n * loops, rate):
@@ -121,17 +213,21 @@ def replay_to_tcp(survey, port: int, *, host: str = "127.0.0.1", rate: float, lo
                         log(f"the client left after {sent} traces")
                     return sent
                 sent = b
-            conn.sendall(END)
-            try:  # let the client read to the end before the connection closes
-                conn.shutdown(socket.SHUT_WR)
-                conn.settimeout(5.0)
-                while conn.recv(4096):
-                    pass
-            except OSError:
-                pass
+            _end(conn)
             return sent
     finally:
         srv.close()
+
+
+def _end(conn) -> None:
+    conn.sendall(END)
+    try:  # let the client read to the end before the connection closes
+        conn.shutdown(socket.SHUT_WR)
+        conn.settimeout(5.0)
+        while conn.recv(4096):
+            pass
+    except OSError:
+        pass
 
 
 def replay_to_dzt(recording, out, *, rate: float, poses=None, poses_out=None) -> int:
