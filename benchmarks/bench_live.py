@@ -116,7 +116,24 @@ def fused_bag(work: Path, rate: float, n: int) -> tuple[Path, Path]:
     data = forward_model(scene(), at.positions_xyz, at.orientations_quat_wxyz, offset_m=OFFSET, frequency_hz=F,
                          n_samples=NS, time_window_s=WINDOW, air_wave=1.0, ground_wave=0.5)
     write_bag(folder / "run", imu=run.imu, trajectory=read_tum(folder / "odometry.tum"), traces=(t, data))
+    Survey(data=data, dt_s=WINDOW / NS, offset_m=OFFSET, frequency_hz=F, eps_r=EPS, timestamps_s=t).save(
+        folder / "survey.h5")  # (the same traces, times on the IMU clock: for the TCP stream with sensor messages)
     return folder / "run", folder / "rig.json"
+
+
+def tcp_fused_run(work: Path, rate: float, env: dict, extra=()) -> dict:
+    """The fused bag's traces, IMU samples and camera poses sent over TCP by ``gpr3d replay --imu --odometry``, each
+    message at its time; ``gpr3d live --fuse`` fuses the poses from them."""
+    folder = work / "fused"
+    port = free_port()
+    server = subprocess.Popen([sys.executable, "-m", "gpr3d", "replay", folder / "survey.h5", "--imu",
+                               folder / "imu.csv", "--odometry", folder / "odometry.tum", "--to",
+                               f"tcp://127.0.0.1:{port}", "--rate", str(rate)], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    summary = run_live_process(work, "tcp_fused", f"tcp://127.0.0.1:{port}", env,
+                               ["--fuse", "--rig", folder / "rig.json", "--still", "2", *extra])
+    server.wait(timeout=60)
+    return summary
 
 
 def bag_run(work: Path, bag: Path, rig: Path, env: dict, extra=()) -> dict:
@@ -159,6 +176,8 @@ def main(argv=None):
         bag, rig = fused_bag(work, args.bag_rate, args.traces)
         rows.append((f"ROS bag at {args.bag_rate:g} traces/s (its own pace), poses fused from its IMU (200 Hz) and "
                      "odometry (15 Hz) as they come (`--fuse`)", bag_run(work, bag, rig, env, extra=more)))
+        rows.append((f"TCP stream at {args.bag_rate:g} traces/s with the same IMU and camera pose messages, poses "
+                     "fused as they come (`--fuse`)", tcp_fused_run(work, args.bag_rate, env, extra=more)))
     # the batch volume of the same traces with live's settings
     cfg = json.loads((first["out"] / "config.json").read_text())["config"]
     survey = s.replace(positions_xyz=traj.positions_xyz, orientations_quat_wxyz=traj.orientations_quat_wxyz)

@@ -383,21 +383,27 @@ def test_the_window_buffer_keeps_rows_by_their_numbers():
 
 
 class _Scripted:
-    """A source that gives nothing for ``wait`` polls, then the survey in ``batches`` polls, then nothing."""
+    """A source that gives nothing for ``wait`` polls, then the survey in ``batches`` polls, then nothing (ended
+    at poll ``end_at``); with ``came`` (a function of nothing), each batch says its traces came at ``came()`` (as a
+    source that held them back for their poses does)."""
 
-    def __init__(self, survey, wait, batches):
+    def __init__(self, survey, wait, batches, *, end_at=None, came=None):
         self.header = None
         self.s, self.wait, self.batches, self.polls, self.ended = survey, wait, batches, 0, False
         self.cuts = np.linspace(0, survey.n_traces, batches + 1).astype(int)
+        self.end_at, self.came = end_at, came
 
     def poll(self):
         k, self.polls = self.polls - self.wait, self.polls + 1
+        self.ended = self.end_at is not None and self.polls >= self.end_at
         if k < 0:
             return None  # (not connected yet: no header)
         self.header = StreamHeader(n_samples=self.s.n_samples, dt_s=DT, frequency_hz=800e6, offset_m=0.05,
                                    eps_r=EPS)
         a, b = (self.cuts[k], self.cuts[k + 1]) if k < self.batches else (0, 0)
         poses = np.c_[self.s.positions_xyz[a:b], self.s.orientations_quat_wxyz[a:b]]
+        if self.came is not None:
+            return self.s.data[a:b], poses, np.zeros(b - a), np.full(b - a, self.came())
         return self.s.data[a:b], poses, np.zeros(b - a)
 
     def close(self):
@@ -432,6 +438,26 @@ def test_the_idle_clock_and_the_rate_start_at_the_first_trace(survey, tmp_path, 
                        log=None, poll_s=0.0, clock=lambda: float(next(ticks)), reader_thread=False)
     assert summary.lag_s == 15.0 - 10.0 + 1.0 and summary.wall_s == 10.0 - 6.0 + 6.0
     monkeypatch.undo()
+    # a stream that ends long after its last trace (sensor messages only, or nothing, came since): the wait for
+    # its end is neither lag nor work either (the run ends at its end mark, at poll 12: 19 s)
+    ticks = iter(range(1000))
+    summary = run_live(_Scripted(survey, 5, 3, end_at=12), tmp_path / "e", _cfg(until_idle_s=None), log=None,
+                       poll_s=0.0, clock=lambda: float(next(ticks)), reader_thread=False)
+    assert summary.lag_s == 2.0 and summary.wall_s == 6.0
+    # traces a source held back (for their poses) came before it gave them: the lag and the rate (and the latency,
+    # on the real clock) count from when they came
+    now = [0.0]
+
+    def clock():
+        now[0] = float(next(ticks))
+        return now[0]
+
+    ticks = iter(range(1000))
+    summary = run_live(_Scripted(survey, 5, 3, came=lambda: now[0] + 0.5), tmp_path / "c",
+                       _cfg(until_idle_s=2.5, start_timeout_s=5.5), log=None, poll_s=0.0, clock=clock,
+                       reader_thread=False)
+    # (the source is polled before the clock is read: the poll at 6 s sees now = 5, so its traces came at 5.5 s)
+    assert summary.lag_s == (11.0 - 9.5) + 1.0 and summary.wall_s == 9.5 - 5.5 + 2.5
     # nothing at all within start_timeout_s: one line naming it
     ticks = iter(range(1000))
     with pytest.raises(GPR3DError, match="no traces arrived in 4.5 s"):
@@ -781,7 +807,7 @@ def test_a_bag_s_poses_fused_as_the_replay_comes_are_the_batch_fusion_s(fused_ba
     ref = fuse_recordings(bag=bag, rig=rig, log=None).trajectory  # (the filter alone: no smoothing)
     # as fast as it reads: every trace, each with the batch fusion's pose at its stamp
     src = BagSource(bag, dt_s=DT, speed=None, fuse={"rig": rig})
-    data, poses, times = src.poll()
+    data, poses, times, _ = src.poll()
     assert src.ended and len(times) == 350 and src.skipped == 0
     want = ref.at(times)
     np.testing.assert_allclose(poses[:, :3], want.positions_xyz, rtol=0, atol=1e-9)
@@ -796,6 +822,8 @@ def test_a_bag_s_poses_fused_as_the_replay_comes_are_the_batch_fusion_s(fused_ba
         t = out[2] if out is not None else np.zeros(0)
         p = out[1] if out is not None else None
         bag_now = 1.5 + now[0]
+        if len(t):  # (each trace came when the replay clock passed its stamp, before the filter let it go)
+            np.testing.assert_allclose(out[3], t - 1.5, rtol=0, atol=1e-9)
         f = src.fused  # (fed nothing stamped after the replay's clock)
         assert (f.ni == 0 or f.imu.t_s[f.ni - 1] <= bag_now) and (f.nv == 0 or f.vo.t_s[f.nv - 1] <= bag_now)
         if len(t):
@@ -890,8 +918,8 @@ def test_a_stream_s_poses_fused_as_its_sensor_messages_come_are_the_batch_fusion
             k += 1
         out = src.poll()
         if out is not None and len(out[2]):
-            data, poses, times = out
-            assert times.max() <= now  # (nothing given before it happened)
+            data, poses, times, came = out
+            assert times.max() <= now and np.all(came <= time.monotonic())  # (nothing given before it happened)
             want = ref.at(times)
             np.testing.assert_allclose(poses[:, :3], want.positions_xyz, rtol=0, atol=1e-9)
             np.testing.assert_allclose(np.abs(np.sum(poses[:, 3:] * want.orientations_quat_wxyz, axis=1)), 1.0,
@@ -941,7 +969,7 @@ def test_traces_outside_the_imu_s_span_are_left_out_and_counted(rig_run):
     src.sock = sock = _FakeSocket()
     sock.pending += encode_header(StreamHeader(n_samples=128, dt_s=DT, sensors=("imu",)))
     sock.pending += b"".join(m for _, m in _messages(survey, sensors)) + b"END!"
-    _, _, times = src.poll()
+    _, _, times, _ = src.poll()
     assert src.ended and times.max() <= 10.0 and len(times) + src.skipped == survey.n_traces
     assert len(times) == np.count_nonzero(survey.timestamps_s <= 10.0)
 

@@ -118,9 +118,11 @@ class TCPSource:
     sensor messages (its IMU samples, and the camera poses and wheel readings its header declares) as they come
     (:class:`~gpr3d.pose.eskf.ForwardFusion`, no smoothing): a trace is given once the filter has passed its time;
     traces outside the IMU's span are left out and counted (``skipped``). Without it the sensor messages are
-    read and let go, and every trace must carry its pose."""
+    read and let go, and every trace must carry its pose. A fused trace's arrival (what its latency counts from) is
+    when it came from the socket, not when the filter let it go (the fourth array :meth:`poll` gives)."""
 
-    def __init__(self, host: str, port: int, *, connect_s: float = 10.0, fuse: dict | None = None):
+    def __init__(self, host: str, port: int, *, connect_s: float = 10.0, fuse: dict | None = None,
+                 clock=time.monotonic):
         self.host, self.port = host, int(port)
         self.connect_s = connect_s
         self.where = f"tcp://{host}:{port}"
@@ -129,8 +131,9 @@ class TCPSource:
         self._t_start = None
         self.fuse = fuse
         self.fused = None  #: the :class:`_StreamFusion` once the header has come (with ``fuse``)
-        self._held = []  # traces waiting for the filter to pass their times
+        self._held = []  # (trace, when it came) waiting for the filter to pass their times
         self.skipped = 0  #: traces outside the IMU's span (with ``fuse``)
+        self.clock = clock
 
     @property
     def header(self) -> StreamHeader | None:
@@ -198,24 +201,26 @@ class TCPSource:
         f = self.fused
         if traces:
             t = np.array([tr.time_s for tr in traces])
-            last = self._held[-1].time_s if self._held else -math.inf
+            last = self._held[-1][0].time_s if self._held else -math.inf
             if np.any(np.diff(np.r_[last, t]) < 0):
                 raise GPR3DError(f"{self.where}: trace {traces[int(np.argmax(np.diff(np.r_[last, t]) < 0))].index}: "
                                  "its time runs backwards (fused poses need the traces in time order)")
-        self._held += traces
+            came = self.clock()
+            self._held += [(tr, came) for tr in traces]
         f.add(sensors, ended=self.decoder.ended)
         give = []
         until = f.until
-        while self._held and (self._held[0].time_s <= until or self.decoder.ended):
-            tr = self._held.pop(0)
+        while self._held and (self._held[0][0].time_s <= until or self.decoder.ended):
+            tr, came = self._held.pop(0)
             if f.first_s <= tr.time_s <= until:
-                give.append(tr)
+                give.append((tr, came))
             else:
                 self.skipped += 1
         if not give:
-            return np.zeros((0, header.n_samples), np.float32), np.zeros((0, 7)), np.zeros(0)
-        times = np.array([tr.time_s for tr in give])
-        return np.stack([tr.samples for tr in give]), f.at(times), times
+            return np.zeros((0, header.n_samples), np.float32), np.zeros((0, 7)), np.zeros(0), np.zeros(0)
+        times = np.array([tr.time_s for tr, _ in give])
+        return (np.stack([tr.samples for tr, _ in give]), f.at(times), times,
+                np.array([came for _, came in give]))
 
     def close(self) -> None:
         if self.sock is not None:
@@ -496,8 +501,10 @@ class BagSource:
         if not rows:
             return np.zeros((0, self.header.n_samples), np.float32), np.zeros((0, 7)), np.zeros(0)
         data = np.concatenate(rows)  # (one width: iter_bag_traces holds every message to the first's)
-        if self.fused is not None:
-            return data, self.fused.at(times), np.asarray(times)
+        if self.fused is not None:  # (a trace came when the replay passed its stamp, not when the filter did)
+            came = (np.full(len(times), now) if self.speed is None else
+                    np.minimum(now, self._start[1] + (np.asarray(times) - self._start[0]) / self.speed))
+            return data, self.fused.at(times), np.asarray(times), came
         at = self.trajectory.at(np.asarray(times))
         return data, np.c_[at.positions_xyz, at.orientations_quat_wxyz], np.asarray(times)
 
@@ -564,8 +571,9 @@ class SourceReader:
         self._arrived.wait(timeout_s)
 
     def take(self) -> list:
-        """Every batch read so far, ``[((data, poses, times), arrival), ...]``; the source's error once everything
-        read before it has been taken."""
+        """Every batch read so far, ``[((data, poses, times[, came]), arrival), ...]`` (``came``: when each trace came,
+        where a source held traces back for their poses); the source's error once everything read before it has
+        been taken."""
         import queue
 
         self._arrived.clear()
@@ -817,7 +825,7 @@ class LiveReconstruction:
 
     def add(self, data, poses, *, now=None):
         """Raw traces ``(k, n_samples)`` with poses ``(k, 7)`` (``x y z qw qx qy qz``), arrived at ``now``
-        (monotonic seconds; default: now)."""
+        (monotonic seconds, or one time per trace; default: now)."""
         data = np.asarray(data, np.float32)
         k = len(data)
         if k == 0:
@@ -835,7 +843,7 @@ class LiveReconstruction:
             raise InvalidDataError(f"trace {int(bad[0]) + self.n_in}: its pose is not finite or its quaternion zero")
         p[:, 3:] /= norm[:, None]
         self._poses.append(p)
-        self._arrival.append(np.full(k, now))
+        self._arrival.append(np.broadcast_to(np.asarray(now, float), (k,)))
         self.n_in += k
         if self.detector is not None:
             self.raw_tail.append(data)
@@ -1321,16 +1329,18 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     last_new = t_start
     newest_arrival = None
     worked_until = -math.inf  # when the last step that did some work ended
-    idle = interrupted = False
+    interrupted = False
     reader = SourceReader(source, clock=clock) if reader_thread else None
 
     def add(batches):
         nonlocal t_first, last_new, newest_arrival
         for got, at in batches:
             if len(got[0]):
-                live.add(got[0], got[1], now=at)
-                t_first = at if t_first is None else t_first
-                last_new = newest_arrival = at
+                came = got[3] if len(got) > 3 else at  # (a fused trace came before the filter let it go)
+                live.add(got[0], got[1], now=came)
+                t_first = float(np.min(came)) if t_first is None else t_first
+                newest_arrival = float(np.max(came))
+                last_new = at
 
     try:
         while True:
@@ -1363,7 +1373,6 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
                 if cfg.start_timeout_s is not None and now - t_start >= cfg.start_timeout_s:
                     break
             elif cfg.until_idle_s is not None and now - last_new >= cfg.until_idle_s:
-                idle = True
                 break
             if not worked and not batches:
                 if reader is not None:
@@ -1392,10 +1401,10 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     t_last = clock()
     live.step(ended=True)
     t_end = clock()
-    # the lag: from the newest trace's arrival to the end of the work on it. An idle wait ended the run: the
-    # work went on into it as long as steps did some (a detector's backlog, say), and the rest of it is neither
-    # lag nor work; otherwise the run ended when the stream did, and everything since counts
-    done = max(worked_until, newest_arrival) if idle else t_last
+    # the lag: from the newest trace's arrival to the end of the work on it. The work went on after it as long as
+    # steps did some (a detector's backlog, say); a wait for the source after that (its idle time, or a stream
+    # that went on with sensor messages only) is neither lag nor work
+    done = max(worked_until, newest_arrival)
     lag = max(0.0, done - newest_arrival) + (t_end - t_last)
     busy = max(newest_arrival - t_first + lag, 1e-9)
     result = live.finish(source=str(getattr(source.header, "name", "")))
