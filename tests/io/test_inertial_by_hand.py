@@ -154,8 +154,8 @@ def test_camera_motions_as_they_come_are_the_batch_ones_and_judge_gaps_by_the_in
     from gpr3d.io.inertial import CameraMotions
 
     t = np.array([0.0, 0.1, 0.2, 0.3, 0.45, 0.76, 0.86, 1.5])
-    yaw = np.deg2rad([0, 10, 20, 30, 40, 50, 55, 70])
-    q = Rotation.from_euler("z", yaw[:, None]).as_quat()[:, [3, 0, 1, 2]]
+    ang = np.deg2rad([0, 10, 20, 30, 40, 50, 55, 70])
+    q = Rotation.from_euler("zyx", np.c_[ang, 0.5 * ang, -0.3 * ang]).as_quat()[:, [3, 0, 1, 2]]
     p = np.stack([np.arange(8) * 0.2, np.sin(np.arange(8)), np.zeros(8)], 1)
     batch = relative_from_camera_poses(Trajectory(t, p, q))
     cm = CameraMotions()
@@ -168,7 +168,13 @@ def test_camera_motions_as_they_come_are_the_batch_ones_and_judge_gaps_by_the_in
     # the batch judges by the whole record's median (0.1 s); as they come, by the intervals up to each frame:
     # the first (0.1) is its own median; 0.31 s after four of 0.1 and one of 0.15 is a gap, as is 0.64 s
     assert batch.valid.tolist() == [False, True, True, True, True, False, True, False]
-    assert valid.tolist() == [False, True, True, True, True, False, True, False]
+    assert valid.dtype == bool and valid.tolist() == [False, True, True, True, True, False, True, False]
+    # the median so far, of an even number of intervals the mean of the middle two: 0.4 s after 0.1 s is a gap
+    # (1.5 x 0.25), 0.2 after 0.1, 0.1 (median 0.1) too, then 0.2 after 0.1, 0.1, 0.2 is not (1.5 x 0.15), nor 0.29
+    # after 0.1, 0.1, 0.2, 0.2 (1.5 x 0.2)
+    assert CameraMotions().add([0.0, 0.1, 0.5], p[:3], q[:3])[4].tolist() == [False, True, False]
+    tt = [0.0, 0.1, 0.2, 0.4, 0.6, 0.89]
+    assert CameraMotions().add(tt, p[:6], q[:6])[4].tolist() == [False, True, True, False, True, True]
     # where the rate rises later, the two differ: 0.16 s after 0.1 is within 1.5x of the median so far (0.13 s),
     # beyond 1.5x the whole record's (0.075 s)
     t = [0.0, 0.1, 0.26, 0.31, 0.36]
