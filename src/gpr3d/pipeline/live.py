@@ -130,7 +130,7 @@ class TCPSource:
         self.sock = None
         self._t_start = None
         self.fuse = fuse
-        self.fused = None  #: the :class:`_StreamFusion` once the header has come (with ``fuse``)
+        self.fused = None  #: the pose filter once the header has come (with ``fuse``)
         self._held = []  # (trace, when it came) waiting for the filter to pass their times
         self.skipped = 0  #: traces outside the IMU's span (with ``fuse``)
         self.clock = clock
