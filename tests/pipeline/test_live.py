@@ -656,6 +656,28 @@ def test_a_refresh_looks_where_traces_came_and_keeps_the_targets_elsewhere(surve
     assert [t for t in live.targets if t.kind == "line" and abs(t.points_xyz[0][0] - 0.6) < 0.05]
 
 
+def test_a_refresh_takes_the_preview_s_hough_settings_and_the_end_the_batch_s(survey, tmp_path, monkeypatch):
+    import gpr3d.migration.reconstruct as rec
+
+    calls = []
+    real = rec.volume_targets
+
+    def spy(*a, **kw):
+        calls.append(kw)
+        return real(*a, **kw)
+
+    monkeypatch.setattr(rec, "volume_targets", spy)
+    header = StreamHeader(n_samples=survey.n_samples, dt_s=DT, frequency_hz=800e6, offset_m=0.05, eps_r=EPS)
+    live = LiveReconstruction(header, _cfg(min_batch=1, refresh_s=3600.0, preview_max_peaks=37,
+                                           preview_angle_step_deg=1.5), tmp_path)
+    live.add(survey.data, np.c_[survey.positions_xyz, survey.orientations_quat_wxyz])
+    live.step(ended=True)
+    assert calls and all(kw == {"angle_step_deg": 1.5, "max_peaks": 37} for kw in calls)
+    calls.clear()
+    live.finish()
+    assert calls and all("max_peaks" not in kw and "angle_step_deg" not in kw for kw in calls)
+
+
 def _bag_of(survey, path, *, ros1=False, pose_span=None):
     """``survey`` as a bag: ``/gpr/traces`` one trace a message, 10 ms apart from t = 50 s, and ``/odometry``
     the poses at the same stamps (``pose_span``: only those of these traces)."""
