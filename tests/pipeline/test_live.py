@@ -1025,6 +1025,8 @@ def test_fusion_a_stream_cannot_give_is_named_in_one_line(tmp_path):
     with pytest.raises(GPR3DError, match=r"^tcp://127.0.0.1:1: IMU forces: median magnitude 1 is not in m/s\^2 "
                                          r"\(in g\? multiply by 9.80665\)$"):
         _one_poll(sensed, *imu_g, fuse={})
+    with pytest.raises(GPR3DError, match=r"missing.json"):  # (the rig read before connecting)
+        open_source("tcp://127.0.0.1:5600", fuse={"rig": tmp_path / "missing.json"})
     with pytest.raises(GPR3DError, match=r"^--imu-topic are for a ROS bag$"):
         open_source("tcp://127.0.0.1:5600", fuse={"imu_topic": "/imu"})
     with pytest.raises(GPR3DError, match=r"--fuse is for a ROS bag or a tcp:// stream carrying IMU samples"):

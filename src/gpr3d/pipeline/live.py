@@ -132,6 +132,10 @@ class TCPSource:
         self.decoder = StreamDecoder(where=self.where)
         self.sock = None
         self._t_start = None
+        if fuse is not None and fuse.get("rig") is not None and not isinstance(fuse["rig"], dict):
+            from gpr3d.io.inertial import read_rig
+
+            fuse = {**fuse, "rig": read_rig(fuse["rig"])}  # (read now: a wrong file is named before any work)
         self.fuse = fuse
         self.fused = None  #: the pose filter once the header has come (with ``fuse``)
         self._held = []  # (trace, when it came) waiting for the filter to pass their times
@@ -338,7 +342,8 @@ class _StreamFusion:
         from gpr3d.pose.eskf import EskfConfig
 
         self.where = where
-        self.cfg = EskfConfig(init_still_s=still_s, **(read_rig(rig) if rig else {}))
+        rig = rig if isinstance(rig, dict) else (read_rig(rig) if rig else {})  # (a path, or what it holds)
+        self.cfg = EskfConfig(init_still_s=still_s, **rig)
         self.rate_hz = header.imu_rate_hz
         self.sensors = header.sensors
         self.motions = CameraMotions()
