@@ -67,15 +67,21 @@ def main(argv=None):
                    help="share of the wall scans whose echoes ring (gpr3d.simulation.surveys.echo_ringing)")
     p.add_argument("--augment", action="store_true",
                    help="stretch the windows along the traces, change their gain and noise (gpr3d.detection.augment)")
+    p.add_argument("--stretch", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
+                   help="with --augment: the trace-axis stretch's range (default 0.7 1.4; the two radars' hyperbolas "
+                        "differ about 2.5x in width)")
     args = p.parse_args(argv)
     if not 0.0 <= args.wall <= 1.0 or not 0.0 <= args.real <= 1.0:
         p.error("--wall and --real are shares in 0..1")
+    if args.stretch and not args.augment:
+        p.error("--stretch is the range of --augment's stretch: give --augment too")
     zero_shot = args.real == 0  # no P-GPR label read: the zero-shot model of issue 29 item 5
     cfg = TrainConfig(out=args.out, init=args.init, kinds=list(CATEGORIES), steps=args.steps, batch=args.batch,
                       lr=args.lr, warmup=50, labels=None if zero_shot else str(Path(args.pgpr) / args.split), labels_fraction=args.real,
                       freeze=args.freeze, checkpoint_every=50, labels_pattern=args.only,
                       packed=args.packed or None, packed_fraction=args.packed_fraction,
-                      augment=args.augment or None, wall_fraction=args.wall, **PGPR)
+                      augment=({"stretch": tuple(args.stretch)} if args.stretch else True) if args.augment else None,
+                      wall_fraction=args.wall, **PGPR)
     wall = SurveySource(cfg.data_seed, profile="wall", ringing=args.wall_ringing) if args.wall else None
     res = train_detector(cfg, SurveySource(cfg.data_seed), wall_source=wall, progress=False,
                          max_seconds=args.max_seconds)
