@@ -52,9 +52,28 @@ def pace_at(due_s, *, batch_s: float = 0.01, clock=time.monotonic, sleep=time.sl
 
 
 def read_sensors(imu, odometry=None, wheel=None) -> dict:
-    """A cart's sensor records as a stream carries them (``"imu"``: ``(k, 7)`` ``t ax ay az gx gy gz``,
-    ``"odometry"``: ``(k, 8)`` ``t x y z qw qx qy qz``, ``"wheel"``: ``(k, 2)`` ``t distance``): the files
-    ``gpr3d pose fuse`` reads (IMU CSV, camera poses as TUM/EuRoC/CSV, wheel CSV)."""
+    """A cart's sensor records as a trace stream carries them (:func:`replay_to_tcp`'s ``sensors``).
+
+    Parameters
+    ----------
+    imu : str or Path
+        IMU samples (CSV: ``t, ax, ay, az, gx, gy, gz``; s, m/s^2, rad/s), as ``gpr3d pose fuse`` reads them.
+    odometry : str or Path, optional
+        The visual odometry's camera poses (TUM, EuRoC or CSV).
+    wheel : str or Path, optional
+        Survey wheel readings (CSV: ``t, distance``).
+
+    Returns
+    -------
+    dict
+        ``"imu"``: ``(k, 7)`` rows ``t ax ay az gx gy gz``; with ``odometry``, ``"odometry"``: ``(k, 8)`` rows
+        ``t x y z qw qx qy qz``; with ``wheel``, ``"wheel"``: ``(k, 2)`` rows ``t distance``.
+
+    Raises
+    ------
+    GPR3DError
+        A file that cannot be read as its kind, in one line naming it.
+    """
     from gpr3d.io.inertial import read_imu_csv, read_wheel_csv
     from gpr3d.io.trajectory import read_trajectory
 
