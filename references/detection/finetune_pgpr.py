@@ -75,6 +75,8 @@ def main(argv=None):
         p.error("--wall and --real are shares in 0..1")
     if args.stretch and not args.augment:
         p.error("--stretch is the range of --augment's stretch: give --augment too")
+    if args.stretch and not 0.25 <= args.stretch[0] <= args.stretch[1] <= 4.0:
+        p.error(f"--stretch must satisfy 0.25 <= LOW <= HIGH <= 4, got {args.stretch[0]:g} {args.stretch[1]:g}")
     zero_shot = args.real == 0  # no P-GPR label read: the zero-shot model of issue 29 item 5
     cfg = TrainConfig(out=args.out, init=args.init, kinds=list(CATEGORIES), steps=args.steps, batch=args.batch,
                       lr=args.lr, warmup=50, labels=None if zero_shot else str(Path(args.pgpr) / args.split), labels_fraction=args.real,

@@ -1172,8 +1172,9 @@ class LiveReconstruction:
             img, fold = self._assemble(grid, self.tiles)
             img, _ = normalise_by_fold(img, fold, self.rc.normalize, fold_max=self.fold_max)
             env = image_envelope(img, chunk_voxels=1_000_000)  # (slabs of 8 MB: reused, see keep_memory)
-            # the final extraction's settings but a coarser Hough angle step and fewer peaks: a fifth of the time,
-            # measured (benchmarks/bench_live.py), the same targets on the benchmark's survey
+            # the final extraction's settings but a coarser Hough angle step (a third of the time) and at most
+            # preview_max_peaks peaks (43 % less again), each measured on the benchmark's survey
+            # (benchmarks/bench_live.py) with the same targets at every refresh
             found = volume_targets(env, grid, self.rc, self.v, self.h.frequency_hz,
                                    angle_step_deg=self.cfg.preview_angle_step_deg,
                                    max_peaks=self.cfg.preview_max_peaks)
