@@ -84,6 +84,8 @@ def main(argv=None):
     p.add_argument("--name", default="detector_eval", help="the result files' name in --out (.md and .csv)")
     p.add_argument("--worst", type=int, default=0, help="draw the K records of the survey and gprmax_survey sets "
                    "with the lowest apex recall (first weights) into docs/figures/detections/worst_*.png")
+    p.add_argument("--mirror", action="store_true", help="test-time views: each record also with its traces "
+                   "reversed, the boxes fused (Detector.mirror)")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
     from gpr3d.detection.evaluate import evaluate_detector
@@ -96,6 +98,9 @@ def main(argv=None):
         det.refiner = None
         prov = det.provenance
         name = prov.get("name", Path(w).stem)
+        if args.mirror:
+            det.mirror = True
+            name += " (mirrored too)"
         if refiner:
             from gpr3d.detection.refine import load_refiner
 

@@ -132,7 +132,30 @@ def main(argv=None):
     p.add_argument("--worst", type=int, default=0, help="overlays of the K B-scans with the most missed labels "
                    "(first detector), into --figures")
     p.add_argument("--figures", default=str(ROOT / "docs" / "figures" / "pgpr"))
+    p.add_argument("--trace-scales", default="1", help="test-time views: the pictures also detected stretched along "
+                   "their traces by these factors (comma-separated, e.g. 0.5,1,2), the boxes fused")
+    p.add_argument("--mirror", action="store_true", help="test-time views: also each picture's traces reversed")
+    p.add_argument("--vote", action="store_true", help="a fused box's score: the views' scores summed over the views")
+    p.add_argument("--no-average", action="store_true", help="fused views keep the best box's corners (not the mean)")
+    p.add_argument("--reference-from", default=None, metavar="GLOB",
+                   help="with --trace-scales auto: the median trace width (gpr3d.detection.windows.trace_width) "
+                        "of P-GPR's train pictures named by GLOB (the detector's training pictures)")
     args = p.parse_args(argv)
+    try:
+        scales = tuple(v if v == "auto" else float(v) for v in args.trace_scales.split(","))
+        if not all(v == "auto" or 0.1 <= v <= 10 for v in scales):
+            raise ValueError
+    except ValueError:
+        p.error(f"--trace-scales must be numbers in 0.1..10 or auto, separated by commas, got {args.trace_scales!r}")
+    reference = None
+    if args.reference_from:
+        import numpy as np
+
+        from gpr3d.detection.windows import WindowConfig, prepare, trace_width
+
+        reference = float(np.median([trace_width(prepare(s, WindowConfig()))
+                                     for s, _ in pgpr_records(args.pgpr, "train", args.reference_from)]))
+        print(f"reference width {reference:.2f} traces (train {args.reference_from})", flush=True)
     recs = pgpr_records(args.pgpr, args.split, args.only)
     devices = {dev: [r for r in recs if Path(r[1]["image"]).name.startswith(dev + "_")] for dev in ("AIR", "IECAS")}
     devices = {d: v for d, v in devices.items() if v and len(v) < len(recs)}
@@ -147,6 +170,11 @@ def main(argv=None):
     for spec, refiner in [(d, r) for d in args.detectors for r in [None, *args.refiner]]:
         det, name = load(spec)
         det.refiner = None
+        det.trace_scales, det.mirror, det.fuse_average, det.vote = scales, args.mirror, not args.no_average, args.vote
+        det.reference_width = reference
+        if scales != (1.0,) or args.mirror:
+            name += f" (views: x{', x'.join(str(v) if v == 'auto' else f'{v:g}' for v in scales)}{', mirrored' if args.mirror else ''}" + \
+                (", best box" if args.no_average else "") + (", vote" if args.vote else "") + ")"
         if refiner:
             from gpr3d.detection.refine import load_refiner
 

@@ -206,8 +206,10 @@ def test_demo_end_to_end(tmp_path):
         assert (pg["image"], pg["n_labelled"]) == ("IECAS_0032.png", 9) and "detections_pgpr.png" in names
         assert 0 <= pg["right_kind"] <= pg["found_iou50"] <= 9 and sum(pg["kinds"].values()) == pg["n_detections"]
         # its boxes placed by the shipped refiner, beside the network's own (one image: either may fit better)
-        assert pg["refiner"] == "refiner_pgpr_synth" and set(pg["mean_iou"]) == {"refined", "network"}
+        assert pg["refiner"] == "refiner_pgpr_synth" and set(pg["mean_iou"]) == {"refined", "network", "mirrored"}
         assert all(0.3 < v <= 1 for v in pg["mean_iou"].values()) and pg["mean_iou"]["refined"] != pg["mean_iou"]["network"]
+        # and seen mirrored too: the two views' boxes fused move them
+        assert 0 <= pg["found_iou50_mirrored"] <= 9 and pg["mean_iou"]["mirrored"] != pg["mean_iou"]["refined"]
     pose = summary["stages"]["pose"]  # the fused path beats chained odometry that a gap and gross errors break
     assert {"pose_fused.tum", "pose_vo_alone.tum", "pose_truth.tum", "pose_paths.png"} <= names
     # where its time went: each of its stages, the library's inside them, adding up to its wall time

@@ -60,6 +60,10 @@ def test_detect_on_the_embedded_dzt_imports_neither_scipy_signal_nor_ndimage(tmp
     (["--score", "2"], "--score must lie in 0..1"),
     (["--weights", "{junk}"], "not a readable weights file"),
     (["--out", "{txt}"], "expected a .json file"),
+    (["--trace-scales", "0.2"], "--trace-scales must be different factors in 0.25..4 separated by commas"),
+    (["--trace-scales", "1,x"], "--trace-scales must be different factors in 0.25..4 separated by commas"),
+    (["--trace-scales", "1,1"], "--trace-scales must be different factors in 0.25..4 separated by commas"),
+    (["--trace-scales", "nan"], "--trace-scales must be different factors in 0.25..4 separated by commas"),
 ])
 def test_detect_bad_arguments_one_line(tmp_path, args, msg):
     from gpr3d.core.survey import Survey
@@ -74,6 +78,31 @@ def test_detect_bad_arguments_one_line(tmp_path, args, msg):
     r = run_cli(*base, *args)
     assert r.returncode == 1
     assert msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_detect_with_views_gives_what_the_library_gives(tmp_path):
+    from gpr3d.detection.infer import load_detector
+    from gpr3d.io.registry import read
+
+    src = real_file("gprpy_gssi_400MHz/FILE____032.DZT")
+    out = tmp_path / "det.json"
+    r = run_cli("detect", src, "--out", out, "--depth", "none", "--mirror", "--trace-scales", "1,2")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(out.read_text())
+    det = load_detector()
+    det.trace_scales, det.mirror = (1.0, 2.0), True
+    want = det.detect(read(src), score_threshold=0.5)
+    one = load_detector().detect(read(src), score_threshold=0.5)
+    # each view twice (mirrored): 1040 traces in 8 windows of 256 (half overlapping), x2 2079 traces in 16
+    assert one["n_windows"] == 8 and d["n_windows"] == want["n_windows"] == 2 * 8 + 2 * 16
+    assert d["views"] == {"trace_scales": [1.0, 2.0], "mirror": True}
+    assert one["views"] == {"trace_scales": [1.0], "mirror": False}
+    got = np.array([t["box"] for t in d["targets"]])
+    assert got.shape == (len(want["targets"]), 4)
+    assert np.allclose(got, [t["box"] for t in want["targets"]], rtol=1e-9, atol=0)
+    # the views moved the boxes: not what the record alone gives
+    plain = np.array([t["box"] for t in one["targets"]])
+    assert got.shape != plain.shape or not np.allclose(got, plain, rtol=1e-3, atol=0)
 
 
 def test_eval_detector_on_a_dataset_folder_matches_the_library(tmp_path):

@@ -245,3 +245,89 @@ def test_the_shipped_weights_load_into_a_detector_and_its_windows_give_float64_b
     assert all(torch.equal(sd[k], ref[k]) for k in ref)
     out = det.predict_windows([np.random.default_rng(0).random((3, window.rows, window.traces), dtype=np.float32)])
     assert len(out) == 1 and out[0][0].dtype == np.float64 and out[0][1].dtype == np.float64
+
+
+class _BrightNet(_Net):
+    """A box 6 image columns wide around the centre of each window's bright columns, rows 2..10;
+    the score says how many times the record was stretched (0.5 + factor / 10: which view it came from)."""
+
+    factor = 1.0
+
+    def __call__(self, batch):
+        out = []
+        for im in batch:
+            m = np.abs(im[0].numpy() - im[0, 0, 0].item()).max(axis=0)  # against the picture's zero
+            c = float(np.sum(np.arange(m.size) * m) / np.sum(m)) + 0.5  # the bright columns' centre, in pixels
+            out.append({"boxes": torch.tensor([[c - 3.0, 2.0, c + 3.0, 10.0]]),
+                        "scores": torch.tensor([0.5 + self.factor / 10]), "labels": torch.tensor([1])})
+        return out
+
+
+_PLAIN = WindowConfig(dewow=False, background=False, equalise=False)  # the one bright trace stays alone
+
+
+def _one_bright_trace(n=80, at=37):
+    data = np.zeros((n, 100), np.float32)
+    data[at, 40:46] = [1, -2, 3, -3, 2, -1]
+    return Survey(data=data, dt_s=1e-10, frequency_hz=1e9)
+
+
+@pytest.mark.parametrize("factor, mirror, half", [(1.0, False, 3.0), (2.0, False, 1.5), (3.0, False, 1.0),
+                                                  (1.0, True, 3.0), (2.0, True, 1.5), (0.5, False, 6.0)])
+def test_a_view_s_boxes_come_back_to_the_record_s_traces(factor, mirror, half):
+    net = _BrightNet()
+    net.factor = factor
+    det = infer.Detector(net, _PLAIN)
+    survey = _one_bright_trace()
+    boxes, scores, labels, shares, n_windows, proc = det._view(survey, None, factor, mirror)
+    # the bright trace 37 is seen at column 37 f (mirrored: (79 - 37) f), the box's 6 columns are 6 / f traces
+    assert n_windows == 1 and labels.tolist() == [1] and scores.tolist() == [pytest.approx(0.5 + factor / 10)]
+    s_per_row = (100 - 1) * 1e-10 / (256 - 1)
+    assert boxes[0] == pytest.approx([37 - half, 1.5 * s_per_row, 37 + half, 9.5 * s_per_row], abs=1e-9)
+    assert proc.shape == (80, 256)
+
+
+def test_the_views_are_fused_into_the_record_s_boxes():
+    class Net(_BrightNet):
+        def __call__(self, batch):  # the stretch read back from the bright trace's width: 1 column, or 3 at x2
+            m = np.abs(batch[0][0].numpy() - batch[0][0, 0, 0].item()).max(axis=0)
+            self.factor = 2.0 if np.sum(m > 0.01 * m.max()) == 3 else 1.0
+            return super().__call__(batch)
+
+    det = infer.Detector(Net(), _PLAIN)
+    det.trace_scales, det.mirror = (1.0, 2.0), True
+    survey = _one_bright_trace(n=120, at=37)
+    out = det.detect(survey, score_threshold=0.0)
+    (t,) = out["targets"]  # four views, one hyperbola: IoU of [34, 40] and [35.5, 38.5] is 0.5
+    assert out["n_windows"] == 4
+    # corners the score-weighted mean of the four views' (two at 0.6 ([34, 40]), two at 0.7 ([35.5, 38.5]))
+    # (the network's scores are float32: 0.6 and 0.7 to 3e-8)
+    assert t["box"][0] == pytest.approx((2 * 0.6 * 34 + 2 * 0.7 * 35.5) / 2.6, abs=1e-6)
+    assert t["box"][2] == pytest.approx((2 * 0.6 * 40 + 2 * 0.7 * 38.5) / 2.6, abs=1e-6)
+    assert t["score"] == pytest.approx(0.7)
+    det.fuse_average = False  # the best view's corners
+    assert det.detect(survey, score_threshold=0.0)["targets"][0]["box"][0::2] == pytest.approx([35.5, 38.5])
+    det.vote = True  # the score: the four views' summed over four
+    assert det.detect(survey, score_threshold=0.0)["targets"][0]["score"] == pytest.approx(0.65)
+
+
+def test_the_auto_trace_scale_stretches_a_record_to_the_training_records_width():
+    from gpr3d.detection.windows import prepare, trace_width
+
+    net = _BrightNet()
+    det = infer.Detector(net, _PLAIN)
+    survey = _one_bright_trace()
+    proc = prepare(survey, _PLAIN)
+    w = trace_width(proc)
+    det.reference_width = 2.0 * w
+    assert det.auto_scale(proc) == pytest.approx(2.0, rel=1e-12)
+    auto = det._view(survey, None, "auto", False)
+    two = det._view(survey, None, 2.0, False)
+    assert np.array_equal(auto[0], two[0]) and auto[4] == two[4] == 1
+    det.reference_width = 100 * w  # kept within 0.25..4
+    assert det.auto_scale(proc) == 4.0
+    det.reference_width = 0.01 * w
+    assert det.auto_scale(proc) == 0.25
+    det.trace_scales, det.reference_width = ("auto",), None
+    with pytest.raises(InvalidDataError, match="^trace scale 'auto' needs the width of the detector's training "):
+        det.detect(survey)

@@ -286,3 +286,67 @@ def test_a_cut_box_without_a_rate_takes_the_middle_of_its_earliest_arrivals():
         proc[i, row - 2: row + 3] = [0.5, 1.0, 0.0, -1.0, -0.5]
     tr, t = apex_of_box(proc, [0, 2.5e-9, 20, 11.5e-9], spr, frequency_hz=f)
     assert tr == 5.0 and t == pytest.approx(2.5e-9 + BOX_PAD_PERIODS / f, rel=1e-12, abs=0)
+
+
+def test_fuse_views_by_hand():
+    from gpr3d.detection.windows import fuse_views
+
+    dt = 1e-10  # time compared in samples: 1 ns is 10 samples
+    boxes = np.array([[10.0, 1e-9, 20.0, 3e-9],  # A, score 0.9
+                      [11.0, 1e-9, 21.0, 3e-9],  # A's twin (IoU 9/11)
+                      [15.0, 1e-9, 25.0, 3e-9],  # IoU 5/15 with A, 6/14 with the twin: a group of its own
+                      [10.0, 1.8e-9, 20.0, 3e-9],  # inside A, IoU 0.6: joins A
+                      [40.0, 5e-9, 44.0, 6e-9]])  # alone
+    scores = np.array([0.9, 0.6, 0.8, 0.3, 0.2])
+    keep, fused = fuse_views(boxes, scores, dt)
+    assert keep.tolist() == [0, 2, 4]
+    a = (0.9 * boxes[0] + 0.6 * boxes[1] + 0.3 * boxes[3]) / 1.8
+    assert np.allclose(fused, [a, boxes[2], boxes[4]], rtol=1e-12, atol=0)
+    keep, best = fuse_views(boxes, scores, dt, average=False)
+    assert keep.tolist() == [0, 2, 4] and np.array_equal(best, boxes[[0, 2, 4]])
+    keep, fused, votes = fuse_views(boxes, scores, dt, n_views=2)
+    assert votes == pytest.approx([0.9, 0.4, 0.1], rel=1e-12)  # (0.9 + 0.6 + 0.3) / 2, 0.8 / 2, 0.2 / 2
+    assert fuse_views(boxes, scores, dt, n_views=1)[2] == pytest.approx([1.0, 0.8, 0.2], rel=1e-12)  # 1.8 capped
+    # the IoU is taken with time in samples: the same boxes in seconds at another dt group alike
+    assert fuse_views(boxes * [1, 10, 1, 10], scores, 10 * dt)[0].tolist() == [0, 2, 4]
+    # nothing in, nothing out; a count mismatch named
+    k, b = fuse_views(np.zeros((0, 4)), np.zeros(0), dt)
+    assert k.shape == (0,) and b.shape == (0, 4)
+    with pytest.raises(InvalidDataError, match="^5 boxes but 4 scores$"):
+        fuse_views(boxes, scores[:4], dt)
+
+
+def _half_width_by_brute_force(x):
+    """The lag where the rows' summed autocorrelation (np.correlate, each row's mean removed) first falls to half."""
+    x = x - x.mean(axis=0, keepdims=True)
+    n = x.shape[0]
+    ac = sum(np.correlate(x[:, r], x[:, r], mode="full")[n - 1:] for r in range(x.shape[1]))
+    ac = ac / ac[0]
+    k = int(np.nonzero(ac < 0.5)[0][0])
+    return k - 1 + (ac[k - 1] - 0.5) / (ac[k - 1] - ac[k])
+
+
+@pytest.mark.parametrize("sigma", [2.0, 7.5, 15.0])
+def test_trace_width_is_the_half_width_of_the_autocorrelation(sigma):
+    from gpr3d.detection.windows import trace_width
+
+    rng = np.random.default_rng(1)
+    i = np.arange(300)
+    x = np.stack([np.exp(-(i - c) ** 2 / (2 * sigma**2)) * rng.choice([-1, 1]) for c in rng.uniform(40, 260, 48)], 1)
+    w = trace_width(x.astype(np.float32))
+    assert w == pytest.approx(_half_width_by_brute_force(x), rel=1e-5)
+    # a Gaussian's autocorrelation is a Gaussian sqrt(2) wider: half at 2 sigma sqrt(ln 2) (the means removed
+    # shorten it a little)
+    assert 0.85 * 2 * sigma * np.sqrt(np.log(2)) < w <= 1.01 * 2 * sigma * np.sqrt(np.log(2))
+    # the same features stretched twice as wide along the traces: twice the width
+    wide = np.stack([np.exp(-(np.arange(600) - 2 * c) ** 2 / (2 * (2 * sigma) ** 2)) for c in rng.uniform(40, 260, 48)], 1)
+    assert trace_width(wide) == pytest.approx(2 * trace_width(wide[::2]), rel=0.05)
+
+
+def test_trace_width_of_records_without_a_decaying_width():
+    from gpr3d.detection.windows import trace_width
+
+    assert trace_width(np.ones((50, 8))) == 50.0  # nothing varies along the traces
+    assert trace_width(np.zeros((50, 8))) == 50.0
+    with pytest.raises(InvalidDataError, match=r"^a record of shape \(1, 8\) has no width along its traces$"):
+        trace_width(np.ones((1, 8)))

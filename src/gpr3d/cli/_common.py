@@ -113,7 +113,24 @@ def _detector(args):
 
     if not 0.0 <= args.score <= 1.0:
         raise GPR3DError(f"--score must lie in 0..1, got {args.score}")
-    return load_detector(args.weights, device=args.device, engine=args.runtime, refiner=args.refiner)
+    scales = _trace_scales(getattr(args, "trace_scales", None))
+    det = load_detector(args.weights, device=args.device, engine=args.runtime, refiner=args.refiner)
+    det.trace_scales, det.mirror = scales, bool(getattr(args, "mirror", False))
+    return det
+
+
+def _trace_scales(text) -> tuple:
+    """``--trace-scales``: factors in 0.25..4 separated by commas (None: ``(1.0,)``, the record as it is)."""
+    if text is None:
+        return (1.0,)
+    try:
+        scales = tuple(float(v) for v in str(text).split(","))
+    except ValueError:
+        scales = ()
+    if not scales or not all(math.isfinite(v) and 0.25 <= v <= 4.0 for v in scales) or len(set(scales)) < len(scales):
+        raise GPR3DError(f"--trace-scales must be different factors in 0.25..4 separated by commas (e.g. 1,2), "
+                         f"got {text!r}")
+    return scales
 
 
 def _check_radius(args, method: str) -> None:
@@ -171,6 +188,16 @@ def add_detector_args(sp):
     sp.add_argument("--runtime", default="auto", choices=("auto", "torch", "onnx"),
                     help="auto (default: ONNX Runtime for the shipped model on the CPU, else PyTorch), "
                          "torch, or onnx (an .onnx export; no PyTorch import, faster start)")
+
+
+def add_view_args(sp):
+    sp.add_argument("--mirror", action="store_true",
+                    help="also detect each record with its traces reversed and fuse the boxes (twice the network's "
+                         "time; on P-GPR's real B-scans +0.015 mAP@0.5)")
+    sp.add_argument("--trace-scales", default=None, metavar="F,F",
+                    help="also detect each record stretched along its traces by these factors (e.g. 0.5,1,2: "
+                         "hyperbolas narrower or wider than the training data's, another radar's trace interval) "
+                         "and fuse the boxes")
 
 
 def add_depth_args(sp, flag):

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from gpr3d.cli._common import _check_radius, _check_suffix, _detector, add_depth_args, add_detector_args, add_input
+from gpr3d.cli._common import (_check_radius, _check_suffix, _detector, add_depth_args, add_detector_args, add_input,
+                               add_view_args)
 from gpr3d.core.errors import GPR3DError
 from gpr3d.pipeline import add_depths, load_models, read_targets
 
@@ -17,6 +18,7 @@ def add_arguments(sp):
     sp.add_argument("--boxes", default=None, help="detections (gpr3d detect output) instead of running the detector")
     sp.add_argument("--out", default=None, help="also write the detections with depths as JSON")
     add_detector_args(sp)
+    add_view_args(sp)
     add_depth_args(sp, "--method")
 
 

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gpr3d.cli._common import _check_radius, _check_suffix, _detector, add_depth_args, add_detector_args
+from gpr3d.cli._common import (_check_radius, _check_suffix, _detector, add_depth_args, add_detector_args,
+                               add_view_args)
 from gpr3d.core.errors import GPR3DError
 from gpr3d.core.timing import stage
 from gpr3d.pipeline import add_depths, load_models
@@ -30,6 +31,7 @@ def add_arguments(sp):
     sp.add_argument("--out", required=True, help="JSON file to write")
     sp.add_argument("--overlay", default=None, help="PNG of the B-scan with the boxes drawn (first channel)")
     add_detector_args(sp)
+    add_view_args(sp)
     add_depth_args(sp, "--depth")
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gpr3d.cli._common import _detector, _read_labels, add_detector_args, add_label_args
+from gpr3d.cli._common import _detector, _read_labels, add_detector_args, add_label_args, add_view_args
 from gpr3d.core.errors import GPR3DError
 
 
@@ -60,6 +60,7 @@ def add_arguments(sp):
                     help="the split of a YOLO data.yaml to evaluate on (default val)")
     add_label_args(sp)
     add_detector_args(sp)
+    add_view_args(sp)
 
 
 def run(args):

@@ -16,7 +16,9 @@ import numpy as np
 from gpr3d.core.deps import require
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.timing import stage
-from gpr3d.detection.windows import WindowConfig, apex_of_box, merge, prepare, rows_interval, width_rate, windows
+from gpr3d.detection.windows import (WindowConfig, apex_of_box, fuse_views, merge, prepare, rows_interval, trace_width,
+                                     width_rate, windows)
+from gpr3d.processing.analytic import running_mean
 
 __all__ = ["Detector", "load_detector", "ENGINES"]
 
@@ -88,6 +90,16 @@ class Detector:
     nms = None  #: None: torchvision's non-maximum suppression when merging windows
     #: a :class:`~gpr3d.detection.refine.BoxRefiner` that moves the merged boxes onto a label rule (None: the network's)
     refiner = None
+    #: test-time views: the record is also detected stretched along its traces by each of these factors (old
+    #: trace ``i`` at column ``i * factor``: 2 shows a hyperbola twice as wide), and with ``mirror`` its traces
+    #: reversed too; all views' boxes are mapped back to the record and fused. ``(1.0,)`` and no mirror: one view
+    trace_scales: tuple = (1.0,)
+    mirror = False
+    vote = False  #: a fused box's score: its group's scores summed over the views (at most 1); else the best's
+    #: how many traces wide the training records' features were (:func:`~gpr3d.detection.windows.trace_width`,
+    #: their median): what a trace scale of ``"auto"`` stretches each record to; None: unknown
+    reference_width = None
+    fuse_average = True  #: the fused views' boxes: the score-weighted mean of each group's corners (else the best's)
 
     def __init__(self, model, window: WindowConfig, *, provenance: dict | None = None, device: str = "cpu",
                  batch: int = 8):
@@ -130,19 +142,77 @@ class Detector:
                                      r["kind_scores"].cpu().numpy() if "kind_scores" in r else None))
         return out
 
+    def _view(self, survey, proc: np.ndarray | None, factor: float, mirror: bool):
+        """One view's merged boxes in the record's traces and seconds, their scores, labels and kind shares, its
+        window count and the processed record (``proc``, made here where None): that record stretched along its
+        traces by ``factor`` (old trace ``i`` at ``i * factor``) and, with ``mirror``, its traces reversed."""
+        from gpr3d.detection.augment import stretch_traces
+
+        with stage("windows"):
+            if proc is None:
+                proc = prepare(survey, self.window)
+            n = proc.shape[0]
+            if factor == "auto":
+                factor = self.auto_scale(proc)
+            view = proc[::-1] if mirror else proc
+            if factor < 1.0:  # squeezed: each column the mean of the traces it stands for (no aliasing), centred
+                view = running_mean(view, int(round(1.0 / factor)) | 1, axis=0)
+            if factor != 1.0:
+                view = stretch_traces(view, factor)
+            wins = windows(survey, self.window, processed=np.ascontiguousarray(view) if mirror else view)
+        with stage("network"):
+            raw = self.predict_windows_kinds([w.image for w in wins])
+        with stage("merge"):
+            boxes, scores, index = merge([(w, b, s) for w, (b, s, _, _) in zip(wins, raw)], view.shape[0],
+                                         survey.dt_s, nms=self.nms, return_index=True)
+        labels = np.concatenate([r[2] for r in raw])[index] if raw else np.zeros(0, np.int64)
+        shares = np.concatenate([r[3] for r in raw])[index] if raw else np.zeros(0)
+        boxes = np.asarray(boxes, float).reshape(-1, 4).copy()
+        boxes[:, [0, 2]] /= factor
+        if mirror:
+            boxes[:, [0, 2]] = (n - 1.0) - boxes[:, [2, 0]]
+        return boxes, np.asarray(scores, float), labels, shares, len(wins), proc
+
+    def auto_scale(self, proc: np.ndarray) -> float:
+        """The stretch that makes a processed record's features as wide as the training records' were:
+        ``reference_width / trace_width(proc)``, kept within 0.25..4."""
+        return float(np.clip(self.reference_width / trace_width(proc), 0.25, 4.0))
+
+    def _views(self, survey):
+        """The record seen as it is and, where ``trace_scales``/``mirror`` ask, stretched along its traces and
+        mirrored; the views' boxes in one set, overlapping ones (IoU >= 0.5, time in samples) merged into the
+        best-scored one, whose corners become the score-weighted mean of the group's (see ``trace_scales``)."""
+        if "auto" in self.trace_scales and not self.reference_width:
+            raise InvalidDataError("trace scale 'auto' needs the width of the detector's training records "
+                                   "(Detector.reference_width, traces); this detector has none")
+        views = [(f if f == "auto" else float(f), m) for f in self.trace_scales
+                 for m in ((False, True) if self.mirror else (False,))]
+        parts, proc = [], None
+        for f, m in views:
+            parts.append(self._view(survey, proc, f, m))
+            proc = parts[-1][5]
+        n_windows = sum(p[4] for p in parts)
+        if len(parts) == 1:
+            return (proc, *parts[0][:4], n_windows)
+        with stage("merge"):
+            boxes = np.concatenate([p[0] for p in parts])
+            scores = np.concatenate([p[1] for p in parts])
+            labels = np.concatenate([p[2] for p in parts]).astype(np.int64)
+            shares = np.concatenate([np.asarray(p[3], float) for p in parts])
+            if self.vote:
+                keep, fused, fscores = fuse_views(boxes, scores, survey.dt_s, average=self.fuse_average,
+                                                  n_views=len(parts))
+            else:
+                keep, fused = fuse_views(boxes, scores, survey.dt_s, average=self.fuse_average)
+                fscores = scores[keep]
+        return proc, fused, fscores, labels[keep], shares[keep], n_windows
+
     def detect(self, survey, *, score_threshold: float = 0.5, input_name: str | None = None) -> dict:
         """Detections of one record as the ``gpr3d detect`` contract (CONVENTIONS.md)."""
         if not 0.0 <= score_threshold <= 1.0:
             raise InvalidDataError(f"score threshold must lie in 0..1, got {score_threshold!r}")
         t0 = time.perf_counter()
-        with stage("windows"):
-            proc = prepare(survey, self.window)
-            wins = windows(survey, self.window, processed=proc)
-        with stage("network"):
-            raw = self.predict_windows_kinds([w.image for w in wins])
-        with stage("merge"):
-            boxes, scores, index = merge([(w, b, s) for w, (b, s, _, _) in zip(wins, raw)], survey.n_traces,
-                                         survey.dt_s, nms=self.nms, return_index=True)
+        proc, boxes, scores, labels, shares, n_windows = self._views(survey)
         if self.refiner is not None and len(boxes):
             with stage("refine"):
                 from gpr3d.detection.refine import record_image
@@ -150,8 +220,6 @@ class Detector:
                 boxes = self.refiner.refine(survey, self.window.rows, boxes, record_image(proc, self.window.style))
         with stage("apexes"):
             kinds = self.kinds
-            labels = np.concatenate([r[2] for r in raw])[index] if raw else np.zeros(0, np.int64)
-            shares = np.concatenate([r[3] for r in raw])[index] if raw else np.zeros(0)
             s_per_row = rows_interval(survey, self.window)
             # apexes from data whose rows keep the pulse's shape (equalising the rows distorts it)
             plain = prepare(survey, replace(self.window, equalise=False)) if self.window.equalise else proc
@@ -176,8 +244,10 @@ class Detector:
                     t["x_m"] = float(np.interp(at, np.arange(survey.n_traces), survey.distances_m))
                 targets.append(t)
         return {"input": input_name or survey.metadata.get("path"), "channel": survey.metadata.get("channel", 0),
-                "n_traces": survey.n_traces, "dt_s": survey.dt_s, "n_windows": len(wins),
+                "n_traces": survey.n_traces, "dt_s": survey.dt_s, "n_windows": n_windows,
                 "detector": self.provenance.get("name", "gpr3d detector"),
                 "refiner": None if self.refiner is None else self.refiner.provenance.get("name", "gpr3d box refiner"),
+                "views": {"trace_scales": [f if f == "auto" else float(f) for f in self.trace_scales],
+                          "mirror": bool(self.mirror)},
                 "score_threshold": score_threshold,
                 "wall_s": time.perf_counter() - t0, "targets": targets}

@@ -26,7 +26,7 @@ from gpr3d.processing.image import network_view, record_scale, render_channels a
 
 __all__ = ["WindowConfig", "Window", "prepare", "windows", "make_window", "record_scale", "rows_interval", "render",
            "width_rate",
-           "merge", "apex_of_box", "window_targets"]
+           "merge", "fuse_views", "trace_width", "apex_of_box", "window_targets"]
 
 
 @dataclass
@@ -190,6 +190,70 @@ def merge(per_window: list[tuple[Window, np.ndarray, np.ndarray]], n_traces: int
     if return_index:
         return boxes_a[keep], np.asarray(scores)[keep], keep
     return boxes_a[keep], np.asarray(scores)[keep]
+
+
+def trace_width(processed: np.ndarray) -> float:
+    """How many traces wide a record's features are: the lag (traces, linearly interpolated) where the
+    autocorrelation along the traces, summed over the rows, first falls to half its value at lag 0.
+
+    ``processed`` is ``(n_traces, rows)`` (:func:`prepare`'s view); each row's mean is removed first. A radar with a
+    denser trace interval shows the same hyperbolas wider: its width is larger (P-GPR's two radars: a median of
+    about 23 and 11 traces). A record with no lateral variation, or none that decays, gives ``n_traces``.
+    """
+    x = np.asarray(processed, dtype=np.float64)
+    if x.ndim != 2 or x.shape[0] < 2:
+        raise InvalidDataError(f"a record of shape {x.shape} has no width along its traces")
+    x = x - x.mean(axis=0, keepdims=True)
+    n = x.shape[0]
+    spec = np.fft.rfft(x, n=2 * n, axis=0)
+    ac = np.fft.irfft((spec * spec.conj()).real, n=2 * n, axis=0)[:n].sum(axis=1)
+    if not ac[0] > 0:
+        return float(n)
+    ac = ac / ac[0]
+    below = np.nonzero(ac < 0.5)[0]
+    if not below.size:
+        return float(n)
+    k = int(below[0])
+    return float(k - 1 + (ac[k - 1] - 0.5) / (ac[k - 1] - ac[k]))
+
+
+def fuse_views(boxes, scores, dt_s: float, *, iou: float = 0.5, average: bool = True, n_views: int | None = None):
+    """Boxes of several views of one record (``(k, 4)`` in traces and seconds) fused: ``(kept indices, boxes)``,
+    and with ``n_views`` a third item, the fused scores: each group's scores summed over ``n_views`` (at most 1),
+    so that a box the views agree on ranks above one that a single view saw.
+
+    In order of score, each box not yet taken gathers every untaken box that overlaps it by ``iou`` or more (time
+    in samples, as :func:`merge`); it is kept with the group's corners averaged, weighted by score (``average``;
+    otherwise its own), and the rest of the group is dropped. The kept indices carry scores, kinds and the like.
+    """
+    b = np.asarray(boxes, float).reshape(-1, 4)
+    s = np.asarray(scores, float).reshape(-1)
+    if len(b) != len(s):
+        raise InvalidDataError(f"{len(b)} boxes but {len(s)} scores")
+    if not len(b):
+        return (np.zeros(0, np.int64), np.zeros((0, 4))) + ((np.zeros(0),) if n_views else ())
+    sc = b.copy()
+    sc[:, [1, 3]] /= dt_s
+    area = np.maximum(sc[:, 2] - sc[:, 0], 0) * np.maximum(sc[:, 3] - sc[:, 1], 0)
+    free = np.ones(len(b), bool)
+    keep, out, fs = [], [], []
+    for i in np.argsort(-s, kind="stable"):
+        if not free[i]:
+            continue
+        w = np.maximum(np.minimum(sc[i, 2], sc[:, 2]) - np.maximum(sc[i, 0], sc[:, 0]), 0)
+        h = np.maximum(np.minimum(sc[i, 3], sc[:, 3]) - np.maximum(sc[i, 1], sc[:, 1]), 0)
+        inter = w * h
+        union = area[i] + area - inter
+        ov = np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+        group = free & (ov >= iou)
+        group[i] = True
+        free &= ~group
+        keep.append(i)
+        wt = s[group] if average and s[group].sum() > 0 else None
+        out.append(np.average(b[group], axis=0, weights=wt) if average else b[i])
+        fs.append(min(1.0, float(s[group].sum()) / n_views) if n_views else s[i])
+    res = np.asarray(keep, np.int64), np.asarray(out, float).reshape(-1, 4)
+    return res + ((np.asarray(fs, float),) if n_views else ())
 
 
 def width_rate(boxes, n_traces: int, t_end_s: float, frequency_hz: float | None) -> float | None:
