@@ -91,6 +91,17 @@ def main(argv=None):
         print(f"step {res['steps']} of {cfg.steps}; run the same line again to continue")
         return 0
     weights = Path(args.out) / "weights.pt"
+    width = None  # how wide the real training pictures' features are: what --trace-scales auto stretches records to
+    if not zero_shot:
+        import numpy as np
+
+        from gpr3d.detection.windows import prepare, trace_width
+        from gpr3d.io.yolo import read_yolo
+
+        width = float(np.median([trace_width(prepare(s, cfg.window)) for s, _ in
+                                 read_yolo(Path(args.pgpr) / args.split, pattern=args.only, names=PGPR["labels_names"],
+                                           kinds=PGPR["labels_kinds"], pixel_map=PGPR["pixel_map"],
+                                           frequency_hz=PGPR["labels_frequency_hz"])]))
     save_weights(res["model"], cfg.model, cfg.window, weights, kinds=res["kinds"],
                  provenance={"name": cfg.model, "command": "python " + " ".join(sys.argv), "config": asdict(cfg),
                              "train_wall_s": res["wall_s"], "device": "cpu",
@@ -103,7 +114,7 @@ def main(argv=None):
                                         + (f", {args.wall_ringing:.0%} of those ringing" if args.wall_ringing else "")
                                         + ")" if args.wall else "")
                                      + (f"; augmented {cfg.augment}" if cfg.augment else ""),
-                             "steps_done": res["steps"]})
+                             "steps_done": res["steps"], **({"trace_width": width} if width else {})})
     print(json.dumps({"weights": str(weights), "steps": res["steps"], "wall_s": res["wall_s"]}))
     return 0
 

@@ -60,10 +60,11 @@ def test_detect_on_the_embedded_dzt_imports_neither_scipy_signal_nor_ndimage(tmp
     (["--score", "2"], "--score must lie in 0..1"),
     (["--weights", "{junk}"], "not a readable weights file"),
     (["--out", "{txt}"], "expected a .json file"),
-    (["--trace-scales", "0.2"], "--trace-scales must be different factors in 0.25..4 separated by commas"),
-    (["--trace-scales", "1,x"], "--trace-scales must be different factors in 0.25..4 separated by commas"),
-    (["--trace-scales", "1,1"], "--trace-scales must be different factors in 0.25..4 separated by commas"),
-    (["--trace-scales", "nan"], "--trace-scales must be different factors in 0.25..4 separated by commas"),
+    (["--trace-scales", "0.2"], "--trace-scales must be different factors in 0.25..4 or auto, separated by commas"),
+    (["--trace-scales", "1,x"], "--trace-scales must be different factors in 0.25..4 or auto, separated by commas"),
+    (["--trace-scales", "1,1"], "--trace-scales must be different factors in 0.25..4 or auto, separated by commas"),
+    (["--trace-scales", "1,auto"], "--trace-scales auto needs a detector that knows how wide its training"),
+    (["--trace-scales", "nan"], "--trace-scales must be different factors in 0.25..4 or auto, separated by commas"),
 ])
 def test_detect_bad_arguments_one_line(tmp_path, args, msg):
     from gpr3d.core.survey import Survey

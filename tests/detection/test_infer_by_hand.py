@@ -328,6 +328,9 @@ def test_the_auto_trace_scale_stretches_a_record_to_the_training_records_width()
     assert det.auto_scale(proc) == 4.0
     det.reference_width = 0.01 * w
     assert det.auto_scale(proc) == 0.25
+    # the width comes with weights that recorded it (finetune_pgpr.py), none otherwise
+    assert infer.Detector(net, _PLAIN, provenance={"trace_width": 12.5}).reference_width == 12.5
+    assert infer.Detector(net, _PLAIN, provenance={"name": "x"}).reference_width is None
     det.trace_scales, det.reference_width = ("auto",), None
     with pytest.raises(InvalidDataError, match="^trace scale 'auto' needs the width of the detector's training "):
         det.detect(survey)

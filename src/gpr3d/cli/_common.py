@@ -115,6 +115,9 @@ def _detector(args):
         raise GPR3DError(f"--score must lie in 0..1, got {args.score}")
     scales = _trace_scales(getattr(args, "trace_scales", None))
     det = load_detector(args.weights, device=args.device, engine=args.runtime, refiner=args.refiner)
+    if "auto" in scales and not det.reference_width:
+        raise GPR3DError("--trace-scales auto needs a detector that knows how wide its training records' features "
+                         "were (weights fine-tuned by references/detection/finetune_pgpr.py); these weights do not")
     det.trace_scales, det.mirror = scales, bool(getattr(args, "mirror", False))
     return det
 
@@ -124,12 +127,13 @@ def _trace_scales(text) -> tuple:
     if text is None:
         return (1.0,)
     try:
-        scales = tuple(float(v) for v in str(text).split(","))
+        scales = tuple(v if v == "auto" else float(v) for v in str(text).split(","))
     except ValueError:
         scales = ()
-    if not scales or not all(math.isfinite(v) and 0.25 <= v <= 4.0 for v in scales) or len(set(scales)) < len(scales):
-        raise GPR3DError(f"--trace-scales must be different factors in 0.25..4 separated by commas (e.g. 1,2), "
-                         f"got {text!r}")
+    if not scales or not all(v == "auto" or (math.isfinite(v) and 0.25 <= v <= 4.0) for v in scales) \
+            or len(set(scales)) < len(scales):
+        raise GPR3DError(f"--trace-scales must be different factors in 0.25..4 or auto, separated by commas (e.g. "
+                         f"1,2 or 1,auto), got {text!r}")
     return scales
 
 
@@ -197,7 +201,8 @@ def add_view_args(sp):
     sp.add_argument("--trace-scales", default=None, metavar="F,F",
                     help="also detect each record stretched along its traces by these factors (e.g. 0.5,1,2: "
                          "hyperbolas narrower or wider than the training data's, another radar's trace interval) "
-                         "and fuse the boxes")
+                         "and fuse the boxes; auto: as wide as the training pictures' features (weights that "
+                         "record it)")
 
 
 def add_depth_args(sp, flag):

@@ -104,6 +104,7 @@ class Detector:
     def __init__(self, model, window: WindowConfig, *, provenance: dict | None = None, device: str = "cpu",
                  batch: int = 8):
         self.model, self.window, self.provenance, self.device, self.batch = model, window, provenance or {}, device, batch
+        self.reference_width = self.provenance.get("trace_width")  # a fine-tune's real pictures (finetune_pgpr.py)
 
     @classmethod
     def load(cls, path=None, *, device: str = "cpu") -> "Detector":
