@@ -258,8 +258,9 @@ class _BrightNet(_Net):
         for im in batch:
             m = np.abs(im[0].numpy() - im[0, 0, 0].item()).max(axis=0)  # against the picture's zero
             c = float(np.sum(np.arange(m.size) * m) / np.sum(m)) + 0.5  # the bright columns' centre, in pixels
+            left = 0.01 if c < 60 else 0.0  # the bright trace in the left part: only the unmirrored x1 view
             out.append({"boxes": torch.tensor([[c - 3.0, 2.0, c + 3.0, 10.0]]),
-                        "scores": torch.tensor([0.5 + self.factor / 10]), "labels": torch.tensor([1])})
+                        "scores": torch.tensor([0.5 + self.factor / 10 + left]), "labels": torch.tensor([1])})
         return out
 
 
@@ -281,7 +282,8 @@ def test_a_view_s_boxes_come_back_to_the_record_s_traces(factor, mirror, half):
     survey = _one_bright_trace()
     boxes, scores, labels, shares, n_windows, proc = det._view(survey, None, factor, mirror)
     # the bright trace 37 is seen at column 37 f (mirrored: (79 - 37) f), the box's 6 columns are 6 / f traces
-    assert n_windows == 1 and labels.tolist() == [1] and scores.tolist() == [pytest.approx(0.5 + factor / 10)]
+    left = 0.01 if (42 if mirror else 37) * factor < 60 else 0.0  # where the fake network saw the bright trace
+    assert n_windows == 1 and labels.tolist() == [1] and scores.tolist() == [pytest.approx(0.5 + factor / 10 + left)]
     s_per_row = (100 - 1) * 1e-10 / (256 - 1)
     assert boxes[0] == pytest.approx([37 - half, 1.5 * s_per_row, 37 + half, 9.5 * s_per_row], abs=1e-9)
     assert proc.shape == (80, 256)
@@ -300,15 +302,20 @@ def test_the_views_are_fused_into_the_record_s_boxes():
     out = det.detect(survey, score_threshold=0.0)
     (t,) = out["targets"]  # four views, one hyperbola: IoU of [34, 40] and [35.5, 38.5] is 0.5
     assert out["n_windows"] == 4
-    # corners the score-weighted mean of the four views' (two at 0.6 ([34, 40]), two at 0.7 ([35.5, 38.5]))
-    # (the network's scores are float32: 0.6 and 0.7 to 3e-8)
-    assert t["box"][0] == pytest.approx((2 * 0.6 * 34 + 2 * 0.7 * 35.5) / 2.6, abs=1e-6)
-    assert t["box"][2] == pytest.approx((2 * 0.6 * 40 + 2 * 0.7 * 38.5) / 2.6, abs=1e-6)
+    # corners the score-weighted mean of the four views': x1 at 0.61 (unmirrored) and 0.6 (mirrored) ([34, 40]),
+    # x2 both at 0.7 ([35.5, 38.5]) (the network's scores are float32: to 3e-8)
+    assert t["box"][0] == pytest.approx((1.21 * 34 + 2 * 0.7 * 35.5) / 2.61, abs=1e-6)
+    assert t["box"][2] == pytest.approx((1.21 * 40 + 2 * 0.7 * 38.5) / 2.61, abs=1e-6)
     assert t["score"] == pytest.approx(0.7)
+    assert out["views"] == {"trace_scales": [1.0, 2.0], "mirror": True}
     det.fuse_average = False  # the best view's corners
     assert det.detect(survey, score_threshold=0.0)["targets"][0]["box"][0::2] == pytest.approx([35.5, 38.5])
     det.vote = True  # the score: the four views' summed over four
-    assert det.detect(survey, score_threshold=0.0)["targets"][0]["score"] == pytest.approx(0.65)
+    assert det.detect(survey, score_threshold=0.0)["targets"][0]["score"] == pytest.approx(2.61 / 4)
+    det.mirror, det.vote, det.fuse_average = False, False, True  # two views, unmirrored: x1's box scores 0.61
+    out = det.detect(survey, score_threshold=0.0)
+    assert out["n_windows"] == 2 and out["views"] == {"trace_scales": [1.0, 2.0], "mirror": False}
+    assert out["targets"][0]["box"][0] == pytest.approx((0.61 * 34 + 0.7 * 35.5) / 1.31, abs=1e-6)
 
 
 def test_the_auto_trace_scale_stretches_a_record_to_the_training_records_width():
@@ -324,6 +331,10 @@ def test_the_auto_trace_scale_stretches_a_record_to_the_training_records_width()
     auto = det._view(survey, None, "auto", False)
     two = det._view(survey, None, 2.0, False)
     assert np.array_equal(auto[0], two[0]) and auto[4] == two[4] == 1
+    det.trace_scales = ("auto",)  # through detect: the view named as asked, the boxes the x2 view's
+    out = det.detect(survey, score_threshold=0.0)
+    assert out["views"] == {"trace_scales": ["auto"], "mirror": False}
+    assert out["targets"][0]["box"] == pytest.approx(two[0][0].tolist(), abs=1e-12)
     det.reference_width = 100 * w  # kept within 0.25..4
     assert det.auto_scale(proc) == 4.0
     det.reference_width = 0.01 * w

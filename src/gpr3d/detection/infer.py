@@ -160,7 +160,7 @@ class Detector:
                 view = running_mean(view, int(round(1.0 / factor)) | 1, axis=0)
             if factor != 1.0:
                 view = stretch_traces(view, factor)
-            wins = windows(survey, self.window, processed=np.ascontiguousarray(view) if mirror else view)
+            wins = windows(survey, self.window, processed=np.ascontiguousarray(view))
         with stage("network"):
             raw = self.predict_windows_kinds([w.image for w in wins])
         with stage("merge"):
