@@ -95,10 +95,11 @@ def main(argv=None):
     if not zero_shot:
         import numpy as np
 
-        from gpr3d.detection.windows import prepare, trace_width
+        from gpr3d.detection.windows import WindowConfig, prepare, trace_width
         from gpr3d.io.yolo import read_yolo
 
-        width = float(np.median([trace_width(prepare(s, cfg.window)) for s, _ in
+        window = WindowConfig(**cfg.window)  # (the config holds the window's settings as a dict)
+        width = float(np.median([trace_width(prepare(s, window)) for s, _ in
                                  read_yolo(Path(args.pgpr) / args.split, pattern=args.only, names=PGPR["labels_names"],
                                            kinds=PGPR["labels_kinds"], pixel_map=PGPR["pixel_map"],
                                            frequency_hz=PGPR["labels_frequency_hz"])]))
