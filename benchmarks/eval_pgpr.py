@@ -143,10 +143,10 @@ def main(argv=None):
     args = p.parse_args(argv)
     try:
         scales = tuple(v if v == "auto" else float(v) for v in args.trace_scales.split(","))
-        if not all(v == "auto" or 0.1 <= v <= 10 for v in scales):
+        if not all(v == "auto" or 0.25 <= v <= 4 for v in scales):
             raise ValueError
     except ValueError:
-        p.error(f"--trace-scales must be numbers in 0.1..10 or auto, separated by commas, got {args.trace_scales!r}")
+        p.error(f"--trace-scales must be numbers in 0.25..4 or auto, separated by commas, got {args.trace_scales!r}")
     reference = None
     if args.reference_from:
         import numpy as np
@@ -171,7 +171,11 @@ def main(argv=None):
         det, name = load(spec)
         det.refiner = None
         det.trace_scales, det.mirror, det.fuse_average, det.vote = scales, args.mirror, not args.no_average, args.vote
-        det.reference_width = reference
+        if reference is not None:  # else what the weights recorded (finetune_pgpr.py), if they did
+            det.reference_width = reference
+        if "auto" in scales and not det.reference_width:
+            p.error(f"--trace-scales auto: {spec} records no trace width; give --reference-from GLOB (the pictures "
+                    "it was trained on)")
         if scales != (1.0,) or args.mirror:
             name += f" (views: x{', x'.join(str(v) if v == 'auto' else f'{v:g}' for v in scales)}{', mirrored' if args.mirror else ''}" + \
                 (", best box" if args.no_average else "") + (", vote" if args.vote else "") + ")"

@@ -470,9 +470,13 @@ def _pgpr_rows(det, out: Path, log) -> dict:
     truth = labels["labels"]
     # one to one, best score first: a label is found by a box at IoU >= 0.5, of the right kind or not
     px = np.array([1.0, 1 / survey.dt_s, 1.0, 1 / survey.dt_s])  # traces and samples
-    hits = box_matches([np.asarray(lab["box"]) * px for lab in truth], [lab["kind"] for lab in truth],
-                       [np.asarray(tg["box"]) * px for tg in res["targets"]], [tg["kind"] for tg in res["targets"]],
-                       [tg["score"] for tg in res["targets"]])
+
+    def matches(found):
+        return box_matches([np.asarray(lab["box"]) * px for lab in truth], [lab["kind"] for lab in truth],
+                           [np.asarray(tg["box"]) * px for tg in found], [tg["kind"] for tg in found],
+                           [tg["score"] for tg in found])
+
+    hits = matches(res["targets"])
     found = sum(h is not None for h in hits)
     right = sum(bool(h and h[2]) for h in hits)
     fit = {"refined": _mean_best_iou(truth, res["targets"], px)}
@@ -483,15 +487,13 @@ def _pgpr_rows(det, out: Path, log) -> dict:
         finally:
             det.refiner = refiner
     # the picture seen mirrored too (gpr3d detect --mirror): both views' boxes fused
-    det.mirror = True
+    mirror, det.mirror = det.mirror, True
     try:
         both = det.detect(survey, score_threshold=0.5)["targets"]
     finally:
-        det.mirror = False
+        det.mirror = mirror
     fit["mirrored"] = _mean_best_iou(truth, both, px)
-    found_both = sum(h is not None for h in box_matches(
-        [np.asarray(lab["box"]) * px for lab in truth], [lab["kind"] for lab in truth],
-        [np.asarray(tg["box"]) * px for tg in both], [tg["kind"] for tg in both], [tg["score"] for tg in both]))
+    found_both = sum(h is not None for h in matches(both))
     kinds = [tg["kind"] for tg in res["targets"]]
     named = ", ".join(f"{kinds.count(k)} {k}" for k in sorted(set(kinds))) or "none"
     truth_kinds = [lab["kind"] for lab in truth]

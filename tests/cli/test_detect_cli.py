@@ -100,7 +100,9 @@ def test_detect_with_views_gives_what_the_library_gives(tmp_path):
     assert one["views"] == {"trace_scales": [1.0], "mirror": False}
     got = np.array([t["box"] for t in d["targets"]])
     assert got.shape == (len(want["targets"]), 4)
-    assert np.allclose(got, [t["box"] for t in want["targets"]], rtol=1e-9, atol=0)
+    # the command and this process may run the network on other thread counts (float32 sums in another order):
+    # boxes equal to a few parts in a million, far inside what the views move them by (below)
+    assert np.allclose(got, [t["box"] for t in want["targets"]], rtol=1e-5, atol=0)
     # the views moved the boxes: not what the record alone gives
     plain = np.array([t["box"] for t in one["targets"]])
     assert got.shape != plain.shape or not np.allclose(got, plain, rtol=1e-3, atol=0)
