@@ -121,4 +121,9 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from gpr3d.core.errors import GPR3DError
+
+    try:
+        sys.exit(main())
+    except GPR3DError as e:  # a wrong setting or file: one line, as the gpr3d commands answer
+        sys.exit(f"finetune_pgpr.py: {e}")
