@@ -5,6 +5,8 @@ import json
 import numpy as np
 import pytest
 
+import gpr3d
+
 pytest.importorskip("torch")
 pytest.importorskip("torchvision")
 
@@ -151,3 +153,26 @@ def test_eval_detector_bad_arguments_one_line(tmp_path, args, msg):
     r = run_cli("eval", "detector", *args)
     assert r.returncode != 0
     assert msg in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_detect_with_depths_on_one_file_of_every_real_folder(tmp_path):
+    """Every radar's first file, as a user first tries it: the detector, DepthNet's host permittivity and the depths
+    of what it found. MALA's ten_col.rd3 stood still for seven of its ten traces (a few GPS fixes): its depth stage
+    once asked for 59 GiB."""
+    from tests.conftest import real_files
+
+    files = {}
+    for f in real_files():
+        files.setdefault(f.parent, f)
+    if not files:
+        pytest.skip("real data not available")
+    for src in files.values():
+        out = tmp_path / f"{src.stem}.json"
+        r = run_cli("detect", src, "--out", out)
+        assert r.returncode == 0, f"{src}: {r.stderr}"
+        d = json.loads(out.read_text())
+        n = gpr3d.read(src).n_traces
+        assert d["n_traces"] == n and f"targets in {n} traces" in r.stdout, src
+        eps = d["permittivity"]["eps_r"] if d.get("permittivity") else None
+        # a record with positions (or a DZT's marks) has its host permittivity; one without says why not
+        assert (eps is not None and 1 <= eps <= 81) or "no trace positions" in r.stderr, (src, d.get("permittivity"), r.stderr)

@@ -131,6 +131,25 @@ def test_traces_are_box_filtered_where_several_share_a_column():
     assert dn._smoothed(one, 1.0, 6) is one.proc
 
 
+
+def test_a_cart_that_stood_still_is_filtered_by_its_mean_interval_never_wider_than_the_record():
+    """Positions from a few GPS fixes (MALA's ten_col.rd3): seven traces at one place, then three 17 mm apart, so
+    the median interval is nil (once: a 35-million-trace filter, 59 GiB). The mean interval is 51 mm / 9."""
+    rec = ramp_record(n=10)
+    rec.x_m = np.r_[np.zeros(7), 0.017, 0.034, 0.051] + np.arange(10) * 1e-9  # as prepare_depth_record makes them
+    col = np.arange(1, 11, dtype=float)
+    # columns 17 mm wide: 3 traces a column
+    want = np.convolve(np.r_[col[0], col, col[-1]], np.ones(3) / 3, mode="valid")
+    np.testing.assert_allclose(dn._smoothed(rec, 6 * 0.017, 6)[:, 0], want, rtol=1e-6)
+    # a column wider than the record: a centred filter of 11, the ends repeated
+    wide = dn._smoothed(rec, 6.0, 6)[:, 0]
+    padded = np.r_[np.full(5, col[0]), col, np.full(5, col[-1])]
+    np.testing.assert_allclose(wide, [padded[i:i + 11].mean() for i in range(10)], rtol=1e-6)
+    # half a mean interval either side of the traces still counts as inside
+    got = dn._columns(rec, 0.051 + 0.5 * 0.051 / 9 - 0.002, 0.004, 1, rec.proc)
+    np.testing.assert_allclose(got[0], rec.proc[-1], rtol=1e-6)
+    assert not dn._columns(rec, 0.051 + 0.5 * 0.051 / 9 + 0.0005, 0.001, 1, rec.proc).any()
+
 def test_a_window_is_centred_and_sized_to_alpha_times_the_vacuum_depth():
     rec = ramp_record(n=40, size=64, spacing=0.01, window_s=4e-9)
     cfg = DepthConfig(size=64, alpha=0.5)
@@ -848,10 +867,12 @@ def test_window_columns_at_the_record_s_ends():
 def test_traces_box_filtered_by_hand_at_the_edges():
     three = ramp_record(n=3, size=2, spacing=0.01)
     t = three.proc.astype(np.float64)
-    # five traces a column: a five-wide box, the end traces repeated beyond the ends
-    np.testing.assert_allclose(dn._smoothed(three, 8 * 0.05, 8),
-                               [(3 * t[0] + t[1] + t[2]) / 5, (2 * t[0] + t[1] + 2 * t[2]) / 5,
-                                (t[0] + t[1] + 3 * t[2]) / 5], rtol=1e-6)
+    # four or five traces a column, wider than the record: the record's own odd width, three, the end traces
+    # repeated beyond the ends
+    for per in (4, 5):
+        np.testing.assert_allclose(dn._smoothed(three, 8 * 0.01 * per, 8),
+                                   [(2 * t[0] + t[1]) / 3, (t[0] + t[1] + t[2]) / 3, (t[1] + 2 * t[2]) / 3],
+                                   rtol=1e-6)
     two = ramp_record(n=2, size=2, spacing=0.01)
     t = two.proc.astype(np.float64)
     np.testing.assert_allclose(dn._smoothed(two, 8 * 0.03, 8), [(2 * t[0] + t[1]) / 3, (t[0] + 2 * t[1]) / 3],

@@ -89,7 +89,8 @@ def _by_hand(s, method, eps_r, aperture_deg=50.0, grid=GRID):
         else:
             a = p[:, 0] if axis == "x" else p[:, 1]
             order = np.argsort(a)
-            mig, dz = stolt_migrate(s.data[idx][order], float(np.median(np.diff(a[order]))), s.dt_s, eps_r)
+            step = (a[order][-1] - a[order][0]) / (len(a) - 1)  # the mean interval
+            mig, dz = stolt_migrate(s.data[idx][order], step, s.dt_s, eps_r)
             z = np.arange(mig.shape[1]) * dz
             tmp = np.stack([np.interp(grid.depth, z, tr) for tr in mig])
             target = grid.x if axis == "x" else grid.y
@@ -109,6 +110,22 @@ def test_pseudo3d_is_the_grid_method_written_out(method, t0):
     ref = _by_hand(s, method, 5.0)
     np.testing.assert_allclose(vol, ref, atol=2e-3 * ref.max())
     assert np.count_nonzero(vol) > 0.5 * vol.size
+
+
+def test_stolt_takes_a_line_s_mean_interval_where_the_cart_stood_still():
+    """The first line's first seven traces at one place (an operator who paused): its median interval is nil,
+    its mean 0.15 m / 11; the image is the grid method's with that step, finite."""
+    s = _grid_survey(t0=0.0)
+    s.positions_xyz[:7, :2] = s.positions_xyz[0, :2] * [0.0, 1.0]
+    s.positions_xyz[7:12, 0] = 0.03 * np.arange(1, 6)
+    vol, _ = pseudo3d(s, GRID, eps_r=5.0, method="stolt")
+    assert np.isfinite(vol).all()
+    ref = _by_hand(s, "stolt", 5.0)
+    np.testing.assert_allclose(vol, ref, atol=2e-3 * ref.max())
+    s.positions_xyz[:12, :2] = [0.1, 0.05]
+    with pytest.raises(InvalidDataError, match=r"^a survey line at .* has all its traces at one place: Stolt needs "
+                                               r"a line that moves$"):
+        pseudo3d(s, GRID, eps_r=5.0, method="stolt")
 
 
 def test_one_line_by_itself_with_its_defaults():

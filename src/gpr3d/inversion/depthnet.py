@@ -127,19 +127,27 @@ def _columns(rec: DepthRecord, left_m: float, width_m: float, size: int, smoothe
     i1 = np.minimum(i0 + 1, rec.x_m.size - 1)
     w = (fi - i0)[:, None]
     block = (1 - w) * smoothed[i0] + w * smoothed[i1]
-    half = 0.5 * float(np.median(np.diff(rec.x_m))) if rec.x_m.size > 1 else 0.0
+    half = 0.5 * _interval(rec)
     outside = (xc < rec.x_m[0] - half) | (xc > rec.x_m[-1] + half)
     block[outside] = 0.0
     return block.astype(np.float32)
 
 
+def _interval(rec: DepthRecord) -> float:
+    """The record's mean trace interval (m; 0 for one trace): its length over its intervals. Not the median: a cart
+    that stood still for most of a record (positions from a few GPS fixes) repeats one position, so the median
+    interval is nil."""
+    return float(rec.x_m[-1] - rec.x_m[0]) / (rec.x_m.size - 1) if rec.x_m.size > 1 else 0.0
+
+
 def _smoothed(rec: DepthRecord, width_m: float, size: int) -> np.ndarray:
-    """The traces box-filtered to the column width where several traces share a column (anti-aliasing)."""
+    """The traces box-filtered to the column width where several traces share a column (anti-aliasing); a column
+    wider than the record averages it all (a centred filter of its trace count, the next odd one)."""
     from gpr3d.processing.analytic import running_mean
 
     if rec.x_m.size < 2:
         return rec.proc
-    per = (width_m / size) / max(float(np.median(np.diff(rec.x_m))), 1e-9)
+    per = min((width_m / size) / max(_interval(rec), 1e-9), rec.x_m.size | 1)
     return running_mean(rec.proc, int(round(per)), axis=0) if per > 1.5 else rec.proc
 
 

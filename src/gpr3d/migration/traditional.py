@@ -154,7 +154,11 @@ def pseudo3d(survey, grid: Grid3D, *, eps_r: float, method: str = "kirchhoff", a
             along = p[:, 0] if axis == "x" else p[:, 1]
             order = np.argsort(along)
             a, dat = along[order], data[order]
-            step = float(np.median(np.diff(a)))
+            # the line's mean interval, its length over its intervals (a median is nil where the cart stood still)
+            step = float(a[-1] - a[0]) / (len(a) - 1)
+            if not step > 0:
+                raise InvalidDataError(f"a survey line at {axis} = {coord:g} m has all its traces at one place: "
+                                       "Stolt needs a line that moves")
             mig, dz = stolt_migrate(dat, step, survey.dt_s, eps_r)
             # onto the grid: along-line position and depth by linear interpolation
             target_a = grid.x if axis == "x" else grid.y
