@@ -10,7 +10,7 @@ from gpr3d.core.grid import Grid3D
 from gpr3d.migration.reconstruct import ReconstructConfig, check_config, check_grid_fits
 
 GOOD = [
-    {"eps_r": None}, {"eps_r": 1.0}, {"eps_r": 1}, {"spacing_m": 1e-6}, {"depth_spacing_m": None},
+    {"eps_r": None}, {"eps_r": 1.0}, {"eps_r": 1}, {"spacing_m": 1e-6}, {"spacing_m": None}, {"depth_spacing_m": None},
     {"max_depth_m": None}, {"pad_m": 0.0}, {"aperture_deg": None}, {"aperture_deg": 0.001}, {"aperture_deg": 89.9},
     {"threshold": 1.0}, {"threshold": 1e-6}, {"min_line_m": 0.0}, {"min_target_depth_m": None},
     {"min_target_depth_m": 0.0}, {"min_target_depth_m": 0.5}, {"taper_traces": 0.0}, {"taper_traces": 0.5},
@@ -24,7 +24,7 @@ BAD = [
     ({"eps_r": float("nan")}, "eps_r must be a finite number, got nan"),
     ({"eps_r": "4"}, "eps_r must be a finite number, got '4'"),
     ({"eps_r": True}, "eps_r must be a finite number, got True"),
-    ({"spacing_m": None}, "spacing_m must be a finite number, got None"),
+    ({"spacing_m": "2 cm"}, "spacing_m must be a finite number, got '2 cm'"),
     ({"spacing_m": 0.0}, "spacing_m must be positive, got 0.0"),
     ({"depth_spacing_m": 0}, "depth_spacing_m must be positive, got 0"),
     ({"max_depth_m": -1.0}, "max_depth_m must be positive, got -1.0"),

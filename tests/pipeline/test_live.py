@@ -1072,3 +1072,16 @@ def test_a_replay_with_sensors_sends_each_message_at_its_time_and_checks_its_inp
     untimed = Survey(data=survey.data, dt_s=DT)
     with pytest.raises(GPR3DError, match="carry no increasing times"):
         replay_to_tcp(untimed, 0, rate=100.0, sensors=sensors)
+
+
+@pytest.mark.parametrize("f_hz, want", [(800e6, 0.015), (250e6, 0.049), (None, 0.02)])
+def test_live_sizes_its_voxels_by_the_stream_s_antenna_as_reconstruct_does(f_hz, want, tmp_path):
+    """No spacing given: the stream header's frequency in the host sets the voxel, as reconstruct's default does
+    for the same record (so that the final volume can equal the batch one): 800 MHz in eps_r 6, 15.3 cm / 10;
+    250 MHz, 49.0 cm / 10; none, 2 cm."""
+    from gpr3d.migration.reconstruct import voxel_spacing_m
+
+    header = StreamHeader(n_samples=128, dt_s=DT, frequency_hz=f_hz, offset_m=0.05, eps_r=EPS)
+    live = LiveReconstruction(header, LiveConfig(reconstruct=ReconstructConfig(aperture_deg=45.0), detect=False),
+                              tmp_path)
+    assert live.rc.spacing_m == pytest.approx(want, abs=1e-12) == voxel_spacing_m(f_hz, EPS)[0]

@@ -42,7 +42,9 @@ def add_arguments(sp):
                     help="how eps_r and the depths are estimated (default hybrid)")
     sp.add_argument("--depthnet", default=None, help="DepthNet weights (default: the shipped ones)")
     rc = _reconstruct_defaults()
-    sp.add_argument("--spacing", type=float, default=rc.spacing_m, help=f"voxel size (m; default {rc.spacing_m:g})")
+    sp.add_argument("--spacing", type=float, default=rc.spacing_m,
+                    help="voxel size (m; default: a tenth of the antenna's centre wavelength in the ground, 2 cm "
+                         "where the file names no frequency)")
     sp.add_argument("--max-depth", type=float, default=rc.max_depth_m,
                     help="deepest voxel (m; default: what the time window reaches)")
     sp.add_argument("--signal-depth", action="store_true",
