@@ -123,7 +123,7 @@ def one_line_error(capsys, argv, *needles):
     (["cscan", "{d}/walk.h5", "--out", "{d}/c", "--fill", "-1"], ["--fill must be a distance in metres, 0 to 20 cells"]),
     (["cscan", "{d}/walk.h5", "--out", "{d}/c", "--fill", "1e9"], ["--fill", "got 1e+09"]),
     (["reconstruct", "{d}/walk.h5", "--eps-r", "6", "--out", "{d}/r", "--tile", "0.0001"],
-     ["--tile must be a tile side in metres, at least 10 voxels (the data's voxels are 0.002 m or more) (0.02..100000), "
+     ["--tile must be a tile side in metres, at least 10 voxels (the data's voxels are 0.02 m or more) (0.2..100000), "
       "got 0.0001"]),
     (["process", DZT, "--out", "{d}/p.h5", "--steps", "gain_tpow:power=1:power=2"], ["'power' given twice"]),
     (["reconstruct", "{d}/walk.h5", "--eps-r", "6", "--out", "/sys/gpr3d_x"], ["--out /sys/gpr3d_x: cannot write in /sys"]),

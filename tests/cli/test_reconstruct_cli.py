@@ -58,8 +58,7 @@ def test_reconstruct_with_a_tum_trajectory(pipe_survey):
     doc = json.loads((d / "c2f" / "config.json").read_text())
     assert doc["config"]["coarse_to_fine"] is True and doc["config"]["refine_level"] == 0.4
     refine = doc["refine"]
-    # columns a third of the 15.3 cm wavelength apart over the data's 1.5 cm voxels: every third
-    assert refine["stride"] == 3 and refine["level"] == pytest.approx(0.4 * doc["config"]["threshold"]), refine
+    assert refine["stride"] == 2 and refine["level"] == pytest.approx(0.4 * doc["config"]["threshold"]), refine
     assert 0 < refine["refined_fraction"] < 0.7
     fast = json.loads((d / "c2f" / "targets.json").read_text())["targets"]
     assert [t["kind"] for t in fast] == [t["kind"] for t in targets]
@@ -114,8 +113,8 @@ def test_boxes_make_a_noise_map(pipe_survey, tmp_path):
     (["--spacing", "0"], "--spacing must be positive"),
     (["--boxes", "{box}"], "no 'targets' list"),
     (["--boxes", "{ns_box}"], "box 0 [10, 5, 40, 9] lies outside the data"),
-    (["--tile", "0"], "--tile must be a tile side in metres, at least 10 voxels (the data's voxels are 0.002 m or more) "
-                      "(0.02..100000), got 0"),
+    (["--tile", "0"], "--tile must be a tile side in metres, at least 10 voxels (the data's voxels are 0.02 m or more) "
+                      "(0.2..100000), got 0"),
     (["--tile", "0.1", "--spacing", "0.02"], "--tile must be a tile side in metres, at least 10 voxels of --spacing "
                                               "0.02 (0.2..100000), got 0.1"),
     (["--workers", "-2"], "workers must be a whole number >= 0, got -2"),

@@ -170,15 +170,16 @@ def test_reconstruct_names_its_stages_for_whoever_times_them(tmp_path):
     assert list(t.seconds) == ["write volume", "write vti"]
 
 
-@pytest.mark.parametrize("f_hz, eps, want", [
-    (500e6, 9.0, 0.020),  # c / (500 MHz x 3) = 19.99 cm: 2.0 cm to the millimetre
-    (100e6, 11.316, 0.089),  # 89.1 cm / 10: 8.9 cm (the real 100 MHz grid, DepthNet's eps_r)
-    (1.6e9, 6.0, 0.008),  # 7.65 cm / 10
-    (800e6, 6.0, 0.015),  # 15.30 cm / 10
-    (10e6, 1.0, 0.5),  # 30 m / 10: the largest voxel kept
-    (100e9, 80.0, 0.002),  # 0.34 mm: the smallest
+@pytest.mark.parametrize("f_hz, eps, want, kept", [
+    (500e6, 9.0, 0.020, False),  # c / (500 MHz x 3) = 19.99 cm: 2.0 cm to the millimetre
+    (400e6, 6.0, 0.031, False),  # 30.6 cm / 10
+    (100e6, 11.316, 0.089, False),  # 89.1 cm / 10 (the real 100 MHz grid, DepthNet's eps_r)
+    (250e6, 4.0, 0.06, False),  # 59.96 cm / 10
+    (1.6e9, 6.0, 0.02, True),  # 7.65 cm / 10 = 8 mm: not finer than 2 cm
+    (800e6, 6.0, 0.02, True),  # 1.5 cm: 2 cm
+    (10e6, 1.0, 0.5, True),  # 30 m / 10: the largest voxel kept
 ])
-def test_the_voxel_follows_the_antenna_s_wavelength_in_the_ground(f_hz, eps, want):
+def test_the_voxel_follows_the_antenna_s_wavelength_in_the_ground(f_hz, eps, want, kept):
     from gpr3d.core.units import C0
     from gpr3d.migration.reconstruct import voxel_spacing_m
 
@@ -186,7 +187,7 @@ def test_the_voxel_follows_the_antenna_s_wavelength_in_the_ground(f_hz, eps, wan
     assert spacing == pytest.approx(want, abs=1e-12)
     wavelength = C0 / (f_hz * np.sqrt(eps))
     assert how == (f"a tenth of the {f_hz / 1e6:g} MHz wavelength in the host (eps_r {eps:.3g}: {wavelength:.3g} m), "
-                   "to the millimetre")
+                   "to the millimetre" + (", kept to 0.02..0.5 m" if kept else ""))
 
 
 @pytest.mark.parametrize("f_hz", [None, 0.0, float("nan")])
@@ -198,14 +199,21 @@ def test_a_record_without_a_frequency_keeps_two_centimetre_voxels(f_hz):
 
 @pytest.mark.parametrize("method", ["pseudo3d", "backprojection"])
 def test_reconstruct_at_its_default_sizes_voxels_by_the_data_and_says_so(grid_lines, method, tmp_path):
-    """800 MHz in eps_r 6: 1.5 cm voxels (a tenth of 15.3 cm), the pipe where it is; a given spacing is kept."""
+    """The lines' 800 MHz in eps_r 6 keep 2 cm voxels (a tenth of 15.3 cm is finer); the same lines said to be
+    recorded at 400 MHz get 3.1 cm ones, the pipe where it is; a given spacing is kept."""
     rec = reconstruct(grid_lines, ReconstructConfig(max_depth_m=0.6, method=method))
-    assert rec.grid.dx == rec.grid.dy == rec.grid.dd == pytest.approx(0.015, abs=1e-12)
-    assert rec.config["spacing_m"] == pytest.approx(0.015, abs=1e-12)
-    assert rec.spacing["spacing_m"] == pytest.approx(0.015, abs=1e-12)
-    assert rec.spacing["how"].startswith("a tenth of the 800 MHz wavelength in the host (eps_r 6: 0.153 m)")
+    assert rec.grid.dx == rec.grid.dy == rec.grid.dd == pytest.approx(0.02, abs=1e-12)
+    assert rec.spacing["how"].endswith("kept to 0.02..0.5 m")
+    low = grid_lines.copy()
+    low.frequency_hz = 400e6
+    rec = reconstruct(low, ReconstructConfig(max_depth_m=0.6, method=method))
+    assert rec.grid.dx == rec.grid.dy == rec.grid.dd == pytest.approx(0.031, abs=1e-12)
+    assert rec.config["spacing_m"] == pytest.approx(0.031, abs=1e-12)
+    assert rec.spacing == {"spacing_m": 0.031, "how": "a tenth of the 400 MHz wavelength in the host (eps_r 6: "
+                                                      "0.306 m), to the millimetre"}
     best = max((t for t in rec.targets if t.kind == "line"), key=lambda t: t.length_m)
-    assert np.all(np.abs(np.array(best.points_xyz)[:, 0] - 0.8) < 0.03) and best.depth_m == pytest.approx(0.3, abs=0.03)
+    assert np.all(np.abs(np.array(best.points_xyz)[:, 0] - 0.8) < 0.035)
+    assert best.depth_m == pytest.approx(0.3, abs=0.035)
     write_reconstruction(rec, tmp_path, source="grid")
     assert json.loads((tmp_path / "config.json").read_text())["spacing"] == rec.spacing
     given = reconstruct(grid_lines, ReconstructConfig(spacing_m=0.03, max_depth_m=0.6, method=method))
@@ -213,6 +221,8 @@ def test_reconstruct_at_its_default_sizes_voxels_by_the_data_and_says_so(grid_li
 
 
 def test_a_tile_smaller_than_ten_data_sized_voxels_is_refused_before_migrating(grid_lines):
-    with pytest.raises(InvalidDataError, match=r"^tile_m must be at least 10 of this record's voxels \(0\.015 m: a "
-                                               r"tenth of the 800 MHz wavelength .*\), so 0\.15 m or more; got 0\.1$"):
-        reconstruct(grid_lines, ReconstructConfig(max_depth_m=0.6, tile_m=0.1))
+    low = grid_lines.copy()
+    low.frequency_hz = 400e6
+    with pytest.raises(InvalidDataError, match=r"^tile_m must be at least 10 of this record's voxels \(0\.031 m: a "
+                                               r"tenth of the 400 MHz wavelength .*\), so 0\.31 m or more; got 0\.3$"):
+        reconstruct(low, ReconstructConfig(max_depth_m=0.6, tile_m=0.3))

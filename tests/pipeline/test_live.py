@@ -1074,10 +1074,10 @@ def test_a_replay_with_sensors_sends_each_message_at_its_time_and_checks_its_inp
         replay_to_tcp(untimed, 0, rate=100.0, sensors=sensors)
 
 
-@pytest.mark.parametrize("f_hz, want", [(800e6, 0.015), (250e6, 0.049), (None, 0.02)])
+@pytest.mark.parametrize("f_hz, want", [(800e6, 0.02), (250e6, 0.049), (None, 0.02)])
 def test_live_sizes_its_voxels_by_the_stream_s_antenna_as_reconstruct_does(f_hz, want, tmp_path):
     """No spacing given: the stream header's frequency in the host sets the voxel, as reconstruct's default does
-    for the same record (so that the final volume can equal the batch one): 800 MHz in eps_r 6, 15.3 cm / 10;
+    for the same record (so that the final volume can equal the batch one): 800 MHz in eps_r 6, 2 cm (15.3 cm / 10 is finer);
     250 MHz, 49.0 cm / 10; none, 2 cm."""
     from gpr3d.migration.reconstruct import voxel_spacing_m
 

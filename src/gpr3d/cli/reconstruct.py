@@ -49,7 +49,7 @@ def add_arguments(sp):
     rc = _reconstruct_defaults()
     sp.add_argument("--spacing", type=float, default=rc.spacing_m,
                     help="voxel size in metres (default: a tenth of the antenna's centre wavelength in the ground, to "
-                         "the millimetre: 2 cm at 500 MHz in eps_r 9; 2 cm where the file names no frequency)")
+                         "the millimetre, 2 cm or more; 2 cm where the file names no frequency)")
     sp.add_argument("--max-depth", type=float, default=rc.max_depth_m,
                     help="deepest voxel (m; default: what the time window reaches)")
     sp.add_argument("--signal-depth", action="store_true",

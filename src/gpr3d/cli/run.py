@@ -43,8 +43,8 @@ def add_arguments(sp):
     sp.add_argument("--depthnet", default=None, help="DepthNet weights (default: the shipped ones)")
     rc = _reconstruct_defaults()
     sp.add_argument("--spacing", type=float, default=rc.spacing_m,
-                    help="voxel size (m; default: a tenth of the antenna's centre wavelength in the ground, 2 cm "
-                         "where the file names no frequency)")
+                    help="voxel size (m; default: a tenth of the antenna's centre wavelength in the ground, 2 cm or "
+                         "more; 2 cm where the file names no frequency)")
     sp.add_argument("--max-depth", type=float, default=rc.max_depth_m,
                     help="deepest voxel (m; default: what the time window reaches)")
     sp.add_argument("--signal-depth", action="store_true",

@@ -234,22 +234,27 @@ def _prepare(survey, cfg):
 
 #: the voxel size where the record names no frequency (m)
 FALLBACK_SPACING_M = 0.02
-#: the voxel sizes a data-sized grid keeps to (m)
-SPACING_RANGE_M = (0.002, 0.5)
+#: the voxel sizes a data-sized grid keeps to (m): never finer than the 2 cm of the fixed grid it replaced (a
+#: high-frequency antenna's finer image is asked with ``spacing_m``), never coarser than half a metre
+SPACING_RANGE_M = (0.02, 0.5)
 
 
 def voxel_spacing_m(frequency_hz, eps_r: float) -> tuple[float, str]:
     """The voxel size that follows the data: a tenth of the antenna's centre wavelength in the host, ``c /
-    (f sqrt(eps_r)) / 10``, to the millimetre, within ``SPACING_RANGE_M`` (a focused point spans a few voxels;
-    the field is sampled well over its Nyquist rate for the envelope), and why; ``FALLBACK_SPACING_M`` where
-    ``frequency_hz`` is unknown. 500 MHz in eps_r 9 gives 2 cm, a 100 MHz survey 8-10 cm, a 1.6 GHz concrete
-    scanner 6-8 mm."""
+    (f sqrt(eps_r)) / 10``, to the millimetre, within ``SPACING_RANGE_M`` (a focused point still spans a few
+    voxels; a low-frequency survey is not imaged on voxels far finer than it can resolve), and why;
+    ``FALLBACK_SPACING_M`` where ``frequency_hz`` is unknown. 500 MHz in eps_r 9 gives 2 cm, 400 MHz in eps_r 6
+    3.1 cm, a 100 MHz survey 8-10 cm."""
     if not (frequency_hz and math.isfinite(frequency_hz) and frequency_hz > 0):
         return FALLBACK_SPACING_M, f"{FALLBACK_SPACING_M:g} m: the record names no antenna frequency"
     wavelength = velocity_from_eps_r(eps_r) / frequency_hz
-    spacing = min(max(round(wavelength / 10, 3), SPACING_RANGE_M[0]), SPACING_RANGE_M[1])
-    return spacing, (f"a tenth of the {frequency_hz / 1e6:g} MHz wavelength in the host (eps_r {eps_r:.3g}: "
-                     f"{wavelength:.3g} m), to the millimetre")
+    tenth = round(wavelength / 10, 3)
+    spacing = min(max(tenth, SPACING_RANGE_M[0]), SPACING_RANGE_M[1])
+    why = (f"a tenth of the {frequency_hz / 1e6:g} MHz wavelength in the host (eps_r {eps_r:.3g}: {wavelength:.3g} m), "
+           "to the millimetre")
+    if spacing != tenth:
+        why += f", kept to {SPACING_RANGE_M[0]:g}..{SPACING_RANGE_M[1]:g} m"
+    return spacing, why
 
 
 def time_zero_search_s(survey) -> float:
