@@ -178,6 +178,7 @@ def test_reconstruct_names_its_stages_for_whoever_times_them(tmp_path):
     (1.6e9, 6.0, 0.02, True),  # 7.65 cm / 10 = 8 mm: not finer than 2 cm
     (800e6, 6.0, 0.02, True),  # 1.5 cm: 2 cm
     (10e6, 1.0, 0.5, True),  # 30 m / 10: the largest voxel kept
+    (0.5, 9.0, 0.5, True),  # half a hertz is still a frequency: 0.5 m
 ])
 def test_the_voxel_follows_the_antenna_s_wavelength_in_the_ground(f_hz, eps, want, kept):
     from gpr3d.core.units import C0
@@ -206,7 +207,9 @@ def test_reconstruct_at_its_default_sizes_voxels_by_the_data_and_says_so(grid_li
     assert rec.spacing["how"].endswith("kept to 0.02..0.5 m")
     low = grid_lines.copy()
     low.frequency_hz = 400e6
-    rec = reconstruct(low, ReconstructConfig(max_depth_m=0.6, method=method))
+    said = []
+    rec = reconstruct(low, ReconstructConfig(max_depth_m=0.6, method=method), log=said.append)
+    assert "voxels of 3.1 cm: a tenth of the 400 MHz wavelength in the host (eps_r 6: 0.306 m), to the millimetre" in said
     assert rec.grid.dx == rec.grid.dy == rec.grid.dd == pytest.approx(0.031, abs=1e-12)
     assert rec.config["spacing_m"] == pytest.approx(0.031, abs=1e-12)
     assert rec.spacing == {"spacing_m": 0.031, "how": "a tenth of the 400 MHz wavelength in the host (eps_r 6: "
@@ -226,3 +229,7 @@ def test_a_tile_smaller_than_ten_data_sized_voxels_is_refused_before_migrating(g
     with pytest.raises(InvalidDataError, match=r"^tile_m must be at least 10 of this record's voxels \(0\.031 m: a "
                                                r"tenth of the 400 MHz wavelength .*\), so 0\.31 m or more; got 0\.3$"):
         reconstruct(low, ReconstructConfig(max_depth_m=0.6, tile_m=0.3))
+    # ten voxels exactly: taken, the tiles' image the one pass's
+    tiled = reconstruct(low, ReconstructConfig(max_depth_m=0.6, tile_m=10 * 0.031))
+    whole = reconstruct(low, ReconstructConfig(max_depth_m=0.6))
+    np.testing.assert_allclose(tiled.envelope, whole.envelope, rtol=0, atol=1e-5 * whole.envelope.max())
