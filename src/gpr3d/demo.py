@@ -718,6 +718,12 @@ def _real_stage(out: Path, cfg: DemoConfig, log):
     t_proc = time.perf_counter() - t
     log(f"[1/8] read {Path(src).name}: {raw}")
     log(f"      processed ({', '.join(h['step'] for h in proc.history)}) in {t_proc * 1e3:.0f} ms")
+    voxel = None
+    if raw.eps_r:  # the grid gpr3d reconstruct would image this record on: its voxel follows the antenna
+        from gpr3d.migration.reconstruct import voxel_spacing_m
+
+        voxel, how = voxel_spacing_m(raw.frequency_hz, raw.eps_r)
+        log(f"      reconstruct's voxel for it: {voxel * 100:.3g} cm, {how} (the header's eps_r)")
     save_bscan_png(raw, out / "real_raw.png", cmap=cfg.cmap, title=f"{Path(src).name}: raw")
     save_bscan_png(proc, out / "real_processed.png", cmap=cfg.cmap, title=f"{Path(src).name}: processed")
     if proc.eps_r:
@@ -735,6 +741,7 @@ def _real_stage(out: Path, cfg: DemoConfig, log):
         "frequency_hz": raw.frequency_hz,
         "eps_r_header": raw.eps_r,
         "estimated_t0_s": proc.history[0]["result"]["t0_s"],
+        "voxel_m": voxel,
         "processing": [{"step": h["step"], "args": h["args"]} for h in proc.history],
         "read_s": t_read,
         "process_s": t_proc,

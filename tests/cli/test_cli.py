@@ -149,6 +149,9 @@ def test_demo_end_to_end(tmp_path):
     summary = json.loads((tmp_path / "d" / "summary.json").read_text())
     real = summary["stages"]["real"]
     assert (real["n_traces"], real["n_samples"]) == (1040, 512)
+    # the voxel reconstruct would take for it: a tenth of 400 MHz's wavelength in the header's eps_r 6 (30.6 cm)
+    assert real["voxel_m"] == 0.031
+    assert "reconstruct's voxel for it: 3.1 cm, a tenth of the 400 MHz wavelength in the host" in r.stdout
     for row in summary["stages"]["synthetic"]["apexes"]:
         assert abs(row["apex_time_error_s"]) < 0.1e-9  # two samples
         assert abs(row["apex_trace_found"] - row["apex_trace_true"]) <= 1
