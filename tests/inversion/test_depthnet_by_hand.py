@@ -141,6 +141,10 @@ def test_a_cart_that_stood_still_is_filtered_by_its_mean_interval_never_wider_th
     # columns 17 mm wide: 3 traces a column
     want = np.convolve(np.r_[col[0], col, col[-1]], np.ones(3) / 3, mode="valid")
     np.testing.assert_allclose(dn._smoothed(rec, 6 * 0.017, 6)[:, 0], want, rtol=1e-6)
+    # where the record starts does not matter, only its length
+    far = ramp_record(n=10)
+    far.x_m = rec.x_m + 5.0
+    np.testing.assert_array_equal(dn._smoothed(far, 6 * 0.017, 6), dn._smoothed(rec, 6 * 0.017, 6))
     # a column wider than the record: a centred filter of 11, the ends repeated
     wide = dn._smoothed(rec, 6.0, 6)[:, 0]
     padded = np.r_[np.full(5, col[0]), col, np.full(5, col[-1])]
