@@ -12,7 +12,7 @@ class ReconstructConfig:
     eps_r: float | None = None  #: None: the survey's hint
     #: the voxel size (m); None: the data's, a tenth of the antenna's centre wavelength in the host (to the
     #: millimetre, 2 cm or more; 2 cm at 500 MHz in eps_r 9; 2 cm where the record names no frequency):
-    #: :func:`gpr3d.migration.reconstruct.voxel_spacing_m`
+    #: ``gpr3d.migration.reconstruct.voxel_spacing_m``
     spacing_m: float | None = None
     depth_spacing_m: float | None = None
     max_depth_m: float | None = None  #: None: what the time window reaches (or its signal: ``signal_depth``)

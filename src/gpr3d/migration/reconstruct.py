@@ -65,7 +65,7 @@ class Reconstruction:
     frame: "ProfileFrame | None" = None
     #: how deep the grid goes and why (:func:`grid_depth_m`; ``config.json``'s ``"depth"``)
     depth: dict | None = None
-    #: the voxel size and why (``{"spacing_m", "how"}``: given, or :func:`voxel_spacing_m`'s; ``config.json``'s
+    #: the voxel size and why (``{"spacing_m", "how"}``: given, or those of ``voxel_spacing_m``; ``config.json``'s
     #: ``"spacing"``)
     spacing: dict | None = None
 
