@@ -50,14 +50,14 @@ def main(argv=None):
     grid = work / "grid.h5"
     gpr3d("grid", *sorted((data / "gpro_sns_100MHz_grid").glob("XLINE*.DT1")), "--spacing", "0.2", "--out", grid,
           env=env)
-    records = [("real 100 MHz grid, 25 lines, 5871 traces", grid, []),
-               ("real 400 MHz GSSI profile, 1040 traces", data / "gprpy_gssi_400MHz" / "FILE____032.DZT", [])]
+    records = [("real 100 MHz grid, 25 lines, 5871 traces", grid),
+               ("real 400 MHz GSSI profile, 1040 traces", data / "gprpy_gssi_400MHz" / "FILE____032.DZT")]
     gpr3d("reconstruct", records[1][1], "--out", work / "warm", env=env)  # numba's cache filled, untimed
     rows = []
-    for what, src, extra in records:
+    for what, src in records:
         for label, spacing in (("data-sized (default)", []), ("fixed 2 cm (--spacing 0.02)", ["--spacing", "0.02"])):
             out = work / f"{src.stem}_{len(spacing)}"
-            wall = gpr3d("reconstruct", src, "--out", out, *spacing, *extra, env=env)
+            wall = gpr3d("reconstruct", src, "--out", out, *spacing, env=env)
             cfg = json.loads((out / "config.json").read_text())
             g = cfg["grid"]
             targets = json.loads((out / "targets.json").read_text())["targets"]

@@ -1085,3 +1085,7 @@ def test_live_sizes_its_voxels_by_the_stream_s_antenna_as_reconstruct_does(f_hz,
     live = LiveReconstruction(header, LiveConfig(reconstruct=ReconstructConfig(aperture_deg=45.0), detect=False),
                               tmp_path)
     assert live.rc.spacing_m == pytest.approx(want, abs=1e-12) == voxel_spacing_m(f_hz, EPS)[0]
+    # a header's eps_r that is no permittivity is named as such, not as a voxel size made from it
+    bad = StreamHeader(n_samples=128, dt_s=DT, frequency_hz=f_hz, offset_m=0.05, eps_r=float("nan"))
+    with pytest.raises(GPR3DError, match=r"^eps_r must be a finite number, got nan$"):
+        LiveReconstruction(bad, LiveConfig(reconstruct=ReconstructConfig(aperture_deg=45.0), detect=False), tmp_path)

@@ -757,15 +757,15 @@ class LiveReconstruction:
             raise GPR3DError("live mode needs an aperture (--aperture > 0): it bounds the voxels each trace reaches")
         if rc.method != "backprojection":
             raise GPR3DError("live mode migrates by back projection (--method backprojection)")
-        if rc.spacing_m is None:  # as a batch reconstruct of the same record sizes its voxels
-            from gpr3d.migration.reconstruct import voxel_spacing_m
-
-            rc = replace(rc, spacing_m=voxel_spacing_m(header.frequency_hz, float(eps))[0])
         self.rc = replace(rc, eps_r=float(eps), lattice=True, background_window=cfg.background_window,
                           background_trailing=cfg.background_trailing, remove_background=True,
                           coarse_to_fine=False,  # (every voxel is migrated as the traces come)
                           signal_depth=False)  # (where the signal ends is not known before the survey does)
         check_config(self.rc)
+        if self.rc.spacing_m is None:  # as a batch reconstruct of the same record sizes its voxels (eps_r checked)
+            from gpr3d.migration.reconstruct import voxel_spacing_m
+
+            self.rc = replace(self.rc, spacing_m=voxel_spacing_m(header.frequency_hz, float(eps))[0])
         self.eps = float(eps)
         self.v = velocity_from_eps_r(self.eps)
         self.out = Path(out)
