@@ -113,18 +113,36 @@ def read_volume(path, names=None) -> Volume:
 
 def write_vti(path, grid: Grid3D, arrays: dict) -> Path:
     """Write ``arrays`` (name -> ``grid.shape``; None left out) as VTK image data (``.vti``, ParaView): z up, so
-    depth runs downwards from the top of the block."""
-    from gpr3d.core.deps import require
+    depth runs downwards from the top of the block.
 
-    evtk = require("pyevtk").hl
-    point_data = {k: np.ascontiguousarray(np.asarray(a, np.float32)[:, :, ::-1]) for k, a in arrays.items()
-                  if a is not None}
+    The XML image-data layout of VTK's file formats, its arrays float32 little-endian in one raw appended block,
+    each behind its byte count (UInt64), x fastest. Written here rather than by pyevtk, which packs every value
+    through a Python argument list (0.2 s per 4 M voxels, against a few milliseconds for the bytes themselves)."""
+    named = {str(k): np.asarray(a) for k, a in arrays.items() if a is not None}
+    for k, a in named.items():
+        if a.shape != grid.shape:
+            raise ValueError(f"volume {k!r} has shape {a.shape}, the grid {grid.shape}")
     z_bottom = -(grid.d0 + (grid.nd - 1) * grid.dd)
+    extent = f"0 {grid.nx - 1} 0 {grid.ny - 1} 0 {grid.nd - 1}"
+    nbytes = 4 * int(np.prod(grid.shape))
+    entries = "".join(f'<DataArray Name="{k}" NumberOfComponents="1" type="Float32" format="appended" '
+                      f'offset="{i * (8 + nbytes)}"/>\n' for i, k in enumerate(named))
+    scalars = f' Scalars="{next(iter(named))}"' if named else ""
+    head = ('<?xml version="1.0"?>\n'
+            '<VTKFile type="ImageData" version="1.0" byte_order="LittleEndian" header_type="UInt64">\n'
+            f'<ImageData WholeExtent="{extent}" Origin="{grid.x0!r} {grid.y0!r} {z_bottom!r}" '
+            f'Spacing="{grid.dx!r} {grid.dy!r} {grid.dd!r}">\n<Piece Extent="{extent}">\n'
+            f"<PointData{scalars}>\n{entries}</PointData>\n</Piece>\n</ImageData>\n"
+            '<AppendedData encoding="raw">\n_')
     path = Path(path)
     with atomic_path(path, suffix=".part.vti") as tmp:
-        written = evtk.imageToVTK(str(tmp)[:-4], origin=(grid.x0, grid.y0, z_bottom),
-                                  spacing=(grid.dx, grid.dy, grid.dd), pointData=point_data)
-        Path(written).replace(tmp)
+        with open(tmp, "wb") as f:
+            f.write(head.encode("ascii"))
+            for a in named.values():
+                f.write(np.uint64(nbytes).astype("<u8").tobytes())
+                # x fastest, then y, then z up: the depth axis reversed, the axes' order turned round
+                np.ascontiguousarray(a[:, :, ::-1].transpose(2, 1, 0), dtype="<f4").tofile(f)
+            f.write(b"\n</AppendedData>\n</VTKFile>\n")
     return path
 
 
