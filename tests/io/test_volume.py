@@ -262,11 +262,17 @@ def test_the_vti_spacing_is_the_grid_s(tmp_path):
 def test_the_vti_holds_every_volume_at_its_offset(tmp_path):
     """Each DataArray's offset (counted from the byte after the '_' that opens the appended block) leads to an
     8-byte little-endian byte count and then that volume's values, x fastest and depth reversed (z up)."""
+    import xml.etree.ElementTree as ET
+
     vols = volumes()
+    vols["image"] = vols["image"].astype(np.float64)  # float64 given: float32 written
     write_vti(tmp_path / "v.vti", GRID, {"envelope": vols["envelope"], "skipped": None, "image": vols["image"]})
     raw = (tmp_path / "v.vti").read_bytes()
     head = raw[: raw.index(b"<AppendedData")].decode()
-    assert head.count("<DataArray") == 2 and 'Scalars="envelope"' in head
+    root = ET.fromstring(head + "</VTKFile>")
+    pd = root.find("ImageData/Piece/PointData")
+    assert pd.get("Scalars") == "envelope" and [e.get("Name") for e in pd] == ["envelope", "image"]
+    assert all(not (e.tail or "").strip() for e in pd) and not (pd.text or "").strip()
     start = raw.index(b"_", raw.index(b"<AppendedData")) + 1
     n = int(np.prod(GRID.shape))
     for name in ("envelope", "image"):
@@ -306,3 +312,14 @@ def test_vtk_reads_the_vti_as_written(tmp_path):
     for name, ref in (("envelope", vols["envelope"]), ("noise_map", vols["image"])):
         v = vtk_to_numpy(im.GetPointData().GetArray(name)).reshape(GRID.nd, GRID.ny, GRID.nx).transpose(2, 1, 0)
         np.testing.assert_array_equal(v[:, :, ::-1], ref)
+
+
+def test_a_vti_of_no_volume_is_an_empty_image(tmp_path):
+    import xml.etree.ElementTree as ET
+
+    write_vti(tmp_path / "v.vti", GRID, {"envelope": None})
+    raw = (tmp_path / "v.vti").read_bytes()
+    root = ET.fromstring(raw[: raw.index(b"<AppendedData")].decode() + "</VTKFile>")
+    pd = root.find("ImageData/Piece/PointData")
+    assert pd is not None and len(pd) == 0 and pd.get("Scalars") is None
+    assert raw.endswith(b'<AppendedData encoding="raw">\n_\n</AppendedData>\n</VTKFile>\n')
