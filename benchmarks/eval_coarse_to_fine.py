@@ -66,7 +66,32 @@ def score(rec, pipes) -> dict:
             "n": len(rec.targets)}
 
 
-def compare(name, s, pipes, spacing, levels, log):
+def target_list(rec):
+    """The targets as compared between two images: kind and points to the millimetre."""
+    return [(t.kind, np.round(np.asarray(t.points_xyz, float), 3).tolist()) for t in rec.targets]
+
+
+class refine_mode:
+    """Within it, coarse-to-fine refines depth ranges with ``margin`` wavelengths, or whole columns (None)."""
+
+    def __init__(self, margin):
+        self.margin = margin
+
+    def __enter__(self):
+        import functools
+
+        from gpr3d.migration import refine
+
+        self.saved = refine.refined_adjoint
+        refine.refined_adjoint = functools.partial(self.saved, depth_margin=self.margin)
+
+    def __exit__(self, *exc):
+        from gpr3d.migration import refine
+
+        refine.refined_adjoint = self.saved
+
+
+def compare(name, s, pipes, spacing, levels, log, margins=(None,)):
     out = []
     t = time.perf_counter()
     full = reconstruct(s, ReconstructConfig(eps_r=s.eps_r, spacing_m=spacing, coarse_to_fine=False))
@@ -76,16 +101,21 @@ def compare(name, s, pipes, spacing, levels, log):
     peak = float(full.envelope.max())
     sf = score(full, pipes)
     out.append({"scene": name, "setting": "every voxel", "migrate_s": full.timings_s["migrate"], "wall_s": full_s,
-                "fraction": 1.0, "env_change": 0.0, **sf})
+                "fraction": 1.0, "env_change": 0.0, "same": True, **sf})
     for lv in levels:
-        t = time.perf_counter()
-        r = reconstruct(s, ReconstructConfig(eps_r=s.eps_r, spacing_m=spacing, coarse_to_fine=True, refine_level=lv))
-        wall = time.perf_counter() - t
-        assert r.grid == full.grid
-        d = float(np.abs(r.envelope - full.envelope)[near].max()) / peak if near.any() else 0.0
-        out.append({"scene": name, "setting": f"coarse-to-fine {lv:g}", "migrate_s": r.timings_s["migrate"],
-                    "wall_s": wall, "fraction": r.refine.get("refined_fraction", 1.0),
-                    "stride": r.refine.get("stride", 1), "env_change": d, **score(r, pipes)})
+        for margin in margins:
+            with refine_mode(margin):
+                t = time.perf_counter()
+                r = reconstruct(s, ReconstructConfig(eps_r=s.eps_r, spacing_m=spacing, coarse_to_fine=True,
+                                                     refine_level=lv))
+                wall = time.perf_counter() - t
+            assert r.grid == full.grid
+            d = float(np.abs(r.envelope - full.envelope)[near].max()) / peak if near.any() else 0.0
+            how = "whole columns" if margin is None else f"depth ranges +- {margin:g} wavelength"
+            out.append({"scene": name, "setting": f"coarse-to-fine {lv:g}, {how}", "migrate_s": r.timings_s["migrate"],
+                        "wall_s": wall, "fraction": r.refine.get("refined_fraction", 1.0),
+                        "stride": r.refine.get("stride", 1), "env_change": d,
+                        "same": target_list(r) == target_list(full), **score(r, pipes)})
     for row in out:
         log(f"{row['scene']:>10s} {row['setting']:>20s} migrate {row['migrate_s']:6.2f} s  refined "
             f"{row['fraction']:.3f}  completeness {row['completeness']:.3f}  pos {row['position_m']:.3f}  false "
@@ -96,7 +126,10 @@ def compare(name, s, pipes, spacing, levels, log):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", default="0-11")
-    ap.add_argument("--levels", default="0.25,0.5")
+    ap.add_argument("--levels", default="0.5")
+    ap.add_argument("--margins", default="columns,0.5,1",
+                    help="how coarse-to-fine refines: 'columns' (whole columns) or a depth range's margin in "
+                         "wavelengths, comma-separated")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--no-stages-survey", action="store_true")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
@@ -107,6 +140,7 @@ def main(argv=None):
     else:
         seeds = [int(v) for v in args.seeds.split(",")]
     levels = [float(v) for v in args.levels.split(",")]
+    margins = [None if v == "columns" else float(v) for v in args.margins.split(",")]
     rows = []
 
     def log(msg):
@@ -114,10 +148,11 @@ def main(argv=None):
 
     if not args.no_stages_survey:
         s, pipes = stages_survey()
-        rows += compare("L-pipes", s, pipes, 0.02, levels, log)
+        rows += compare("L-pipes", s, pipes, 0.02, levels, log, margins)
     for seed in seeds:
         spec = make_scene(seed)
-        rows += compare(f"{spec['kind']} {seed}", scene_survey(spec), spec["pipes"], spec["spacing_m"], levels, log)
+        rows += compare(f"{spec['kind']} {seed}", scene_survey(spec), spec["pipes"], spec["spacing_m"], levels, log,
+                        margins)
 
     settings = list(dict.fromkeys(r["setting"] for r in rows))
     lines = [f"Host CPU: {cpu_name()}, {args.threads} threads; `reconstruct` at its defaults (true eps_r; 2 cm voxels "
@@ -125,8 +160,9 @@ def main(argv=None):
              f"`refine_level`, on the 8000-trace L-pipe survey and eval_scenes seeds {args.seeds} (10,000 traces "
              "each)", "",
              "| setting | migration s (sum) | x every voxel | refined share (mean) | completeness (mean) | "
-             "position err m (mean) | false targets (sum) | envelope change where targets are (max, of peak) |",
-             "|---|---|---|---|---|---|---|---|"]
+             "position err m (mean) | false targets (sum) | envelope change where targets are (max, of peak) | "
+             "scenes with the same targets (to the mm) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     base = sum(r["migrate_s"] for r in rows if r["setting"] == "every voxel")
     for st in settings:
         rs = [r for r in rows if r["setting"] == st]
@@ -134,13 +170,13 @@ def main(argv=None):
         lines.append(f"| {st} | {mig:.1f} | {mig / base:.2f} | {np.mean([r['fraction'] for r in rs]):.3f} | "
                      f"{np.nanmean([r['completeness'] for r in rs]):.3f} | "
                      f"{np.nanmean([r['position_m'] for r in rs]):.3f} | {sum(r['false'] for r in rs)} | "
-                     f"{max(r['env_change'] for r in rs):.4f} |")
+                     f"{max(r['env_change'] for r in rs):.4f} | {sum(r['same'] for r in rs)} of {len(rs)} |")
     lines += ["", "| scene | setting | migration s | refined share | completeness | position err m | false | targets |"
-              " envelope change |", "|---|---|---|---|---|---|---|---|---|"]
+              " envelope change | same targets |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['scene']} | {r['setting']} | {r['migrate_s']:.2f} | {r['fraction']:.3f} | "
                      f"{r['completeness']:.3f} | {r['position_m']:.3f} | {r['false']} | {r['n']} | "
-                     f"{r['env_change']:.4f} |")
+                     f"{r['env_change']:.4f} | {'yes' if r['same'] else 'no'} |")
     write_table(args.out, "coarse_to_fine.md", "\n".join(lines), "eval_coarse_to_fine.py", argv)
 
 

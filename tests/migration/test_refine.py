@@ -87,6 +87,41 @@ def test_marked_columns_by_hand(monkeypatch):
     np.testing.assert_array_equal(cols2, want2)
 
 
+def test_marked_depth_ranges_by_hand():
+    # coarse columns every 2 fine ones: 9 x 7 of them over 17 x 13 fine columns, 40 depths of 2 cm; coarse column
+    # (4, 3) hot at depths 10 and 14, (5, 3) at 20 (exactly at the level), (8, 6) at 1; the rest far below
+    grid = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 17, 13, 40)
+    cenv = np.full((9, 7, 40), 0.01, np.float32)
+    cenv[4, 3, [10, 14]] = 1.0
+    cenv[5, 3, 20] = 0.5
+    cenv[8, 6, 1] = 0.9
+    # a margin of 0.5 x 0.1 m over 2 cm depths: 3 voxels (2.5 rounded up)
+    ranges, ref = refine.refine_ranges(cenv, 2, grid, level=0.5, wavelength_m=0.1, margin_wavelengths=0.5,
+                                       reference_percentile=100)
+    assert ref == 1.0 and ranges.dtype == np.int32 and ranges.shape == (17, 13, 2)
+    want = np.zeros((17, 13, 2), np.int32)
+    # fine i takes coarse i // 2 and i // 2 + 1: coarse 4 <- fine 6..9, coarse 5 <- fine 8..11; coarse 3 <- 4..7
+    want[6:8, 4:8] = (7, 18)     # coarse (4, 3) alone: depths 10..14, 3 more each way
+    want[8:10, 4:8] = (7, 24)    # coarse (4, 3) and (5, 3): 10..20 and the margins
+    want[10:12, 4:8] = (17, 24)  # coarse (5, 3) alone
+    want[14:17, 10:13] = (0, 5)  # coarse (8, 6): depth 1, the margin cut at the top
+    np.testing.assert_array_equal(ranges, want)
+    # the margin cut at the bottom; no margin; nothing above the level
+    cenv[4, 3, 39] = 1.0
+    r2 = refine.refine_ranges(cenv, 2, grid, level=0.5, wavelength_m=0.1, margin_wavelengths=0.5,
+                              reference_percentile=100)[0]
+    assert tuple(r2[6, 4]) == (7, 40)
+    r0 = refine.refine_ranges(cenv, 2, grid, level=0.5, wavelength_m=0.1, margin_wavelengths=0.0,
+                              reference_percentile=100)[0]
+    assert tuple(r0[6, 4]) == (10, 40) and tuple(r0[10, 4]) == (20, 21) and tuple(r0[0, 0]) == (0, 0)
+    assert not refine.refine_ranges(cenv, 2, grid, level=1.5, wavelength_m=0.1, margin_wavelengths=0.5,
+                                    reference_percentile=100)[0].any()
+    # an envelope of zeros (no reference): every voxel
+    everything = refine.refine_ranges(np.zeros_like(cenv), 2, grid, level=0.5, wavelength_m=0.1,
+                                      margin_wavelengths=0.5)[0]
+    assert (everything[..., 0] == 0).all() and (everything[..., 1] == 40).all()
+
+
 def test_coarse_grid_and_interpolation_by_hand():
     # the coarse grid starts on the first fine column and reaches the last one: ceil((n - 1) / k) + 1 columns
     g = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 7, 8, 5)
@@ -115,7 +150,8 @@ def _sphere_survey(n=1500, seed=3):
     return walk, data
 
 
-def test_refined_voxels_equal_the_whole_image_and_the_rest_are_the_coarse_columns_interpolated():
+@pytest.mark.parametrize("margin", [refine.DEPTH_MARGIN, None, 0.0])
+def test_refined_voxels_equal_the_whole_image_and_the_rest_are_the_coarse_columns_interpolated(margin):
     walk, data = _sphere_survey()
     tx, rx = antenna_positions(walk.positions_xyz, walk.orientations_quat_wxyz, 0.05)
     grid = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 80, 78, 40)
@@ -125,7 +161,8 @@ def test_refined_voxels_equal_the_whole_image_and_the_rest_are_the_coarse_column
     whole, whole_fold = op.adjoint(d, with_fold=True)
     wl = 0.2  # a longer wavelength than the data's: stride 3
     img, fold, info = refine.refined_adjoint(op, d, with_fold=True, wavelength_m=wl, level=0.15,
-                                             normalize="sqrt_fold")
+                                             normalize="sqrt_fold", **({} if margin == refine.DEPTH_MARGIN else
+                                                                      {"depth_margin": margin}))
     k = info["stride"]
     assert k == 3 and 0 < info["refined_fraction"] < 0.5
     # the ranges the pass used, rebuilt from the coarse envelope of the whole image's own coarse columns
@@ -138,9 +175,18 @@ def test_refined_voxels_equal_the_whole_image_and_the_rest_are_the_coarse_column
                                cy[cy < grid.ny])], atol=1e-5 * np.abs(whole).max())  # coarse columns are fine ones
     assert in_grid.any()
     cenv = image_envelope(normalise_by_fold(cimg, cfold, "sqrt_fold")[0])
-    cols = refine.refine_columns(cenv, k, grid, level=0.15, wavelength_m=wl)[0]
-    assert cols.mean() == pytest.approx(info["refined_fraction"])
-    inside = np.broadcast_to(cols[..., None], grid.shape)
+    if margin is None:
+        cols = refine.refine_columns(cenv, k, grid, level=0.15, wavelength_m=wl)[0]
+        inside = np.broadcast_to(cols[..., None], grid.shape)
+        assert info["refine"] == "whole columns" and info["refined_columns"] == pytest.approx(info["refined_fraction"])
+    else:
+        ranges = refine.refine_ranges(cenv, k, grid, level=0.15, wavelength_m=wl, margin_wavelengths=margin)[0]
+        kk = np.arange(grid.nd)
+        inside = (kk >= ranges[..., :1]) & (kk < ranges[..., 1:])
+        assert info["refine"] == "depth ranges" and info["depth_margin_wavelengths"] == margin
+        assert info["refined_columns"] == pytest.approx((ranges[..., 1] > ranges[..., 0]).mean())
+        assert info["refined_fraction"] < info["refined_columns"]  # not every depth of the refined columns
+    assert inside.mean() == pytest.approx(info["refined_fraction"])
     peak = np.abs(whole).max()
     np.testing.assert_allclose(img[inside], whole[inside], atol=1e-5 * peak)
     np.testing.assert_allclose(fold[inside], whole_fold[inside], atol=1e-5 * whole_fold.max())
@@ -178,7 +224,7 @@ def test_too_much_marked_migrates_every_voxel(monkeypatch):
     np.testing.assert_array_equal(img, whole)
     np.testing.assert_array_equal(fold, whole_fold)
     assert info["refined_fraction"] == 1.0 and info["marked_fraction"] == marked
-    assert info["why"] == f"the coarse pass marked {marked:.0%} of the columns: every voxel migrated"
+    assert info["why"] == f"the coarse pass marked {marked:.0%} of the voxels: every voxel migrated"
     assert set(info["seconds"]) == {"coarse", "mark", "fine"} and 0 <= sum(info["seconds"].values()) <= wall
     assert min(info["seconds"].values()) >= 0 and info["stride"] == 3
 
@@ -193,27 +239,42 @@ def _pipe_survey():
                   orientations_quat_wxyz=walk.orientations_quat_wxyz, offset_m=0.1, frequency_hz=500e6, eps_r=9.0)
 
 
-def test_reconstruct_coarse_to_fine_finds_the_same_targets_and_says_what_it_did(tmp_path):
+def test_reconstruct_coarse_to_fine_finds_the_same_targets_and_says_what_it_did(tmp_path, monkeypatch):
+    import functools
+
     s = _pipe_survey()
     full = reconstruct(s, ReconstructConfig())
     fast = reconstruct(s, ReconstructConfig(coarse_to_fine=True))
     assert full.refine is None and fast.grid == full.grid
     r = fast.refine
-    assert r["stride"] == 3 and r["frequency_hz"] == 500e6 and 0 < r["refined_fraction"] < 0.7
+    assert r["stride"] == 3 and r["frequency_hz"] == 500e6 and 0 < r["refined_fraction"] < 0.3
+    assert r["refine"] == "depth ranges" and r["refined_fraction"] < r["refined_columns"] < 0.7
     assert r["wavelength_m"] == pytest.approx(299792458.0 / 3 / 500e6)
-    # the same targets (to float rounding: refined columns are migrated whole, the envelope is theirs)
+    ref = np.percentile(full.envelope.max(axis=2), 99.5)
+    near = full.envelope >= full.config["threshold"] * ref
+    # depth ranges: the same targets to a voxel (the interpolated voxels beyond a range reach into its envelope a
+    # little), the envelope where they are within 1 % of its peak
     assert len(full.targets) == len(fast.targets) >= 2
     for a, b in zip(full.targets, fast.targets):
         assert a.kind == b.kind
+        np.testing.assert_allclose(np.asarray(b.points_xyz), np.asarray(a.points_xyz), atol=full.grid.dx)
+        assert b.score == pytest.approx(a.score, abs=0.01)
+    change = np.abs(fast.envelope - full.envelope)[near].max() / full.envelope.max()
+    assert 0 < change < 0.01
+    # whole columns: the same targets to float rounding (refined columns are migrated whole, the envelope theirs)
+    monkeypatch.setattr(refine, "refined_adjoint", functools.partial(refine.refined_adjoint, depth_margin=None))
+    whole = reconstruct(s, ReconstructConfig(coarse_to_fine=True))
+    assert whole.refine["refine"] == "whole columns" and whole.refine["refined_fraction"] > r["refined_fraction"]
+    assert len(full.targets) == len(whole.targets)
+    for a, b in zip(full.targets, whole.targets):
+        assert a.kind == b.kind
         np.testing.assert_allclose(np.asarray(b.points_xyz), np.asarray(a.points_xyz), atol=1e-4)
         assert b.score == pytest.approx(a.score, rel=1e-4)
-    # where the targets are, the envelope is the whole image's
-    ref = np.percentile(full.envelope.max(axis=2), 99.5)
-    near = full.envelope >= full.config["threshold"] * ref
-    np.testing.assert_allclose(fast.envelope[near], full.envelope[near], rtol=0, atol=1e-5 * full.envelope.max())
+    np.testing.assert_allclose(whole.envelope[near], full.envelope[near], rtol=0, atol=1e-5 * full.envelope.max())
     write_reconstruction(fast, tmp_path)
     doc = json.loads((tmp_path / "config.json").read_text())
     assert doc["refine"]["stride"] == 3 and doc["config"]["coarse_to_fine"] is True
+    assert doc["refine"]["refine"] == "depth ranges" and doc["refine"]["depth_margin_wavelengths"] == 0.5
 
 
 def test_a_profile_or_no_aperture_skips_the_coarse_pass_and_says_why():
@@ -298,15 +359,22 @@ def test_what_the_refined_pass_reports():
                                              normalize="sqrt_fold")
     wall = time.perf_counter() - t
     assert fold is None and img.shape == op.grid.shape
-    assert set(info) == {"stride", "coarse_grid", "wavelength_m", "level", "reference", "margin_coarse_columns",
-                         "refined_fraction", "seconds"}
+    assert set(info) == {"stride", "coarse_grid", "wavelength_m", "level", "reference", "refine",
+                         "depth_margin_wavelengths", "refined_fraction", "refined_columns", "seconds"}
     assert info["stride"] == 2 and info["coarse_grid"] == [31, 31, 20] and info["wavelength_m"] == 0.13
-    assert info["level"] == 0.4 and info["margin_coarse_columns"] == 0 and 0 < info["refined_fraction"] < 0.7
+    assert info["level"] == 0.4 and info["depth_margin_wavelengths"] == refine.DEPTH_MARGIN
+    assert 0 < info["refined_fraction"] < info["refined_columns"] < 0.7 and info["refine"] == "depth ranges"
     assert set(info["seconds"]) == {"coarse", "mark", "fine", "fill"}
     assert all(0 <= v for v in info["seconds"].values()) and sum(info["seconds"].values()) <= wall
     whole = op.adjoint(d)
-    cols = np.abs(img - whole).max(axis=2) <= 1e-5 * np.abs(whole).max()
-    assert cols.mean() >= info["refined_fraction"]  # the refined columns (and the coarse ones) are the whole image's
+    same = np.abs(img - whole) <= 1e-5 * np.abs(whole).max()
+    assert same.mean() >= info["refined_fraction"]  # the refined voxels (and the coarse columns) are the whole image's
+    _, _, cinfo = refine.refined_adjoint(op, d, with_fold=False, wavelength_m=0.13, level=0.4, normalize="sqrt_fold",
+                                         depth_margin=None)
+    assert set(cinfo) == {"stride", "coarse_grid", "wavelength_m", "level", "reference", "refine",
+                          "margin_coarse_columns", "refined_fraction", "refined_columns", "seconds"}
+    assert cinfo["refine"] == "whole columns" and cinfo["margin_coarse_columns"] == 0
+    assert cinfo["refined_fraction"] == cinfo["refined_columns"] == pytest.approx(info["refined_columns"])
 
 
 def test_too_few_columns_apart_migrates_every_voxel_and_says_so():
