@@ -342,7 +342,7 @@ def _reconstruction_stage(out: Path, log) -> dict:
     n_tiles = len(plan_tiles(tiled.grid, 0.64))
     log(f"      site scale: in {n_tiles} tiles of 0.64 m with the cone's halo ({wall_tiles:.1f} s), the volume "
         f"{'equals the one-pass volume bit for bit' if same else 'DIFFERS from the one-pass volume'}")
-    # coarse-to-fine (gpr3d reconstruct --coarse-to-fine): every third column first, then every voxel of the columns
+    # coarse-to-fine (gpr3d reconstruct --coarse-to-fine): every third column first, then every voxel of the depths
     # where that image holds energy; the targets against the one-pass ones
     t = time.perf_counter()
     c2f = reconstruct(survey, ReconstructConfig(spacing_m=0.02, max_depth_m=0.8, coarse_to_fine=True))
@@ -350,8 +350,8 @@ def _reconstruction_stage(out: Path, log) -> dict:
     ev_c2f = _named(evaluate_targets(c2f.targets, truth_lines_from_pipes(pipes)))
     moved = _largest_move(c2f.targets, result_targets)
     ref = c2f.refine
-    log(f"      coarse-to-fine: {ref.get('refined_fraction', 1.0) * 100:.0f} % of the columns migrated whole "
-        f"(coarse columns every {ref.get('stride', 1)}), migration {c2f.timings_s['migrate']:.1f} s against "
+    log(f"      coarse-to-fine: {ref.get('refined_fraction', 1.0) * 100:.0f} % of the voxels migrated at full "
+        f"resolution (coarse columns every {ref.get('stride', 1)}), migration {c2f.timings_s['migrate']:.1f} s against "
         f"{mig:.1f} s; {len(c2f.targets)} targets against {len(result_targets)}"
         + (f", none moved more than {moved * 100:.1f} cm" if moved is not None else " (not the same set)"))
     est = rows["estimated"]

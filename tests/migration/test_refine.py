@@ -223,6 +223,9 @@ def test_too_much_marked_migrates_every_voxel(monkeypatch):
     wall = time.perf_counter() - t
     np.testing.assert_array_equal(img, whole)
     np.testing.assert_array_equal(fold, whole_fold)
+    alone, no_fold, _ = refine.refined_adjoint(op, d, with_fold=False, wavelength_m=0.2, level=0.15, normalize="fold")
+    np.testing.assert_array_equal(alone, whole)
+    assert no_fold is None
     assert info["refined_fraction"] == 1.0 and info["marked_fraction"] == marked
     assert info["why"] == f"the coarse pass marked {marked:.0%} of the voxels: every voxel migrated"
     assert set(info["seconds"]) == {"coarse", "mark", "fine"} and 0 <= sum(info["seconds"].values()) <= wall
@@ -375,6 +378,25 @@ def test_what_the_refined_pass_reports():
                           "margin_coarse_columns", "refined_fraction", "refined_columns", "seconds"}
     assert cinfo["refine"] == "whole columns" and cinfo["margin_coarse_columns"] == 0
     assert cinfo["refined_fraction"] == cinfo["refined_columns"] == pytest.approx(info["refined_columns"])
+    assert cinfo["reference"] == info["reference"] > 0
+    # the reference's percentile is the one asked, in either mode; the fine pass migrates only the ranges
+    calls = []
+    adjoint = op.adjoint
+
+    def spy(data, **kw):
+        calls.append(kw.get("depth_range"))
+        return adjoint(data, **kw)
+
+    op.adjoint = spy
+    for margin in (refine.DEPTH_MARGIN, None):
+        calls.clear()
+        low = refine.refined_adjoint(op, d, with_fold=False, wavelength_m=0.13, level=0.4, normalize="sqrt_fold",
+                                     reference_percentile=90, depth_margin=margin)[2]
+        assert 0 < low["reference"] < info["reference"] and low["refined_fraction"] > info["refined_fraction"] / 2
+        # (the coarse pass's operator is a copy of this one, the spy with it: every depth of its columns)
+        assert len(calls) == 2 and calls[0] is None and calls[1].shape == (60, 60, 2)
+        kk = np.arange(op.grid.nd)
+        assert ((kk >= calls[1][..., :1]) & (kk < calls[1][..., 1:])).mean() == pytest.approx(low["refined_fraction"])
 
 
 def test_too_few_columns_apart_migrates_every_voxel_and_says_so():

@@ -68,10 +68,10 @@ def add_arguments(sp):
                     help="the antennas' height above the ground (m) when held a wavelength or more above it (an "
                          f"air-launched antenna: the rays refract at the surface; default {rc.air_gap_m:g})")
     sp.add_argument("--coarse-to-fine", action="store_true",
-                    help="a coarse pass over every few columns first, then every voxel of the columns where it "
+                    help="a coarse pass over every few columns first, then every voxel of the depths where it "
                          "finds energy, the others interpolated (config.json's 'refine' says how many)")
     sp.add_argument("--refine-level", type=float, default=None,
-                    help="with --coarse-to-fine: refine the columns where the coarse envelope reaches this share of "
+                    help="with --coarse-to-fine: refine where the coarse envelope reaches this share of "
                          f"--threshold (default {rc.refine_level:g})")
     sp.add_argument("--engine", choices=("numba", "numpy", "torch"), default=None,
                     help=f"migration kernel (default {rc.engine}; torch with --device cuda: the GPU)")
