@@ -391,7 +391,7 @@ def test_what_the_refined_pass_reports():
     for margin in (refine.DEPTH_MARGIN, None):
         calls.clear()
         low = refine.refined_adjoint(op, d, with_fold=False, wavelength_m=0.13, level=0.4, normalize="sqrt_fold",
-                                     reference_percentile=90, depth_margin=margin)[2]
+                                     reference_percentile=98, depth_margin=margin)[2]
         assert 0 < low["reference"] < info["reference"] and low["refined_fraction"] > info["refined_fraction"] / 2
         # (the coarse pass's operator is a copy of this one, the spy with it: every depth of its columns)
         assert len(calls) == 2 and calls[0] is None and calls[1].shape == (60, 60, 2)
