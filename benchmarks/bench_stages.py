@@ -215,7 +215,7 @@ def main(argv=None):
               f"| `gpr3d reconstruct` end to end, warm ({g['nx']} x {g['ny']} x {g['nd']}) | {warm:.2f} | "
               f"{warm / w_ref:.2f} |",
               f"| `gpr3d reconstruct --coarse-to-fine` end to end, warm (stride {refine.get('stride')}, "
-              f"{100 * refine.get('refined_fraction', 1.0):.0f} % of the columns refined) | {warm_c2f:.2f} | "
+              f"{100 * refine.get('refined_fraction', 1.0):.0f} % of the voxels refined) | {warm_c2f:.2f} | "
               f"{warm_c2f / w_ref:.2f} |",
               f"| `gpr3d reconstruct` end to end, cold cache (first run, background warm-up) | {cold:.2f} | "
               f"{cold / w_ref:.2f} |",
