@@ -127,7 +127,8 @@ def refine_ranges(cenv: np.ndarray, k: int, grid: Grid3D, *, level: float, wavel
     in each coarse column, the depths where it reaches ``level`` x the ``reference_percentile`` of its ridge map,
     from the shallowest to the deepest, widened by ``margin_wavelengths`` of ``wavelength_m`` above and below; a
     fine column takes the union (shallowest to deepest) of its coarse neighbours' ranges (``i // k``,
-    ``i // k + 1`` along x and y). Returns ``(ranges, reference)``."""
+    ``i // k + 1`` along x and y; ``LATERAL_MARGIN``, the whole-column marking's, does not apply). Returns
+    ``(ranges, reference)``."""
     ridge = cenv.max(axis=2)
     ref = float(np.percentile(ridge, reference_percentile))
     hot = cenv >= level * ref if ref > 0 else np.ones(cenv.shape, bool)
