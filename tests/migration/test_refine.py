@@ -255,13 +255,15 @@ def test_reconstruct_coarse_to_fine_finds_the_same_targets_and_says_what_it_did(
     assert r["wavelength_m"] == pytest.approx(299792458.0 / 3 / 500e6)
     ref = np.percentile(full.envelope.max(axis=2), 99.5)
     near = full.envelope >= full.config["threshold"] * ref
-    # depth ranges: the same targets to a voxel (the interpolated voxels beyond a range reach into its envelope a
-    # little), the envelope where they are within 1 % of its peak
+    # depth ranges: the same targets within two voxels, the envelope where they are within 1 % of its peak (the
+    # interpolated voxels beyond a range reach into its envelope a little: measured 0.23 % here, and a line's end,
+    # where its ridge crosses the threshold, 1.0 cm and 2.0 cm off; two voxels, not one, so that rounding on another
+    # CPU cannot push an end that moved by exactly one voxel over the bound)
     assert len(full.targets) == len(fast.targets) >= 2
     for a, b in zip(full.targets, fast.targets):
         assert a.kind == b.kind
-        np.testing.assert_allclose(np.asarray(b.points_xyz), np.asarray(a.points_xyz), atol=full.grid.dx)
-        assert b.score == pytest.approx(a.score, abs=0.01)
+        np.testing.assert_allclose(np.asarray(b.points_xyz), np.asarray(a.points_xyz), atol=2 * full.grid.dx)
+        assert b.score == pytest.approx(a.score, abs=0.01)  # (measured 0.003)
     change = np.abs(fast.envelope - full.envelope)[near].max() / full.envelope.max()
     assert 0 < change < 0.01
     # whole columns: the same targets to float rounding (refined columns are migrated whole, the envelope theirs)
