@@ -139,8 +139,13 @@ def main(argv=None):
         seeds = list(range(a, b + 1))
     else:
         seeds = [int(v) for v in args.seeds.split(",")]
-    levels = [float(v) for v in args.levels.split(",")]
-    margins = [None if v == "columns" else float(v) for v in args.margins.split(",")]
+    try:
+        levels = [float(v) for v in args.levels.split(",")]
+        margins = [None if v == "columns" else float(v) for v in args.margins.split(",")]
+    except ValueError:
+        ap.error("--levels takes numbers and --margins numbers or 'columns', comma-separated")
+    if not all(0 < v <= 1 for v in levels) or not all(m is None or m >= 0 for m in margins):
+        ap.error("--levels must lie in (0, 1] and --margins be >= 0 (or 'columns')")
     rows = []
 
     def log(msg):
