@@ -67,6 +67,10 @@ def test_detect_on_the_embedded_dzt_imports_neither_scipy_signal_nor_ndimage(tmp
     (["--trace-scales", "1,1"], "--trace-scales must be different factors in 0.25..4 or auto, separated by commas"),
     (["--trace-scales", "1,auto"], "--trace-scales auto needs a detector that knows how wide its training"),
     (["--trace-scales", "nan"], "--trace-scales must be different factors in 0.25..4 or auto, separated by commas"),
+    (["--refine-passes", "0"], "--refine-passes must be a whole number in 1..5, got 0"),
+    (["--refine-passes", "6"], "--refine-passes must be a whole number in 1..5, got 6"),
+    (["--refine-passes", "1", "--refiner", "none"], "say how the box refiner is applied: not with --refiner none"),
+    (["--no-refine-mirror", "--refiner", "none"], "say how the box refiner is applied: not with --refiner none"),
 ])
 def test_detect_bad_arguments_one_line(tmp_path, args, msg):
     from gpr3d.core.survey import Survey
@@ -176,3 +180,25 @@ def test_detect_with_depths_on_one_file_of_every_real_folder(tmp_path):
         eps = d["permittivity"]["eps_r"] if d.get("permittivity") else None
         # a record with positions (or a DZT's marks) has its host permittivity; one without says why not
         assert (eps is not None and 1 <= eps <= 81) or "no trace positions" in r.stderr, (src, d.get("permittivity"), r.stderr)
+
+
+def test_detect_applies_the_refiner_as_told_and_says_so(tmp_path):
+    """``--refine-passes 1 --no-refine-mirror``: the boxes the library gives with one look at each box, not the
+    default two mirrored passes; the JSON says which."""
+    from gpr3d.detection.infer import load_detector
+    from gpr3d.io.registry import read
+
+    src = real_file("gprpy_gssi_400MHz/FILE____032.DZT")
+    out = tmp_path / "det.json"
+    r = run_cli("detect", src, "--out", out, "--depth", "none", "--refine-passes", "1", "--no-refine-mirror")
+    assert r.returncode == 0, r.stderr
+    d = json.loads(out.read_text())
+    assert d["refine"] == {"mirror": False, "passes": 1}
+    want = load_detector(refine_mirror=False, refine_passes=1).detect(read(src), score_threshold=0.5)
+    default = load_detector().detect(read(src), score_threshold=0.5)
+    assert default["refine"] == {"mirror": True, "passes": 2}
+    got = np.array([t["box"] for t in d["targets"]])
+    assert got.shape == (len(want["targets"]), 4)
+    assert np.allclose(got, [t["box"] for t in want["targets"]], rtol=1e-5, atol=0)
+    two = np.array([t["box"] for t in default["targets"]])
+    assert got.shape != two.shape or not np.allclose(got, two, rtol=1e-3, atol=0)

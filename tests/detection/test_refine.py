@@ -182,6 +182,7 @@ class _Fixed:
     """A refiner whose network asks the same edge moves of every box."""
 
     provenance = {"name": "fixed moves"}
+    mirror, passes = False, 1  # one look at each box, as the moves it asks are written
 
     def __init__(self, d):
         self.d, self.seen = np.asarray(d, float), []
@@ -231,10 +232,11 @@ def test_the_detector_refines_its_merged_boxes_before_it_reports_them():
     det = _one_box_detector(WindowConfig(traces=256, rows=128, overlap=0.0))
     plain = det.detect(s)
     assert plain["refiner"] is None
-    plain = plain["targets"]
+    plain, plain_refine = plain["targets"], plain["refine"]
     det.refiner = _Fixed([0.0, 0.0, 0.2, 0.1])
     found = det.detect(s)
-    assert found["refiner"] == "fixed moves"
+    assert found["refiner"] == "fixed moves" and found["refine"] == {"mirror": False, "passes": 1}
+    assert plain_refine is None
     moved = found["targets"]
     assert len(plain) == len(moved) == 1  # one window
     a, b = np.asarray(plain[0]["box"]), np.asarray(moved[0]["box"])
@@ -483,3 +485,130 @@ def test_refiner_weights_that_do_not_fit_are_one_line(tmp_path):
         np.testing.assert_allclose(ref.net(x).numpy(), R.build_refiner().half().float().eval()(x).numpy(), atol=1e-5)
     with pytest.raises(FormatError, match=r"gone\.pt: no such box refiner weights file"):
         R.load_refiner(tmp_path / "gone.pt")
+
+
+def test_mirror_deltas_swap_the_side_edges_and_turn_them_round():
+    d = np.array([[0.1, -0.2, 0.3, 0.4], [-0.05, 0.0, 0.0, -0.1]])
+    np.testing.assert_array_equal(R.mirror_deltas(d), [[-0.3, -0.2, -0.1, 0.4], [0.0, 0.0, 0.05, -0.1]])
+    np.testing.assert_array_equal(R.mirror_deltas(R.mirror_deltas(d)), d)
+
+
+class _ToBrightest:
+    """A refiner whose network centres each box on the picture's brightest column and moves its bottom down by a
+    tenth of its height: it sees the picture, so it is mirror-equivariant by construction."""
+
+    provenance = {"name": "to the brightest column"}
+
+    def __init__(self, mirror, passes):
+        self.mirror, self.passes, self.seen = mirror, passes, []
+
+    def predict(self, image, boxes_px):
+        self.seen.append((image.copy(), boxes_px.copy()))
+        centre = float(np.argmax(image[0, 0].sum(axis=0))) + 0.5  # pixel c covers [c, c + 1)
+        w = np.maximum(boxes_px[:, 2] - boxes_px[:, 0], 2.0)
+        shift = (centre - 0.5 * (boxes_px[:, 0] + boxes_px[:, 2])) / w
+        return np.stack([shift, np.zeros(len(w)), shift, np.full(len(w), 0.1)], axis=1)
+
+    refine = R.BoxRefiner.refine
+
+
+def test_a_mirrored_look_averages_the_box_s_moves_with_its_mirror_image_s():
+    s = _survey(n_traces=300)
+    rows = 128
+    image = np.zeros((3, rows, 300), np.float32)
+    image[:, :, 171] = 1.0  # traces 171: the brightest column
+    boxes = np.array([[120.0, 1e-9, 160.0, 2e-9], [200.0, 0.5e-9, 260.0, 3e-9]])
+    one = _ToBrightest(False, 1).refine(s, rows, boxes, image)
+    np.testing.assert_allclose(0.5 * (one[:, 0] + one[:, 2]), 171.0, atol=1e-9)  # pixel 171.5 is trace 171
+    np.testing.assert_allclose(one[:, 2] - one[:, 0], boxes[:, 2] - boxes[:, 0])
+    np.testing.assert_allclose(one[:, 3] - boxes[:, 3], 0.1 * (boxes[:, 3] - boxes[:, 1]), rtol=1e-9)
+    ref = _ToBrightest(True, 1)
+    both = ref.refine(s, rows, boxes, image)
+    np.testing.assert_allclose(both, one, rtol=1e-9, atol=1e-15)  # an equivariant network: the mirror changes nothing
+    (img_a, px_a), (img_b, px_b) = ref.seen
+    np.testing.assert_array_equal(img_b, img_a[..., ::-1])  # the second look: the picture mirrored ...
+    np.testing.assert_allclose(px_b, np.stack([300 - px_a[:, 2], px_a[:, 1], 300 - px_a[:, 0], px_a[:, 3]], 1))
+    # ... and a network that always moves boxes right moves them neither way when the two looks are averaged
+    right = _Fixed([0.1, 0.0, 0.1, 0.2])
+    right.mirror = True
+    got = right.refine(s, rows, boxes, image)
+    np.testing.assert_allclose(got[:, [0, 2]], boxes[:, [0, 2]], atol=1e-9)
+    np.testing.assert_allclose(got[:, 3] - boxes[:, 3], 0.2 * (boxes[:, 3] - boxes[:, 1]), rtol=1e-6)
+    np.testing.assert_allclose(got[:, 1], boxes[:, 1], rtol=1e-6)
+
+
+def test_each_pass_starts_from_the_box_the_one_before_moved():
+    s = _survey(n_traces=300)
+    rows = 128
+    image = np.zeros((3, rows, 300), np.float32)
+    target = np.array([100.0, 10.0, 180.0, 70.0])  # pixels
+
+    class Halfway(_Fixed):
+        def predict(self, image, boxes_px):  # half of the way to the target, every edge
+            self.seen.append((image.shape, boxes_px.copy()))
+            return 0.5 * R.box_deltas(boxes_px, np.repeat(target[None], len(boxes_px), 0))
+
+    pm = R.record_pixmap(s, rows)
+    start = np.array([60.0, 30.0, 150.0, 110.0])
+    box = np.array([pm.px_to_box(start)])
+    for passes in (1, 2, 3):
+        ref = Halfway(np.zeros(4))
+        ref.passes = passes
+        got = np.array(pm.box_to_px(ref.refine(s, rows, box, image)[0]))
+        np.testing.assert_allclose(got, target + (start - target) / 2**passes, rtol=1e-6)
+        assert len(ref.seen) == passes
+        if passes > 1:
+            np.testing.assert_allclose(ref.seen[1][1][0], 0.5 * (start + target), rtol=1e-6)
+
+
+def test_the_shipped_refiner_gives_a_mirrored_picture_mirrored_boxes():
+    """With the mirrored look (the default) the shipped network's boxes of a real P-GPR picture seen mirrored are
+    the mirror images of its boxes of the picture (to float rounding), in one pass or two; with one look they are
+    not (the network was trained on mirrored crops but is not exactly symmetric)."""
+    from gpr3d.data import example_pgpr
+    from gpr3d.detection.windows import WindowConfig, prepare
+    from gpr3d.io.yolo import read_yolo
+
+    (survey, labels), = read_yolo(example_pgpr(), names=["steel", "pipe"], kinds="pipe=pvc_pipe",
+                                  pixel_map="s_per_px=3.125e-11", frequency_hz=1.6e9)
+    cfg = WindowConfig()
+    image = R.record_image(prepare(survey, cfg), cfg.style)
+    n = survey.n_traces
+    boxes = np.array([x["box"] for x in labels["labels"]], float)
+    rng = np.random.default_rng(11)
+    h = boxes[:, 3] - boxes[:, 1]
+    boxes = boxes + np.stack([rng.normal(0, 2, len(boxes)), rng.normal(0, 0.1, len(boxes)) * h,
+                              rng.normal(0, 2, len(boxes)), rng.normal(0, 0.1, len(boxes)) * h], 1)
+
+    def flip(b):
+        return np.stack([n - 1 - b[:, 2], b[:, 1], n - 1 - b[:, 0], b[:, 3]], axis=1)
+
+    gaps = {}
+    for mirror, passes in ((True, 1), (True, 2), (False, 1)):
+        ref = R.load_refiner(mirror=mirror, passes=passes)
+        a = ref.refine(survey, cfg.rows, boxes, image)
+        b = flip(ref.refine(survey, cfg.rows, flip(boxes), np.ascontiguousarray(image[..., ::-1])))
+        px = np.array([1.0, 1 / survey.dt_s, 1.0, 1 / survey.dt_s])  # traces and samples
+        gaps[mirror, passes] = float(np.abs((a - b) * px).max())
+        assert np.abs((a - boxes) * px).max() > 0.3  # the boxes did move
+    print("GAPS", gaps)
+    assert gaps[True, 1] < 2e-3 and gaps[True, 2] < 2e-3, gaps
+    assert gaps[False, 1] > 0.05, gaps
+
+
+@pytest.mark.parametrize("mirror, passes, what", [
+    (True, 0, "passes must be a whole number in 1..5, got 0"), (True, 6, "got 6"), (True, 1.5, "got 1.5"),
+    (True, True, "got True"), ("yes", 2, "mirror setting must be True or False, got 'yes'")])
+def test_how_a_refiner_is_applied_is_checked_in_one_line(mirror, passes, what, tmp_path):
+    from gpr3d.detection.infer import load_detector
+
+    with pytest.raises(InvalidDataError, match=what):
+        R.load_refiner(tmp_path / "never_read.pt", mirror=mirror, passes=passes)  # before the file is read
+    with pytest.raises(InvalidDataError, match=what):
+        load_detector(tmp_path / "never_read.pt", refiner="default", refine_mirror=mirror, refine_passes=passes)
+    ref = R.load_refiner()
+    assert (ref.mirror, ref.passes) == (R.MIRROR, R.PASSES) == (True, 2)  # the shipped way
+    ref.passes = passes if passes != 0 else -1
+    ref.mirror = mirror
+    with pytest.raises(InvalidDataError, match="the refiner's"):  # settings changed afterwards are checked too
+        ref.refine(_survey(), 128, np.array([[10.0, 1e-9, 40.0, 2e-9]]), np.zeros((3, 128, 300), np.float32))

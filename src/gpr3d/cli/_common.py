@@ -114,7 +114,17 @@ def _detector(args):
     if not 0.0 <= args.score <= 1.0:
         raise GPR3DError(f"--score must lie in 0..1, got {args.score}")
     scales = _trace_scales(getattr(args, "trace_scales", None))
-    det = load_detector(args.weights, device=args.device, engine=args.runtime, refiner=args.refiner)
+    passes, mirror_off = getattr(args, "refine_passes", None), bool(getattr(args, "no_refine_mirror", False))
+    if passes is not None and not 1 <= passes <= 5:
+        raise GPR3DError(f"--refine-passes must be a whole number in 1..5, got {passes}")
+    if (passes is not None or mirror_off) and args.refiner == "none":
+        raise GPR3DError("--refine-passes and --no-refine-mirror say how the box refiner is applied: "
+                         "not with --refiner none")
+    det = load_detector(args.weights, device=args.device, engine=args.runtime, refiner=args.refiner,
+                        refine_passes=passes, refine_mirror=False if mirror_off else None)
+    if (passes is not None or mirror_off) and det.refiner is None:
+        raise GPR3DError("--refine-passes and --no-refine-mirror say how the box refiner is applied: these weights "
+                         "come without one (give --refiner default or a refiner's file)")
     if "auto" in scales and not det.reference_width:
         raise GPR3DError("--trace-scales auto needs a detector that knows how wide its training records' features "
                          "were (weights fine-tuned by references/detection/finetune_pgpr.py); these weights do not")
@@ -203,6 +213,11 @@ def add_view_args(sp):
                          "hyperbolas narrower or wider than the training data's, another radar's trace interval) "
                          "and fuse the boxes; auto: as wide as the training pictures' features (weights that "
                          "record it)")
+    sp.add_argument("--refine-passes", type=int, default=None, metavar="N",
+                    help="apply the box refiner N times (1..5; default 2), each time from the box it moved")
+    sp.add_argument("--no-refine-mirror", action="store_true",
+                    help="the box refiner sees each box once, not also mirrored (by default the two edge moves "
+                         "are averaged)")
 
 
 def add_depth_args(sp, flag):

@@ -28,14 +28,22 @@ __all__ = ["Detector", "load_detector", "ENGINES"]
 ENGINES = ("auto", "torch", "onnx")
 
 
-def load_detector(path=None, *, device: str = "cpu", engine: str = "auto", refiner="auto") -> "Detector":
+def load_detector(path=None, *, device: str = "cpu", engine: str = "auto", refiner="auto", refine_mirror=None,
+                  refine_passes=None) -> "Detector":
     """The detector in ``path`` (default: the shipped one), run by ``engine`` (see ``ENGINES``).
 
     ``path`` may be a ``.pt`` weights file (torch) or an ``.onnx`` export of one (onnx).
     ``refiner``: the box refiner that places its boxes (:mod:`gpr3d.detection.refine`):
     ``"auto"`` the shipped one with the shipped detector and none with other weights,
-    ``"none"`` (or None) none, or a refiner's ``.pt``/``.onnx`` file.
+    ``"none"`` (or None) none, or a refiner's ``.pt``/``.onnx`` file; ``refine_mirror``,
+    ``refine_passes``: how it is applied (None: the refiner's defaults,
+    :data:`gpr3d.detection.refine.MIRROR` and :data:`~gpr3d.detection.refine.PASSES`).
     """
+    if refine_mirror is not None or refine_passes is not None:
+        from gpr3d.detection.refine import MIRROR, PASSES, check_application
+
+        check_application(MIRROR if refine_mirror is None else refine_mirror,
+                          PASSES if refine_passes is None else refine_passes)
     det = _load_network(path, device=device, engine=engine)
     if refiner == "auto":
         refiner = "default" if path is None else None
@@ -43,7 +51,8 @@ def load_detector(path=None, *, device: str = "cpu", engine: str = "auto", refin
         from gpr3d.detection.refine import load_refiner
 
         onnx = det.model is None  # the ONNX engine: no PyTorch for the refiner either
-        det.refiner = load_refiner(None if refiner == "default" else refiner, engine="onnx" if onnx else "torch")
+        how = {k: v for k, v in (("mirror", refine_mirror), ("passes", refine_passes)) if v is not None}
+        det.refiner = load_refiner(None if refiner == "default" else refiner, engine="onnx" if onnx else "torch", **how)
     return det
 
 
@@ -248,6 +257,8 @@ class Detector:
                 "n_traces": survey.n_traces, "dt_s": survey.dt_s, "n_windows": n_windows,
                 "detector": self.provenance.get("name", "gpr3d detector"),
                 "refiner": None if self.refiner is None else self.refiner.provenance.get("name", "gpr3d box refiner"),
+                "refine": None if self.refiner is None else {"mirror": bool(getattr(self.refiner, "mirror", False)),
+                                                             "passes": int(getattr(self.refiner, "passes", 1))},
                 "views": {"trace_scales": [f if f == "auto" else float(f) for f in self.trace_scales],
                           "mirror": bool(self.mirror)},
                 "score_threshold": score_threshold,

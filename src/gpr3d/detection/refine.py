@@ -31,9 +31,10 @@ from gpr3d.core.errors import FormatError, InvalidDataError
 from gpr3d.io.coco import PixelMap
 from gpr3d.io.weights import half_state_dict, read_weights_file
 
-__all__ = ["CROP", "EXPAND", "JITTER", "DEFAULT_REFINER", "DEFAULT_REFINER_ONNX", "record_image", "record_pixmap",
-           "box_deltas", "apply_deltas", "jitter_boxes", "pair_iou", "build_refiner", "crops", "BoxRefiner", "OnnxBoxRefiner",
-           "load_refiner", "save_refiner", "train_refiner", "export_refiner_onnx"]
+__all__ = ["CROP", "EXPAND", "JITTER", "MIRROR", "PASSES", "MAX_PASSES", "DEFAULT_REFINER", "DEFAULT_REFINER_ONNX",
+           "record_image", "record_pixmap", "box_deltas", "apply_deltas", "mirror_deltas", "check_application",
+           "jitter_boxes", "pair_iou", "build_refiner", "crops", "BoxRefiner", "OnnxBoxRefiner", "load_refiner",
+           "save_refiner", "train_refiner", "export_refiner_onnx"]
 
 CROP = 64  #: crop side in pixels
 EXPAND = 2.0  #: the crop covers the box's width and height times this, about its centre
@@ -41,6 +42,11 @@ EXPAND = 2.0  #: the crop covers the box's width and height times this, about it
 #: factors (log-normal sigma), top and bottom shifts (box heights): a detector's spread on
 #: real data (``benchmarks/results/pgpr_box_fit.md``)
 JITTER = {"centre": 0.06, "width": 0.2, "top": 0.1, "bottom": 0.15}
+#: applied with each crop also mirrored, the two edge moves averaged
+MIRROR = True
+#: applied this many times, each pass from the box the one before moved
+PASSES = 2
+MAX_PASSES = 5
 FORMAT = "gpr3d.refiner"
 DEFAULT_REFINER = Path(__file__).with_name("default_refiner.pt")
 DEFAULT_REFINER_ONNX = Path(__file__).with_name("default_refiner.onnx")
@@ -78,6 +84,23 @@ def apply_deltas(boxes, deltas) -> np.ndarray:
     lo, hi = b[:, :2] + d[:, :2] * wh, b[:, 2:] + d[:, 2:] * wh
     mid = 0.5 * (lo + hi)
     return np.concatenate([np.minimum(lo, mid - 0.5), np.maximum(hi, mid + 0.5)], axis=1)
+
+
+def mirror_deltas(deltas) -> np.ndarray:
+    """Edge moves predicted for a mirrored crop, as moves of the unmirrored box: its left edge is the mirror's right
+    one, moved the other way (and likewise the right edge); top and bottom stay."""
+    d = np.asarray(deltas, float).reshape(-1, 4)
+    return np.stack([-d[:, 2], d[:, 1], -d[:, 0], d[:, 3]], axis=1)
+
+
+def check_application(mirror, passes) -> tuple[bool, int]:
+    """``(mirror, passes)`` as a refiner applies them, or one line naming the wrong one."""
+    if not isinstance(mirror, (bool, np.bool_)):
+        raise InvalidDataError(f"the refiner's mirror setting must be True or False, got {mirror!r}")
+    if isinstance(passes, (bool, np.bool_)) or not isinstance(passes, (int, np.integer)) \
+            or not 1 <= passes <= MAX_PASSES:
+        raise InvalidDataError(f"the refiner's passes must be a whole number in 1..{MAX_PASSES}, got {passes!r}")
+    return bool(mirror), int(passes)
 
 
 def jitter_boxes(boxes, n: int, rng, spread: dict | None = None) -> np.ndarray:
@@ -141,15 +164,25 @@ def _graph(net):
     return Graph()
 
 
-def _refined(survey, rows, boxes, image, predict):
-    """Record boxes moved with ``predict(image (1, 3, rows, cols), boxes px (k, 4))``."""
+def _refined(survey, rows, boxes, image, predict, *, mirror: bool = False, passes: int = 1):
+    """Record boxes moved with ``predict(image (1, 3, rows, cols), boxes px (k, 4))``, ``passes`` times; with
+    ``mirror`` each pass averages the moves for the box and for its mirror image in the mirrored picture."""
     b = np.asarray(boxes, float).reshape(-1, 4)
     if not len(b):
         return b
     pm = record_pixmap(survey, rows)
     px = np.array([pm.box_to_px(x) for x in b])
-    d = predict(np.ascontiguousarray(image[None], dtype=np.float32), np.ascontiguousarray(px, dtype=np.float32))
-    return np.array([pm.px_to_box(x) for x in apply_deltas(px, d)])
+    img = np.ascontiguousarray(image[None], dtype=np.float32)
+    flipped = np.ascontiguousarray(img[..., ::-1]) if mirror else None
+    width = img.shape[-1]  # pixel c covers [c, c + 1): the mirror takes x to width - x
+    for _ in range(passes):
+        p32 = np.ascontiguousarray(px, dtype=np.float32)
+        d = predict(img, p32)
+        if mirror:
+            m = np.ascontiguousarray(np.stack([width - p32[:, 2], p32[:, 1], width - p32[:, 0], p32[:, 3]], axis=1))
+            d = 0.5 * (np.asarray(d, float) + mirror_deltas(predict(flipped, m)))
+        px = apply_deltas(px, d)
+    return np.array([pm.px_to_box(x) for x in px])
 
 
 def pair_iou(a, b) -> np.ndarray:
@@ -163,7 +196,13 @@ def pair_iou(a, b) -> np.ndarray:
 
 
 class BoxRefiner:
-    """A trained refiner (PyTorch); :meth:`refine` moves record boxes onto its label rule."""
+    """A trained refiner (PyTorch); :meth:`refine` moves record boxes onto its label rule.
+
+    ``mirror`` and ``passes`` say how it is applied (:data:`MIRROR`, :data:`PASSES`).
+    """
+
+    mirror = MIRROR
+    passes = PASSES
 
     def __init__(self, net, provenance: dict | None = None):
         self.net, self.provenance = net.eval(), provenance or {}
@@ -191,7 +230,8 @@ class BoxRefiner:
     def refine(self, survey, rows: int, boxes, image):
         """``boxes`` (k, 4) of ``survey`` moved onto the label rule; ``image``: the record's :func:`record_image`
         of ``rows`` rows."""
-        return _refined(survey, rows, boxes, image, self.predict)
+        mirror, passes = check_application(self.mirror, self.passes)
+        return _refined(survey, rows, boxes, image, self.predict, mirror=mirror, passes=passes)
 
 
 class OnnxBoxRefiner(BoxRefiner):
@@ -216,14 +256,19 @@ class OnnxBoxRefiner(BoxRefiner):
         return self.session.run(None, {"image": image, "boxes": boxes_px})[0].astype(float)
 
 
-def load_refiner(path=None, *, engine: str = "torch") -> BoxRefiner:
+def load_refiner(path=None, *, engine: str = "torch", mirror: bool = MIRROR, passes: int = PASSES) -> BoxRefiner:
     """The refiner in ``path`` (default: the shipped one): ``.pt`` in PyTorch, ``.onnx`` in ONNX Runtime.
 
-    ``engine="onnx"`` with no path loads the shipped ONNX export.
+    ``engine="onnx"`` with no path loads the shipped ONNX export. ``mirror``, ``passes``: how it
+    is applied (:meth:`BoxRefiner.refine`), checked before the file is read.
     """
+    mirror, passes = check_application(mirror, passes)
     if (path is not None and str(path).lower().endswith(".onnx")) or (path is None and engine == "onnx"):
-        return OnnxBoxRefiner.load(path)
-    return BoxRefiner.load(path)
+        ref = OnnxBoxRefiner.load(path)
+    else:
+        ref = BoxRefiner.load(path)
+    ref.mirror, ref.passes = mirror, passes
+    return ref
 
 
 def save_refiner(net, path, *, provenance: dict | None = None) -> None:
