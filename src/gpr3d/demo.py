@@ -511,14 +511,17 @@ def _pgpr_rows(det, out: Path, log) -> dict:
         f"in {wall:.1f} s; of its {len(truth)} labelled ({truth_kinds.count('rebar')} rebar, "
         f"{truth_kinds.count('pvc_pipe')} pipe) {found} found at IoU >= 0.5, {right} of them of the right kind")
     if "network" in fit:
-        log(f"      boxes placed by the box refiner ({res['refiner']}): mean IoU with the labels "
+        how = res["refine"]
+        looks = f"{'each box also seen mirrored, ' if how['mirror'] else ''}{how['passes']} pass" + \
+            ("es" if how["passes"] > 1 else "")
+        log(f"      boxes placed by the box refiner ({res['refiner']}; {looks}): mean IoU with the labels "
             f"{fit['refined']:.2f}, the network's own boxes {fit['network']:.2f}")
     log(f"      seen mirrored too (--mirror, the two views' boxes fused): {found_both} of {len(truth)} found, mean IoU "
         f"{fit['mirrored']:.2f}")
     return {"image": name, "n_detections": len(kinds), "kinds": {k: kinds.count(k) for k in set(kinds)},
             "n_labelled": len(truth), "found_iou50": found, "found_iou50_mirrored": found_both, "right_kind": right,
             "detect_s": wall,
-            "mean_iou": fit, "refiner": res["refiner"],
+            "mean_iou": fit, "refiner": res["refiner"], "refine": res["refine"],
             "figure": "detections_pgpr.png"}
 
 

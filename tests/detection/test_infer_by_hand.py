@@ -200,7 +200,8 @@ def test_the_engine_is_chosen_by_the_file_the_device_and_what_is_installed(monke
 
     monkeypatch.setattr(ort.OnnxDetector, "load", loaded("onnx"))
     monkeypatch.setattr(infer.Detector, "load", loaded("torch"))
-    monkeypatch.setattr(refine, "load_refiner", lambda p, engine: refiners.append((p, engine)) or (p, engine))
+    monkeypatch.setattr(refine, "load_refiner", lambda p, engine, mirror, passes: refiners.append((p, engine)) or
+                        (p, engine, mirror, passes))
     shipped = tmp_path / "default.onnx"
     monkeypatch.setattr(ort, "DEFAULT_ONNX", shipped)
     import importlib.util
@@ -223,8 +224,9 @@ def test_the_engine_is_chosen_by_the_file_the_device_and_what_is_installed(monke
     # the shipped refiner with the shipped detector only, in the detector's engine
     assert refiners == [(None, "torch"), (None, "onnx"), (None, "torch"), (None, "torch"), (None, "onnx")]
     assert infer.load_detector(refiner="none").refiner is None and infer.load_detector(refiner=None).refiner is None
-    assert infer.load_detector("m.pt", refiner="r.pt").refiner == ("r.pt", "torch")
-    assert infer.load_detector("m.onnx", refiner="default").refiner == (None, "onnx")
+    assert infer.load_detector("m.pt", refiner="r.pt").refiner == ("r.pt", "torch", True, 2)  # the shipped way
+    assert infer.load_detector("m.onnx", refiner="default", refine_passes=3).refiner == (None, "onnx", True, 3)
+    assert infer.load_detector(refine_mirror=False).refiner == (None, "torch", False, 2)
     for kw, msg in [(dict(engine="tensorrt"), "unknown engine 'tensorrt'; choose one of auto, torch, onnx"),
                     (dict(path="m.pt", engine="onnx"), "--runtime onnx needs an .onnx file (export one with python "
                      "references/detection/export_onnx.py m.pt OUT.onnx), not m.pt"),

@@ -237,6 +237,9 @@ def test_the_detector_refines_its_merged_boxes_before_it_reports_them():
     found = det.detect(s)
     assert found["refiner"] == "fixed moves" and found["refine"] == {"mirror": False, "passes": 1}
     assert plain_refine is None
+    det.refiner.mirror, det.refiner.passes = True, 3  # the JSON says how the refiner was applied
+    assert det.detect(s)["refine"] == {"mirror": True, "passes": 3}
+    det.refiner.mirror, det.refiner.passes = False, 1
     moved = found["targets"]
     assert len(plain) == len(moved) == 1  # one window
     a, b = np.asarray(plain[0]["box"]), np.asarray(moved[0]["box"])
@@ -608,6 +611,9 @@ def test_how_a_refiner_is_applied_is_checked_in_one_line(mirror, passes, what, t
         load_detector(tmp_path / "never_read.pt", refiner="default", refine_mirror=mirror, refine_passes=passes)
     ref = R.load_refiner()
     assert (ref.mirror, ref.passes) == (R.MIRROR, R.PASSES) == (True, 2)  # the shipped way
+    for m, p in ((None, None), (False, None), (None, 3), (False, 1)):  # each setting given alone reaches the refiner
+        r = load_detector(engine="torch", refine_mirror=m, refine_passes=p).refiner
+        assert (r.mirror, r.passes) == (True if m is None else m, 2 if p is None else p)
     ref.passes = passes if passes != 0 else -1
     ref.mirror = mirror
     with pytest.raises(InvalidDataError, match="the refiner's"):  # settings changed afterwards are checked too

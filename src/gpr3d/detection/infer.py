@@ -39,11 +39,10 @@ def load_detector(path=None, *, device: str = "cpu", engine: str = "auto", refin
     ``refine_passes``: how it is applied (None: the refiner's defaults,
     :data:`gpr3d.detection.refine.MIRROR` and :data:`~gpr3d.detection.refine.PASSES`).
     """
-    if refine_mirror is not None or refine_passes is not None:
-        from gpr3d.detection.refine import MIRROR, PASSES, check_application
+    from gpr3d.detection.refine import MIRROR, PASSES, check_application
 
-        check_application(MIRROR if refine_mirror is None else refine_mirror,
-                          PASSES if refine_passes is None else refine_passes)
+    mirror, passes = check_application(MIRROR if refine_mirror is None else refine_mirror,
+                                       PASSES if refine_passes is None else refine_passes)
     det = _load_network(path, device=device, engine=engine)
     if refiner == "auto":
         refiner = "default" if path is None else None
@@ -51,8 +50,8 @@ def load_detector(path=None, *, device: str = "cpu", engine: str = "auto", refin
         from gpr3d.detection.refine import load_refiner
 
         onnx = det.model is None  # the ONNX engine: no PyTorch for the refiner either
-        how = {k: v for k, v in (("mirror", refine_mirror), ("passes", refine_passes)) if v is not None}
-        det.refiner = load_refiner(None if refiner == "default" else refiner, engine="onnx" if onnx else "torch", **how)
+        det.refiner = load_refiner(None if refiner == "default" else refiner, engine="onnx" if onnx else "torch",
+                                   mirror=mirror, passes=passes)
     return det
 
 
@@ -257,8 +256,8 @@ class Detector:
                 "n_traces": survey.n_traces, "dt_s": survey.dt_s, "n_windows": n_windows,
                 "detector": self.provenance.get("name", "gpr3d detector"),
                 "refiner": None if self.refiner is None else self.refiner.provenance.get("name", "gpr3d box refiner"),
-                "refine": None if self.refiner is None else {"mirror": bool(getattr(self.refiner, "mirror", False)),
-                                                             "passes": int(getattr(self.refiner, "passes", 1))},
+                "refine": None if self.refiner is None else {"mirror": bool(self.refiner.mirror),
+                                                             "passes": int(self.refiner.passes)},
                 "views": {"trace_scales": [f if f == "auto" else float(f) for f in self.trace_scales],
                           "mirror": bool(self.mirror)},
                 "score_threshold": score_threshold,
