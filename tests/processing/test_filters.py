@@ -301,7 +301,7 @@ def test_corners_below_what_the_trace_holds_are_refused():
     with pytest.raises(ValueError, match=r"fmin_hz = 0.5 Hz must lie between the lowest frequency the 400-sample "
                                          r"traces hold \(2.5e\+07 Hz\)"):
         bandpass(x, DT, fmin_hz=0.5)
-    with pytest.raises(ValueError, match="fmax_hz = 2.49e\+07 Hz"):
+    with pytest.raises(ValueError, match=r"fmax_hz = 2.49e\+07 Hz"):
         bandpass(x, DT, fmax_hz=2.49e7)
     sos = butter(4, 2.5e7, btype="highpass", fs=1 / DT, output="sos")
     np.testing.assert_allclose(bandpass(x, DT, fmin_hz=2.5e7), sosfiltfilt(sos, x, axis=1), atol=2e-5)
