@@ -40,13 +40,14 @@ def test_detect_on_the_real_dzt_writes_the_contract(tmp_path):
     assert f"{len(d['targets'])} targets in 1040 traces" in r.stdout
 
 
-def test_detect_on_the_embedded_dzt_imports_neither_scipy_signal_nor_ndimage(tmp_path):
-    # they cost ~1.3 s of start-up; the detector's path uses gpr3d.processing.analytic instead (the depth fits of
-    # gpr3d.inversion.hyperbola still import both: --depth none here)
+@pytest.mark.parametrize("depth", ["none", "hybrid"])
+def test_detect_on_the_embedded_dzt_imports_neither_scipy_signal_nor_ndimage(tmp_path, depth):
+    # they cost ~1.3 s of start-up; the detector's path and the depth fits (gpr3d.inversion.hyperbola, the default
+    # --depth hybrid: once 0.8 s of a 3.7 s detect here) use gpr3d.processing.analytic instead
     pytest.importorskip("onnxruntime")
     out = tmp_path / "d.json"
     code = ("import sys; from gpr3d.cli.main import main; "
-            f"rc = main(['detect', 'src/gpr3d/data/FILE____032.DZT', '--depth', 'none', '--out', {str(out)!r}]); "
+            f"rc = main(['detect', 'src/gpr3d/data/FILE____032.DZT', '--depth', {depth!r}, '--out', {str(out)!r}]); "
             "print(rc, sorted(m for m in ('scipy.signal', 'scipy.ndimage', 'scipy.stats', 'torch') if m in sys.modules))")
     import subprocess
     import sys

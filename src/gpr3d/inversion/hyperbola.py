@@ -42,13 +42,11 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
-from scipy.optimize import least_squares
-from scipy.signal import hilbert
 
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.units import C0, velocity_from_eps_r
 from gpr3d.io.coco import BOX_PAD_PERIODS
+from gpr3d.processing.analytic import analytic, running_mean
 
 #: where the direct wave's envelope peaks between the air wave (0) and the ground wave (1), for antennas on the
 #: ground: the median over 40 records of the gprMax training twin (0.616, spread 0.03 from 100 MHz to 1.7 GHz, eps_r
@@ -117,8 +115,8 @@ def _envelope(data: np.ndarray, dt_s: float, frequency_hz: float | None) -> np.n
     x = np.asarray(data, dtype=np.float64)
     if frequency_hz:
         w = int(np.clip(round(1.0 / (frequency_hz * dt_s)), 3, max(3, x.shape[1] // 2)))
-        x = x - uniform_filter1d(x, w, axis=1, mode="nearest")
-    return np.abs(hilbert(x, axis=1))
+        x = x - running_mean(x, w, axis=1)
+    return np.abs(analytic(x, axis=1))
 
 
 def _first_peak(e: np.ndarray, level: float = 0.5) -> tuple[float, float]:
@@ -143,8 +141,8 @@ def direct_wave_time(survey) -> tuple[float, float]:
     the same peak picked trace by trace.
     """
     data = np.asarray(survey.data, np.float64)
-    k, _ = _first_peak(np.abs(hilbert(data.mean(axis=0))))
-    env = np.abs(hilbert(data[:: max(1, data.shape[0] // 64)], axis=1))
+    k, _ = _first_peak(np.abs(analytic(data.mean(axis=0))))
+    env = np.abs(analytic(data[:: max(1, data.shape[0] // 64)], axis=1))
     per = np.array([_first_peak(e)[0] for e in env])
     return k * survey.dt_s, float(np.median(np.abs(per - k))) * survey.dt_s
 
@@ -285,6 +283,8 @@ def _travel(p, x, h, with_radius, radius=None):
 
 def _robust_solve(fun, p0, lo, hi, **kw):
     """Least squares under the narrow Cauchy loss, started at ``p0`` and from a broad soft-L1 solve; the lower cost wins."""
+    from scipy.optimize import least_squares  # (here: scipy.optimize is a quarter of a second to import)
+
     direct = least_squares(fun, p0, bounds=(lo, hi), loss="cauchy", f_scale=1.0, x_scale="jac", **kw)
     broad = least_squares(fun, p0, bounds=(lo, hi), loss="soft_l1", f_scale=5.0, x_scale="jac", **kw)
     refined = least_squares(fun, broad.x, bounds=(lo, hi), loss="cauchy", f_scale=1.0, x_scale="jac", **kw)
