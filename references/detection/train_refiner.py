@@ -1,6 +1,6 @@
 """Train the box refiner (``gpr3d.detection.refine``) on labelled records, on the CPU, in minutes.
 
-    python references/detection/train_refiner.py --out runs/refiner.pt [--pgpr DIR] [--synthetic N]
+    python references/detection/train_refiner.py --out runs/refiner.pt [--pgpr DIR] [--only GLOB] [--synthetic N]
         [--gprmax FILE.h5[:N]] [--epochs 9] [--per-label 24] [--onnx OUT.onnx]
 
 Labels from P-GPR's train split (its own box rule: the people who labelled its real
@@ -46,6 +46,8 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, help="the refiner's weights (.pt)")
     p.add_argument("--pgpr", default=str(PGPR_DEFAULT), help="P-GPR folder (its train/ is read); 'none' for none")
+    p.add_argument("--only", default=None, help="P-GPR train pictures named by this glob only (AIR_* for one radar: "
+                   "a refiner for the device-held-out test)")
     p.add_argument("--synthetic", type=int, default=0, help="survey-scale synthetic records (seed 1000) to add")
     p.add_argument("--gprmax", default=None, help="a packed gprMax file to add, FILE:N leaving out its last N")
     p.add_argument("--name", default="gpr3d box refiner", help="the refiner's name in detections")
@@ -62,9 +64,14 @@ def main(argv=None):
     _, window, _ = load_weights()
     records, parts = [], []
     if args.pgpr != "none":
-        recs = pgpr_records(args.pgpr, "train")
+        from gpr3d.core.errors import FormatError
+
+        try:
+            recs = pgpr_records(args.pgpr, "train", args.only)
+        except FormatError as exc:  # (read_yolo: a folder with no picture, or none that the glob names)
+            p.error(f"--only {args.only!r}: no P-GPR train picture matches" if args.only else str(exc))
         records += recs
-        parts.append(f"P-GPR train ({len(recs)} B-scans)")
+        parts.append(f"P-GPR train{f' {args.only}' if args.only else ''} ({len(recs)} B-scans)")
     if args.synthetic:
         from gpr3d.simulation.surveys import survey_sample
 
