@@ -100,7 +100,8 @@ def stack(weights: int, fold: bool = False):
         align = ir.Constant(i32, 4)
         evens = ir.Constant(vi, list(range(0, 2 * W, 2)))
         odds = ir.Constant(vi, list(range(1, 2 * W, 2)))
-        tiny = ir.Constant(vf, [1e-12] * W)
+        tiny2 = ir.Constant(vf, [1e-24] * W)
+        one_f = ir.Constant(vf, [1.0] * W)
         first = builder.udiv(k0, ir.Constant(k0.type, W))
 
         def depth_loop(use_gather):
@@ -108,8 +109,15 @@ def stack(weights: int, fold: bool = False):
                 off = builder.mul(blk, ir.Constant(blk.type, W))
                 d = vload(depth_p, off)
                 za, zb = add(d, ha_v), add(d, hb_v)
-                ra = builder.call(sqrt, [add(mul(za, za), h2a_v)])
-                rb = builder.call(sqrt, [add(mul(zb, zb), h2b_v)])
+                # each leg's length r = q / sqrt(q) through its reciprocal 1 / sqrt(q), which LLVM computes with
+                # the CPU's reciprocal-square-root estimate and a Newton step under these flags (vrsqrt14ps on
+                # AVX-512: a fraction of a full vsqrtps' throughput), and which the obliquity's cosine z / r
+                # reuses; q kept off 0 (a voxel exactly at an antenna: r = 1e-12, its cosine 0, not 0/0)
+                qa = builder.call(vmax, [add(mul(za, za), h2a_v), tiny2])
+                qb = builder.call(vmax, [add(mul(zb, zb), h2b_v), tiny2])
+                ia = builder.fdiv(one_f, builder.call(sqrt, [qa], fastmath=fast), flags=fast)
+                ib = builder.fdiv(one_f, builder.call(sqrt, [qb], fastmath=fast), flags=fast)
+                ra, rb = mul(qa, ia), mul(qb, ib)
                 u = mul(add(t0_v, mul(add(ra, rb), vload(slow_p, off))), idt_v)
                 u = builder.call(vmin, [builder.call(vmax, [u, zero_f]), umax_v])
                 i0 = builder.fptoui(u, vi)
@@ -133,9 +141,7 @@ def stack(weights: int, fold: bool = False):
                 val = add(g0, mul(frac, builder.fsub(g1, g0, flags=fast)))
                 w = None
                 if weights & 1:
-                    # r kept off 0 (a voxel exactly at an antenna): its cosine counts as 0, not 0/0
-                    ra_, rb_ = (builder.call(vmax, [r, tiny]) for r in (ra, rb))
-                    w = mul(half, add(builder.fdiv(za, ra_, flags=fast), builder.fdiv(zb, rb_, flags=fast)))
+                    w = mul(half, add(mul(za, ia), mul(zb, ib)))
                 if weights & 2:
                     ws = mul(half, add(ra, rb))
                     w = ws if w is None else mul(w, ws)
