@@ -18,14 +18,29 @@ def threads_from_argv(default: int = 2) -> None:
     os.environ.setdefault("NUMBA_NUM_THREADS", str(default))
 
 
+def _model_name() -> str:
+    """The CPU's model name as the kernel reports it (``/proc/cpuinfo``), or "" where there is none."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return ""
+
+
 def cpu_name() -> str:
-    """The host CPU as LLVM names it (e.g. ``znver4``, ``sapphirerapids``), via numba."""
+    """The host CPU as LLVM names it (e.g. ``znver4``, ``sapphirerapids``), via numba, with the model name the
+    kernel reports beside it where LLVM's name alone does not say the maker (in a virtual machine LLVM may name an
+    Intel Xeon ``rocketlake``): ``rocketlake (Intel(R) Xeon(R) Processor)``."""
     try:
         import numba.misc.numba_sysinfo as si
 
-        return si.get_sysinfo().get("CPU Name") or platform.processor() or platform.machine()
+        name = si.get_sysinfo().get("CPU Name") or platform.processor() or platform.machine()
     except Exception:  # noqa: BLE001 - numba missing or its probe failing must not stop a benchmark
-        return platform.processor() or platform.machine()
+        name = platform.processor() or platform.machine()
+    model = _model_name()
+    return f"{name} ({model})" if model and not name.startswith("znver") else name
 
 
 def write_table(out_dir, name: str, table: str, script: str, argv=None) -> Path:
