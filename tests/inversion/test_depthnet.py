@@ -146,7 +146,10 @@ def test_training_learns_permittivity_and_depth_and_weights_round_trip(tmp_path)
     from gpr3d.inversion.depthnet import export_depthnet_onnx
 
     info = export_depthnet_onnx(path, tmp_path / "dn.onnx")
-    assert info["max_diff"] < 1e-3
+    # this 120-step net's outputs (eps_r relative, depths in window fractions): under 1e-3 on AMD hosts, 1.2e-3 on an
+    # Intel Xeon (rocketlake to LLVM; its training sums in another order); the shipped weights export to 1e-4. A wrong
+    # input order, scale or RoI box moves them by far more than this bound.
+    assert info["max_diff"] < 3e-3
     est3 = DepthEstimator.load(tmp_path / "dn.onnx")
     r = recs[2]
     boxes = [[r.labels[0]["box"]], [], [r.labels[0]["box"]] * 3]
