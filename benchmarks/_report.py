@@ -31,8 +31,8 @@ def _model_name() -> str:
 
 def cpu_name() -> str:
     """The host CPU as LLVM names it (e.g. ``znver4``, ``sapphirerapids``), via numba, with the model name the
-    kernel reports beside it where LLVM's name alone does not say the maker (in a virtual machine LLVM may name an
-    Intel Xeon ``rocketlake``): ``rocketlake (Intel(R) Xeon(R) Processor)``."""
+    kernel reports beside it where there is one (in a virtual machine LLVM may name an Intel Xeon ``rocketlake``):
+    ``rocketlake (Intel(R) Xeon(R) Processor)``."""
     try:
         import numba.misc.numba_sysinfo as si
 
@@ -40,7 +40,7 @@ def cpu_name() -> str:
     except Exception:  # noqa: BLE001 - numba missing or its probe failing must not stop a benchmark
         name = platform.processor() or platform.machine()
     model = _model_name()
-    return f"{name} ({model})" if model and not name.startswith("znver") else name
+    return f"{name} ({model})" if model else name
 
 
 def write_table(out_dir, name: str, table: str, script: str, argv=None) -> Path:

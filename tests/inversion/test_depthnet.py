@@ -146,9 +146,11 @@ def test_training_learns_permittivity_and_depth_and_weights_round_trip(tmp_path)
     from gpr3d.inversion.depthnet import export_depthnet_onnx
 
     info = export_depthnet_onnx(path, tmp_path / "dn.onnx")
-    # this 120-step net's outputs (eps_r relative, depths in window fractions): under 1e-3 on AMD hosts, 1.2e-3 on an
-    # Intel Xeon (rocketlake to LLVM; its training sums in another order); the shipped weights export to 1e-4. A wrong
-    # input order, scale or RoI box moves them by far more than this bound.
+    # this 120-step net's outputs (eps_r relative, depths in window fractions): under 1e-3 on the AMD hosts of earlier
+    # sessions and in one run on an Intel Xeon (rocketlake to LLVM), 1.17e-3 in another run there (CI, 2026-12-05):
+    # the net trained here differs from run to run and host to host, and so does how far ONNX Runtime's float32 sums
+    # land from PyTorch's; the shipped weights export to 1e-4. 3e-3 leaves that spread room. The export's inputs,
+    # names and answers are held to 1e-3 on a fixed net by test_depthnet_by_hand.py's ONNX test.
     assert info["max_diff"] < 3e-3
     est3 = DepthEstimator.load(tmp_path / "dn.onnx")
     r = recs[2]
