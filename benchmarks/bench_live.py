@@ -63,6 +63,12 @@ def rss_mib(pid: int) -> float | None:
     return None
 
 
+def _busy(summary: dict) -> str:
+    """The seconds a live run spent migrating, detecting and refreshing (its summary's ``busy_s``)."""
+    b = summary.get("busy_s") or {}
+    return " / ".join(f"{b[k]:.1f}" if k in b else "-" for k in ("migrate", "detect", "refresh"))
+
+
 def run_live_process(work: Path, name: str, source, env: dict, args=()) -> dict:
     """``gpr3d live SOURCE --out WORK/NAME --until-idle 3 ARGS`` in a process of its own, its resident memory
     sampled every second; its summary (``live.json``) with ``rss_mib`` (time, MiB), ``last_line`` and ``out``."""
@@ -193,14 +199,15 @@ def main(argv=None):
              f"(3 x 3 x 2 cm voxels to {batch.grid.depth[-1]:.2f} m, 50 deg aperture, detection on)", "",
              "| run | traces | traces/s | lag at the end (s) | trace-to-target latency median / p99 / max (s) | "
              "tiles in memory at most | peak RSS (MiB) | targets | detections | detector behind: windows without "
-             "overlap / traces no window saw |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "overlap / traces no window saw | busy migrating / detecting / refreshing (s) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, r in rows:
         peak = max((m for _, m in r["rss_mib"]), default=float("nan"))
         lines.append(f"| {name} | {r['n_traces']} | {r['traces_per_s']:.0f} | {r['lag_s']:.2f} | "
                      f"{r['latency_s']['median']:.2f} / {r['latency_s']['p99']:.2f} / {r['latency_s']['max']:.2f} | "
                      f"{r['peak_tiles']} | "
                      f"{peak:.0f} | {r['n_targets']} | {r['n_detections']} | {r.get('detect_thinned', 0)} / "
-                     f"{r.get('detect_skipped', 0)} |")
+                     f"{r.get('detect_skipped', 0)} | {_busy(r)} |")
     lines += ["", f"Final volume against the batch `reconstruct` of the same traces with live's settings "
                   f"({batch.grid.nx} x {batch.grid.ny} x {batch.grid.nd}, batch {t_batch:.1f} s in-process): same grid "
                   f"{same_grid}, max |live - batch| / max |batch| = {diff:.2e}" if diff is not None else
@@ -216,7 +223,8 @@ def main(argv=None):
                       f"{r['latency_s']['max']:.2f} s, at most "
                       f"{r['peak_tiles']} tiles in memory, {r['n_detections']} detections (detector behind: "
                       f"{r.get('detect_thinned', 0)} windows without overlap, {r.get('detect_skipped', 0)} traces "
-                      f"no window saw); final volume written: {r['final_volume']}", "",
+                      f"no window saw; busy migrating / detecting / refreshing {_busy(r)} s); final volume "
+                      f"written: {r['final_volume']}", "",
                   "| time (s) | " + " | ".join(f"{t:.0f}" for t, _ in marks) + " |",
                   "|---|" + "---|" * len(marks),
                   "| resident memory (MiB) | " + " | ".join(f"{m:.0f}" for _, m in marks) + " |",

@@ -355,6 +355,37 @@ def test_live_mode_asks_its_detector_to_share_the_cores_and_detects_every_window
     assert [a for a, _ in det.spans[1:]] == [*range(0, n - 64 + 1, 32), n - 64] and summary.detect_skipped == 0
 
 
+
+class _SlowSpans(_Spans):
+    """A detector that takes 20 ms a window (a sleep: at least that long on any host, however loaded)."""
+
+    def detect(self, survey, **kw):
+        time.sleep(0.02)
+        return super().detect(survey, **kw)
+
+
+@pytest.mark.parametrize("detect", [True, False])
+def test_the_summary_says_how_long_each_kind_of_work_took(survey, tmp_path, detect):
+    det = _SlowSpans(traces=64)
+    cfg = _cfg(until_idle_s=2.5)
+    cfg.detect = detect
+    data = survey.data.copy()
+    data[:, 2] = np.arange(survey.n_traces)
+    ticks = iter(range(1000))
+    t = time.perf_counter()
+    summary = run_live(_Scripted(survey.replace(data=data), 0, 3), tmp_path, cfg, detector=det if detect else None,
+                       log=None, poll_s=0.0, clock=lambda: float(next(ticks)), reader_thread=False)
+    real = time.perf_counter() - t
+    b = summary.busy_s
+    assert set(b) == {"migrate", "detect", "refresh"}
+    # the windows live mode ran (the first span is the warm-up's, before the survey) took their sleeps at least;
+    # without a detector, no time is put down to it
+    windows = len(det.spans) - 1
+    assert (windows > 5 and b["detect"] >= 0.02 * windows) if detect else (det.spans == [] and b["detect"] == 0.0)
+    assert b["migrate"] > 0.0 and b["refresh"] > 0.0
+    assert sum(b.values()) <= real  # parts of the run, not more than it
+    assert json.loads((tmp_path / "live.json").read_text())["summary"]["busy_s"] == b
+
 def test_the_window_buffer_keeps_rows_by_their_numbers():
     from gpr3d.pipeline.live import _Window
 

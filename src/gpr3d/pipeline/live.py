@@ -106,6 +106,10 @@ class LiveSummary:
     #: the detector behind: windows it took without overlap, and traces no window saw (``LiveConfig.detect_backlog``)
     detect_thinned: int = 0
     detect_skipped: int = 0
+    #: the seconds spent on each kind of work: ``migrate`` (each trace into its tiles, the last ones at the end
+    #: included), ``detect`` (the detector's windows), ``refresh`` (targets and ``live.json`` while running; not the
+    #: final volume's extraction): where the time went when live mode falls behind
+    busy_s: dict = field(default_factory=dict)
 
     def line(self) -> str:
         return f"{self.n_traces} traces, {self.traces_per_s:.0f} traces/s, lag {self.lag_s:.2f} s"
@@ -808,7 +812,8 @@ class LiveReconstruction:
         self.last_refresh = None  # when the last refresh started
         self.refresh_costs: list = []  # how long the last few refreshes took (s)
         self.n_refreshed = 0  # traces migrated at the last refresh
-        self.migrate_s = 0.0
+        # the seconds spent migrating, running the detector and refreshing the targets (the summary's ``busy_s``)
+        self.migrate_s = self.detect_s = self.refresh_s = 0.0
 
     @property
     def poses(self) -> np.ndarray:
@@ -1078,9 +1083,11 @@ class LiveReconstruction:
     def _detect_span(self, a, b):
         from gpr3d.core.survey import Survey
 
+        t0 = time.perf_counter()
         data = self.raw_tail.rows(a, b)
         s = Survey(data=data, dt_s=self.h.dt_s, frequency_hz=self.h.frequency_hz, offset_m=self.h.offset_m)
         found = self.detector.detect(s, score_threshold=self.cfg.score, input_name=self.h.name)
+        self.detect_s += time.perf_counter() - t0
         for t in found["targets"]:
             t = dict(t)
             t["box"] = [t["box"][0] + a, t["box"][1], t["box"][2] + a, t["box"][3]]
@@ -1201,6 +1208,7 @@ class LiveReconstruction:
             self.latencies.append(done - float(self.arrival[self.n_refreshed]))
         self.n_refreshed = self.n_final
         self.refresh_costs = [*self.refresh_costs[-4:], done - t_start]
+        self.refresh_s += done - t_start
         self.last_refresh = t_start
 
     def status(self) -> dict:
@@ -1428,7 +1436,8 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
                                                 "p99": float(np.percentile(lat, 99)), "max": float(lat.max())},
                           peak_tiles=live.peak_tiles, n_targets=len(live.targets),
                           n_detections=len(live.detections), final_volume=result is not None,
-                          detect_thinned=live.detect_thinned, detect_skipped=live.detect_skipped)
+                          detect_thinned=live.detect_thinned, detect_skipped=live.detect_skipped,
+                          busy_s={"migrate": live.migrate_s, "detect": live.detect_s, "refresh": live.refresh_s})
     if live.detect_thinned or live.detect_skipped:
         log(f"the detector fell behind: {live.detect_thinned} windows without overlap, {live.detect_skipped:,} traces "
             f"seen by no window (LiveConfig.detect_backlog: {cfg.detect_backlog:,} traces)")
