@@ -49,6 +49,10 @@ def spies(monkeypatch):
         log.setdefault("prepare", []).append(cfg.equalise)
         return np.full((survey.n_traces, 8), 7.0 if cfg.equalise else 3.0, np.float32)
 
+    def equalise_rows(view):
+        log.setdefault("equalise", []).append(float(view[0, 0]))
+        return np.full_like(view, 7.0)
+
     def windows(survey, cfg, processed):
         log["windows_processed"] = float(processed[0, 0])
         log["windows_args"] = (survey, cfg)
@@ -78,7 +82,8 @@ def spies(monkeypatch):
         log.setdefault("apex", []).append((float(data[0, 0]), list(b), s_per_row, frequency_hz, n_traces, width_per_s))
         return b[0] + 1.4, b[1] + 1e-9
 
-    for name, fn in dict(prepare=prepare, windows=windows, merge=merge, rows_interval=rows_interval,
+    for name, fn in dict(prepare=prepare, equalise_rows=equalise_rows, windows=windows, merge=merge,
+                         rows_interval=rows_interval,
                          width_rate=width_rate, apex_of_box=apex_of_box).items():
         monkeypatch.setattr(infer, name, fn)
     return log
@@ -104,8 +109,8 @@ def test_detect_keeps_clips_thresholds_orders_and_fills_the_contract(spies):
     assert ks == [0, 1, 2, 3, 4] and (n, dt, nms) == (50, 1e-10, np.sort)
     assert boxes == [[[k, 1.0, k + 2, 3.0]] for k in range(5)]  # label 2 left out
     assert scores == [[pytest.approx(0.1 * (k + 1))] for k in range(5)]
-    assert spies["windows_processed"] == 7.0  # the windows see the equalised view
-    assert spies["prepare"] == [True, False]  # ... the apexes a plain one
+    # the record prepared once, plain; the windows see it equalised, the apexes plain
+    assert spies["prepare"] == [False] and spies["equalise"] == [3.0] and spies["windows_processed"] == 7.0
     t_end = (100 - 1) * 1e-10
     # (scores equal to the threshold are kept; a score of 0.5 counts as whole for the width rate)
     want = [([20.0, 1e-9, 49.0, t_end], 0.95), ([0.0, 0.0, 10.0, 2e-9], 0.5), ([12.0, 2e-9, 18.0, 5e-9], 0.45)]
@@ -146,7 +151,7 @@ def test_detect_names_its_stages_for_whoever_times_them(spies):
     det = infer.Detector(_Net(), WindowConfig(equalise=True))
     with collect(compile_times=False) as t:
         det.detect(_survey(), score_threshold=0.45)
-    assert list(t.seconds) == ["windows", "network", "merge", "apexes"] and set(t.counts.values()) == {1}
+    assert list(t.seconds) == ["prepare", "windows", "network", "merge", "apexes"] and set(t.counts.values()) == {1}
 
 
 def test_detect_names_each_kept_box_by_its_place_in_the_windows(spies):
@@ -165,7 +170,7 @@ def test_detect_names_each_kept_box_by_its_place_in_the_windows(spies):
 def test_detect_without_positions_equalising_or_a_name(spies):
     det = infer.Detector(_Net(), WindowConfig(equalise=False))
     out = det.detect(_survey(positions=False, metadata={}), input_name="given.h5")
-    assert spies["prepare"] == [False]  # one view serves both
+    assert spies["prepare"] == [False] and "equalise" not in spies  # one view serves both
     assert [t["score"] for t in out["targets"]] == [0.95, 0.5]  # the default threshold: 0.5
     assert out["channel"] == 0
     assert len(det.detect(_survey(), score_threshold=0.0)["targets"]) == 4  # the ends of 0..1 are allowed

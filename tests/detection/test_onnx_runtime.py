@@ -53,6 +53,37 @@ def test_the_nms_graph_builder_makes_the_shipped_graph_and_it_runs_as_torchvisio
     np.testing.assert_array_equal(sel[:, 2], nms(torch.as_tensor(boxes), torch.as_tensor(scores), 0.4).numpy())
 
 
+def test_merge_levels_puts_each_region_where_torchvision_s_scatter_does():
+    from torchvision.ops.poolers import _onnx_merge_levels
+
+    from gpr3d.detection.ort import merge_levels
+
+    rng = np.random.default_rng(5)
+    for n, n_levels in ((40, 3), (7, 4), (5, 2)):
+        levels = torch.from_numpy(rng.integers(0, n_levels, n))
+        levels[:n_levels] = torch.arange(n_levels)  # every level holds a region
+        per_level = [torch.from_numpy(rng.random((int((levels == k).sum()), 3, 2, 2), dtype=np.float32))
+                     for k in range(n_levels)]
+        got = merge_levels(levels, per_level)
+        assert torch.equal(got, _onnx_merge_levels(levels, per_level))
+        # region i: the next unused row of its level's block, in order
+        seen = [0] * n_levels
+        for i, k in enumerate(levels.tolist()):
+            assert torch.equal(got[i], per_level[k][seen[k]])
+            seen[k] += 1
+
+
+def test_the_shipped_graph_pools_by_gathering_regions_not_by_scattering_blocks():
+    # torchvision's traced pooling scatters each level's (n_k, C, 7, 7) block with an index of that whole shape
+    # (an Expand to 4-D in front of each ScatterElements); the shipped graph scatters region numbers only
+    onnx = pytest.importorskip("onnx")
+    g = onnx.load(str(DEFAULT_ONNX)).graph
+    made_by = {o: node for node in g.node for o in node.output}
+    scatters = [node for node in g.node if node.op_type == "ScatterElements"]
+    assert len(scatters) == 1
+    assert made_by[scatters[0].input[1]].op_type != "Expand"
+
+
 def test_shipped_onnx_is_the_shipped_weights_and_detects_the_same():
     onnx_det = OnnxDetector.load()
     assert onnx_det.provenance.get("name") == Detector.load().provenance.get("name")

@@ -118,6 +118,15 @@ def test_network_view_by_hand(n_samples, rows, freq):
                                _network_view_by_hand(data, 1e-10, f, rows, False, False, False), rtol=2e-5, atol=2e-5)
     np.testing.assert_allclose(network_view(s, rows, equalise=False),
                                _network_view_by_hand(data, 1e-10, f, rows, equalise=False), rtol=2e-5, atol=2e-5)
+    # the equalising step on its own (the detector equalises the plain view it keeps for the apexes): the bits of
+    # the whole view, and the by-hand step on the plain one
+    from gpr3d.processing.image import equalise_rows
+
+    plain = network_view(s, rows, equalise=False)
+    eq = equalise_rows(plain)
+    assert eq.dtype == np.float32 and np.array_equal(eq, got)
+    rms = _running_mean(np.sqrt(np.mean(plain.astype(np.float64) ** 2, axis=0)), max(3, rows // 16), 0)
+    np.testing.assert_allclose(eq, plain / np.maximum(rms, 0.05 * rms.max()), rtol=2e-6, atol=1e-6)
 
 
 def test_network_view_of_silence_and_of_bad_records():

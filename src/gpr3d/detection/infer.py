@@ -19,6 +19,7 @@ from gpr3d.core.timing import stage
 from gpr3d.detection.windows import (WindowConfig, apex_of_box, fuse_views, merge, prepare, rows_interval, trace_width,
                                      width_rate, windows)
 from gpr3d.processing.analytic import running_mean
+from gpr3d.processing.image import equalise_rows
 
 __all__ = ["Detector", "load_detector", "ENGINES"]
 
@@ -190,19 +191,21 @@ class Detector:
     def _views(self, survey):
         """The record seen as it is and, where ``trace_scales``/``mirror`` ask, stretched along its traces and
         mirrored; the views' boxes in one set, overlapping ones (IoU >= 0.5, time in samples) merged into the
-        best-scored one, whose corners become the score-weighted mean of the group's (see ``trace_scales``)."""
+        best-scored one, whose corners become the score-weighted mean of the group's (see ``trace_scales``).
+        Returns ``(plain, proc, boxes, scores, labels, shares, n_windows)``: ``proc`` the record as the network
+        sees it, ``plain`` the same before its rows are equalised."""
         if "auto" in self.trace_scales and not self.reference_width:
             raise InvalidDataError("trace scale 'auto' needs the width of the detector's training records "
                                    "(Detector.reference_width, traces); this detector has none")
         views = [(f if f == "auto" else float(f), m) for f in self.trace_scales
                  for m in ((False, True) if self.mirror else (False,))]
-        parts, proc = [], None
-        for f, m in views:
-            parts.append(self._view(survey, proc, f, m))
-            proc = parts[-1][5]
+        with stage("prepare"):
+            plain = prepare(survey, replace(self.window, equalise=False))
+            proc = equalise_rows(plain) if self.window.equalise else plain
+        parts = [self._view(survey, proc, f, m) for f, m in views]
         n_windows = sum(p[4] for p in parts)
         if len(parts) == 1:
-            return (proc, *parts[0][:4], n_windows)
+            return (plain, proc, *parts[0][:4], n_windows)
         with stage("merge"):
             boxes = np.concatenate([p[0] for p in parts])
             scores = np.concatenate([p[1] for p in parts])
@@ -214,14 +217,14 @@ class Detector:
             else:
                 keep, fused = fuse_views(boxes, scores, survey.dt_s, average=self.fuse_average)
                 fscores = scores[keep]
-        return proc, fused, fscores, labels[keep], shares[keep], n_windows
+        return plain, proc, fused, fscores, labels[keep], shares[keep], n_windows
 
     def detect(self, survey, *, score_threshold: float = 0.5, input_name: str | None = None) -> dict:
         """Detections of one record as the ``gpr3d detect`` contract (CONVENTIONS.md)."""
         if not 0.0 <= score_threshold <= 1.0:
             raise InvalidDataError(f"score threshold must lie in 0..1, got {score_threshold!r}")
         t0 = time.perf_counter()
-        proc, boxes, scores, labels, shares, n_windows = self._views(survey)
+        plain, proc, boxes, scores, labels, shares, n_windows = self._views(survey)
         if self.refiner is not None and len(boxes):
             with stage("refine"):
                 from gpr3d.detection.refine import record_image
@@ -230,8 +233,7 @@ class Detector:
         with stage("apexes"):
             kinds = self.kinds
             s_per_row = rows_interval(survey, self.window)
-            # apexes from data whose rows keep the pulse's shape (equalising the rows distorts it)
-            plain = prepare(survey, replace(self.window, equalise=False)) if self.window.equalise else proc
+            # apexes from ``plain``: data whose rows keep the pulse's shape (equalising the rows distorts it)
             t_end = (survey.n_samples - 1) * survey.dt_s
             kept = []
             for j in np.argsort(-np.asarray(scores, float), kind="stable"):

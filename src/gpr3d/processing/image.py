@@ -13,7 +13,7 @@ import numpy as np
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.processing.analytic import hilbert_envelope, running_mean
 
-__all__ = ["bscan_image", "resample_rows", "normalise_window", "hot_rgb", "network_view", "render_channels",
+__all__ = ["bscan_image", "resample_rows", "normalise_window", "hot_rgb", "network_view", "equalise_rows", "render_channels",
            "record_scale"]
 
 
@@ -83,13 +83,20 @@ def network_view(survey, rows: int, *, dewow: bool = True, background: bool = Tr
     factor = data.shape[1] / rows
     if factor > 1.5:  # anti-alias before the time axis shrinks
         data = running_mean(data, int(round(factor)), axis=1)
-    out = resample_rows(data.astype(np.float32), rows).astype(np.float64)
-    if equalise:
-        rms = np.sqrt(np.mean(out**2, axis=0))
-        rms = running_mean(rms, max(3, rows // 16))
-        floor = 0.05 * float(np.max(rms)) if rms.size else 0.0
-        out = out / np.maximum(rms, floor if floor > 0 else 1.0)
-    return out.astype(np.float32)
+    out = resample_rows(data.astype(np.float32), rows)
+    return equalise_rows(out) if equalise else out.astype(np.float32, copy=False)
+
+
+def equalise_rows(view: np.ndarray) -> np.ndarray:
+    """``view`` ``(n_traces, rows)`` with each row divided by its RMS across the traces (smoothed over ``rows / 16``
+    rows, and at least 5 % of the largest): :func:`network_view`'s last step, float32. ``network_view(s, rows)``
+    is ``equalise_rows(network_view(s, rows, equalise=False))``, to the bit."""
+    out = np.asarray(view, dtype=np.float64)
+    rows = out.shape[1]
+    rms = np.sqrt(np.mean(out**2, axis=0))
+    rms = running_mean(rms, max(3, rows // 16))
+    floor = 0.05 * float(np.max(rms)) if rms.size else 0.0
+    return (out / np.maximum(rms, floor if floor > 0 else 1.0)).astype(np.float32)
 
 
 def render_channels(block: np.ndarray, style: str = "channels", *, scale: float | None = None) -> np.ndarray:
