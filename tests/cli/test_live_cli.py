@@ -64,6 +64,8 @@ def test_replay_into_live_prints_traces_rate_and_lag(survey, tmp_path):  # noqa:
     (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--spacing", "-1", "--no-detect"], "--spacing must be positive"),
     (["live", "tcp:/bad", "--out", "{tmp}/o", "--no-detect"], "live mode reads growing DZT files"),
     (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--no-detect"], "a bag's traces carry no sample interval: give it"),
+    (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--no-detect", "--detect-in-turn"],
+     "--detect-in-turn is for the detector: drop it or --no-detect"),
     (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--dt", "0.1", "--no-detect"], "--dt are for a ROS bag"),
     (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "-1", "--no-detect"], "--dt must be ns"),
     (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "0.1", "--speed", "-2", "--no-detect"], "--speed must be"),
@@ -115,6 +117,27 @@ def test_live_replays_a_ros_bag_given_its_sample_interval_and_topics(survey, tmp
     assert re.fullmatch(rf"{survey.n_traces} traces, \d+ traces/s, lag \d+\.\d\d s", out[-1]), out[-1]
     cfg = json.loads((tmp_path / "live" / "config.json").read_text())["config"]
     assert cfg["eps_r"] == EPS and cfg["background_window"] == 32
+
+
+@pytest.mark.parametrize("flag, in_thread", [((), True), (("--detect-in-turn",), False)])
+def test_live_runs_its_detector_in_a_thread_unless_told_to_take_turns(survey, tmp_path, monkeypatch, flag,  # noqa: F811
+                                                                      in_thread):
+    import gpr3d.pipeline
+    from gpr3d.cli.main import main
+    from tests.pipeline.test_live import DT, EPS, _bag_of
+
+    seen = {}
+
+    def run_live(source, out, cfg, *, detector=None, log=None):
+        seen.update(cfg=cfg, detector=detector)
+        raise gpr3d.core.errors.GPR3DError("stopped by the test")
+
+    monkeypatch.setattr(gpr3d.pipeline, "run_live", run_live)
+    bag = _bag_of(survey, tmp_path / "run.bag", ros1=True)
+    code = main(["live", str(bag), "--dt", str(DT * 1e9), "--trace-topic", "/gpr/traces", "--pose-topic",
+                 "/odometry", "--eps-r", str(EPS), "--out", str(tmp_path / "live"), *flag])
+    assert code != 0 and seen["cfg"].detect and seen["detector"] is not None
+    assert seen["cfg"].detect_thread is in_thread
 
 
 def test_live_fuses_a_bag_s_poses_as_the_replay_comes(fused_bag, tmp_path, capsys):  # noqa: F811

@@ -70,6 +70,9 @@ def add_arguments(sp):
     sp.add_argument("--no-detect", action="store_true", help="no hyperbola detection on the windows")
     sp.add_argument("--weights", default=None, help="detector weights (default: the shipped model)")
     sp.add_argument("--score", type=float, default=0.5, help="keep detections scoring at least this (0..1)")
+    sp.add_argument("--detect-in-turn", action="store_true",
+                    help="run the detector's windows in turn with the migration (default: in a thread of its own, "
+                         "beside it)")
     sp.add_argument("--device", default="cpu", help="cpu (default), cuda, cuda:N")
     sp.add_argument("--refiner", default="auto", help="box refiner: auto (default: the shipped one with the shipped "
                     "detector, none with --weights), none, or a refiner's .pt/.onnx file")
@@ -92,6 +95,8 @@ def run(args):
         raise GPR3DError(f"--score must lie in 0..1, got {args.score}")
     if not (0 < args.aperture < 90):
         raise GPR3DError(f"--aperture must lie in (0, 90) degrees for live mode, got {args.aperture:g}")
+    if args.detect_in_turn and args.no_detect:
+        raise GPR3DError("--detect-in-turn is for the detector: drop it or --no-detect")
     if args.background_window < 2:
         raise GPR3DError(f"--background-window must be at least 2 traces, got {args.background_window}")
     eps = _eps_argument(args.eps_r)
@@ -110,7 +115,7 @@ def run(args):
                                   refiner=args.refiner)
     cfg = LiveConfig(reconstruct=rc, background_window=args.background_window,
                      background_trailing=not args.centred_background, refresh_s=args.refresh,
-                     detect=not args.no_detect, score=args.score,
+                     detect=not args.no_detect, score=args.score, detect_thread=not args.detect_in_turn,
                      until_idle_s=None if args.until_idle == 0 else args.until_idle,
                      start_timeout_s=None if args.start_timeout == 0 else args.start_timeout)
     bag = {}

@@ -16,10 +16,12 @@ takes them in batches:
    (``tile_voxels`` a side, voxel centres on whole multiples of the spacing); the image and the fold are summed
    per tile; tiles no recent trace can reach are written to ``OUT/tiles/`` and dropped from memory (read back if
    the cart returns), so memory follows the cart, not the survey;
-4. **detection** runs on each window of raw traces as it fills (the shipped detector, ``--no-detect`` off);
+4. **detection** runs on each window of raw traces as it fills (the shipped detector, ``--no-detect`` off), in a
+   thread of its own beside steps 3 and 5 (``detect_thread``; the windows' detections are kept in their order,
+   as when they run in turn);
 5. every ``refresh_s`` (from the start of the last refresh) the targets of the tiles in memory are extracted and
-   ``OUT/live.json`` (traces, rate, lag, targets, detections) is rewritten atomically; a due refresh comes before
-   the next detector window.
+   ``OUT/live.json`` (traces, rate, lag, targets, detections) is rewritten atomically; without the detector's
+   thread, a due refresh comes before the next detector window.
 
 At the end (the stream's end mark, ``until_idle_s`` without a new trace, or Ctrl-C) the volume over every antenna
 position is put together from the tiles and finished exactly as ``gpr3d reconstruct`` finishes its own (fold
@@ -72,6 +74,9 @@ class LiveConfig:
     #: the same targets at every refresh of the benchmark's survey in 43 % less time
     preview_max_peaks: int = 100
     detect: bool = True  #: run the detector on each window of traces as it fills
+    #: run the detector's windows in a thread of its own, beside the migration and the refreshes (False: in turn
+    #: with them, in the main loop)
+    detect_thread: bool = True
     score: float = 0.5  #: the detector's score threshold
     until_idle_s: float | None = 5.0  #: end once no trace has come for this long (None: only at the end mark)
     start_timeout_s: float | None = 60.0  #: give up when no trace at all has come for this long (None: wait)
@@ -108,7 +113,8 @@ class LiveSummary:
     detect_skipped: int = 0
     #: the seconds spent on each kind of work: ``migrate`` (each trace into its tiles, the last ones at the end
     #: included), ``detect`` (the detector's windows), ``refresh`` (targets and ``live.json`` while running; not the
-    #: final volume's extraction): where the time went when live mode falls behind
+    #: final volume's extraction): where the time went when live mode falls behind. The detector's thread
+    #: (``LiveConfig.detect_thread``) runs beside the other two: then ``detect`` overlaps them
     busy_s: dict = field(default_factory=dict)
 
     def line(self) -> str:
@@ -743,6 +749,76 @@ class _Window:
         return self._a[self._lo + a - self.first: self._lo + b - self.first]
 
 
+class _DetectorThread:
+    """Runs ``run(a, data)`` on the windows given to :meth:`submit`, one after the other in a thread of its own,
+    and hands their results back in the same order (:meth:`take`). The detector's network (ONNX Runtime or
+    PyTorch) lets go of Python's lock while it computes, so the windows run beside the migration and the refreshes:
+    on 2 cores neither fills both. What ``run`` raises is raised again by :meth:`take`."""
+
+    #: windows given to the thread and not yet taken back, at most: one running, one waiting (the detector is
+    #: never idle while windows are full); more wait in the raw traces, where the backlog rules see them
+    QUEUED = 2
+
+    def __init__(self, run):
+        import threading
+        from collections import deque
+
+        self._run_window = run
+        self._jobs: deque = deque()
+        self._done: deque = deque()
+        self._cv = threading.Condition()
+        self._closed = False
+        self.in_flight = 0  # submitted and not yet taken back
+        self._thread = threading.Thread(target=self._loop, name="gpr3d-live-detector", daemon=True)
+        self._thread.start()
+
+    def submit(self, a: int, data: np.ndarray) -> None:
+        with self._cv:
+            self._jobs.append((a, data))
+            self.in_flight += 1
+            self._cv.notify_all()
+
+    def _loop(self):
+        while True:
+            with self._cv:
+                while not self._jobs and not self._closed:
+                    self._cv.wait()
+                if self._closed:
+                    return
+                a, data = self._jobs[0]
+            try:
+                got = (a, self._run_window(a, data), None)
+            except BaseException as exc:  # noqa: BLE001 - handed to the main thread, which raises it
+                got = (a, None, exc)
+            with self._cv:
+                self._jobs.popleft()
+                self._done.append(got)
+                self._cv.notify_all()
+
+    def take(self) -> list:
+        """``[(a, result), ...]`` of the windows finished since the last take, in the order they were given."""
+        with self._cv:
+            done = list(self._done)
+            self._done.clear()
+            self.in_flight -= len(done)
+        for _, _, exc in done:
+            if exc is not None:
+                raise exc
+        return [(a, r) for a, r, _ in done]
+
+    def wait(self, left: int) -> None:
+        """Return once at most ``left`` of the windows given are not finished."""
+        with self._cv:
+            while len(self._jobs) > left:
+                self._cv.wait()
+
+    def close(self) -> None:
+        with self._cv:
+            self._closed = True
+            self._cv.notify_all()
+        self._thread.join(timeout=5.0)
+
+
 class LiveReconstruction:
     """The state of a live run: feed it batches of raw traces with poses (:meth:`add`), call :meth:`step` to
     process what is ready, :meth:`finish` at the end."""
@@ -805,6 +881,7 @@ class LiveReconstruction:
         self._det_window: list = []  # the window each kept detection came from (its first trace)
         self.targets: list = []
         self.latencies: list = []
+        self._worker = _DetectorThread(self._found_in) if self.detector is not None and cfg.detect_thread else None
         #: called before a refresh to add the traces that came meanwhile (run_live: what the reader has queued)
         self.intake = None
         #: whether traces wait to be taken in (run_live: the reader's queue): the detector then yields to a due refresh
@@ -1057,42 +1134,78 @@ class LiveReconstruction:
         backlog = max(int(self.cfg.detect_backlog), 2 * win)
         n = self.raw_tail.end
         ran = 0
+        worker = self._worker
+        if worker is not None:
+            self._collect()
         while n - self.next_window >= win:
-            if not ended and self._refresh_due() and (ready > self.n_refreshed or self._waiting()):
-                break
+            if worker is None:
+                if not ended and self._refresh_due() and (ready > self.n_refreshed or self._waiting()):
+                    break
+            elif worker.in_flight >= _DetectorThread.QUEUED:
+                if not ended:
+                    break  # (the windows wait for the thread: the detector is behind by what waits here)
+                worker.wait(worker.in_flight - 1)
+                self._collect()
             if n - self.next_window > 2 * backlog:
                 start = (n - backlog) // step * step
                 self.detect_skipped += max(0, start - self.det_end)
                 self.next_window = start
-            self._detect_span(self.next_window, self.next_window + win)
+            self._run_window(self.next_window, self.next_window + win)
             self.det_end = self.next_window + win
             thin = n - self.next_window > backlog
             self.detect_thinned += thin
             self.next_window += win if thin else step
             ran += 1
         if ended and n > self.det_end:
-            self._detect_span(max(0, n - win), n)
+            self._run_window(max(0, n - win), n)
             self.det_end = self.next_window = n
             ran += 1
+        if ended and worker is not None:
+            worker.wait(0)
+            self._collect()
         self.raw_tail.drop_before(self.next_window - win)  # (the last window at the end may reach back)
         return ran
+
+    def _run_window(self, a, b):
+        """The detector on traces ``a .. b - 1``: now, or queued for the detector's thread (a copy of them)."""
+        if self._worker is None:
+            self._detect_span(a, b)
+        else:
+            self._worker.submit(a, self.raw_tail.rows(a, b).copy())
+
+    def _collect(self):
+        """The detections of the windows the detector's thread has finished, in their order."""
+        for a, found in self._worker.take():
+            for t in found:
+                self._add_detection(t, a)
+
+    def close(self):
+        """Stop the detector's thread (the windows it has not run are dropped)."""
+        if self._worker is not None:
+            self._worker.close()
 
     def _waiting(self) -> bool:
         return bool(self.waiting is not None and self.waiting())
 
     def _detect_span(self, a, b):
+        for t in self._found_in(a, self.raw_tail.rows(a, b)):
+            self._add_detection(t, a)
+
+    def _found_in(self, a, data) -> list:
+        """The detector's targets in ``data``, the raw traces from number ``a`` on, placed in the stream's traces."""
         from gpr3d.core.survey import Survey
 
         t0 = time.perf_counter()
-        data = self.raw_tail.rows(a, b)
         s = Survey(data=data, dt_s=self.h.dt_s, frequency_hz=self.h.frequency_hz, offset_m=self.h.offset_m)
         found = self.detector.detect(s, score_threshold=self.cfg.score, input_name=self.h.name)
-        self.detect_s += time.perf_counter() - t0
+        out = []
         for t in found["targets"]:
             t = dict(t)
             t["box"] = [t["box"][0] + a, t["box"][1], t["box"][2] + a, t["box"][3]]
             t["apex_trace"] += a
-            self._add_detection(t, a)
+            out.append(t)
+        self.detect_s += time.perf_counter() - t0  # (only this thread, or only the main one, adds to it)
+        return out
 
     def _add_detection(self, t, window_start=0):
         """Keep ``t`` (found in the window starting at trace ``window_start``) unless a kept box of the same
@@ -1234,7 +1347,10 @@ class LiveReconstruction:
         from gpr3d.migration.masking import image_envelope
         from gpr3d.migration.reconstruct import Reconstruction, normalise_by_fold, volume_targets, write_reconstruction
 
-        self.step(ended=True)
+        try:
+            self.step(ended=True)
+        finally:
+            self.close()
         if self.n_final == 0:
             raise GPR3DError("no traces arrived: nothing to migrate")
         grid = self._final_grid()
@@ -1404,6 +1520,10 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     except KeyboardInterrupt:  # Ctrl-C ends the survey: what came is finished and written (a second one aborts)
         interrupted = True
         log(f"interrupted: finishing with the {live.n_in if live else 0:,} traces received")
+    except BaseException:
+        if live is not None:
+            live.close()  # (the detector's thread)
+        raise
     finally:
         if reader is not None:
             reader.close()
@@ -1421,7 +1541,11 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     if getattr(source, "skipped", 0):
         log(f"{source.skipped:,} traces outside the poses' time span left out")
     t_last = clock()
-    live.step(ended=True)
+    try:
+        live.step(ended=True)
+    except BaseException:
+        live.close()
+        raise
     t_end = clock()
     # the lag: from the newest trace's arrival to the end of the work on it. The work went on after it as long as
     # steps did some (a detector's backlog, say); a wait for the source after that (its idle time, or a stream
