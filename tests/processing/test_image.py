@@ -123,6 +123,7 @@ def test_network_view_by_hand(n_samples, rows, freq):
     from gpr3d.processing.image import equalise_rows
 
     plain = network_view(s, rows, equalise=False)
+    assert plain.dtype == np.float32
     eq = equalise_rows(plain)
     assert eq.dtype == np.float32 and np.array_equal(eq, got)
     rms = _running_mean(np.sqrt(np.mean(plain.astype(np.float64) ** 2, axis=0)), max(3, rows // 16), 0)

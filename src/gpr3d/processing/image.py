@@ -83,8 +83,8 @@ def network_view(survey, rows: int, *, dewow: bool = True, background: bool = Tr
     factor = data.shape[1] / rows
     if factor > 1.5:  # anti-alias before the time axis shrinks
         data = running_mean(data, int(round(factor)), axis=1)
-    out = resample_rows(data.astype(np.float32), rows)
-    return equalise_rows(out) if equalise else out.astype(np.float32, copy=False)
+    out = resample_rows(data.astype(np.float32), rows)  # (float32, an array of its own)
+    return equalise_rows(out) if equalise else out
 
 
 def equalise_rows(view: np.ndarray) -> np.ndarray:
