@@ -21,6 +21,9 @@ def _run(*args):
     (("--out", "/proc/no/such/folder"), "--out /proc/no/such/folder: No such file or directory"),
     (("--out", "{file}"), "not a folder"),
     (("--base", "no-such-revision-xyz"), "--base no-such-revision-xyz: "),
+    (("--other", "/no/such.onnx"), "--other /no/such.onnx: no such file"),
+    (("--name", "../x.md"), "--name ../x.md: a file name ending in .md"),
+    (("--base", "HEAD", "--other", "{file}"), "--base and --other: give one graph to time against"),
 ])
 def test_a_wrong_setting_is_one_line_naming_it(tmp_path, args, says):
     if args[:1] == ("--base",) and not (ROOT / ".git").exists():
