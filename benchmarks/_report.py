@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import platform
+import shlex
 import sys
 from pathlib import Path
 
@@ -44,11 +45,12 @@ def cpu_name() -> str:
 
 
 def write_table(out_dir, name: str, table: str, script: str, argv=None) -> Path:
-    """Print ``table`` and write it to ``out_dir/name`` with the command that reproduces it."""
+    """Print ``table`` and write it to ``out_dir/name`` with the command that reproduces it (its arguments quoted
+    for a shell: ``--live-args "--weights W.onnx"`` stays one argument)."""
     print(table)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     args = sys.argv[1:] if argv is None else list(argv)
     path = out / name
-    path.write_text(f"{table}\n\ncommand: python benchmarks/{script} {' '.join(args)}\n")
+    path.write_text(f"{table}\n\ncommand: python benchmarks/{script} {shlex.join(str(a) for a in args)}\n")
     return path
