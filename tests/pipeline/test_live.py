@@ -343,7 +343,7 @@ def test_a_detector_behind_thins_its_windows_then_skips_ahead_and_yields_to_wait
 
 
 class _Gated(_Spans):
-    """A :class:`_Spans` whose windows wait for ``go`` (10 s at most), noting the thread each ran in; with
+    """A :class:`_Spans` whose windows wait for ``go`` (60 s at most), noting the thread each ran in; with
     ``broken``, the window starting at that trace raises."""
 
     def __init__(self, broken=None, **kw):
@@ -357,7 +357,7 @@ class _Gated(_Spans):
     def detect(self, survey, **kw):
         import threading
 
-        self.go.wait(10.0)
+        self.go.wait(60.0)  # (set by the test long before: the cap only keeps a broken test from hanging)
         self.threads.add(threading.get_ident())
         if int(survey.data[0, 2]) == self.broken:
             raise ValueError(f"window {self.broken} broke")
@@ -422,6 +422,22 @@ def test_live_mode_asks_its_detector_to_share_the_cores_and_detects_every_window
     assert det.shared == 1  # before the first window (the warm-up's)
     n = survey.n_traces  # windows every 32 traces, and one over the last 64 at the end
     assert [a for a, _ in det.spans[1:]] == [*range(0, n - 64 + 1, 32), n - 64] and summary.detect_skipped == 0
+
+
+def test_a_run_whose_detector_fails_raises_it_and_leaves_no_detector_thread(survey, tmp_path):
+    import threading
+
+    det = _Gated(broken=32, traces=64)  # (the warm-up's window starts at 0: the survey's second window breaks)
+    det.go.set()
+    cfg = _cfg(until_idle_s=2.5)
+    cfg.detect = True
+    data = survey.data.copy()
+    data[:, 2] = np.arange(survey.n_traces)
+    ticks = iter(range(1000))
+    with pytest.raises(ValueError, match="^window 32 broke$"):
+        run_live(_Scripted(survey.replace(data=data), 0, 3), tmp_path, cfg, detector=det, log=None, poll_s=0.0,
+                 clock=lambda: float(next(ticks)), reader_thread=False)
+    assert not [t for t in threading.enumerate() if t.name == "gpr3d-live-detector"]
 
 
 

@@ -1455,6 +1455,16 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
         No traces arrived, no connection, a stream or file that breaks its format, or settings live mode cannot
         run (no aperture, no eps_r).
     """
+    made: list = []  # the LiveReconstruction once it is made: its detector's thread stops however the run ends
+    try:
+        return _run_live(source, out, cfg, made, detector=detector, log=log, poll_s=poll_s, clock=clock,
+                         reader_thread=reader_thread)
+    finally:
+        for live in made:
+            live.close()
+
+
+def _run_live(source, out, cfg, made, *, detector, log, poll_s, clock, reader_thread) -> LiveSummary:
     log = log or (lambda msg: None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -1492,6 +1502,7 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
                 ended = source.ended
             if batches and live is None and source.header is not None:
                 live = LiveReconstruction(source.header, cfg, out, detector=detector, log=log)
+                made.append(live)
                 if reader is not None:
                     live.intake = lambda: add(reader.take())  # (a due refresh takes in what came meanwhile)
                     live.waiting = lambda: reader.waiting
@@ -1520,10 +1531,6 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     except KeyboardInterrupt:  # Ctrl-C ends the survey: what came is finished and written (a second one aborts)
         interrupted = True
         log(f"interrupted: finishing with the {live.n_in if live else 0:,} traces received")
-    except BaseException:
-        if live is not None:
-            live.close()  # (the detector's thread)
-        raise
     finally:
         if reader is not None:
             reader.close()
@@ -1541,11 +1548,7 @@ def run_live(source, out, cfg: LiveConfig, *, detector=None, log=print, poll_s: 
     if getattr(source, "skipped", 0):
         log(f"{source.skipped:,} traces outside the poses' time span left out")
     t_last = clock()
-    try:
-        live.step(ended=True)
-    except BaseException:
-        live.close()
-        raise
+    live.step(ended=True)
     t_end = clock()
     # the lag: from the newest trace's arrival to the end of the work on it. The work went on after it as long as
     # steps did some (a detector's backlog, say); a wait for the source after that (its idle time, or a stream

@@ -13,8 +13,8 @@ import numpy as np
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.processing.analytic import hilbert_envelope, running_mean
 
-__all__ = ["bscan_image", "resample_rows", "normalise_window", "hot_rgb", "network_view", "equalise_rows", "render_channels",
-           "record_scale"]
+__all__ = ["bscan_image", "resample_rows", "normalise_window", "hot_rgb", "network_view", "equalise_rows",
+           "render_channels", "record_scale"]
 
 
 def resample_rows(data: np.ndarray, n_out: int) -> np.ndarray:
