@@ -12,7 +12,7 @@ image), network, merge, refine, apexes. With ``--base``, only the network graphs
 code is the working tree's), each graph on every window, the two alternating; the table gives both medians, on how
 many windows both keep as many boxes (score >= 0.5), and there how far each box is from the other's nearest (px).
 
-    python benchmarks/bench_window.py [--windows 12] [--rounds 3] [--threads 2] [--base REV | --other FILE] [--out DIR]
+    python benchmarks/bench_window.py [--windows 12] [--rounds 3] [--base REV | --other FILE] [--out DIR]
 """
 
 from __future__ import annotations
@@ -21,10 +21,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _report import cpu_name, threads_from_argv, write_table  # noqa: E402
-
-if __name__ == "__main__":
-    threads_from_argv()
+from _report import cpu_name, write_table  # noqa: E402
 
 import argparse  # noqa: E402
 import os  # noqa: E402
@@ -110,7 +107,6 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--windows", type=int, default=12, help="windows (one per synthetic record)")
     ap.add_argument("--rounds", type=int, default=3, help="passes over the windows")
-    ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--base", default=None, help="a git revision whose shipped ONNX graph to time against")
     ap.add_argument("--other", default=None, help="an ONNX detector graph to time against (e.g. an 8-bit one made by "
                     "references/detection/quantize_onnx.py)")
@@ -123,8 +119,6 @@ def main(argv=None) -> None:
         raise SystemExit(f"--rounds must lie in 1..100, got {args.rounds}")
     if Path(args.name).name != args.name or not args.name.endswith(".md"):
         raise SystemExit(f"--name {args.name}: a file name ending in .md")
-    if args.threads < 1:
-        raise SystemExit(f"--threads must be at least 1, got {args.threads}")
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise SystemExit(f"--out {out}: not a folder")
@@ -138,7 +132,6 @@ def main(argv=None) -> None:
         raise SystemExit(f"--other {args.other}: no such file")
     base = base_graph(args.base) if args.base else (Path(args.other) if args.other else None)
     label = args.base or (Path(args.other).name if args.other else None)
-    os.environ.setdefault("OMP_NUM_THREADS", str(args.threads))
 
     from gpr3d.detection.infer import load_detector
 
@@ -147,7 +140,7 @@ def main(argv=None) -> None:
     surveys = records(args.windows)
     det.detect(surveys[0], score_threshold=0.5)  # (warm-up)
     stages, whole = stage_table(det, surveys, args.rounds)
-    lines = [f"Host CPU: {cpu_name()}, {args.threads} threads; the shipped detector and refiner (ONNX Runtime) on "
+    lines = [f"Host CPU: {cpu_name()}, {os.cpu_count()} cores (ONNX Runtime: a thread per core); the shipped detector and refiner (ONNX Runtime) on "
              f"{args.windows} windows of {TRACES} traces (survey_sample(777, i), i < {args.windows}), "
              f"{args.rounds} rounds; median ms per window", "",
              "| stage | ms |", "|---|---|"]

@@ -17,7 +17,6 @@ def _run(*args):
 @pytest.mark.parametrize("args, says", [
     (("--windows", "0"), "--windows must lie in 1..500, got 0"),
     (("--rounds", "101"), "--rounds must lie in 1..100, got 101"),
-    (("--threads", "0"), "--threads must be at least 1, got 0"),
     (("--out", "/proc/no/such/folder"), "--out /proc/no/such/folder: No such file or directory"),
     (("--out", "{file}"), "not a folder"),
     (("--base", "no-such-revision-xyz"), "--base no-such-revision-xyz: "),
