@@ -678,9 +678,9 @@ def _live_stage(out: Path, log, rate: float = 4000.0) -> dict:
 
     detector = None
     if available("torch") and available("torchvision"):
-        from gpr3d.detection.infer import load_detector
+        from gpr3d.detection.infer import fastest_engine, load_detector
 
-        detector = load_detector()
+        detector = load_detector(engine=fastest_engine())  # as gpr3d live: the 8-bit graph where it can
     cfg = LiveConfig(reconstruct=ReconstructConfig(spacing_m=0.03, depth_spacing_m=0.02, max_depth_m=0.8),
                      detect=detector is not None, until_idle_s=1.0)
     folder = out / "live"
@@ -691,7 +691,8 @@ def _live_stage(out: Path, log, rate: float = 4000.0) -> dict:
     vol = read_volume(folder / "volume.h5")
     same = vol.grid == batch.grid
     diff = float(np.abs(vol.arrays["image"] - batch.image).max() / np.abs(batch.image).max()) if same else None
-    found = f"the detector run on each window as it filled ({summ.n_detections} hyperbolas), " if detector else ""
+    found = (f"the detector ({detector.provenance.get('name', 'shipped')}) run on each window as it filled "
+             f"({summ.n_detections} hyperbolas), " if detector else "")
     verdict = ("grids differ" if diff is None else
                f"the final volume {'equals' if diff < 1e-4 else 'DIFFERS from'} the batch reconstruct with the same "
                f"settings (max difference {diff:.1e} of its peak)")

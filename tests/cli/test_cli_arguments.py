@@ -283,7 +283,7 @@ def test_migrate_a_profile_and_draw_wiggles_and_an_ascan(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, message", [
     (["detect", "x.DZT", "--out", "d.json", "--runtime", "nosuch"],
-     "gpr3d detect: error: argument --runtime: invalid choice: 'nosuch' (choose from 'auto', 'torch', 'onnx') "
+     "gpr3d detect: error: argument --runtime: invalid choice: 'nosuch' (choose from 'auto', 'torch', 'onnx', 'int8') "
      "(usage: gpr3d detect --help)"),
     (["simulate", "--seed", "abc", "--out", "s"],
      "gpr3d simulate: error: argument --seed: invalid int value: 'abc' (usage: gpr3d simulate --help)"),

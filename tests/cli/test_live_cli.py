@@ -66,6 +66,10 @@ def test_replay_into_live_prints_traces_rate_and_lag(survey, tmp_path):  # noqa:
     (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--no-detect"], "a bag's traces carry no sample interval: give it"),
     (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--no-detect", "--detect-in-turn"],
      "--detect-in-turn is for the detector: drop it or --no-detect"),
+    (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--no-detect", "--runtime", "onnx"],
+     "--runtime is for the detector: drop it or --no-detect"),
+    (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--runtime", "int8", "--weights", "w.pt"],
+     "--runtime int8 runs the shipped detector's 8-bit graph; for w.pt make one with"),
     (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--dt", "0.1", "--no-detect"], "--dt are for a ROS bag"),
     (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "-1", "--no-detect"], "--dt must be ns"),
     (["live", "{tmp}/r.bag", "--out", "{tmp}/o", "--dt", "0.1", "--speed", "-2", "--no-detect"], "--speed must be"),
@@ -138,6 +142,36 @@ def test_live_runs_its_detector_in_a_thread_unless_told_to_take_turns(survey, tm
                  "/odometry", "--eps-r", str(EPS), "--out", str(tmp_path / "live"), *flag])
     assert code != 0 and seen["cfg"].detect and seen["detector"] is not None
     assert seen["cfg"].detect_thread is in_thread
+
+
+@pytest.mark.parametrize("flags, graph", [((), "default_detector_int8.onnx"),
+                                          (("--runtime", "onnx"), "default_detector.onnx"),
+                                          (("--runtime", "torch"), None)])
+def test_live_runs_the_8bit_detector_graph_unless_told_otherwise(survey, tmp_path, monkeypatch, flags,  # noqa: F811
+                                                                 graph):
+    pytest.importorskip("onnxruntime")
+    import gpr3d.pipeline
+    from gpr3d.cli.main import main
+    from gpr3d.detection.ort import OnnxDetector
+    from tests.pipeline.test_live import DT, EPS, _bag_of
+
+    seen = {}
+
+    def run_live(source, out, cfg, *, detector=None, log=None):
+        seen.update(detector=detector)
+        raise gpr3d.core.errors.GPR3DError("stopped by the test")
+
+    monkeypatch.setattr(gpr3d.pipeline, "run_live", run_live)
+    bag = _bag_of(survey, tmp_path / "run.bag", ros1=True)
+    code = main(["live", str(bag), "--dt", str(DT * 1e9), "--trace-topic", "/gpr/traces", "--pose-topic",
+                 "/odometry", "--eps-r", str(EPS), "--out", str(tmp_path / "live"), *flags])
+    det = seen["detector"]
+    assert code != 0 and det.refiner is not None  # (the shipped refiner with the shipped detector, either way)
+    if graph is None:
+        assert not isinstance(det, OnnxDetector) and det.model is not None
+    else:
+        assert isinstance(det, OnnxDetector) and det.path.name == graph
+        assert det.provenance["name"].endswith(" (8-bit)") is ("int8" in graph)
 
 
 def test_live_fuses_a_bag_s_poses_as_the_replay_comes(fused_bag, tmp_path, capsys):  # noqa: F811

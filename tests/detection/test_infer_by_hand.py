@@ -223,16 +223,18 @@ def test_the_engine_is_chosen_by_the_file_the_device_and_what_is_installed(monke
     infer.load_detector("m.pt", engine="torch")
     infer.load_detector("m.pt")  # a weights file: torch
     infer.load_detector(engine="onnx")  # the shipped export
+    infer.load_detector(engine="int8")  # the shipped export's 8-bit graph
     assert calls == [("torch", None, "cpu"), ("onnx", None, "cpu"), ("torch", None, "cuda"), ("torch", None, "cpu"),
                      ("onnx", "m.ONNX", "cpu"), ("torch", "m.pt", "cpu"), ("torch", "m.pt", "cpu"),
-                     ("onnx", None, "cpu")]
+                     ("onnx", None, "cpu"), ("onnx", ort.DEFAULT_INT8, "cpu")]
     # the shipped refiner with the shipped detector only, in the detector's engine
-    assert refiners == [(None, "torch"), (None, "onnx"), (None, "torch"), (None, "torch"), (None, "onnx")]
+    assert refiners == [(None, "torch"), (None, "onnx"), (None, "torch"), (None, "torch"), (None, "onnx"),
+                        (None, "onnx")]
     assert infer.load_detector(refiner="none").refiner is None and infer.load_detector(refiner=None).refiner is None
     assert infer.load_detector("m.pt", refiner="r.pt").refiner == ("r.pt", "torch", True, 2)  # the shipped way
     assert infer.load_detector("m.onnx", refiner="default", refine_passes=3).refiner == (None, "onnx", True, 3)
     assert infer.load_detector(refine_mirror=False).refiner == (None, "torch", False, 2)
-    for kw, msg in [(dict(engine="tensorrt"), "unknown engine 'tensorrt'; choose one of auto, torch, onnx"),
+    for kw, msg in [(dict(engine="tensorrt"), "unknown engine 'tensorrt'; choose one of auto, torch, onnx, int8"),
                     (dict(path="m.pt", engine="onnx"), "--runtime onnx needs an .onnx file (export one with python "
                      "references/detection/export_onnx.py m.pt OUT.onnx), not m.pt"),
                     (dict(path="m.onnx", engine="torch"), "m.onnx is an ONNX export: run it with --runtime onnx (or auto)")]:

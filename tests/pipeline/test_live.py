@@ -262,6 +262,7 @@ class _Spans:
         from types import SimpleNamespace
 
         self.window = SimpleNamespace(traces=traces, overlap=overlap)
+        self.provenance = {"name": "stand-in"}
         self.spans = []
         self.shared = 0
 
@@ -422,6 +423,8 @@ def test_live_mode_asks_its_detector_to_share_the_cores_and_detects_every_window
     assert det.shared == 1  # before the first window (the warm-up's)
     n = survey.n_traces  # windows every 32 traces, and one over the last 64 at the end
     assert [a for a, _ in det.spans[1:]] == [*range(0, n - 64 + 1, 32), n - 64] and summary.detect_skipped == 0
+    found = json.loads((tmp_path / "detections.json").read_text())
+    assert found["detector"] == "stand-in (live)" and len(found["targets"]) == summary.n_detections > 0
 
 
 def test_a_run_whose_detector_fails_raises_it_and_leaves_no_detector_thread(survey, tmp_path):

@@ -69,6 +69,10 @@ def add_arguments(sp):
                     help="give up when no trace at all has come in this many seconds (default 60; 0: wait)")
     sp.add_argument("--no-detect", action="store_true", help="no hyperbola detection on the windows")
     sp.add_argument("--weights", default=None, help="detector weights (default: the shipped model)")
+    sp.add_argument("--runtime", default=None, choices=("auto", "torch", "onnx", "int8"),
+                    help="the detector's runtime: int8 (default for the shipped model on the CPU: its 8-bit graph, "
+                         "about 0.7x the float graph's time a window), onnx (the float graph), torch, or auto "
+                         "(as gpr3d detect chooses; the default with --weights or a GPU)")
     sp.add_argument("--score", type=float, default=0.5, help="keep detections scoring at least this (0..1)")
     sp.add_argument("--detect-in-turn", action="store_true",
                     help="run the detector's windows in turn with the migration (default: in a thread of its own, "
@@ -97,6 +101,8 @@ def run(args):
         raise GPR3DError(f"--aperture must lie in (0, 90) degrees for live mode, got {args.aperture:g}")
     if args.detect_in_turn and args.no_detect:
         raise GPR3DError("--detect-in-turn is for the detector: drop it or --no-detect")
+    if args.runtime is not None and args.no_detect:
+        raise GPR3DError("--runtime is for the detector: drop it or --no-detect")
     if args.background_window < 2:
         raise GPR3DError(f"--background-window must be at least 2 traces, got {args.background_window}")
     eps = _eps_argument(args.eps_r)
@@ -111,8 +117,11 @@ def run(args):
                             "max_depth_m": "--max-depth", "eps_r": "--eps-r"})
     detector = None
     if not args.no_detect:
+        from gpr3d.detection.infer import fastest_engine
+
+        runtime = args.runtime or fastest_engine(args.weights, args.device)
         detector, _ = load_models(detector=True, depth="none", weights=args.weights, device=args.device,
-                                  refiner=args.refiner)
+                                  runtime=runtime, refiner=args.refiner)
     cfg = LiveConfig(reconstruct=rc, background_window=args.background_window,
                      background_trailing=not args.centred_background, refresh_s=args.refresh,
                      detect=not args.no_detect, score=args.score, detect_thread=not args.detect_in_turn,

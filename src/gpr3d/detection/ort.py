@@ -11,6 +11,10 @@ The graph stores its weights in float16 (as the ``.pt`` files do) with a cast to
 float32 in front of each: the file is half the size, and ONNX Runtime folds the
 casts once when the session starts, so it computes in float32 as PyTorch does.
 The window settings and the provenance travel in the graph's metadata.
+
+:func:`quantise_onnx` makes the 8-bit graph live mode runs by default (``DEFAULT_INT8``, the ``int8`` engine of
+:func:`~gpr3d.detection.infer.load_detector`): the float graph's convolutions and its box head's fully connected
+layers quantised by ONNX Runtime's static quantisation, calibrated on detector windows.
 """
 
 from __future__ import annotations
@@ -23,14 +27,19 @@ import numpy as np
 
 from gpr3d.core.atomic import atomic_path
 from gpr3d.core.deps import require
-from gpr3d.core.errors import FormatError
+from gpr3d.core.errors import FormatError, InvalidDataError
 from gpr3d.detection.infer import Detector
 from gpr3d.detection.windows import WindowConfig
 from gpr3d.io.onnxweights import finish_export
 
-__all__ = ["export_onnx", "merge_levels", "OnnxDetector", "onnx_nms", "nms_graph", "DEFAULT_ONNX", "NMS_ONNX", "OPSET"]
+__all__ = ["export_onnx", "merge_levels", "OnnxDetector", "onnx_nms", "nms_graph", "quantise_onnx", "DEFAULT_ONNX",
+           "DEFAULT_INT8", "NMS_ONNX", "OPSET", "QUANTISED_OPS"]
 
 DEFAULT_ONNX = Path(__file__).with_name("default_detector.onnx")
+DEFAULT_INT8 = Path(__file__).with_name("default_detector_int8.onnx")
+#: the operators :func:`quantise_onnx` quantises: every convolution and the box head's two fully connected layers;
+#: the region pooling, box decoding and NMS stay in float
+QUANTISED_OPS = ("Conv", "Gemm")
 OPSET = 17
 _META = "gpr3d.detector"
 
@@ -106,6 +115,66 @@ def export_onnx(weights=None, out=DEFAULT_ONNX) -> dict:
     return {"file": str(out), "bytes": Path(out).stat().st_size, "max_abs_diff": diff}
 
 
+def quantise_onnx(images, out=DEFAULT_INT8, src=DEFAULT_ONNX, *, reduce_range: bool = True,
+                  calibration: str = "", command: str = "") -> dict:
+    """An 8-bit version of the ONNX detector graph ``src`` written (atomically) at ``out``.
+
+    ONNX Runtime's static quantisation (QDQ format) of :data:`QUANTISED_OPS`: weights int8 per output channel,
+    activations uint8 with ranges calibrated (min-max) on ``images``, detector windows as the network takes
+    them (``(3, rows, traces)`` float32). ``reduce_range`` keeps the weights to 7 bits: ONNX Runtime multiplies
+    uint8 by int8 with an instruction whose pair sums saturate at 16 bits on x86 CPUs without VNNI (AVX2 only, e.g.
+    AMD Zen 3), which 7-bit weights cannot reach. The graph carries ``src``'s gpr3d metadata and, under
+    ``quantised``, how it was made (``calibration`` and ``command`` describe the windows and the command line).
+
+    Needs ``onnx`` and ``onnxruntime``; returns ``{"file", "bytes", "windows"}``.
+    """
+    import json
+    import tempfile
+
+    onnx = require("onnx")
+    ort = require("onnxruntime")
+    from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
+    from onnxruntime.quantization.shape_inference import quant_pre_process
+
+    from gpr3d.io.onnxweights import open_session
+
+    images = [np.ascontiguousarray(im, dtype=np.float32) for im in images]
+    if not images:
+        raise InvalidDataError("quantise_onnx needs at least one calibration window")
+    src = Path(src)
+    _, meta = open_session(src, _META, "detector")
+    rows, traces = meta["window"]["rows"], meta["window"]["traces"]
+    for i, im in enumerate(images):
+        if im.shape != (3, rows, traces) or not np.isfinite(im).all():
+            raise InvalidDataError(f"calibration window {i}: {im.shape} {'' if np.isfinite(im).all() else 'non-finite '}"
+                             f"values; the network takes finite (3, {rows}, {traces}) windows")
+
+    class _Windows(CalibrationDataReader):
+        def __init__(self):
+            self._it = iter([{"image": im} for im in images])
+
+        def get_next(self):
+            return next(self._it, None)
+
+    meta["quantised"] = {"source_graph": src.name, "source_sha256": hashlib.sha256(src.read_bytes()).hexdigest(),
+                         "operators": list(QUANTISED_OPS), "weights": "int8 per channel" + (
+                             ", 7-bit range" if reduce_range else ""), "activations": "uint8, min-max calibrated",
+                         "calibration_windows": len(images), "calibration": calibration, "command": command,
+                         "onnxruntime": ort.__version__}
+    with tempfile.TemporaryDirectory() as tmp, atomic_path(out, suffix=".onnx.part") as part:
+        pre = Path(tmp) / "pre.onnx"
+        quant_pre_process(str(src), str(pre), skip_symbolic_shape=True)
+        quantize_static(str(pre), str(part), _Windows(), quant_format=QuantFormat.QDQ, per_channel=True,
+                        op_types_to_quantize=list(QUANTISED_OPS), activation_type=QuantType.QUInt8,
+                        weight_type=QuantType.QInt8, reduce_range=reduce_range)
+        proto = onnx.load(str(part))
+        del proto.metadata_props[:]  # (the pre-processing's own entries too)
+        entry = proto.metadata_props.add()
+        entry.key, entry.value = _META, json.dumps(meta)
+        onnx.save(proto, str(part))
+    return {"file": str(out), "bytes": Path(out).stat().st_size, "windows": len(images)}
+
+
 def nms_graph():
     """A one-node ONNX graph: NonMaxSuppression over one class (boxes (1, N, 4), scores (1, 1, N))."""
     from onnx import TensorProto, helper
@@ -166,8 +235,11 @@ class OnnxDetector(Detector):
         if str(device) != "cpu":
             raise FormatError(p, f"the ONNX engine runs on the CPU; use the torch engine for --device {device}")
         sess, meta = open_session(p, _META, "detector", threads=threads)
-        return cls(sess, WindowConfig(**meta["window"]), provenance=meta.get("provenance", {}), path=p,
-                   kinds=meta.get("kinds"))
+        prov = dict(meta.get("provenance", {}))
+        if "quantised" in meta:  # an 8-bit graph (quantise_onnx): its name says so, its making travels with it
+            prov["name"] = f"{prov.get('name', 'gpr3d detector')} (8-bit)"
+            prov["quantised"] = meta["quantised"]
+        return cls(sess, WindowConfig(**meta["window"]), provenance=prov, path=p, kinds=meta.get("kinds"))
 
     def share_cores(self) -> None:
         """Let the session's threads sleep between runs instead of spinning on the cores (ONNX Runtime's habit):

@@ -1575,7 +1575,8 @@ def _run_live(source, out, cfg, made, *, detector, log, poll_s, clock, reader_th
         atomic_write_text(out / "detections.json", json.dumps(
             {"input": live.h.name, "channel": getattr(getattr(source, "dzt", None), "channel", 0),
              "n_traces": live.n_in, "dt_s": live.h.dt_s,
-             "detector": "gpr3d detector (live)", "score_threshold": cfg.score, "targets": live.detections},
+             "detector": f"{getattr(detector, 'provenance', {}).get('name', 'gpr3d detector')} (live)",
+             "score_threshold": cfg.score, "targets": live.detections},
             indent=1))
     summary.files = sorted(p.name for p in out.iterdir())
     return summary

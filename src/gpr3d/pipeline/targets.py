@@ -24,8 +24,8 @@ def load_models(*, detector: bool = True, depth: str = "hybrid", weights=None, d
         Their weights (default: the shipped ones).
     device : str
         ``cpu``, ``cuda`` or ``cuda:N``.
-    runtime : {"auto", "torch", "onnx"}
-        The detector's runtime.
+    runtime : {"auto", "torch", "onnx", "int8"}
+        The detector's runtime (``gpr3d.detection.infer.ENGINES``).
     refiner : str or Path or None
         The detector's box refiner (``load_detector``'s: ``"auto"``, ``"none"`` or a file).
 
