@@ -60,8 +60,8 @@ def add_arguments(sp):
                     help="traces in the moving background window (default 256), ending at each trace")
     sp.add_argument("--centred-background", action="store_true",
                     help="centre the background window on each trace (a trace then waits for half a window)")
-    sp.add_argument("--refresh", type=float, default=0.5,
-                    help="seconds between target refreshes (default 0.5; longer where one takes over a third of it)")
+    sp.add_argument("--refresh", type=float, default=0.4,
+                    help="seconds between target refreshes (default 0.4; longer where one takes over a third of it)")
     sp.add_argument("--until-idle", type=float, default=5.0,
                     help="end once no trace has come for this many seconds after the first (default 5; 0: only at "
                          "the end mark)")

@@ -67,8 +67,11 @@ class LiveConfig:
     background_trailing: bool = True
     time_zero_traces: int = 64  #: traces time zero is estimated from
     tile_voxels: int = 32  #: a tile's side in voxels
-    refresh_s: float = 0.5  #: how often the targets and ``live.json`` are refreshed (s; longer where a refresh
-    #: would take more than a third of the time)
+    #: how often the targets and ``live.json`` are refreshed (s; longer where a refresh would take more than a third
+    #: of the time). A trace waits about this long plus a refresh for its targets: 0.4 s (instead of 0.5) took the
+    #: worst latency of a 208,000-trace replay at 800/s on 2 Intel cores from 0.93-1.19 s to 0.89 s, for 13 % more
+    #: time refreshing (benchmarks/bench_live.py)
+    refresh_s: float = 0.4
     preview_angle_step_deg: float = 1.0  #: the refreshes' Hough angle step (the final targets: the batch one's)
     #: the most Hough peaks a refresh examines per group of columns (the final targets: the batch's 400); 100 gave
     #: the same targets at every refresh of the benchmark's survey in 43 % less time
