@@ -1,5 +1,5 @@
 """The live trace stream (gpr3d.io.stream): the bytes it writes decode to the same traces however they are cut
-into pieces; each way of breaking the format gets its own one-line error; growing DZT and TUM files give each
+into pieces; each way of breaking the format gets its own one-line error; growing DZT, DT1 and TUM files give each
 trace once, as the batch readers read them."""
 
 import struct
@@ -8,9 +8,11 @@ import numpy as np
 import pytest
 
 from gpr3d.core.errors import FormatError
+from gpr3d.io.dt1 import read_dt1
 from gpr3d.io.dzt import read_dzt
 from gpr3d.io.stream import (
     END,
+    GrowingDT1,
     GrowingDZT,
     GrowingTUM,
     StreamDecoder,
@@ -21,7 +23,7 @@ from gpr3d.io.stream import (
     encode_trace,
     encode_wheel,
 )
-from tests.io.makers import write_dzt
+from tests.io.makers import write_dt1, write_dzt
 
 HEADER = StreamHeader(n_samples=5, dt_s=1e-10, frequency_hz=1e9, offset_m=0.05, eps_r=6.0, name="t")
 
@@ -127,6 +129,63 @@ def test_a_growing_dzt_gives_each_trace_once_as_the_reader_reads_it(tmp_path):
     grow.write_bytes(raw[:1024 + 2 * tb])
     with pytest.raises(FormatError, match="shrank"):
         g.poll()
+
+
+@pytest.mark.parametrize("bits", [16, 32])
+def test_a_growing_dt1_gives_each_trace_once_as_the_batch_reader_reads_it(tmp_path, bits):
+    whole = write_dt1(tmp_path / "whole", n_traces=9, n_points=20, window_ns=50.0, units="cm", freq=500.0, sep=14.0,
+                      bits=bits)
+    ref = read_dt1(whole)[0]
+    raw = whole.read_bytes()
+    grow = tmp_path / "grow.DT1"
+    (tmp_path / "grow.HD").write_bytes((tmp_path / "whole.HD").read_bytes())
+    g = GrowingDT1(grow)
+    assert g.poll().shape[0] == 0 and g.header is None  # no file yet
+    tb = 128 + 20 * bits // 8
+    got = []
+    for cut in (100, tb - 1, tb, tb + 5, 4 * tb, 4 * tb + tb // 2, 8 * tb, len(raw)):
+        grow.write_bytes(raw[:cut])
+        got.append(g.poll())
+    assert [len(x) for x in got] == [0, 0, 1, 0, 3, 0, 4, 1]
+    np.testing.assert_array_equal(np.concatenate([x for x in got if len(x)]), ref.data)
+    assert g.dt_s == ref.dt_s == pytest.approx(50e-9 / 20)
+    # the HD's antenna: 500 MHz, 14 cm apart (its positions are in cm)
+    assert (g.header["frequency_hz"], g.header["separation_m"]) == (ref.frequency_hz, ref.offset_m) == (500e6, 0.14)
+    grow.write_bytes(raw[:2 * tb])
+    with pytest.raises(FormatError, match=r"shrank while being read \(2 whole traces, 9 read\)"):
+        g.poll()
+
+
+def test_a_growing_dt1_without_its_hd_takes_the_interval_given_or_names_what_is_missing(tmp_path):
+    whole = write_dt1(tmp_path / "whole", n_traces=3, n_points=20)
+    grow = tmp_path / "grow.dt1"
+    grow.write_bytes(whole.read_bytes())
+    with pytest.raises(FormatError) as err:
+        GrowingDT1(grow).poll()
+    assert str(err.value) == "grow.dt1: no HD header beside it to give the sample interval: give it (--dt, in ns)"
+    g = GrowingDT1(grow, dt_s=2e-10)
+    np.testing.assert_array_equal(g.poll(), read_dt1(whole)[0].data)
+    assert g.dt_s == 2e-10 and g.header["frequency_hz"] is None and g.header["separation_m"] is None
+
+
+@pytest.mark.parametrize("case, message", [
+    ("points", "grow.DT1: first trace header says 0.5 points a trace: not a pulseEKKO DT1, or corrupt"),
+    ("hd", "grow.DT1: first trace header says 20 points, grow.HD says 25: mismatched files"),
+    ("later", "grow.DT1: trace 2 header says 21 points, the first says 20: corrupt"),
+])
+def test_a_growing_dt1_that_cannot_be_right_is_named(tmp_path, case, message):
+    whole = write_dt1(tmp_path / "whole", n_traces=4, n_points=20, bad_trace=2 if case == "later" else None)
+    raw = bytearray(whole.read_bytes())
+    hd = (tmp_path / "whole.HD").read_text()
+    if case == "points":
+        raw[8:12] = np.float32(0.5).tobytes()
+    if case == "hd":
+        hd = hd.replace("NUMBER OF PTS/TRC  = 20", "NUMBER OF PTS/TRC  = 25")
+    (tmp_path / "grow.HD").write_text(hd)
+    (tmp_path / "grow.DT1").write_bytes(bytes(raw))
+    with pytest.raises(FormatError) as err:
+        GrowingDT1(tmp_path / "grow.DT1").poll()
+    assert str(err.value) == message
 
 
 def test_a_growing_tum_gives_whole_lines_only(tmp_path):

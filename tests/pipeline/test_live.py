@@ -5,6 +5,7 @@ DZT file that grows, and whether its tiles stayed in memory or went to disk and 
 import json
 import threading
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -18,7 +19,7 @@ from gpr3d.io.volume import read_volume
 from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct
 from gpr3d.pipeline.live import (BagSource, LiveConfig, LiveReconstruction, SourceReader, open_source,
                                  run_live)
-from gpr3d.pipeline.replay import pace, replay_to_dzt, replay_to_tcp
+from gpr3d.pipeline.replay import pace, replay_to_file, replay_to_tcp
 from gpr3d.simulation.forward import ForwardScene, Pipe, forward_model
 from tests.io.makers import write_dzt
 
@@ -173,7 +174,7 @@ def test_a_growing_dzt_with_growing_poses_equals_the_batch_volume(survey, tmp_pa
     tum = _tum_of(survey, tmp_path / "rec.tum")
     q = survey.orientations_quat_wxyz
     grow, grow_tum = tmp_path / "live.dzt", tmp_path / "live.tum"
-    th = threading.Thread(target=replay_to_dzt, args=(src, grow), daemon=True,
+    th = threading.Thread(target=replay_to_file, args=(src, grow), daemon=True,
                           kwargs=dict(rate=3000.0, poses=tum, poses_out=grow_tum))
     th.start()
     out = tmp_path / "out"
@@ -184,6 +185,46 @@ def test_a_growing_dzt_with_growing_poses_equals_the_batch_volume(survey, tmp_pa
     assert source.header.frequency_hz == 800e6  # from the antenna's name in the DZT header
     rec = read_dzt(src)[0].replace(positions_xyz=survey.positions_xyz, orientations_quat_wxyz=q, offset_m=0.05,
                                    frequency_hz=800e6)
+    _batch_equals_live(rec, out)
+
+
+def _dt1_of(survey, stem):
+    """``survey`` as a pulseEKKO DT1/HD pair (16-bit samples scaled from the survey's; 800 MHz, 5 cm apart)."""
+    stem.with_suffix(".HD").write_text(
+        f"1234\nData Collected with a test\n2026-12-05\nNUMBER OF TRACES   = {survey.n_traces}\n"
+        f"NUMBER OF PTS/TRC  = {survey.n_samples}\nTOTAL TIME WINDOW  = {survey.n_samples * DT * 1e9!r}\n"
+        "POSITION UNITS     = m\nNOMINAL FREQUENCY  = 800\nANTENNA SEPARATION = 0.05\n")
+    ints = np.round(survey.data / np.abs(survey.data).max() * 3e4).astype("<i2")
+    with open(stem.with_suffix(".DT1"), "wb") as f:
+        for i, row in enumerate(ints):
+            h = np.zeros(32, "<f4")
+            h[0], h[1], h[2], h[5] = i + 1, 0.01 * i, survey.n_samples, 2
+            f.write(h.tobytes() + row.tobytes())
+    return stem.with_suffix(".DT1")
+
+
+def test_a_growing_dt1_with_growing_poses_equals_the_batch_volume(survey, tmp_path):
+    from gpr3d.io.dt1 import read_dt1
+
+    src = _dt1_of(survey, tmp_path / "rec")
+    tum = _tum_of(survey, tmp_path / "rec.tum")
+    grow, grow_tum = tmp_path / "live" / "LINE.DT1", tmp_path / "live.tum"
+    grow.parent.mkdir()
+    th = threading.Thread(target=replay_to_file, args=(src, grow), daemon=True,
+                          kwargs=dict(rate=3000.0, poses=tum, poses_out=grow_tum))
+    th.start()
+    out = tmp_path / "out"
+    source = open_source(grow, poses=grow_tum)  # (the HD copied beside it first: its interval and antenna)
+    cfg = _cfg(until_idle_s=1.5)
+    cfg.reconstruct = replace(cfg.reconstruct, eps_r=EPS)  # (a DT1 names no permittivity: --eps-r)
+    summary = run_live(source, out, cfg, log=None)
+    th.join(10)
+    assert summary.n_traces == survey.n_traces
+    assert (source.header.frequency_hz, source.header.offset_m) == (800e6, 0.05)
+    assert source.header.dt_s == pytest.approx(DT, rel=1e-12)
+    rec = read_dt1(src)[0].replace(positions_xyz=survey.positions_xyz,
+                                   orientations_quat_wxyz=survey.orientations_quat_wxyz)
+    assert (rec.offset_m, rec.frequency_hz) == (0.05, 800e6)
     _batch_equals_live(rec, out)
 
 
@@ -228,7 +269,10 @@ def test_live_without_eps_r_anywhere_is_refused(tmp_path):
     ("tcp://host", {}, "expected tcp://HOST:PORT"),
     ("tcp://host:99999", {}, "expected tcp://HOST:PORT"),
     ("tcp://127.0.0.1:5600", {"poses": "p.tum"}, "--poses is for a growing file"),
-    ("rec.dt1", {"poses": "p.tum"}, "live mode reads growing DZT files"),
+    ("rec.sgy", {"poses": "p.tum"}, "rec.sgy: live mode reads growing DZT or DT1 files"),
+    ("rec.dt1", {"poses": "p.tum", "channel": 1}, "rec.dt1: a DT1 file holds one channel"),
+    ("rec.dzt", {"poses": "p.tum", "bag": {"dt_s": 1e-10}}, "rec.dzt: --dt are for a ROS bag"),
+    ("rec.dt1", {"poses": "p.tum", "bag": {"dt_s": 1e-10, "speed": 2.0}}, "rec.dt1: --dt, --speed are for a ROS bag"),
     ("rec.dzt", {}, "live mode needs the antenna's poses"),
 ])
 def test_wrong_sources_are_named(source, kw, message):

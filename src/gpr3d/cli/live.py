@@ -9,12 +9,13 @@ NAME = "live"
 HELP = "live 3D: migrate traces as a radar delivers them, targets refreshed while surveying"
 EPILOG = ("examples:\n  gpr3d live tcp://127.0.0.1:5600 --out site --eps-r 9\n"
           "  gpr3d live LINE.DZT --poses LINE.tum --out site --eps-r 6 --until-idle 10\n"
+          "  gpr3d live LINE.DT1 --poses LINE.tum --out site --eps-r 6   # pulseEKKO; --dt NS where no HD yet\n"
           "  gpr3d live run.bag --dt 0.1 --trace-topic /gpr/traces --pose-topic /odometry --out site --eps-r 6\n"
           "  gpr3d live run.bag --dt 0.1 --fuse --rig rig.json --out site --eps-r 6   # poses fused as they come\n"
           "  gpr3d live tcp://127.0.0.1:5600 --fuse --rig rig.json --out site   # from the stream's IMU and odometry\n\n"
           "SOURCE: tcp://HOST:PORT (the trace stream of docs/CONVENTIONS.md: each trace with its pose, or with\n"
           "--fuse its IMU and odometry messages), a DZT\n"
-          "file the radar is writing with --poses, a TUM file written beside it, or a ROS bag (.bag, or a ROS 2\n"
+          "or DT1 file the radar is writing with --poses, a TUM file written beside it, or a ROS bag (.bag, or a ROS 2\n"
           "bag folder) replayed at its own pace: a trace topic (a header and a float array named trace, samples\n"
           "or data), poses from a pose topic, --poses, or fused from its IMU and odometry topics (--fuse).\n"
           "Refreshed while running:\n"
@@ -26,11 +27,12 @@ EPILOG = ("examples:\n  gpr3d live tcp://127.0.0.1:5600 --out site --eps-r 9\n"
 
 def add_arguments(sp):
     rc = _reconstruct_defaults()
-    sp.add_argument("source", help="tcp://HOST:PORT, a growing DZT file (with --poses), or a ROS bag")
+    sp.add_argument("source", help="tcp://HOST:PORT, a growing DZT or DT1 file (with --poses), or a ROS bag")
     sp.add_argument("--out", required=True, help="output folder")
     sp.add_argument("--poses", default=None, help="TUM trajectory beside a growing file (one pose per trace), or for "
                                                   "a bag's traces (interpolated at their stamps)")
-    sp.add_argument("--dt", type=float, default=None, help="a bag's sample interval in ns (its messages carry none)")
+    sp.add_argument("--dt", type=float, default=None, help="sample interval in ns: a bag's (its messages carry none), "
+                    "or a growing DT1's without its HD header")
     sp.add_argument("--trace-topic", default=None, help="a bag's GPR trace topic (default: the one such topic)")
     sp.add_argument("--pose-topic", default=None, help="a bag's pose topic (default: the one such topic)")
     sp.add_argument("--fuse", action="store_true",
@@ -49,7 +51,8 @@ def add_arguments(sp):
     sp.add_argument("--speed", type=float, default=1.0,
                     help="replay a bag at this many times its pace (default 1; 0: as fast as it reads)")
     sp.add_argument("--channel", type=int, default=0, help="channel of a multi-channel DZT (default 0)")
-    sp.add_argument("--offset", type=float, default=0.0, help="transmitter-receiver offset of a DZT's antenna (m)")
+    sp.add_argument("--offset", type=float, default=None, help="transmitter-receiver offset of a growing file's "
+                    "antenna (m; default: a DT1's HD header's separation, else 0)")
     sp.add_argument("--eps-r", default=None, help="relative permittivity (default: the stream's header)")
     sp.add_argument("--spacing", type=float, default=0.03, help="voxel size in metres (default 0.03)")
     sp.add_argument("--depth-spacing", type=float, default=0.02, help="voxel height in metres (default 0.02)")
@@ -94,7 +97,8 @@ def run(args):
     _in_range(args.until_idle, "--until-idle", 0, 86400, "seconds")
     _in_range(args.start_timeout, "--start-timeout", 0, 86400 * 7, "seconds")
     _in_range(args.connect_timeout, "--connect-timeout", 0, 86400, "seconds")
-    _in_range(args.offset, "--offset", 0, 10, "metres")
+    if args.offset is not None:
+        _in_range(args.offset, "--offset", 0, 10, "metres")
     if not 0.0 <= args.score <= 1.0:
         raise GPR3DError(f"--score must lie in 0..1, got {args.score}")
     if not (0 < args.aperture < 90):

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 from gpr3d.cli._common import _in_range
 from gpr3d.core.errors import GPR3DError
 
 NAME = "replay"
-HELP = "replay a recording as a radar delivers it (a TCP trace stream, or a DZT file that grows)"
+HELP = "replay a recording as a radar delivers it (a TCP trace stream, or a DZT or DT1 file that grows)"
 EPILOG = ("examples:\n  gpr3d replay survey.h5 --poses path.tum --to tcp://127.0.0.1:5600 --rate 800\n"
           "  gpr3d replay LINE.DZT --poses LINE.tum --to live/LINE.DZT --poses-out live/LINE.tum --speed 4\n"
           "  gpr3d replay run.h5 --imu imu.csv --odometry odometry.tum --to tcp://127.0.0.1:5600 --speed 1\n\n"
@@ -20,10 +21,11 @@ EPILOG = ("examples:\n  gpr3d replay survey.h5 --poses path.tum --to tcp://127.0
 
 
 def add_arguments(sp):
-    sp.add_argument("input", help="the recording (any gpr3d reads; a DZT for --to FILE.DZT)")
+    sp.add_argument("input", help="the recording (any gpr3d reads; a DZT or DT1 for --to FILE.DZT/.DT1)")
     sp.add_argument("--poses", default=None, help="TUM trajectory, one pose per trace")
-    sp.add_argument("--to", required=True, help="tcp://HOST:PORT (a server), or a .DZT file to grow")
-    sp.add_argument("--poses-out", default=None, help="with --to FILE.DZT: the TUM file the poses grow into")
+    sp.add_argument("--to", required=True, help="tcp://HOST:PORT (a server), or a .DZT or .DT1 file to grow (a DT1's "
+                    "HD header copied beside it first)")
+    sp.add_argument("--poses-out", default=None, help="with --to FILE: the TUM file the poses grow into")
     sp.add_argument("--rate", type=float, default=None, help="traces per second")
     sp.add_argument("--speed", type=float, default=None, help="times the recording's own trace rate")
     sp.add_argument("--loops", type=int, default=1, help="play the recording this many times (tcp only)")
@@ -51,8 +53,16 @@ def _rate(args, own_rate):
     return args.speed * own_rate
 
 
+def _own_rate(survey):
+    """A recording's own traces a second, from its timestamps (None without them)."""
+    if survey.timestamps_s is None or survey.n_traces < 2:
+        return None
+    span = float(survey.timestamps_s[-1] - survey.timestamps_s[0])
+    return (survey.n_traces - 1) / span if span > 0 else None
+
+
 def run(args):
-    from gpr3d.pipeline import attach_trajectory, read_recording, read_sensors, replay_to_dzt, replay_to_tcp
+    from gpr3d.pipeline import attach_trajectory, read_recording, read_sensors, replay_to_file, replay_to_tcp
 
     _check_rate(args)
     if args.loops < 1:
@@ -76,11 +86,7 @@ def run(args):
         survey = read_recording(args.input)
         if args.poses:
             survey = attach_trajectory(survey, args.poses, source=str(args.input))
-        own = None
-        if survey.timestamps_s is not None and survey.n_traces > 1:
-            span = float(survey.timestamps_s[-1] - survey.timestamps_s[0])
-            own = (survey.n_traces - 1) / span if span > 0 else None
-        rate = _rate(args, own)
+        rate = _rate(args, _own_rate(survey))
         n = replay_to_tcp(survey, int(port), host=host, rate=rate, loops=args.loops, loop_shift_m=args.loop_shift,
                           accept_s=args.accept_timeout, sensors=sensors,
                           on_listen=lambda p: print(f"serving {survey.n_traces * args.loops} traces on "
@@ -88,15 +94,21 @@ def run(args):
                           log=print)
         print(f"sent {n} traces")
         return 0
-    if not args.to.lower().endswith(".dzt") or not str(args.input).lower().endswith(".dzt"):
-        raise GPR3DError("--to a file replays a DZT recording into a .DZT file (or give --to tcp://HOST:PORT)")
+    kind = Path(args.input).suffix.lower()
+    if kind not in (".dzt", ".dt1") or Path(args.to).suffix.lower() != kind:
+        raise GPR3DError("--to a file replays a DZT or DT1 recording into a file of its kind (.DZT, .DT1; or give "
+                         "--to tcp://HOST:PORT)")
     if args.loops != 1 or args.loop_shift != 0:
         raise GPR3DError("--loops and --loop-shift are for tcp:// replays")
     if (args.poses is None) != (args.poses_out is None):
         raise GPR3DError("--to FILE.DZT takes --poses and --poses-out together (the poses grow beside the traces)")
-    from gpr3d.io.dzt import read_dzt_header
+    if kind == ".dzt":
+        from gpr3d.io.dzt import read_dzt_header
 
-    rate = _rate(args, read_dzt_header(args.input)["scans_per_s"])
-    n = replay_to_dzt(args.input, args.to, rate=rate, poses=args.poses, poses_out=args.poses_out)
+        own = read_dzt_header(args.input)["scans_per_s"]
+    else:
+        own = _own_rate(read_recording(args.input))
+    rate = _rate(args, own)
+    n = replay_to_file(args.input, args.to, rate=rate, poses=args.poses, poses_out=args.poses_out)
     print(f"wrote {n} traces to {args.to} at {rate:g} traces/s")
     return 0

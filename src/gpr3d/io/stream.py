@@ -36,7 +36,7 @@ import numpy as np
 
 from gpr3d.core.errors import FormatError
 
-__all__ = ["END", "HEADER_MAGIC", "SENSORS", "GrowingDZT", "GrowingTUM", "StreamDecoder", "StreamHeader", "Trace",
+__all__ = ["END", "HEADER_MAGIC", "SENSORS", "GrowingDT1", "GrowingDZT", "GrowingTUM", "StreamDecoder", "StreamHeader", "Trace",
            "encode_camera_pose", "encode_header", "encode_imu", "encode_trace", "encode_wheel"]
 
 HEADER_MAGIC = b"GPR3DTR1"
@@ -327,6 +327,96 @@ class GrowingDZT:
             out[:, :2] = out[:, 2:3]
         self.n_read += k
         return out
+
+
+class GrowingDT1:
+    """A pulseEKKO DT1 file that a radar is still writing: :meth:`poll` gives the traces completed since the last
+    call, as :func:`gpr3d.io.dt1.read_dt1` reads them (16- or 32-bit samples as float32).
+
+    The points per trace and bytes per point come from the first trace's own header; the sample interval from the
+    HD header beside the file (``TOTAL TIME WINDOW / NUMBER OF PTS/TRC``, which must agree with the trace header)
+    where it is there, else from ``dt_s``; ``frequency_hz`` and ``separation_m`` from the HD (None without one).
+    Until the first trace header is there, ``header`` is None and polls give nothing."""
+
+    def __init__(self, path, dt_s: float | None = None):
+        self.path = Path(path)
+        self.given_dt_s = dt_s
+        self.header: dict | None = None
+        self.n_read = 0
+
+    def open_header(self) -> bool:
+        """Read the first trace header (and the HD beside the file): False while it is not all there yet."""
+        from gpr3d.io._common import sidecar
+        from gpr3d.io.dt1 import _UNITS_M, TRACE_HEADER_BYTES, _hd_number, read_hd
+
+        try:
+            with open(self.path, "rb") as fh:
+                head = fh.read(TRACE_HEADER_BYTES)
+        except FileNotFoundError:
+            return False
+        if len(head) < TRACE_HEADER_BYTES:
+            return False
+        first = np.frombuffer(head, dtype="<f4")
+        npts = float(first[2])
+        if not (math.isfinite(npts) and npts == int(npts) and 2 <= npts <= 10**6):
+            raise FormatError(self.path, f"first trace header says {npts:g} points a trace: not a pulseEKKO DT1, "
+                                         "or corrupt")
+        npts = int(npts)
+        bpp = int(first[5]) if math.isfinite(first[5]) and int(first[5]) in (2, 4) else 2  # (as read_dt1)
+        dt_s, freq, sep = self.given_dt_s, None, None
+        hd_path = sidecar(self.path, ".hd")
+        if hd_path is not None:
+            hd = read_hd(hd_path)
+            hd_pts = _hd_number(hd_path, hd, "NUMBER OF PTS/TRC")
+            window_ns = _hd_number(hd_path, hd, "TOTAL TIME WINDOW")
+            if hd_pts != npts:
+                raise FormatError(self.path, f"first trace header says {npts} points, {hd_path.name} says "
+                                             f"{hd_pts:g}: mismatched files")
+            if not (math.isfinite(window_ns) and window_ns > 0):
+                raise FormatError(hd_path, f"TOTAL TIME WINDOW must be a positive number of ns, got {window_ns:g}")
+            dt_s = window_ns * 1e-9 / npts
+            mhz = _hd_number(hd_path, hd, "NOMINAL FREQUENCY", required=False)
+            freq = mhz * 1e6 if mhz else None
+            unit = _UNITS_M.get(hd.get("POSITION UNITS", "m").strip().lower(), 1.0)
+            sep = _hd_number(hd_path, hd, "ANTENNA SEPARATION", required=False)
+            sep = None if sep is None else sep * unit
+        if dt_s is None:
+            raise FormatError(self.path, "no HD header beside it to give the sample interval: give it (--dt, in ns)")
+        self.header = {"n_samples": npts, "bytes_per_point": bpp, "dt_s": float(dt_s), "frequency_hz": freq,
+                       "separation_m": sep, "hd": None if hd_path is None else str(hd_path)}
+        return True
+
+    @property
+    def dt_s(self) -> float:
+        return self.header["dt_s"]
+
+    def poll(self) -> np.ndarray:
+        """``(k, n_samples)`` float32: the whole traces written since the last poll (k may be 0)."""
+        from gpr3d.io.dt1 import TRACE_HEADER_BYTES
+
+        if self.header is None and not self.open_header():
+            return np.zeros((0, 0), np.float32)
+        ns, bpp = self.header["n_samples"], self.header["bytes_per_point"]
+        tb = TRACE_HEADER_BYTES + ns * bpp
+        have = self.path.stat().st_size // tb
+        if have < self.n_read:
+            raise FormatError(self.path, f"shrank while being read ({have} whole traces, {self.n_read} read)")
+        k = int(have - self.n_read)
+        if k == 0:
+            return np.zeros((0, ns), np.float32)
+        rec = np.dtype([("h", "<f4", (TRACE_HEADER_BYTES // 4,)), ("d", "<i2" if bpp == 2 else "<i4", (ns,))])
+        with open(self.path, "rb") as fh:
+            fh.seek(self.n_read * tb)
+            arr = np.fromfile(fh, dtype=rec, count=k)
+        if len(arr) != k:
+            raise FormatError(self.path, "shrank while being read")
+        bad = np.nonzero(arr["h"][:, 2] != ns)[0]
+        if bad.size:
+            i = int(bad[0])
+            raise FormatError(self.path, f"trace {self.n_read + i} header says {arr['h'][i, 2]:g} points, the first "
+                                         f"says {ns}: corrupt")
+        self.n_read += k
+        return arr["d"].astype(np.float32)
 
 
 class GrowingTUM:

@@ -20,7 +20,7 @@ _WHERE = {
     "fuse_recordings": "poses", "poses_at_traces": "poses", "write_rig_recordings": "poses",
     "RunConfig": "run", "run_pipeline": "run", "write_report": "report",
     "LiveConfig": "live", "open_source": "live", "run_live": "live",
-    "replay_to_tcp": "replay", "replay_to_dzt": "replay", "read_sensors": "replay",
+    "replay_to_tcp": "replay", "replay_to_file": "replay", "read_sensors": "replay",
 }
 
 __all__ = sorted(_WHERE)

@@ -48,7 +48,7 @@ from gpr3d.core.errors import GPR3DError, InvalidDataError
 from gpr3d.core.grid import Grid3D
 from gpr3d.core.rows import GrowingRows
 from gpr3d.core.units import velocity_from_eps_r
-from gpr3d.io.stream import GrowingDZT, GrowingTUM, StreamDecoder, StreamHeader
+from gpr3d.io.stream import GrowingDT1, GrowingDZT, GrowingTUM, StreamDecoder, StreamHeader
 
 __all__ = ["BagSource", "FileSource", "LiveConfig", "LiveReconstruction", "LiveSummary", "SourceReader", "TCPSource",
            "open_source", "run_live"]
@@ -248,17 +248,26 @@ class TCPSource:
 
 
 class FileSource:
-    """A DZT recording and a TUM trajectory (one pose per trace, in trace order) that are still being written:
-    trace ``i`` is given once pose ``i`` is there. The stream never ends by itself (``until_idle_s`` ends it)."""
+    """A DZT or pulseEKKO DT1 recording and a TUM trajectory (one pose per trace, in trace order) that are still
+    being written: trace ``i`` is given once pose ``i`` is there. The stream never ends by itself
+    (``until_idle_s`` ends it). A DT1's sample interval comes from its HD header, or ``dt_s`` where there is none
+    yet; its antenna separation from the HD where ``offset_m`` is None."""
 
-    def __init__(self, recording, poses, *, channel: int = 0, offset_m: float = 0.0,
-                 frequency_hz: float | None = None):
-        if not str(recording).lower().endswith(".dzt"):
-            raise GPR3DError(f"{recording}: live mode reads growing DZT files (or tcp://HOST:PORT)")
+    def __init__(self, recording, poses, *, channel: int = 0, offset_m: float | None = None,
+                 frequency_hz: float | None = None, dt_s: float | None = None):
+        kind = Path(recording).suffix.lower()
+        if kind not in (".dzt", ".dt1"):
+            raise GPR3DError(f"{recording}: live mode reads growing DZT or DT1 files (or tcp://HOST:PORT)")
         if poses is None:
             raise GPR3DError("live mode needs the antenna's poses: give --poses (a TUM file, one pose per trace, "
                              "that may grow with the recording)")
-        self.dzt = GrowingDZT(recording, channel)
+        if kind == ".dt1" and channel != 0:
+            raise GPR3DError(f"{recording}: a DT1 file holds one channel (--channel is for a DZT)")
+        if kind == ".dzt" and dt_s is not None:
+            raise GPR3DError(f"{recording}: a DZT header gives the sample interval (--dt is for a DT1 without its "
+                             "HD, or a ROS bag)")
+        self.recording = GrowingDZT(recording, channel) if kind == ".dzt" else GrowingDT1(recording, dt_s)
+        self.channel = int(channel)
         self.tum = GrowingTUM(poses)
         self.offset_m = offset_m
         self.frequency_hz = frequency_hz
@@ -268,19 +277,31 @@ class FileSource:
         self.ended = False
         self.waiting_for_poses = 0  #: traces read whose poses have not come yet
 
+    @property
+    def path(self) -> Path:
+        return self.recording.path
+
+    def _header(self) -> StreamHeader:
+        h = self.recording.header
+        if isinstance(self.recording, GrowingDT1):
+            sep = h["separation_m"]
+            return StreamHeader(n_samples=h["n_samples"], dt_s=h["dt_s"], frequency_hz=self.frequency_hz or
+                                h["frequency_hz"], offset_m=self.offset_m if self.offset_m is not None else (sep or 0.0),
+                                name=str(self.path))
+        from gpr3d.io.dzt import _antenna_mhz
+
+        mhz = _antenna_mhz(h["antennas"][self.channel])
+        return StreamHeader(n_samples=h["n_samples"], dt_s=self.recording.dt_s,
+                            frequency_hz=self.frequency_hz or (mhz * 1e6 if mhz else None),
+                            offset_m=self.offset_m or 0.0, eps_r=h["eps_r"], name=str(self.path))
+
     def poll(self):
-        d = self.dzt.poll()
-        if self.dzt.header is None:
+        d = self.recording.poll()
+        if self.recording.header is None:
             return None
         if self.header is None:
-            from gpr3d.io.dzt import _antenna_mhz
-
-            h = self.dzt.header
-            mhz = _antenna_mhz(h["antennas"][self.dzt.channel])
-            self.header = StreamHeader(n_samples=h["n_samples"], dt_s=self.dzt.dt_s,
-                                       frequency_hz=self.frequency_hz or (mhz * 1e6 if mhz else None),
-                                       offset_m=self.offset_m, eps_r=h["eps_r"], name=str(self.dzt.path))
-            self._data = np.zeros((0, h["n_samples"]), np.float32)
+            self.header = self._header()
+            self._data = np.zeros((0, self.header.n_samples), np.float32)
         p = self.tum.poll()
         self._data = np.concatenate([self._data, d]) if len(d) else self._data
         self._poses = np.concatenate([self._poses, p]) if len(p) else self._poses
@@ -632,7 +653,7 @@ def _bag_flags(bag: dict) -> str:
     return ", ".join(sorted("--" + k.removesuffix("_s").replace("_", "-") for k in bag))
 
 
-def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 0.0,
+def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float | None = None,
                 frequency_hz: float | None = None, connect_s: float = 10.0, bag: dict | None = None,
                 fuse: dict | None = None):
     """The source of a live run.
@@ -640,22 +661,23 @@ def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 
     Parameters
     ----------
     source : str or Path
-        ``tcp://HOST:PORT`` (the trace stream of :mod:`gpr3d.io.stream`, each trace with its pose), a DZT file
-        the radar is writing, or a ROS bag (a ``.bag`` file or a ROS 2 bag folder) to replay.
+        ``tcp://HOST:PORT`` (the trace stream of :mod:`gpr3d.io.stream`, each trace with its pose), a DZT or
+        pulseEKKO DT1 file the radar is writing, or a ROS bag (a ``.bag`` file or a ROS 2 bag folder) to replay.
     poses : str or Path, optional
-        With a DZT file: the TUM trajectory written beside it (pose ``i`` for trace ``i``); with a bag: a TUM
+        With a growing file: the TUM trajectory written beside it (pose ``i`` for trace ``i``); with a bag: a TUM
         trajectory interpolated at the traces' stamps instead of the bag's pose topic; never with ``tcp://``.
     channel : int
         The DZT's channel.
-    offset_m : float
-        The DZT antenna's transmitter-receiver offset (m; a stream's header gives its own).
+    offset_m : float, optional
+        The antenna's transmitter-receiver offset (m; default: a DT1's HD header's separation, else 0; a stream's
+        header gives its own).
     frequency_hz : float, optional
         The DZT antenna's centre frequency (default: from the antenna's name in the header).
     connect_s : float
         How long a ``tcp://`` source keeps trying to connect (s).
     bag : dict, optional
         A bag's settings for :class:`BagSource` (``dt_s``, ``trace_topic``, ``pose_topic``, ``samples_per_trace``,
-        ``speed``, ``eps_r``, ``fuse``).
+        ``speed``, ``eps_r``, ``fuse``); a growing DT1 takes ``dt_s`` alone (where no HD header is beside it).
     fuse : dict, optional
         Fuse the antenna's poses as they come (``rig``, ``still_s``; a bag's also ``imu_topic``,
         ``odometry_topic``): from a bag's IMU and odometry topics, or from a ``tcp://`` stream's sensor messages.
@@ -668,7 +690,8 @@ def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 
     Raises
     ------
     GPR3DError
-        A malformed ``tcp://`` address, ``poses`` with a stream, a file that is no DZT, or a DZT without poses.
+        A malformed ``tcp://`` address, ``poses`` with a stream, a file that is no DZT or DT1, or one without
+        poses.
     """
     if fuse is not None:
         fuse = dict(fuse)
@@ -692,13 +715,16 @@ def open_source(source: str, *, poses=None, channel: int = 0, offset_m: float = 
             settings["fuse"] = fuse
         if "dt_s" not in settings:
             raise GPR3DError(f"{source}: a bag's traces carry no sample interval: give it (--dt, in ns)")
-        return BagSource(p, poses=poses, offset_m=offset_m, frequency_hz=frequency_hz, **settings)
-    if bag:
+        return BagSource(p, poses=poses, offset_m=offset_m or 0.0, frequency_hz=frequency_hz, **settings)
+    dt_s = None
+    if p.suffix.lower() == ".dt1" and bag and set(bag) == {"dt_s"}:
+        dt_s = bag["dt_s"]  # (a DT1 whose HD header is not there yet)
+    elif bag:
         raise GPR3DError(f"{source}: {_bag_flags(bag)} are for a ROS bag (a .bag file or a ROS 2 bag folder)")
     if fuse is not None:
         raise GPR3DError(f"{source}: --fuse is for a ROS bag or a tcp:// stream carrying IMU samples (a growing "
                          "file's poses come from --poses)")
-    return FileSource(source, poses, channel=channel, offset_m=offset_m, frequency_hz=frequency_hz)
+    return FileSource(source, poses, channel=channel, offset_m=offset_m, frequency_hz=frequency_hz, dt_s=dt_s)
 
 
 # -- the engine ----------------------------------------------------------------------------------------------------
@@ -1541,7 +1567,7 @@ def _run_live(source, out, cfg, made, *, detector, log, poll_s, clock, reader_th
             source.close()
     if live is None or live.n_in == 0:
         where = (getattr(getattr(source, "decoder", None), "where", None) or getattr(source, "path", None)
-                 or getattr(getattr(source, "dzt", None), "path", "the source"))
+                 or "the source")
         waiting = getattr(source, "waiting_for_poses", 0)
         if waiting:
             raise GPR3DError(f"{where}: {waiting} traces came, but no poses for them in {source.tum.path}")
@@ -1576,7 +1602,7 @@ def _run_live(source, out, cfg, made, *, detector, log, poll_s, clock, reader_th
     atomic_write_text(out / "live.json", json.dumps(st, indent=1))
     if live.detections:
         atomic_write_text(out / "detections.json", json.dumps(
-            {"input": live.h.name, "channel": getattr(getattr(source, "dzt", None), "channel", 0),
+            {"input": live.h.name, "channel": getattr(source, "channel", 0),
              "n_traces": live.n_in, "dt_s": live.h.dt_s,
              "detector": f"{getattr(detector, 'provenance', {}).get('name', 'gpr3d detector')} (live)",
              "score_threshold": cfg.score, "targets": live.detections},

@@ -2,8 +2,9 @@
 
 - to ``tcp://HOST:PORT``: a server there sends the :mod:`gpr3d.io.stream` format (header, then each trace with its
   pose) to the first client that connects, at the given rate, then the end mark;
-- to a ``.DZT`` file: a DZT recording's header, then its traces appended at the given rate (as the radar writes
-  them), and with ``poses_out`` its poses appended to a TUM file in step.
+- to a ``.DZT`` or ``.DT1`` file: a DZT recording's header (a pulseEKKO recording's HD header, beside it), then
+  its traces appended at the given rate (as the radar writes them), and with ``poses_out`` its poses appended to a
+  TUM file in step.
 
 ``loops`` plays the recording several times, each pass moved ``loop_shift_m`` further along x (a long survey from a
 short one: the cart never comes back). With ``sensors`` (:func:`read_sensors`: an IMU record, camera poses, wheel
@@ -24,7 +25,7 @@ from gpr3d.core.errors import GPR3DError
 from gpr3d.io.stream import (END, StreamHeader, encode_camera_pose, encode_header, encode_imu, encode_trace,
                              encode_wheel)
 
-__all__ = ["pace", "pace_at", "read_sensors", "replay_to_dzt", "replay_to_tcp"]
+__all__ = ["pace", "pace_at", "read_sensors", "replay_to_file", "replay_to_tcp"]
 
 
 def pace(n: int, rate: float, *, batch_s: float = 0.01, clock=time.monotonic, sleep=time.sleep):
@@ -249,15 +250,39 @@ def _end(conn) -> None:
         pass
 
 
-def replay_to_dzt(recording, out, *, rate: float, poses=None, poses_out=None) -> int:
-    """Grow a DZT file as a radar would: ``recording``'s header, then its traces at ``rate`` per second.
+def _file_layout(src: Path) -> tuple[int, int, int]:
+    """``(header bytes, trace bytes, whole traces)`` of a DZT or DT1 recording; a one-line FormatError for
+    anything else."""
+    from gpr3d.core.errors import FormatError
+
+    kind = src.suffix.lower()
+    if kind == ".dzt":
+        from gpr3d.io.dzt import read_dzt_header
+
+        hdr = read_dzt_header(src)
+        tb = hdr["n_samples"] * hdr["n_channels"] * hdr["bits"] // 8
+        return hdr["data_offset"], tb, (hdr["file_bytes"] - hdr["data_offset"]) // tb
+    if kind == ".dt1":
+        from gpr3d.io.stream import GrowingDT1
+
+        g = GrowingDT1(src, dt_s=1.0)  # (its first trace header; the interval is the HD's business)
+        if not g.open_header():
+            raise FormatError(src, "shorter than one trace header: not a pulseEKKO DT1")
+        tb = 128 + g.header["n_samples"] * g.header["bytes_per_point"]
+        return 0, tb, src.stat().st_size // tb
+    raise FormatError(src, "replaying into a file takes a DZT or DT1 recording")
+
+
+def replay_to_file(recording, out, *, rate: float, poses=None, poses_out=None) -> int:
+    """Grow a DZT or pulseEKKO DT1 file as a radar would: ``recording``'s header (a DT1's HD header, copied beside
+    ``out`` first), then its traces at ``rate`` per second.
 
     Parameters
     ----------
     recording : str or Path
-        A DZT file.
+        A DZT or DT1 file.
     out : str or Path
-        The DZT file written (flushed after every batch of traces).
+        The file written (flushed after every batch of traces), of the recording's kind.
     rate : float
         Traces per second.
     poses : str or Path, optional
@@ -273,17 +298,16 @@ def replay_to_dzt(recording, out, *, rate: float, poses=None, poses_out=None) ->
     Raises
     ------
     GPR3DError
-        Poses that do not match the traces, no ``poses_out``, ``out`` being the recording, or a rate that is no
-        positive number.
+        Poses that do not match the traces, no ``poses_out``, ``out`` being the recording or of another kind, or a
+        rate that is no positive number.
     FormatError
-        A recording that is no DZT.
+        A recording that is no DZT or DT1.
     """
-    from gpr3d.io.dzt import read_dzt_header
-
     src = Path(recording)
-    hdr = read_dzt_header(src)
-    tb = hdr["n_samples"] * hdr["n_channels"] * hdr["bits"] // 8
-    n = (hdr["file_bytes"] - hdr["data_offset"]) // tb
+    if Path(out).suffix.lower() != src.suffix.lower():
+        raise GPR3DError(f"--to {out}: a {src.suffix.upper().lstrip('.')} recording grows into a "
+                         f"{src.suffix.upper()} file")
+    head, tb, n = _file_layout(src)
     lines = None
     if poses is not None:
         lines = [ln for ln in Path(poses).read_text().splitlines() if ln.strip() and not ln.startswith("#")]
@@ -294,10 +318,16 @@ def replay_to_dzt(recording, out, *, rate: float, poses=None, poses_out=None) ->
     out = Path(out)
     if out.resolve() == src.resolve():
         raise GPR3DError(f"--to {out} is the recording itself")
+    if src.suffix.lower() == ".dt1":
+        from gpr3d.io._common import sidecar
+
+        hd = sidecar(src, ".hd")
+        if hd is not None:
+            Path(out).with_suffix(hd.suffix).write_bytes(hd.read_bytes())
     pf = open(poses_out, "w") if lines is not None else None
     try:
         with open(src, "rb") as fin, open(out, "wb") as fout:
-            fout.write(fin.read(hdr["data_offset"]))
+            fout.write(fin.read(head))
             fout.flush()
             for a, b in pace(n, rate):
                 fout.write(fin.read((b - a) * tb))
