@@ -87,7 +87,7 @@ MODULES = {
                         "tests/detection/test_refine.py::test_the_detector_refines_its_merged_boxes_before_it_reports_them",
                         "tests/detection/test_refine.py::test_how_a_refiner_is_applied_is_checked_in_one_line"],
     "detection.refine": ["tests/detection/test_refine.py", "-m", "not slow"],
-    "detection.ort": ["tests/detection/test_onnx_runtime.py"],
+    "detection.ort": ["tests/detection/test_onnx_runtime.py", "tests/detection/test_onnx_int8.py"],
     "detection.train": ["tests/detection/test_train_by_hand.py", "tests/detection/test_kinds.py"],
     "detection.weights": ["tests/detection/test_weights_train.py", "tests/detection/test_kinds.py", "-k",
                           "round_trip or bad_weight or default_weights or messages_in_full or test_kinds"],

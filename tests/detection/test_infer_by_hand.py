@@ -237,10 +237,32 @@ def test_the_engine_is_chosen_by_the_file_the_device_and_what_is_installed(monke
     for kw, msg in [(dict(engine="tensorrt"), "unknown engine 'tensorrt'; choose one of auto, torch, onnx, int8"),
                     (dict(path="m.pt", engine="onnx"), "--runtime onnx needs an .onnx file (export one with python "
                      "references/detection/export_onnx.py m.pt OUT.onnx), not m.pt"),
-                    (dict(path="m.onnx", engine="torch"), "m.onnx is an ONNX export: run it with --runtime onnx (or auto)")]:
+                    (dict(path="m.onnx", engine="torch"), "m.onnx is an ONNX export: run it with --runtime onnx (or auto)"),
+                    (dict(path="m.pt", engine="int8"), "--runtime int8 runs the shipped detector's 8-bit graph; for m.pt "
+                     "make one with python references/detection/quantize_onnx.py OUT.onnx and run it with --runtime "
+                     "onnx")]:
         with pytest.raises(GPR3DError) as err:
             infer.load_detector(**kw)
         assert str(err.value) == msg
+
+
+def test_the_fastest_engine_is_the_8bit_graph_for_the_shipped_model_on_the_cpu_where_it_can_run(monkeypatch,
+                                                                                                  tmp_path):
+    import importlib.util
+
+    from gpr3d.detection import ort
+
+    graph = tmp_path / "int8.onnx"
+    monkeypatch.setattr(ort, "DEFAULT_INT8", graph)
+    have = {"onnxruntime": True}
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name: object() if have.get(name) else None)
+    assert infer.fastest_engine() == "auto"  # no 8-bit graph installed
+    graph.write_bytes(b"x")
+    assert infer.fastest_engine() == infer.fastest_engine(None, "cpu") == "int8"
+    assert infer.fastest_engine("m.pt") == "auto" and infer.fastest_engine("m.onnx") == "auto"  # the user's own
+    assert infer.fastest_engine(None, "cuda") == infer.fastest_engine(None, "cuda:1") == "auto"  # a GPU: torch
+    have["onnxruntime"] = False
+    assert infer.fastest_engine() == "auto"  # no ONNX Runtime
 
 
 def test_the_shipped_weights_load_into_a_detector_and_its_windows_give_float64_boxes():
