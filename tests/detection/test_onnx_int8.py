@@ -100,42 +100,88 @@ def _windows(n=1):
     return [w.image for w in windows(s, cfg, processed=prepare(s, cfg))][:n]
 
 
-def test_quantise_onnx_writes_an_8bit_graph_calibrated_on_the_windows_it_is_given(tmp_path):
+def _graph_facts(path) -> dict:
+    """How a graph was quantised, read from its nodes: QuantizeLinear nodes, their zero points' types, whether every
+    weight scale is per output channel."""
+    g = onnx.load(str(path)).graph
+    inits = {t.name: t for t in g.initializer}
+    quant = [n for n in g.node if n.op_type == "QuantizeLinear"]
+    weight_dq = [n for n in g.node if n.op_type == "DequantizeLinear" and n.input[0] in inits
+                 and inits[n.input[0]].data_type == onnx.TensorProto.INT8]
+    return {"quantize_nodes": len(quant),
+            "zero_point_types": {onnx.TensorProto.DataType.Name(inits[n.input[2]].data_type) for n in quant},
+            "per_channel": all(list(inits[n.input[1]].dims) == [inits[n.input[0]].dims[0]] for n in weight_dq)}
+
+
+@pytest.mark.parametrize("full_range", [False, True])
+def test_quantise_onnx_writes_an_8bit_graph_calibrated_on_the_windows_it_is_given(tmp_path, monkeypatch, full_range):
+    import onnxruntime
+
+    cwd = tmp_path / "cwd"  # (nothing may be written where the command runs)
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
     out = tmp_path / "q.onnx"
-    got = quantise_onnx(_windows(1), out, reduce_range=False, calibration="one window", command="a test")
+    windows = [w.astype(np.float64) for w in _windows(1)]  # (cast for the graph)
+    kw = dict(reduce_range=False, calibration="one window", command="a test") if full_range else {}
+    got = quantise_onnx(windows, out, **kw)
     assert got == {"file": str(out), "bytes": out.stat().st_size, "windows": 1}
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["q.onnx"]  # nothing left beside it
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cwd", "q.onnx"] and list(cwd.iterdir()) == []
     g = onnx.load(str(out))
     assert [p.key for p in g.metadata_props] == ["gpr3d.detector"]  # (the quantiser's own entries dropped)
     meta = json.loads(g.metadata_props[0].value)
     base = json.loads(onnx.load(str(DEFAULT_ONNX)).metadata_props[0].value)
     q = meta.pop("quantised")
     assert meta == base  # the float graph's window, provenance and kinds, as they were
-    assert q["calibration_windows"] == 1 and q["calibration"] == "one window" and q["command"] == "a test"
-    assert q["weights"] == "int8 per channel" and q["source_sha256"] == hashlib.sha256(
-        DEFAULT_ONNX.read_bytes()).hexdigest()
-    assert max(int(np.abs(w.astype(np.int32)).max()) for _, w in _weights_of(out)) == 127  # full range
+    assert q == {"source_graph": "default_detector.onnx",
+                 "source_sha256": hashlib.sha256(DEFAULT_ONNX.read_bytes()).hexdigest(),
+                 "operators": ["Conv", "Gemm"], "weights": "int8 per channel" + ("" if full_range else ", 7-bit range"),
+                 "activations": "uint8, min-max calibrated", "calibration_windows": 1,
+                 "calibration": "one window" if full_range else "", "command": "a test" if full_range else "",
+                 "onnxruntime": onnxruntime.__version__}
+    peaks = [int(np.abs(w.astype(np.int32)).max()) for _, w in _weights_of(out)]
+    assert max(peaks) == (127 if full_range else 64) and len(peaks) == len(_weights_of(DEFAULT_ONNX))
+    # quantised as the shipped graph is: the same activations quantised (uint8), weights per output channel
+    assert _graph_facts(out) == _graph_facts(DEFAULT_INT8) == {"quantize_nodes": 61, "zero_point_types": {"UINT8"},
+                                                                "per_channel": True}
     # it detects: the float graph's boxes on a record, each one found again
     s, _ = survey_sample(31, 2)
     a = OnnxDetector.load().detect(s, score_threshold=0.5)["targets"]
     b = OnnxDetector.load(out).detect(s, score_threshold=0.5)["targets"]
     assert len(a) >= 5 and abs(len(a) - len(b)) <= 2
     assert np.median([max(_iou(x["box"], y["box"]) for y in b) for x in a]) >= 0.85
+    # an 8-bit graph whose metadata names no provenance is still named as one
+    del meta["provenance"]
+    meta["quantised"] = q
+    g.metadata_props[0].value = json.dumps(meta)
+    onnx.save(g, str(tmp_path / "bare.onnx"))
+    assert OnnxDetector.load(tmp_path / "bare.onnx").provenance == {"name": "gpr3d detector (8-bit)", "quantised": q}
 
 
 @pytest.mark.parametrize("images, message", [
     ([], "quantise_onnx needs at least one calibration window"),
-    ([np.zeros((3, 8, 8), np.float32)], "calibration window 0: (3, 8, 8) values; the network takes finite"),
+    ([np.zeros((3, 8, 8), np.float32)], "calibration window 0: (3, 8, 8) values; the network takes finite (3, "),
     ("nan", "calibration window 0: (3, "),
 ])
 def test_quantise_onnx_refuses_windows_it_cannot_calibrate_on_before_writing(tmp_path, images, message):
+    rows, traces = OnnxDetector.load().window.rows, OnnxDetector.load().window.traces
     if images == "nan":
         images = _windows(1)
         images[0][1, 5, 5] = np.nan
-        message += f"{images[0].shape[1]}, {images[0].shape[2]}) non-finite values"
+        message += f"{rows}, {traces}) non-finite values; the network takes finite (3, "
+    if message.endswith("(3, "):
+        message += f"{rows}, {traces}) windows"
     with pytest.raises(InvalidDataError) as err:
         quantise_onnx(images, tmp_path / "q.onnx")
-    assert message in str(err.value) and len(str(err.value).splitlines()) == 1
+    assert str(err.value) == message
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_quantise_onnx_names_a_source_graph_it_cannot_read(tmp_path):
+    from gpr3d.core.errors import FormatError
+
+    with pytest.raises(FormatError) as err:
+        quantise_onnx(_windows(1), tmp_path / "q.onnx", src=tmp_path / "absent.onnx")
+    assert str(err.value) == "absent.onnx: no such ONNX detector file"
     assert list(tmp_path.iterdir()) == []
 
 
