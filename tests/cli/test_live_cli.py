@@ -218,3 +218,18 @@ def test_replay_sends_a_cart_s_sensors_and_live_fuses_its_poses_from_them(rig_ru
     assert g.x0 <= lo[0] + 0.03 and g.x0 + (g.nx - 1) * g.dx >= hi[0] - 0.03
     assert g.y0 <= lo[1] + 0.03 and g.y0 + (g.ny - 1) * g.dy >= hi[1] - 0.03
     assert [t["kind"] for t in json.loads((tmp_path / "live" / "targets.json").read_text())["targets"]] == ["line"]
+
+
+def test_replay_grows_a_dt1_without_its_hd_given_a_rate_and_asks_for_the_hd_only_for_speed(tmp_path):
+    from tests.io.makers import write_dt1
+
+    src = write_dt1(tmp_path / "line", n_traces=40, n_points=20)
+    src.with_suffix(".HD").unlink()  # (a DT1 whose header was never written: --rate needs none)
+    out = tmp_path / "grown" / "LINE.DT1"
+    out.parent.mkdir()
+    r = run_cli("replay", src, "--to", out, "--rate", "100000")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().splitlines()[-1] == f"wrote 40 traces to {out} at 100000 traces/s"
+    assert out.read_bytes() == src.read_bytes() and sorted(p.name for p in out.parent.iterdir()) == ["LINE.DT1"]
+    r = run_cli("replay", src, "--to", out, "--speed", "2")
+    assert r.returncode != 0 and len(r.stderr.strip().splitlines()) == 1 and "HD" in r.stderr

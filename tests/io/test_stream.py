@@ -310,3 +310,30 @@ def test_real_pulseekko_lines_grown_trace_by_trace_are_what_the_batch_reader_rea
         np.testing.assert_array_equal(np.concatenate([x for x in got if len(x)]), ref.data)
         assert g.dt_s == ref.dt_s and g.header["frequency_hz"] == ref.frequency_hz
         assert g.header["separation_m"] == ref.offset_m and ref.offset_m > 0
+
+
+def test_a_growing_dt1_s_interval_given_and_its_hd_must_agree_and_its_units_be_known(tmp_path):
+    whole = write_dt1(tmp_path / "grow", n_traces=3, n_points=20, window_ns=50.0)  # 2.5 ns a sample
+    g = GrowingDT1(whole, dt_s=2.5e-9)  # (the same as the HD's: taken)
+    assert len(g.poll()) == 3 and g.dt_s == pytest.approx(2.5e-9)
+    with pytest.raises(FormatError) as err:
+        GrowingDT1(whole, dt_s=1e-10).poll()
+    assert str(err.value) == ("grow.DT1: --dt 0.1 ns disagrees with grow.HD's 2.5 ns (TOTAL TIME WINDOW / NUMBER OF "
+                              "PTS/TRC): drop --dt")
+    hd = tmp_path / "grow.HD"
+    hd.write_text(hd.read_text().replace("POSITION UNITS     = m", "POSITION UNITS     = furlongs"))
+    with pytest.raises(FormatError) as err:
+        GrowingDT1(whole).poll()
+    assert str(err.value) == "grow.HD: unknown POSITION UNITS 'furlongs'"
+
+
+def test_dt1_layout_reads_the_first_trace_header_once_it_is_all_there(tmp_path):
+    from gpr3d.io.stream import dt1_layout
+
+    whole = write_dt1(tmp_path / "w", n_traces=2, n_points=30, bits=32)
+    p = tmp_path / "g.DT1"
+    assert dt1_layout(p) is None  # no file yet
+    p.write_bytes(whole.read_bytes()[:127])
+    assert dt1_layout(p) is None  # a header cut short
+    p.write_bytes(whole.read_bytes()[:128])
+    assert dt1_layout(p) == (30, 4)

@@ -1253,3 +1253,33 @@ def test_live_sizes_its_voxels_by_the_stream_s_antenna_as_reconstruct_does(f_hz,
     bad = StreamHeader(n_samples=128, dt_s=DT, frequency_hz=f_hz, offset_m=0.05, eps_r=float("nan"))
     with pytest.raises(GPR3DError, match=r"^eps_r must be a finite number, got nan$"):
         LiveReconstruction(bad, LiveConfig(reconstruct=ReconstructConfig(aperture_deg=45.0), detect=False), tmp_path)
+
+
+def test_a_growing_dt1_takes_its_antenna_from_the_hd_unless_an_offset_is_given(tmp_path):
+    from tests.io.makers import write_dt1
+
+    rec = write_dt1(tmp_path / "line", n_traces=4, n_points=20, window_ns=40.0, units="cm", freq=250.0, sep=40.0)
+    _tum_of(Survey(data=np.zeros((4, 20), np.float32), dt_s=DT, positions_xyz=np.zeros((4, 3)),
+                   orientations_quat_wxyz=np.tile([1.0, 0, 0, 0], (4, 1))), tmp_path / "line.tum")
+    for offset, want in ((None, 0.4), (0.1, 0.1), (0.0, 0.0)):
+        source = open_source(rec, poses=tmp_path / "line.tum", offset_m=offset)
+        data, poses, times = source.poll()
+        h = source.header
+        assert (h.offset_m, h.frequency_hz, h.n_samples, len(data)) == (pytest.approx(want), 250e6, 20, 4)
+        assert h.dt_s == pytest.approx(2e-9) and h.eps_r is None  # (a DT1 names no permittivity: --eps-r)
+
+
+def test_replay_to_file_refuses_what_it_cannot_grow(tmp_path):
+    from gpr3d.core.errors import FormatError
+    from tests.io.makers import write_dt1
+
+    src = write_dt1(tmp_path / "line", n_traces=3, n_points=20)
+    with pytest.raises(GPR3DError, match=r"^--to .*out\.dzt: a DT1 recording grows into a \.DT1 file$"):
+        replay_to_file(src, tmp_path / "out.dzt", rate=10.0)
+    (tmp_path / "x.rd3").write_bytes(b"\0" * 300)
+    with pytest.raises(FormatError, match="replaying into a file takes a DZT or DT1 recording"):
+        replay_to_file(tmp_path / "x.rd3", tmp_path / "y.rd3", rate=10.0)
+    (tmp_path / "short.DT1").write_bytes(b"\0" * 100)
+    with pytest.raises(FormatError, match="shorter than one trace header: not a pulseEKKO DT1"):
+        replay_to_file(tmp_path / "short.DT1", tmp_path / "o.DT1", rate=10.0)
+    assert not (tmp_path / "out.dzt").exists() and not (tmp_path / "o.DT1").exists()

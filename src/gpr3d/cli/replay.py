@@ -102,12 +102,14 @@ def run(args):
         raise GPR3DError("--loops and --loop-shift are for tcp:// replays")
     if (args.poses is None) != (args.poses_out is None):
         raise GPR3DError("--to FILE.DZT takes --poses and --poses-out together (the poses grow beside the traces)")
-    if kind == ".dzt":
-        from gpr3d.io.dzt import read_dzt_header
+    own = None
+    if args.rate is None:  # (--speed: the recording's own rate; a DT1's from its traces' times, read with its HD)
+        if kind == ".dzt":
+            from gpr3d.io.dzt import read_dzt_header
 
-        own = read_dzt_header(args.input)["scans_per_s"]
-    else:
-        own = _own_rate(read_recording(args.input))
+            own = read_dzt_header(args.input)["scans_per_s"]
+        else:
+            own = _own_rate(read_recording(args.input))
     rate = _rate(args, own)
     n = replay_to_file(args.input, args.to, rate=rate, poses=args.poses, poses_out=args.poses_out)
     print(f"wrote {n} traces to {args.to} at {rate:g} traces/s")

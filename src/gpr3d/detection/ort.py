@@ -146,8 +146,9 @@ def quantise_onnx(images, out=DEFAULT_INT8, src=DEFAULT_ONNX, *, reduce_range: b
     rows, traces = meta["window"]["rows"], meta["window"]["traces"]
     for i, im in enumerate(images):
         if im.shape != (3, rows, traces) or not np.isfinite(im).all():
-            raise InvalidDataError(f"calibration window {i}: {im.shape} {'' if np.isfinite(im).all() else 'non-finite '}"
-                             f"values; the network takes finite (3, {rows}, {traces}) windows")
+            bad = "" if np.isfinite(im).all() else "non-finite "
+            raise InvalidDataError(f"calibration window {i}: {im.shape} {bad}values; the network takes finite "
+                                   f"(3, {rows}, {traces}) windows")
 
     class _Windows(CalibrationDataReader):
         def __init__(self):

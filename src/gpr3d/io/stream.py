@@ -36,8 +36,8 @@ import numpy as np
 
 from gpr3d.core.errors import FormatError
 
-__all__ = ["END", "HEADER_MAGIC", "SENSORS", "GrowingDT1", "GrowingDZT", "GrowingTUM", "StreamDecoder", "StreamHeader", "Trace",
-           "encode_camera_pose", "encode_header", "encode_imu", "encode_trace", "encode_wheel"]
+__all__ = ["END", "HEADER_MAGIC", "SENSORS", "GrowingDT1", "GrowingDZT", "GrowingTUM", "StreamDecoder", "StreamHeader",
+           "Trace", "dt1_layout", "encode_camera_pose", "encode_header", "encode_imu", "encode_trace", "encode_wheel"]
 
 HEADER_MAGIC = b"GPR3DTR1"
 TRACE_TAG = b"TRCE"
@@ -329,6 +329,28 @@ class GrowingDZT:
         return out
 
 
+def dt1_layout(path) -> tuple[int, int] | None:
+    """``(points per trace, bytes per point)`` of a pulseEKKO DT1 file from its first trace header (bytes per point
+    as :func:`gpr3d.io.dt1.read_dt1` takes them); None while the file or that header is not all there yet; a
+    one-line :class:`~gpr3d.core.errors.FormatError` where the header cannot be a DT1's."""
+    from gpr3d.io.dt1 import TRACE_HEADER_BYTES
+
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(TRACE_HEADER_BYTES)
+    except FileNotFoundError:
+        return None
+    if len(head) < TRACE_HEADER_BYTES:
+        return None
+    first = np.frombuffer(head, dtype="<f4")
+    npts = float(first[2])
+    if not (math.isfinite(npts) and npts == int(npts) and 2 <= npts <= 10**6):
+        raise FormatError(Path(path), f"first trace header says {npts:g} points a trace: not a pulseEKKO DT1, or "
+                                      "corrupt")
+    bpp = int(first[5]) if math.isfinite(first[5]) and int(first[5]) in (2, 4) else 2
+    return int(npts), bpp
+
+
 class GrowingDT1:
     """A pulseEKKO DT1 file that a radar is still writing: :meth:`poll` gives the traces completed since the last
     call, as :func:`gpr3d.io.dt1.read_dt1` reads them (16- or 32-bit samples as float32).
@@ -347,22 +369,12 @@ class GrowingDT1:
     def open_header(self) -> bool:
         """Read the first trace header (and the HD beside the file): False while it is not all there yet."""
         from gpr3d.io._common import sidecar
-        from gpr3d.io.dt1 import _UNITS_M, TRACE_HEADER_BYTES, _hd_number, read_hd
+        from gpr3d.io.dt1 import _UNITS_M, _hd_number, read_hd
 
-        try:
-            with open(self.path, "rb") as fh:
-                head = fh.read(TRACE_HEADER_BYTES)
-        except FileNotFoundError:
+        layout = dt1_layout(self.path)
+        if layout is None:
             return False
-        if len(head) < TRACE_HEADER_BYTES:
-            return False
-        first = np.frombuffer(head, dtype="<f4")
-        npts = float(first[2])
-        if not (math.isfinite(npts) and npts == int(npts) and 2 <= npts <= 10**6):
-            raise FormatError(self.path, f"first trace header says {npts:g} points a trace: not a pulseEKKO DT1, "
-                                         "or corrupt")
-        npts = int(npts)
-        bpp = int(first[5]) if math.isfinite(first[5]) and int(first[5]) in (2, 4) else 2  # (as read_dt1)
+        npts, bpp = layout
         dt_s, freq, sep = self.given_dt_s, None, None
         hd_path = sidecar(self.path, ".hd")
         if hd_path is not None:
@@ -375,9 +387,15 @@ class GrowingDT1:
             if not (math.isfinite(window_ns) and window_ns > 0):
                 raise FormatError(hd_path, f"TOTAL TIME WINDOW must be a positive number of ns, got {window_ns:g}")
             dt_s = window_ns * 1e-9 / npts
+            if self.given_dt_s is not None and not math.isclose(self.given_dt_s, dt_s, rel_tol=1e-6):
+                raise FormatError(self.path, f"--dt {self.given_dt_s * 1e9:g} ns disagrees with {hd_path.name}'s "
+                                             f"{dt_s * 1e9:g} ns (TOTAL TIME WINDOW / NUMBER OF PTS/TRC): drop --dt")
             mhz = _hd_number(hd_path, hd, "NOMINAL FREQUENCY", required=False)
             freq = mhz * 1e6 if mhz else None
-            unit = _UNITS_M.get(hd.get("POSITION UNITS", "m").strip().lower(), 1.0)
+            unit_name = hd.get("POSITION UNITS", "m").strip().lower()
+            if unit_name not in _UNITS_M:  # (as read_dt1: the separation is in these units)
+                raise FormatError(hd_path, f"unknown POSITION UNITS {unit_name!r}")
+            unit = _UNITS_M[unit_name]
             sep = _hd_number(hd_path, hd, "ANTENNA SEPARATION", required=False)
             sep = None if sep is None else sep * unit
         if dt_s is None:

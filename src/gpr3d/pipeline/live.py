@@ -284,9 +284,9 @@ class FileSource:
     def _header(self) -> StreamHeader:
         h = self.recording.header
         if isinstance(self.recording, GrowingDT1):
-            sep = h["separation_m"]
-            return StreamHeader(n_samples=h["n_samples"], dt_s=h["dt_s"], frequency_hz=self.frequency_hz or
-                                h["frequency_hz"], offset_m=self.offset_m if self.offset_m is not None else (sep or 0.0),
+            offset = self.offset_m if self.offset_m is not None else (h["separation_m"] or 0.0)
+            return StreamHeader(n_samples=h["n_samples"], dt_s=h["dt_s"],
+                                frequency_hz=self.frequency_hz or h["frequency_hz"], offset_m=offset,
                                 name=str(self.path))
         from gpr3d.io.dzt import _antenna_mhz
 

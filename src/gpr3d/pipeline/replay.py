@@ -263,12 +263,13 @@ def _file_layout(src: Path) -> tuple[int, int, int]:
         tb = hdr["n_samples"] * hdr["n_channels"] * hdr["bits"] // 8
         return hdr["data_offset"], tb, (hdr["file_bytes"] - hdr["data_offset"]) // tb
     if kind == ".dt1":
-        from gpr3d.io.stream import GrowingDT1
+        from gpr3d.io.dt1 import TRACE_HEADER_BYTES
+        from gpr3d.io.stream import dt1_layout
 
-        g = GrowingDT1(src, dt_s=1.0)  # (its first trace header; the interval is the HD's business)
-        if not g.open_header():
-            raise FormatError(src, "shorter than one trace header: not a pulseEKKO DT1")
-        tb = 128 + g.header["n_samples"] * g.header["bytes_per_point"]
+        layout = dt1_layout(src)
+        if layout is None:
+            raise FormatError(src, "no such file, or shorter than one trace header: not a pulseEKKO DT1")
+        tb = TRACE_HEADER_BYTES + layout[0] * layout[1]
         return 0, tb, src.stat().st_size // tb
     raise FormatError(src, "replaying into a file takes a DZT or DT1 recording")
 
