@@ -1283,3 +1283,37 @@ def test_replay_to_file_refuses_what_it_cannot_grow(tmp_path):
     with pytest.raises(FormatError, match="shorter than one trace header: not a pulseEKKO DT1"):
         replay_to_file(tmp_path / "short.DT1", tmp_path / "o.DT1", rate=10.0)
     assert not (tmp_path / "out.dzt").exists() and not (tmp_path / "o.DT1").exists()
+
+
+def test_the_warm_up_runs_the_box_refiner_once_before_any_trace():
+    """The warm-up's detector run reports no boxes (score threshold 1), and only reported boxes are refined: so
+    the refiner's network is run on its own, two blank crops, or the first window with targets pays its start."""
+    from gpr3d.detection.refine import CROP
+    from gpr3d.pipeline import live as L
+
+    calls = []
+
+    class Refiner:
+        def predict_crops(self, crops):
+            calls.append(("refine", crops.shape, float(np.abs(crops).max())))
+            return np.zeros((len(crops), 4))
+
+    class Detector:
+        window = type("W", (), {"traces": 32})()
+        refiner = Refiner()
+
+        def share_cores(self):
+            calls.append(("share",))
+
+        def detect(self, survey, score_threshold):
+            calls.append(("detect", survey.n_traces, score_threshold))
+
+    L._warm_up(L.LiveConfig(), Detector())
+    assert calls == [("share",), ("detect", 32, 1.0), ("refine", (2, 3, CROP, CROP), 0.0)]
+    calls.clear()
+    Detector.refiner = None  # no refiner: nothing more
+    L._warm_up(L.LiveConfig(), Detector())
+    assert calls == [("share",), ("detect", 32, 1.0)]
+    calls.clear()
+    L._warm_up(L.LiveConfig(detect=False), Detector())  # detection off: the detector is not run
+    assert calls == []

@@ -249,7 +249,12 @@ class Detector:
             with stage("refine"):
                 from gpr3d.detection.refine import record_image
 
-                boxes = self.refiner.refine(survey, self.window.rows, boxes, record_image(proc, self.window.style))
+                # only the boxes reported: each box is refined on its own, the others' moves would be thrown away
+                sure = np.nonzero(np.asarray(scores, float) >= score_threshold)[0]
+                boxes = np.array(boxes, float).reshape(-1, 4)
+                if len(sure):
+                    boxes[sure] = self.refiner.refine(survey, self.window.rows, boxes[sure],
+                                                      record_image(proc, self.window.style))
         with stage("apexes"):
             kinds = self.kinds
             s_per_row = rows_interval(survey, self.window)

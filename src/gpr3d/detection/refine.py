@@ -5,7 +5,7 @@ network trained mostly on other data; the people who label a data set follow the
 own rule for where a hyperbola's box ends (how far down its legs, how wide). The
 refiner looks again at each box in the record's image: it crops a region twice the
 box's size around it (``EXPAND``), resampled to ``CROP`` x ``CROP`` pixels
-(torchvision's ``roi_align``), and a four-stage convolutional network predicts how far
+(sampled as torchvision's ``roi_align`` samples), and a four-stage convolutional network predicts how far
 each edge must move, in box widths and heights (:func:`box_deltas`). It is trained on
 the labels themselves, each shifted and resized at random as a detector's boxes are
 wrong (:data:`JITTER`), mirrored at random (a hyperbola's box rule is symmetric), so
@@ -13,9 +13,12 @@ that training needs no detector run and takes minutes on two cores
 (``references/detection/train_refiner.py``).
 
 Images are the detector's own (:func:`record_image`: the whole record rendered as its
-windows are), boxes are record boxes ``[trace0, t0_s, trace1, t1_s]``. The network
-runs in PyTorch (:class:`BoxRefiner`) or, exported with its cropping, in ONNX Runtime
-(:class:`OnnxBoxRefiner`), so that ``gpr3d detect`` need not import PyTorch.
+windows are), boxes are record boxes ``[trace0, t0_s, trace1, t1_s]``. The crops are cut
+in NumPy (:func:`crop_array`, torchvision's ``roi_align`` sampling, separable along the
+two axes); the network runs in PyTorch (:class:`BoxRefiner`) or, exported, in ONNX
+Runtime (:class:`OnnxBoxRefiner`), so that ``gpr3d detect`` need not import PyTorch. The
+mirrored look needs no second crop: cropping the mirrored picture about the mirrored box
+gives the crop mirrored, so both looks go through the network in one batch.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from gpr3d.io.weights import half_state_dict, read_weights_file
 
 __all__ = ["CROP", "EXPAND", "JITTER", "MIRROR", "PASSES", "MAX_PASSES", "DEFAULT_REFINER", "DEFAULT_REFINER_ONNX",
            "record_image", "record_pixmap", "box_deltas", "apply_deltas", "mirror_deltas", "check_application",
-           "jitter_boxes", "pair_iou", "build_refiner", "crops", "BoxRefiner", "OnnxBoxRefiner", "load_refiner",
+           "jitter_boxes", "pair_iou", "build_refiner", "crop_array", "crops", "BoxRefiner", "OnnxBoxRefiner", "load_refiner",
            "save_refiner", "train_refiner", "export_refiner_onnx"]
 
 CROP = 64  #: crop side in pixels
@@ -129,58 +132,83 @@ def build_refiner():
                          nn.Linear(96 * side * side, 256), nn.ReLU(inplace=True), nn.Linear(256, 4))
 
 
-def _regions(torch, boxes):
-    """Crop regions ``(k, 4)``: each box's centre, ``EXPAND`` times its sides."""
-    c = 0.5 * (boxes[:, :2] + boxes[:, 2:])
-    wh = (boxes[:, 2:] - boxes[:, :2]).clamp(min=_MIN_SIDE)
-    return torch.cat([c - 0.5 * EXPAND * wh, c + 0.5 * EXPAND * wh], dim=1)
+def _regions(boxes: np.ndarray):
+    """Crop regions ``(k, 4)`` float32: each box's centre, ``EXPAND`` times its sides (at least ``_MIN_SIDE``)."""
+    f = np.float32
+    c = f(0.5) * (boxes[:, :2] + boxes[:, 2:])
+    wh = np.maximum(boxes[:, 2:] - boxes[:, :2], f(_MIN_SIDE))
+    return np.concatenate([c - f(0.5 * EXPAND) * wh, c + f(0.5 * EXPAND) * wh], axis=1)
+
+
+def _taps(lo: np.ndarray, hi: np.ndarray, size: int):
+    """Along one axis of ``size`` pixels, for regions ``lo..hi`` (k,): the ``CROP`` bins' four taps each, pixel
+    indices ``(k, CROP, 4)`` and weights (their sum is 1 inside the picture). A bin is the mean of two samples at a
+    quarter and three quarters of it; a sample at ``x`` (pixel ``i`` holds ``i + 0.5``) weighs its two neighbouring
+    pixels linearly; samples more than a pixel outside count zero, those within it take the edge pixel: torchvision's
+    ``roi_align`` (``aligned=True``, ``sampling_ratio=2``), computed in float32 as it computes."""
+    f = np.float32
+    step = (hi - lo) / f(CROP)
+    bins, within = np.arange(CROP, dtype=f).repeat(2), np.tile(np.array([0.5, 1.5], f), CROP)
+    # in torchvision's order of operations, so that float32 rounds alike
+    x = (lo - f(0.5))[:, None] + bins[None] * step[:, None] + within[None] * step[:, None] / f(2)
+    inside = (x >= f(-1.0)) & (x <= f(size))
+    x = np.maximum(x, f(0.0))
+    low = x.astype(np.int64)
+    edge = low >= size - 1
+    low = np.where(edge, size - 1, low)
+    frac = np.where(edge, f(0.0), x - low.astype(f))
+    high = np.where(edge, low, low + 1)
+    w_low, w_high = (f(0.5) - f(0.5) * frac) * inside, f(0.5) * frac * inside
+    k = len(lo)
+    index = np.stack([low, high], axis=-1).reshape(k, CROP, 4)
+    weight = np.stack([w_low, w_high], axis=-1).reshape(k, CROP, 4)
+    return index, weight
+
+
+def crop_array(image, boxes_px) -> np.ndarray:
+    """``(k, 3, CROP, CROP)`` float32 crops of ``image`` (3, rows, cols) around ``boxes_px`` (k, 4) in its pixels:
+    each box's region ``EXPAND`` times its sides about its centre, resampled as :func:`_taps` says (rows first,
+    then columns: two small gathers a box)."""
+    img = np.asarray(image, np.float32)
+    b = np.asarray(boxes_px, np.float32).reshape(-1, 4)
+    out = np.empty((len(b), img.shape[0], CROP, CROP), np.float32)
+    if not len(b):
+        return out
+    reg = _regions(b)
+    xi, xw = _taps(reg[:, 0], reg[:, 2], img.shape[2])
+    yi, yw = _taps(reg[:, 1], reg[:, 3], img.shape[1])
+    for i in range(len(b)):
+        c0 = int(xi[i].min())
+        rows = np.einsum("crtx,rt->crx", img[:, yi[i], c0 : int(xi[i].max()) + 1], yw[i])  # (3, CROP, columns)
+        out[i] = np.einsum("crqt,qt->crq", rows[:, :, xi[i] - c0], xw[i])
+    return out
 
 
 def crops(image, boxes_px):
-    """``(k, 3, CROP, CROP)`` crops (a torch tensor) of ``image`` (3, rows, cols) around ``boxes_px`` (k, 4)."""
+    """:func:`crop_array` as a torch tensor (what training feeds the network)."""
     torch = require("torch")
-    from torchvision.ops import roi_align
-
-    img = torch.as_tensor(np.asarray(image, np.float32) if not torch.is_tensor(image) else image)
-    b = torch.as_tensor(np.asarray(boxes_px, np.float32).reshape(-1, 4))
-    return roi_align(img[None], [_regions(torch, b)], output_size=CROP, spatial_scale=1.0, sampling_ratio=2,
-                     aligned=True)
+    if torch.is_tensor(image):
+        image = image.detach().cpu().numpy()
+    return torch.from_numpy(crop_array(image, boxes_px))
 
 
-def _graph(net):
-    """The refiner with its cropping, as one module (image, boxes) -> deltas: what ONNX exports."""
-    torch = require("torch")
-    from torchvision.ops import roi_align
-
-    class Graph(torch.nn.Module):
-        def __init__(self):
-            super().__init__()
-            self.net = net
-
-        def forward(self, image, boxes):
-            rois = torch.cat([torch.zeros_like(boxes[:, :1]), _regions(torch, boxes)], dim=1)
-            return self.net(roi_align(image, rois, output_size=CROP, spatial_scale=1.0, sampling_ratio=2, aligned=True))
-
-    return Graph()
-
-
-def _refined(survey, rows, boxes, image, predict, *, mirror: bool = False, passes: int = 1):
-    """Record boxes moved with ``predict(image (1, 3, rows, cols), boxes px (k, 4))``, ``passes`` times; with
-    ``mirror`` each pass averages the moves for the box and for its mirror image in the mirrored picture."""
+def _refined(survey, rows, boxes, image, predict_crops, *, mirror: bool = False, passes: int = 1):
+    """Record boxes moved with ``predict_crops(crops (n, 3, CROP, CROP))`` (edge moves ``(n, 4)``), ``passes``
+    times; with ``mirror`` each pass averages the moves for the box and for its mirror image in the mirrored
+    picture: the crops mirrored (the same bins, in the other order), both looks in one batch."""
     b = np.asarray(boxes, float).reshape(-1, 4)
     if not len(b):
         return b
     pm = record_pixmap(survey, rows)
     px = np.array([pm.box_to_px(x) for x in b])
-    img = np.ascontiguousarray(image[None], dtype=np.float32)
-    flipped = np.ascontiguousarray(img[..., ::-1]) if mirror else None
-    width = img.shape[-1]  # pixel c covers [c, c + 1): the mirror takes x to width - x
+    img = np.asarray(image, np.float32)
     for _ in range(passes):
-        p32 = np.ascontiguousarray(px, dtype=np.float32)
-        d = predict(img, p32)
+        c = crop_array(img, px)
         if mirror:
-            m = np.ascontiguousarray(np.stack([width - p32[:, 2], p32[:, 1], width - p32[:, 0], p32[:, 3]], axis=1))
-            d = 0.5 * (np.asarray(d, float) + mirror_deltas(predict(flipped, m)))
+            d = np.asarray(predict_crops(np.concatenate([c, c[..., ::-1]])), float)
+            d = 0.5 * (d[: len(c)] + mirror_deltas(d[len(c) :]))
+        else:
+            d = np.asarray(predict_crops(c), float)
         px = apply_deltas(px, d)
     return np.array([pm.px_to_box(x) for x in px])
 
@@ -221,17 +249,21 @@ class BoxRefiner:
             raise FormatError(p, f"weights do not fit the refiner: {str(exc).splitlines()[-1].strip()[:160]}") from None
         return cls(net, obj.get("provenance"))
 
-    def predict(self, image, boxes_px) -> np.ndarray:
-        """Edge moves ``(k, 4)`` for boxes in pixels of ``image`` (1, 3, rows, cols)."""
+    def predict_crops(self, crops_) -> np.ndarray:
+        """Edge moves ``(n, 4)`` of crops ``(n, 3, CROP, CROP)`` (:func:`crop_array`)."""
         torch = require("torch")
         with torch.inference_mode():
-            return self.net(crops(image[0], boxes_px)).numpy().astype(float)
+            return self.net(torch.from_numpy(np.ascontiguousarray(crops_, np.float32))).numpy().astype(float)
+
+    def predict(self, image, boxes_px) -> np.ndarray:
+        """Edge moves ``(k, 4)`` for boxes in pixels of ``image`` (1, 3, rows, cols)."""
+        return self.predict_crops(crop_array(np.asarray(image)[0], boxes_px))
 
     def refine(self, survey, rows: int, boxes, image):
         """``boxes`` (k, 4) of ``survey`` moved onto the label rule; ``image``: the record's :func:`record_image`
         of ``rows`` rows."""
         mirror, passes = check_application(self.mirror, self.passes)
-        return _refined(survey, rows, boxes, image, self.predict, mirror=mirror, passes=passes)
+        return _refined(survey, rows, boxes, image, self.predict_crops, mirror=mirror, passes=passes)
 
 
 class OnnxBoxRefiner(BoxRefiner):
@@ -246,16 +278,20 @@ class OnnxBoxRefiner(BoxRefiner):
 
         p = Path(path) if path is not None else DEFAULT_REFINER_ONNX
         # a pool of ONNX Runtime's size whose threads sleep between runs: a spinning second pool beside the
-        # detector's slowed it; one thread took 13.2 ms a call of a box-rich window's (28 boxes; RoiAlign's crops
-        # 9.2 ms of it), two sleeping threads 7.4 ms (Intel rocketlake, 2 cores)
+        # detector's slowed it; one thread took 13.2 ms a call of a box-rich window's (28 boxes, when the graph
+        # still cropped: RoiAlign 9.2 ms of it), two sleeping threads 7.4 ms (Intel rocketlake, 2 cores)
         sess, meta = open_session(p, _META, "refiner", spin=False)
         if meta.get("crop") != CROP or meta.get("expand") != EXPAND:
             raise FormatError(p, f"a refiner for {meta.get('crop')} px crops x {meta.get('expand')}, this gpr3d "
                                  f"makes {CROP} px x {EXPAND}")
+        inputs = [i.name for i in sess.get_inputs()]
+        if inputs != ["crops"]:
+            raise FormatError(p, f"a refiner graph taking {', '.join(inputs)} (an export of an older gpr3d, which "
+                                 "cropped inside the graph); export its weights again (export_refiner_onnx)")
         return cls(sess, meta.get("provenance"))
 
-    def predict(self, image, boxes_px) -> np.ndarray:
-        return self.session.run(None, {"image": image, "boxes": boxes_px})[0].astype(float)
+    def predict_crops(self, crops_) -> np.ndarray:
+        return self.session.run(None, {"crops": np.ascontiguousarray(crops_, np.float32)})[0].astype(float)
 
 
 def load_refiner(path=None, *, engine: str = "torch", mirror: bool = MIRROR, passes: int = PASSES) -> BoxRefiner:
@@ -283,10 +319,11 @@ def save_refiner(net, path, *, provenance: dict | None = None) -> None:
 
 
 def export_refiner_onnx(weights=None, out=DEFAULT_REFINER_ONNX) -> dict:
-    """Export a refiner weights file (default: the shipped one) with its cropping to ONNX, atomically.
+    """Export a refiner weights file (default: the shipped one) to ONNX, atomically: crops
+    ``(n, 3, CROP, CROP)`` in (input ``crops``, any ``n``), edge moves ``(n, 4)`` out.
 
     Returns ``{"file", "bytes", "max_abs_diff"}``: the largest difference of the graph's
-    edge moves from PyTorch's on a test image.
+    edge moves from PyTorch's on the crops of a test image.
     """
     torch = require("torch")
     require("onnx")
@@ -295,20 +332,19 @@ def export_refiner_onnx(weights=None, out=DEFAULT_REFINER_ONNX) -> dict:
 
     src = Path(weights) if weights is not None else DEFAULT_REFINER
     ref = BoxRefiner.load(src)
-    graph = _graph(ref.net).eval()
     rng = np.random.default_rng(0)
-    image = rng.random((1, 3, 64, 300), dtype=np.float32)
-    boxes = np.array([[20, 10, 80, 30], [150, 5, 260, 50], [0, 0, 40, 63]], np.float32)
+    image = rng.random((3, 64, 300), dtype=np.float32)
+    test = crop_array(image, np.array([[20, 10, 80, 30], [150, 5, 260, 50], [0, 0, 40, 63]], np.float32))
     meta = {"crop": CROP, "expand": EXPAND, "provenance": ref.provenance, "source_weights": src.name,
             "source_sha256": hashlib.sha256(src.read_bytes()).hexdigest()}
     with atomic_path(out, suffix=".onnx.part") as tmp:
-        torch.onnx.export(graph, (torch.from_numpy(image), torch.from_numpy(boxes)), str(tmp), opset_version=17,
-                          input_names=["image", "boxes"], output_names=["deltas"], dynamo=False,
-                          dynamic_axes={"image": {2: "rows", 3: "cols"}, "boxes": {0: "k"}, "deltas": {0: "k"}})
+        torch.onnx.export(ref.net.eval(), (torch.from_numpy(test),), str(tmp), opset_version=17,
+                          input_names=["crops"], output_names=["deltas"], dynamo=False,
+                          dynamic_axes={"crops": {0: "n"}, "deltas": {0: "n"}})
         finish_export(tmp, _META, meta)
         sess = ort.InferenceSession(str(tmp), providers=["CPUExecutionProvider"])
-        got = sess.run(None, {"image": image, "boxes": boxes})[0]
-        diff = float(np.abs(got - ref.predict(image, boxes)).max())
+        got = sess.run(None, {"crops": test})[0]
+        diff = float(np.abs(got - ref.predict_crops(test)).max())
     return {"file": str(out), "bytes": Path(out).stat().st_size, "max_abs_diff": diff}
 
 
