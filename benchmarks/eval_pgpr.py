@@ -147,16 +147,24 @@ def main(argv=None):
             raise ValueError
     except ValueError:
         p.error(f"--trace-scales must be numbers in 0.25..4 or auto, separated by commas, got {args.trace_scales!r}")
+    from gpr3d.core.errors import FormatError
+
+    for part in args.split.split(","):  # before any work: a folder that is not there is one line
+        if not (Path(args.pgpr) / part).is_dir():
+            p.error(f"--pgpr {args.pgpr}: no {part}/ folder in it (P-GPR's train/ and val/)")
     reference = None
-    if args.reference_from:
-        import numpy as np
+    try:
+        if args.reference_from:
+            import numpy as np
 
-        from gpr3d.detection.windows import WindowConfig, prepare, trace_width
+            from gpr3d.detection.windows import WindowConfig, prepare, trace_width
 
-        reference = float(np.median([trace_width(prepare(s, WindowConfig()))
-                                     for s, _ in pgpr_records(args.pgpr, "train", args.reference_from)]))
-        print(f"reference width {reference:.2f} traces (train {args.reference_from})", flush=True)
-    recs = pgpr_records(args.pgpr, args.split, args.only)
+            reference = float(np.median([trace_width(prepare(s, WindowConfig()))
+                                         for s, _ in pgpr_records(args.pgpr, "train", args.reference_from)]))
+            print(f"reference width {reference:.2f} traces (train {args.reference_from})", flush=True)
+        recs = pgpr_records(args.pgpr, args.split, args.only)
+    except FormatError as exc:  # (read_yolo: no picture, or none the glob names)
+        p.error(str(exc))
     devices = {dev: [r for r in recs if Path(r[1]["image"]).name.startswith(dev + "_")] for dev in ("AIR", "IECAS")}
     devices = {d: v for d, v in devices.items() if v and len(v) < len(recs)}
     n_boxes = sum(len(r[1]["labels"]) for r in recs)

@@ -54,7 +54,7 @@ def main(argv=None):
     p.add_argument("--epochs", type=int, default=9)
     p.add_argument("--per-label", type=int, default=24)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--onnx", default=None, help="also export the refiner with its cropping to this .onnx")
+    p.add_argument("--onnx", default=None, help="also export the refiner (crops in, edge moves out) to this .onnx")
     args = p.parse_args(argv)
     import torch
 
