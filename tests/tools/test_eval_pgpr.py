@@ -17,7 +17,7 @@ def _run(*args):
 @pytest.mark.parametrize("make, args, says", [
     ((), ("--pgpr", "{tmp}/absent"), "--pgpr {tmp}/absent: no val/ folder in it (P-GPR's train/ and val/)"),
     (("val",), ("--pgpr", "{tmp}", "--split", "val,test"), "--pgpr {tmp}: no test/ folder in it"),
-    (("val",), ("--pgpr", "{tmp}"), "a YOLO dataset with no pictures"),
+    (("val",), ("--pgpr", "{tmp}"), "val: not a YOLO dataset: no data.yaml and no images/ folder"),
 ])
 def test_a_p_gpr_folder_it_cannot_read_is_one_line(tmp_path, make, args, says):
     for part in make:
