@@ -92,6 +92,8 @@ def test_crops_sample_the_region_twice_the_box_about_its_centre():
     assert c64.dtype == torch.float32
     np.testing.assert_array_equal(c64.numpy(), R.crops(image, box).numpy())
     np.testing.assert_array_equal(R.crops(torch.from_numpy(image), box).numpy(), R.crops(image, box).numpy())
+    held = torch.from_numpy(image).requires_grad_(True)  # a tensor in a graph (training's): its values
+    np.testing.assert_array_equal(R.crops(held, box).numpy(), R.crops(image, box).numpy())
 
 
 def test_crop_array_samples_as_torchvision_s_roi_align():
@@ -108,6 +110,11 @@ def test_crop_array_samples_as_torchvision_s_roi_align():
         boxes = np.stack([x0, y0, x0 + w, y0 + h], axis=1).astype(np.float32)
         boxes[0] = [0.0, 0.0, cols, rows]  # the whole picture: its region overhangs every edge
         boxes[1] = [5.0, 5.0, 5.5, 6.0]  # thinner than two pixels both ways
+        # 32 wide: a region of 64 bins of one pixel from -0.75, so its first sample lies at exactly -1 (still
+        # sampled: the edge pixel); the next one's last sample at exactly the picture's width (also sampled)
+        boxes[2] = [15.25, 0.0, 47.25, 10.0]
+        boxes[3] = [cols - 31.25 - 16.0, 0.0, cols - 31.25 + 16.0, 10.0]
+        boxes[4] = [0.0, 15.25, 10.0, 47.25]
         reg = torch.from_numpy(R._regions(boxes))
         want = roi_align(torch.from_numpy(image)[None], [reg], output_size=R.CROP, spatial_scale=1.0,
                          sampling_ratio=2, aligned=True).numpy()
@@ -115,6 +122,8 @@ def test_crop_array_samples_as_torchvision_s_roi_align():
         assert got.shape == want.shape == (40, 3, R.CROP, R.CROP) and got.dtype == np.float32
         assert np.abs(want).max() > 1.0 and (want == 0).any()  # regions outside the picture are zero there
         np.testing.assert_allclose(got, want, atol=2e-6)
+        # float64 boxes and pictures are cropped in float32, as the network computes: the float32 result exactly
+        np.testing.assert_array_equal(R.crop_array(image.astype(np.float64), boxes.astype(np.float64)), got)
     assert R.crop_array(image, np.zeros((0, 4))).shape == (0, 3, R.CROP, R.CROP)
 
 
@@ -422,6 +431,9 @@ def test_onnx_export_gives_pytorch_s_edge_moves(tmp_path, monkeypatch):
     boxes = np.array([[100, 20, 160, 50], [400, 0, 499, 95], [3, 40, 9, 44]], np.float32)
     got, want = onnx_ref.predict(image, boxes), torch_ref.predict(image, boxes)
     assert got.shape == (3, 4)
+    crops = R.crop_array(image[0], boxes).astype(np.float64)  # float64 crops are run in float32 by either engine
+    for ref in (onnx_ref, torch_ref):
+        np.testing.assert_array_equal(ref.predict_crops(crops), ref.predict_crops(crops.astype(np.float32)))
     for k in (1, 6):  # any number of boxes, any image size: the graph's axes are free
         many = np.tile(boxes, (2, 1))[:k] * np.float32(0.5)
         small = image[:, :, :50, :260]
@@ -511,6 +523,10 @@ def test_pair_iou_against_hand_values_and_broadcast():
     # 2 x 2 = 4 of 12 + 16 - 4; no overlap (not the product of two negative overlaps); 0.04 of 0.28
     np.testing.assert_allclose(R.pair_iou(a, b), [4 / 24, 0.0, 0.04 / 0.28])
     np.testing.assert_allclose(R.pair_iou(b, a), R.pair_iou(a, b))
+    # apart on one axis only: no overlap (not a negative one)
+    a = np.array([[0.0, 0.0, 1.0, 1.0], [0.0, 0.0, 1.0, 1.0]])
+    b = np.array([[3.0, 0.0, 5.0, 1.0], [0.0, 3.0, 1.0, 5.0]])
+    np.testing.assert_array_equal(R.pair_iou(a, b), [0.0, 0.0])
 
 
 def test_onnx_refiner_files_that_are_not_refiners_are_one_line(tmp_path):
@@ -711,6 +727,7 @@ def test_how_a_refiner_is_applied_is_checked_in_one_line(mirror, passes, what, t
         load_detector(tmp_path / "never_read.pt", refiner="default", refine_mirror=mirror, refine_passes=passes)
     ref = R.load_refiner()
     assert (ref.mirror, ref.passes) == (R.MIRROR, R.PASSES) == (True, 2)  # the shipped way
+    assert R.load_refiner(passes=R.MAX_PASSES).passes == 5  # the most passes allowed
     for m, p in ((None, None), (False, None), (None, 3), (False, 1)):  # each setting given alone reaches the refiner
         r = load_detector(engine="torch", refine_mirror=m, refine_passes=p).refiner
         assert (r.mirror, r.passes) == (True if m is None else m, 2 if p is None else p)

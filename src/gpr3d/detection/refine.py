@@ -192,7 +192,7 @@ def crops(image, boxes_px):
     return torch.from_numpy(crop_array(image, boxes_px))
 
 
-def _refined(survey, rows, boxes, image, predict_crops, *, mirror: bool = False, passes: int = 1):
+def _refined(survey, rows, boxes, image, predict_crops, *, mirror: bool, passes: int):
     """Record boxes moved with ``predict_crops(crops (n, 3, CROP, CROP))`` (edge moves ``(n, 4)``), ``passes``
     times; with ``mirror`` each pass averages the moves for the box and for its mirror image in the mirrored
     picture: the crops mirrored (the same bins, in the other order), both looks in one batch."""
