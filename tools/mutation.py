@@ -85,6 +85,8 @@ MODULES = {
     "detection.kindheads": ["tests/detection/test_kinds.py"],
     "detection.infer": ["tests/detection/test_infer_by_hand.py", "tests/detection/test_kinds.py",
                         "tests/detection/test_refine.py::test_the_detector_refines_its_merged_boxes_before_it_reports_them",
+                        "tests/detection/test_refine.py::test_only_the_boxes_reported_are_refined",
+                        "tests/detection/test_refine.py::test_the_refiner_sees_the_record_as_the_windows_render_it_and_is_timed",
                         "tests/detection/test_refine.py::test_how_a_refiner_is_applied_is_checked_in_one_line"],
     "detection.refine": ["tests/detection/test_refine.py", "-m", "not slow"],
     "detection.ort": ["tests/detection/test_onnx_runtime.py", "tests/detection/test_onnx_int8.py"],

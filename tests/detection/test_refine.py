@@ -353,6 +353,10 @@ def test_only_the_boxes_reported_are_refined():
         np.testing.assert_allclose(t["box"], twin["box"], rtol=1e-12)
     plain = _one_box_detector(cfg, boxes=[[40.0, 30.0, 90.0, 60.0], [150.0, 20.0, 200.0, 70.0],
                                           [100.0, 60.0, 130.0, 90.0]], scores=[0.9, 0.3, 0.6]).detect(s)
+    det.refiner.seen = []
+    edge = det.detect(s, score_threshold=0.6)  # a score equal to the threshold is reported, and refined
+    assert [t["score"] for t in edge["targets"]] == [0.9, 0.6] and det.refiner.seen[0].shape[0] == 4
+    np.testing.assert_allclose([t["box"] for t in edge["targets"]], [t["box"] for t in high["targets"]], rtol=1e-12)
     for t, u in zip(high["targets"], plain["targets"]):  # the reported boxes did move: the two looks' mean moves
         w = u["box"][2] - u["box"][0]                      # (0.05 and -0.1 left, 0.1 and -0.05 right)
         np.testing.assert_allclose(np.subtract(t["box"], u["box"])[[0, 2]], [-0.025 * w, 0.025 * w], rtol=1e-6)
