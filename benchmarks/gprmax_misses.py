@@ -80,7 +80,8 @@ def target_rows(det, records, score: float) -> list[dict]:
             iou = _iou(b * to_px, boxes)
             good = iou >= 0.5
             best = int(np.argmax(np.where(good, scores, -1.0))) if good.any() else None
-            masked = any(o["box"][0] <= x["apex_trace"] <= o["box"][2] and o["box"][1] <= x["apex_time_s"] <= o["box"][3]
+            masked = any(o["box"][0] <= x["apex_trace"] <= o["box"][2]
+                         and o["box"][1] <= x["apex_time_s"] <= o["box"][3]
                          and peaks[j] >= peaks[i] for j, o in enumerate(vis) if j != i)
             rows.append({"record": k, "kind": x.get("kind", "target"), "found": bool(h),
                          "iou": float(iou.max(initial=0.0)), "score": float(scores[best]) if best is not None else 0.0,
@@ -96,7 +97,8 @@ def group_line(name: str, rows: list[dict], score: float) -> str:
         return f"| {name} | 0 | - | - | - | - | - | - |"
     sure = [r for r in rows if r["iou"] >= 0.5 and r["score"] >= score]
     off = f"{np.mean([r['apex_off'] for r in sure]):.2f}" if sure else "-"
-    return (f"| {name} | {n} | {np.mean([r['found'] for r in rows]):.2f} | {np.mean([r['iou'] >= 0.5 for r in rows]):.2f}"
+    return (f"| {name} | {n} | {np.mean([r['found'] for r in rows]):.2f}"
+            f" | {np.mean([r['iou'] >= 0.5 for r in rows]):.2f}"
             f" | {np.mean([r['iou'] >= 0.75 for r in rows]):.2f} | {len(sure) / n:.2f} | {off}"
             f" | {np.median([r['score'] for r in rows]):.2f} |")
 
