@@ -1317,3 +1317,6 @@ def test_the_warm_up_runs_the_box_refiner_once_before_any_trace():
     calls.clear()
     L._warm_up(L.LiveConfig(detect=False), Detector())  # detection off: the detector is not run
     assert calls == []
+    del Detector.refiner  # a detector of the caller's own, without a refiner attribute at all: none
+    L._warm_up(L.LiveConfig(), Detector())
+    assert calls == [("share",), ("detect", 32, 1.0)]

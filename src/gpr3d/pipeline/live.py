@@ -1440,10 +1440,11 @@ def _warm_up(cfg: LiveConfig, detector) -> None:
         detector.share_cores()  # (a pool spinning between windows takes the cores the migration runs on)
         detector.detect(Survey(data=np.zeros((detector.window.traces, 64), np.float32), dt_s=1e-10),
                         score_threshold=1.0)
-        if detector.refiner is not None:  # (refined are only the boxes reported: none above)
+        refiner = getattr(detector, "refiner", None)  # (refined are only the boxes reported: none above)
+        if refiner is not None:
             from gpr3d.detection.refine import CROP
 
-            detector.refiner.predict_crops(np.zeros((2, 3, CROP, CROP), np.float32))
+            refiner.predict_crops(np.zeros((2, 3, CROP, CROP), np.float32))
     from gpr3d.migration.masking import image_envelope  # (scipy.signal: a second to import, on the first refresh)
     from gpr3d.processing.background import moving_background
     from gpr3d.processing.steps import time_zero  # noqa: F401  (what the first traces need, imported now)
