@@ -36,8 +36,8 @@ from gpr3d.io.weights import half_state_dict, read_weights_file
 
 __all__ = ["CROP", "EXPAND", "JITTER", "MIRROR", "PASSES", "MAX_PASSES", "DEFAULT_REFINER", "DEFAULT_REFINER_ONNX",
            "record_image", "record_pixmap", "box_deltas", "apply_deltas", "mirror_deltas", "check_application",
-           "jitter_boxes", "pair_iou", "build_refiner", "crop_array", "crops", "BoxRefiner", "OnnxBoxRefiner", "load_refiner",
-           "save_refiner", "train_refiner", "export_refiner_onnx"]
+           "jitter_boxes", "pair_iou", "build_refiner", "crop_array", "crops", "BoxRefiner", "OnnxBoxRefiner",
+           "load_refiner", "save_refiner", "train_refiner", "export_refiner_onnx"]
 
 CROP = 64  #: crop side in pixels
 EXPAND = 2.0  #: the crop covers the box's width and height times this, about its centre
@@ -167,8 +167,9 @@ def _taps(lo: np.ndarray, hi: np.ndarray, size: int):
 
 def crop_array(image, boxes_px) -> np.ndarray:
     """``(k, 3, CROP, CROP)`` float32 crops of ``image`` (3, rows, cols) around ``boxes_px`` (k, 4) in its pixels:
-    each box's region ``EXPAND`` times its sides about its centre, resampled as :func:`_taps` says (rows first,
-    then columns: two small gathers a box)."""
+    each box's region ``EXPAND`` times its sides about its centre, each bin the mean of 2 x 2 bilinear samples as
+    torchvision's ``roi_align`` takes them (``aligned=True``, ``sampling_ratio=2``), computed separably: rows first,
+    then columns, two small gathers a box."""
     img = np.asarray(image, np.float32)
     b = np.asarray(boxes_px, np.float32).reshape(-1, 4)
     out = np.empty((len(b), img.shape[0], CROP, CROP), np.float32)
