@@ -39,20 +39,10 @@ from _report import cpu_name, write_table  # noqa: E402
 KINDS = ("rebar", "steel_pipe", "tank", "pvc_pipe", "void")
 
 
-def _iou(box, boxes):
-    """IoU of one box with each of ``boxes`` (k, 4), both in the same units."""
-    if not len(boxes):
-        return np.zeros(0)
-    ix = np.clip(np.minimum(boxes[:, 2], box[2]) - np.maximum(boxes[:, 0], box[0]), 0, None)
-    iy = np.clip(np.minimum(boxes[:, 3], box[3]) - np.maximum(boxes[:, 1], box[1]), 0, None)
-    inter = ix * iy
-    union = (box[2] - box[0]) * (box[3] - box[1]) + (boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1]) - inter
-    return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
-
-
 def target_rows(det, records, score: float) -> list[dict]:
     """One row per visible labelled target: its groups and what the detector made of it."""
     from gpr3d.detection.evaluate import apex_matches
+    from gpr3d.detection.refine import pair_iou
     from gpr3d.detection.windows import prepare, rows_interval
     from gpr3d.processing.analytic import hilbert_envelope
 
@@ -77,7 +67,7 @@ def target_rows(det, records, score: float) -> list[dict]:
         scores = np.array([t["score"] for t in found], float)
         for i, (x, h) in enumerate(zip(vis, hit)):
             b = np.asarray(x["box"], float)
-            iou = _iou(b * to_px, boxes)
+            iou = pair_iou(b * to_px, boxes)  # (one label against every detection)
             good = iou >= 0.5
             best = int(np.argmax(np.where(good, scores, -1.0))) if good.any() else None
             masked = any(o["box"][0] <= x["apex_trace"] <= o["box"][2]
