@@ -121,7 +121,9 @@ def test_crop_array_samples_as_torchvision_s_roi_align():
         got = R.crop_array(image, boxes)
         assert got.shape == want.shape == (40, 3, R.CROP, R.CROP) and got.dtype == np.float32
         assert np.abs(want).max() > 1.0 and (want == 0).any()  # regions outside the picture are zero there
-        np.testing.assert_allclose(got, want, atol=2e-6)
+        # float32 both ways, summed in another order: apart by a few units of the last place of values up to ~4
+        # (4.8e-7 measured); a sampling rule's mistake moves a bin by a share of a pixel's value (~0.1-1)
+        np.testing.assert_allclose(got, want, atol=1e-5)
         # float64 boxes and pictures are cropped in float32, as the network computes: the float32 result exactly
         np.testing.assert_array_equal(R.crop_array(image.astype(np.float64), boxes.astype(np.float64)), got)
     assert R.crop_array(image, np.zeros((0, 4))).shape == (0, 3, R.CROP, R.CROP)
@@ -137,8 +139,9 @@ def test_the_mirrored_picture_s_crop_about_the_mirrored_box_is_the_crop_mirrored
     mirrored = np.stack([150 - boxes[:, 2], boxes[:, 1], 150 - boxes[:, 0], boxes[:, 3]], axis=1)
     a = R.crop_array(image, boxes)
     b = R.crop_array(np.ascontiguousarray(image[..., ::-1]), mirrored)
-    # the same to float32 rounding of the sample positions (~1e-5 px at 150 px; a random picture's steps are ~1)
-    np.testing.assert_allclose(b, a[..., ::-1], atol=2e-4)
+    # the same to float32 rounding of the sample positions (a few 1e-6 px at 150 px, times a random picture's steps
+    # between pixels, up to ~7: 5e-5 measured); the wrong orientation or a shifted region moves crops by ~1
+    np.testing.assert_allclose(b, a[..., ::-1], atol=1e-3)
     assert np.abs(a - a[..., ::-1]).max() > 0.5  # the crops themselves are not symmetric
 
 
@@ -481,11 +484,12 @@ def test_the_shipped_refiner_comes_with_the_shipped_detector_in_either_engine(tm
     def px(boxes):
         return np.array([pm.box_to_px(b) for b in boxes])
 
-    # compared in pixels: the two engines' networks round apart by ~3e-4 of a box side on the same crops (these
-    # boxes are at most 100 px: 0.03 px a pass), and on a noise picture the second pass's crops, cut where the
-    # first pass put the boxes, amplify it (0.19 px measured), under the quarter pixel allowed
+    # compared in pixels, one pass (both looks): the two engines' networks round apart by ~3e-4 of a box side on
+    # the same crops (these boxes are at most 100 px: 0.03 px; 0.013 px measured). A second pass on a noise
+    # picture would crop where each engine's first pass put the boxes and amplify that unevenly (0.19 px measured)
+    onnx_det.refiner.passes = torch_det.refiner.passes = 1
     np.testing.assert_allclose(px(onnx_det.refiner.refine(s, 256, rec, img64)),
-                               px(torch_det.refiner.refine(s, 256, rec, img64)), atol=0.25)
+                               px(torch_det.refiner.refine(s, 256, rec, img64)), atol=0.1)
 
 
 @pytest.mark.slow
