@@ -119,6 +119,10 @@ def main(argv=None):
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
     p.add_argument("--name", default="gprmax_misses.md")
     args = p.parse_args(argv)
+    if not 1 <= args.threads <= 256:
+        p.error(f"--threads must lie in 1..256, got {args.threads}")
+    if Path(args.name).name != args.name or not args.name.endswith(".md"):
+        p.error(f"--name {args.name}: a file name ending in .md (no folder: --out says where)")
     if not 0.0 < args.score <= 1.0:
         p.error(f"--score must lie in (0, 1], got {args.score}")
     if not Path(args.set).is_file():

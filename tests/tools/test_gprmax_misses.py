@@ -48,6 +48,9 @@ def test_the_table_splits_by_kind_echo_cut_and_contrast():
     (("--set", "/no/such.h5"), "--set /no/such.h5: no such file"),
     (("--refiner", "/no/r.pt"), "--refiner /no/r.pt: no such file (or default, none)"),
     (("--out", "/no/such/folder"), "--out /no/such/folder: not a folder"),
+    (("--threads", "0"), "--threads must lie in 1..256, got 0"),
+    (("--name", "../x.md"), "--name ../x.md: a file name ending in .md (no folder: --out says where)"),
+    (("--name", "table.txt"), "--name table.txt: a file name ending in .md (no folder: --out says where)"),
 ])
 def test_a_wrong_setting_is_one_line_naming_it(args, says):
     r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "gprmax_misses.py"), *args], capture_output=True,
