@@ -1,6 +1,7 @@
 """Where the shipped detector loses the held-out gprMax survey set's targets, and why.
 
-    python benchmarks/gprmax_misses.py [--refiner default|none|FILE] [--score 0.5] [--set FILE.h5] [--out DIR]
+    python benchmarks/gprmax_misses.py [--detector default|FILE.pt] [--refiner default|none|FILE] [--score 0.5]
+        [--set FILE.h5] [--out DIR]
 
 Every labelled target of the set (``datasets/gprmax_survey.h5``: gprMax 4 B-scans at survey scale, seed 4242,
 never trained on) is put in groups by what it is and where it lies, and for each group the table gives:
@@ -20,6 +21,11 @@ last trace, so half of the hyperbola is missing and the apex comes from the box'
 ``gpr3d.detection.windows.apex_of_box``); and five bands of echo contrast (the envelope's peak within a period of
 the apex, over the record's median envelope, both on the detector's own processed view). Nothing here changes
 the detector; the figures say where to work next.
+
+A second table puts the false targets (detections at or above ``--score`` whose apex matches no label's: the
+issue's "false per true") where they lie: on a labelled target's box with the apex elsewhere, on a target
+labelled not visible, under a labelled target (multiples, ringing), above every target (direct wave, surface) or
+elsewhere (:func:`false_where`).
 """
 
 from __future__ import annotations
@@ -39,8 +45,44 @@ from _report import cpu_name, write_table  # noqa: E402
 KINDS = ("rebar", "steel_pipe", "tank", "pvc_pipe", "void")
 
 
-def target_rows(det, records, score: float) -> list[dict]:
-    """One row per visible labelled target: its groups and what the detector made of it."""
+def false_where(t: dict, labels: list[dict], period: float) -> str:
+    """Where a false target (a detection at or above the score whose apex matches no visible label's) lies, against
+    the record's labels (traces and seconds): ``box right, apex off`` (its box overlaps a visible label's at IoU >=
+    0.5), ``unlabelled target`` (the same against a label marked not visible), ``under a target`` (its apex lies
+    within a visible label's traces and more than half a period later: a multiple or the target's own ringing),
+    ``above every target`` (its apex more than a period earlier than every visible label's: direct wave, surface)
+    or ``elsewhere``."""
+    from gpr3d.detection.refine import pair_iou
+
+    b = np.asarray(t["box"], float)
+    vis = [x for x in labels if x.get("visible", True)]
+    hidden = [x for x in labels if not x.get("visible", True)]
+
+    def overlaps(group):
+        if not group:
+            return False
+        scale = np.array([1.0, 1e9, 1.0, 1e9])  # (seconds as nanoseconds: IoU does not change)
+        return bool((pair_iou(b * scale, np.array([x["box"] for x in group], float) * scale) >= 0.5).any())
+
+    if overlaps(vis):
+        return "box right, apex off"
+    if overlaps(hidden):
+        return "unlabelled target"
+    if any(x["box"][0] <= t["apex_trace"] <= x["box"][2] and t["apex_time_s"] > x["apex_time_s"] + 0.5 * period
+           for x in vis):
+        return "under a target"
+    if not vis or t["apex_time_s"] < min(x["apex_time_s"] for x in vis) - period:
+        return "above every target"
+    return "elsewhere"
+
+
+FALSE_PLACES = ("box right, apex off", "unlabelled target", "under a target", "above every target", "elsewhere")
+
+
+def target_rows(det, records, score: float, false: list | None = None) -> list[dict]:
+    """One row per visible labelled target: its groups and what the detector made of it. With a list ``false``,
+    each false target (score >= ``score``, apex matching no label's) is appended to it as ``(place, score)``
+    (:func:`false_where`)."""
     from gpr3d.detection.evaluate import apex_matches
     from gpr3d.detection.refine import pair_iou
     from gpr3d.detection.windows import prepare, rows_interval
@@ -55,6 +97,18 @@ def target_rows(det, records, score: float) -> list[dict]:
         _, _, hit = apex_matches([[x["apex_trace"], x["apex_time_s"]] for x in vis],
                                  [[t["apex_trace"], t["apex_time_s"]] for t in sure], [t["score"] for t in sure],
                                  max_traces=3.0, max_s=0.25 * period, return_found=True)
+        if false is not None:  # which sure detections are false: greedy by score, so each one's turn decides
+            order = np.argsort(-np.array([t["score"] for t in sure], float), kind="stable")
+            trues = [[x["apex_trace"], x["apex_time_s"]] for x in vis]
+            before = 0
+            for n in range(1, len(order) + 1):
+                sub = [sure[j] for j in order[:n]]
+                _, now = apex_matches(trues, [[t["apex_trace"], t["apex_time_s"]] for t in sub],
+                                      [t["score"] for t in sub], max_traces=3.0, max_s=0.25 * period)
+                if now > before:
+                    t = sure[order[n - 1]]
+                    false.append((false_where(t, labels["labels"], period), float(t["score"])))
+                before = now
         env = hilbert_envelope(prepare(survey, replace(det.window, equalise=False)).astype(np.float64), axis=1)
         spr, floor = rows_interval(survey, det.window), float(np.median(env)) + 1e-30
         half = max(1, int(round(0.5 * period / spr)))
@@ -110,9 +164,20 @@ def table(rows: list[dict], score: float) -> list[str]:
     return lines
 
 
+def false_table(false: list, n_true: int) -> list[str]:
+    """Lines of the false targets' table: per place, how many, per true target, and their median score."""
+    lines = ["| false target | count | per true target | median score |", "|---|---|---|---|"]
+    for place in (*FALSE_PLACES, "all"):
+        sc = [s for p, s in false if p == place or place == "all"]
+        med = f"{np.median(sc):.2f}" if sc else "-"
+        lines.append(f"| {place} | {len(sc)} | {len(sc) / max(n_true, 1):.3f} | {med} |")
+    return lines
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--set", default=str(ROOT / "datasets" / "gprmax_survey.h5"), help="the held-out packed set")
+    p.add_argument("--detector", default="default", help="default (the shipped one) or a detector weights file (.pt)")
     p.add_argument("--refiner", default="default", help="default (the shipped one), none, or a refiner file")
     p.add_argument("--score", type=float, default=0.5, help="score threshold of 'found' (0..1)")
     p.add_argument("--threads", type=int, default=2)
@@ -127,6 +192,8 @@ def main(argv=None):
         p.error(f"--score must lie in (0, 1], got {args.score}")
     if not Path(args.set).is_file():
         p.error(f"--set {args.set}: no such file")
+    if args.detector != "default" and not Path(args.detector).is_file():
+        p.error(f"--detector {args.detector}: no such file (or default)")
     if args.refiner not in ("default", "none") and not Path(args.refiner).is_file():
         p.error(f"--refiner {args.refiner}: no such file (or default, none)")
     if not Path(args.out).is_dir():
@@ -137,13 +204,17 @@ def main(argv=None):
     from gpr3d.io.packed import labelled_records
 
     torch.set_num_threads(args.threads)
-    det = load_detector(None, engine="torch", refiner=args.refiner)
+    det = load_detector(None if args.detector == "default" else args.detector, engine="torch", refiner=args.refiner)
     t0 = time.perf_counter()
-    rows = target_rows(det, labelled_records(args.set), args.score)
+    false: list = []
+    rows = target_rows(det, labelled_records(args.set), args.score, false)
     refiner = "no refiner" if det.refiner is None else f"refiner {det.refiner.provenance.get('name', args.refiner)}"
-    text = "\n".join([f"The shipped detector ({refiner}) on {Path(args.set).name}: {len(rows)} labelled targets in "
+    who = "The shipped detector" if args.detector == "default" else f"The detector {args.detector}"
+    text = "\n".join([f"{who} ({refiner}) on {Path(args.set).name}: {len(rows)} labelled targets in "
                       f"{len({r['record'] for r in rows})} records; host CPU {cpu_name()}, {args.threads} threads, "
-                      f"{time.perf_counter() - t0:.0f} s", "", *table(rows, args.score)])
+                      f"{time.perf_counter() - t0:.0f} s", "", *table(rows, args.score), "",
+                      f"False targets (score >= {args.score:g}, apex matching no label's), by where they lie:", "",
+                      *false_table(false, len(rows))])
     write_table(Path(args.out), args.name, text, "gprmax_misses.py", argv)
 
 

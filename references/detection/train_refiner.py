@@ -1,13 +1,13 @@
 """Train the box refiner (``gpr3d.detection.refine``) on labelled records, on the CPU, in minutes.
 
     python references/detection/train_refiner.py --out runs/refiner.pt [--pgpr DIR] [--only GLOB] [--synthetic N]
-        [--gprmax FILE.h5[:N]] [--epochs 9] [--per-label 24] [--onnx OUT.onnx]
+        [--gprmax FILE.h5[:N] ...] [--epochs 9] [--per-label 24] [--onnx OUT.onnx]
 
 Labels from P-GPR's train split (its own box rule: the people who labelled its real
 B-scans) and, with ``--synthetic N`` / ``--gprmax``, from N survey-scale synthetic records
 (``survey_sample(1000, i)``, the detector's training source) and packed gprMax records
-(``FILE:N`` leaves out its last N): gpr3d's label rule (``docs/labels.md``). Each record
-is rendered as the shipped detector's windows render it. Nothing of P-GPR's validation
+(each ``FILE:N`` leaves out its last N; several files may be given): gpr3d's label rule
+(``docs/labels.md``). Each record is rendered as the shipped detector's windows render it. Nothing of P-GPR's validation
 split nor of the held-out gprMax survey set is read.
 
 P-GPR: Yue, Qin, Zhu, Ye, Wang, "P-GPR: a Ground Penetrating Radar Dataset for Pipeline
@@ -31,15 +31,25 @@ from eval_pgpr import PGPR_DEFAULT, pgpr_records  # noqa: E402
 from finetune_pgpr import PGPR_CREDIT  # noqa: E402  (beside this file)
 
 
-def samples(records, window):
-    """``(image, label boxes px)`` of each record, rendered as the detector's windows are."""
-    from gpr3d.detection.refine import record_image, record_pixmap
+def samples(records, window, whole: bool = False):
+    """``(image, label boxes px)`` of each record, rendered as the detector's windows are; with ``whole``, records
+    whose labels name their apexes (simulated ones) and hold a box cut by the record's first or last trace give
+    ``(image, label boxes px, whole boxes px)`` (``gpr3d.detection.refine.whole_boxes``)."""
+    from gpr3d.detection.refine import record_image, record_pixmap, whole_boxes
     from gpr3d.detection.windows import prepare
 
     for survey, lab in records:
         pm = record_pixmap(survey, window.rows)
-        boxes = [pm.box_to_px(x["box"]) for x in lab["labels"] if x.get("visible", True)]
-        yield record_image(prepare(survey, window), window.style), np.asarray(boxes, float).reshape(-1, 4)
+        vis = [x for x in lab["labels"] if x.get("visible", True)]
+        boxes = np.asarray([pm.box_to_px(x["box"]) for x in vis], float).reshape(-1, 4)
+        image = record_image(prepare(survey, window), window.style)
+        if whole and vis and all("apex_trace" in x for x in vis):
+            wb = whole_boxes([x["box"] for x in vis], [x["apex_trace"] for x in vis], survey.n_traces)
+            wpx = np.asarray([pm.box_to_px(b) for b in wb], float).reshape(-1, 4)
+            if not np.array_equal(wpx, boxes):
+                yield image, boxes, wpx
+                continue
+        yield image, boxes
 
 
 def main(argv=None):
@@ -49,13 +59,25 @@ def main(argv=None):
     p.add_argument("--only", default=None, help="P-GPR train pictures named by this glob only (AIR_* for one radar: "
                    "a refiner for the device-held-out test)")
     p.add_argument("--synthetic", type=int, default=0, help="survey-scale synthetic records (seed 1000) to add")
-    p.add_argument("--gprmax", default=None, help="a packed gprMax file to add, FILE:N leaving out its last N")
+    p.add_argument("--gprmax", nargs="+", default=[], metavar="FILE[:N]",
+                   help="packed gprMax files to add, FILE:N leaving out its last N")
     p.add_argument("--name", default="gpr3d box refiner", help="the refiner's name in detections")
     p.add_argument("--epochs", type=int, default=9)
     p.add_argument("--per-label", type=int, default=24)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--whole", action="store_true",
+                   help="simulated labels cut by the record's ends taught as the whole hyperbola's box (reaching past "
+                        "the record), whose centre is the apex: gpr3d.detection.refine.whole_boxes")
     p.add_argument("--onnx", default=None, help="also export the refiner (crops in, edge moves out) to this .onnx")
     args = p.parse_args(argv)
+    if args.pgpr == "none" and not args.synthetic and not args.gprmax:
+        p.error("nothing to train on: --pgpr none with neither --synthetic nor --gprmax")
+    for spec in args.gprmax:  # checked before any work: a wrong one is one line
+        path, _, held = spec.partition(":")
+        if not Path(path).is_file():
+            p.error(f"--gprmax {spec}: no such file")
+        if held and not held.isdigit():
+            p.error(f"--gprmax {spec}: N after the colon is the count of records left out, a whole number")
     import torch
 
     from gpr3d.detection.refine import export_refiner_onnx, save_refiner, train_refiner
@@ -77,20 +99,20 @@ def main(argv=None):
 
         records += [survey_sample(1000, i) for i in range(args.synthetic)]
         parts.append(f"survey_sample(1000, i < {args.synthetic})")
-    if args.gprmax:
+    for spec in args.gprmax:
         from gpr3d.io.packed import labelled_records
 
-        path, _, held = args.gprmax.partition(":")
+        path, _, held = spec.partition(":")
         recs = list(labelled_records(path))
         recs = recs[: len(recs) - int(held)] if held else recs
         records += recs
         parts.append(f"{Path(path).name} ({len(recs)} records{f', its last {held} left out' if held else ''})")
     t0, cpu0 = time.perf_counter(), time.process_time()
-    net = train_refiner(samples(records, window), epochs=args.epochs, per_label=args.per_label, seed=args.seed,
+    net = train_refiner(samples(records, window, args.whole), epochs=args.epochs, per_label=args.per_label, seed=args.seed,
                         log=lambda m: print(m, flush=True))
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     prov = {"name": args.name, "command": "python references/detection/train_refiner.py " + " ".join(argv or sys.argv[1:]),
-            "data": " + ".join(parts), "epochs": args.epochs, "per_label": args.per_label, "seed": args.seed,
+            "data": " + ".join(parts), "whole": args.whole, "epochs": args.epochs, "per_label": args.per_label, "seed": args.seed,
             "train_wall_s": round(wall, 1), "train_cpu_s": round(cpu, 1), "torch_threads": torch.get_num_threads(),
             "host": platform.processor() or platform.machine()}
     if args.pgpr != "none":
@@ -103,4 +125,9 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    from gpr3d.core.errors import GPR3DError
+
+    try:
+        main()
+    except GPR3DError as e:  # a file that is not what it should be (not a packed dataset, no labels): one line
+        sys.exit(f"train_refiner.py: {e}")

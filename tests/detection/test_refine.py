@@ -469,8 +469,10 @@ def test_the_shipped_refiner_comes_with_the_shipped_detector_in_either_engine(tm
     rng = np.random.default_rng(8)
     image = rng.random((1, 3, 256, 700), dtype=np.float32)
     boxes = np.array([[50, 30, 150, 80], [600, 100, 690, 200]], np.float32)
+    # (1.2e-3 measured on this noise picture, far from any radargram, with the whole-hyperbola refiner; the refiner
+    # shipped before it moves these boxes 0.10 away)
     np.testing.assert_allclose(onnx_det.refiner.predict(image, boxes), torch_det.refiner.predict(image, boxes),
-                               atol=1e-3)
+                               atol=3e-3)
     # its session's threads sleep between runs (a spinning second pool beside the detector's slowed its network)
     opts = onnx_det.refiner.session.get_session_options()
     assert opts.get_session_config_entry("session.intra_op.allow_spinning") == "0"
@@ -743,3 +745,101 @@ def test_how_a_refiner_is_applied_is_checked_in_one_line(mirror, passes, what, t
     ref.mirror = mirror
     with pytest.raises(InvalidDataError, match="the refiner's"):  # settings changed afterwards are checked too
         ref.refine(_survey(), 128, np.array([[10.0, 1e-9, 40.0, 2e-9]]), np.zeros((3, 128, 300), np.float32))
+
+
+def test_whole_boxes_mirror_a_cut_box_about_its_apex():
+    """A box cut by the first trace reaches as far before it as its right edge lies after the apex; one cut by the
+    last trace likewise after it; boxes cut on both sides or on none are left as they are."""
+    boxes = [[0.0, 1.0, 30.0, 2.0],     # cut by trace 0, apex 12: whole from 12 - 18 = -6
+             [70.0, 1.0, 99.0, 2.0],    # cut by the last trace (99 of 100), apex 90: whole to 90 + 20 = 110
+             [0.0, 1.0, 99.0, 2.0],     # both ends: unknown
+             [20.0, 1.0, 40.0, 2.0],    # inside
+             [0.4, 1.0, 10.0, 2.0]]     # within half a trace of the first: cut; apex 9 -> whole from 8
+    whole = R.whole_boxes(boxes, [12.0, 90.0, 50.0, 30.0, 9.0], 100)
+    np.testing.assert_allclose(whole, [[-6.0, 1.0, 30.0, 2.0], [70.0, 1.0, 110.0, 2.0], [0.0, 1.0, 99.0, 2.0],
+                                       [20.0, 1.0, 40.0, 2.0], [0.4, 1.0, 10.0, 2.0]])
+    # the last: its mirror (8.0) lies inside the box, so the box keeps its own edge (a box never shrinks)
+    np.testing.assert_allclose(R.whole_boxes([[0.0, 0, 10.0, 1]], [3.0], 100), [[-4.0, 0, 10.0, 1]])
+    assert np.asarray(boxes).tolist()[0] == [0.0, 1.0, 30.0, 2.0]  # the input is not changed
+
+
+def test_the_apex_of_a_whole_box_is_its_centre_where_it_reaches_past_one_end():
+    assert R.whole_apex([-6.0, 0, 30.0, 1], 100) == 12.0
+    assert R.whole_apex([70.0, 0, 110.0, 1], 100) == 90.0
+    assert R.whole_apex([80.0, 0, 140.0, 1], 100) == 99.0  # a centre past the end is kept inside the record
+    assert R.whole_apex([-0.9, 0, 30.0, 1], 100) is None  # less than a trace past: the label rule's apex
+    assert R.whole_apex([-1.5, 0, 30.0, 1], 100, reach=2.0) is None
+    assert R.whole_apex([-1.5, 0, 30.0, 1], 100) == 14.25
+    assert R.whole_apex([20.0, 0, 40.0, 1], 100) is None and R.whole_apex([-5.0, 0, 105.0, 1], 100) is None
+
+
+class _Whole:
+    provenance = {"name": "whole", "whole": True}
+
+
+def test_a_refiner_is_one_of_whole_hyperbolas_only_where_its_provenance_says_so():
+    assert R.BoxRefiner.whole.fget(_Whole()) is True
+    assert R.BoxRefiner.whole.fget(_Fixed([0, 0, 0, 0])) is False
+    assert R.load_refiner().whole is True and R.load_refiner(engine="onnx").whole is True  # the shipped one
+    assert R.BoxRefiner.whole.fget(type("Old", (), {"provenance": {"name": "x"}})()) is False  # (before --whole)
+
+
+def test_a_whole_refiner_s_box_past_the_first_trace_gives_its_apex_as_its_centre():
+    """The detector's apex of a box the refiner moved past the record's first trace is that box's centre when the
+    refiner learned whole hyperbolas, and the label rule's (from the box cut to the record) when it did not; the
+    box reported is the one cut to the record either way."""
+    from gpr3d.detection.windows import WindowConfig
+
+    s = _survey(n_traces=256)
+    cfg = WindowConfig(traces=256, rows=128, overlap=0.0)
+    det = _one_box_detector(cfg, boxes=[[0.0, 30.0, 60.0, 60.0]])
+    det.refiner = _Fixed([-1.0, 0.0, 0.0, 0.0])  # the left edge one box width further left: past trace 0
+    rule = det.detect(s)["targets"]
+    det.refiner.provenance = {"name": "fixed moves", "whole": True}
+    det.refiner.whole = True
+    whole = det.detect(s)["targets"]
+    assert len(rule) == len(whole) == 1
+    np.testing.assert_allclose(whole[0]["box"], rule[0]["box"], rtol=1e-12)
+    assert whole[0]["box"][0] == 0.0  # reported cut to the record
+    # the network's box: pixels 0..60 are traces -0.5..59.5; moved one width left: -60.5..59.5, centre -0.5 -> 0
+    assert whole[0]["apex_trace"] == 0
+    assert rule[0]["apex_trace"] != whole[0]["apex_trace"]
+    assert whole[0]["apex_time_s"] == rule[0]["apex_time_s"]
+
+
+def _cut_records(n, rng, rows=64, cols=120):
+    """Images each holding a bright 'V' (a hyperbola's legs) cut by the first column; the label box is the V cut to
+    the picture, the whole box the V's own, whose centre is its apex column."""
+    out = []
+    for _ in range(n):
+        img = rng.normal(0, 0.05, (3, rows, cols)).astype(np.float32)
+        apex, half, top = rng.uniform(2, 14), rng.uniform(16, 26), rng.uniform(6, 16)
+        for c in range(cols):
+            if abs(c + 0.5 - apex) <= half:
+                r = int(top + 0.8 * abs(c + 0.5 - apex))
+                img[:, r : r + 3, c] += 1.0
+        bottom = top + 0.8 * half + 3
+        whole = np.array([[apex - half, top, apex + half, bottom]])
+        out.append((img, np.array([[0.5, top, apex + half, bottom]]), whole))
+    return out
+
+
+def test_training_on_whole_boxes_teaches_the_refiner_to_reach_past_the_picture():
+    """Trained with whole target boxes, the refiner moves a box cut to the picture past its first column, and that
+    box's centre finds the apex better than the cut box's rule-free centre; trained on the cut labels alone, it
+    does not reach past."""
+    rng = np.random.default_rng(0)
+    train = _cut_records(80, rng)
+    whole_net = R.BoxRefiner(R.train_refiner(train, epochs=6, per_label=16, batch=64))
+    cut_net = R.BoxRefiner(R.train_refiner([(i, lab) for i, lab, _ in train], epochs=6, per_label=16, batch=64))
+    err_whole, err_cut, reach_cut = [], [], []
+    for img, label, whole in _cut_records(20, np.random.default_rng(1)):
+        apex = 0.5 * (whole[0, 0] + whole[0, 2])
+        start = label.astype(np.float32)
+        moved = R.apply_deltas(start, whole_net.predict(img[None], start))
+        err_whole.append(abs(0.5 * (moved[0, 0] + moved[0, 2]) - apex))
+        err_cut.append(abs(0.5 * (start[0, 0] + start[0, 2]) - apex))
+        reach_cut.append(R.apply_deltas(start, cut_net.predict(img[None], start))[0, 0])
+    # (measured: 0.31 trace against 7.6; a refiner taught the cut labels instead stays within 1.5 traces of them)
+    assert np.median(err_whole) < 0.3 * np.median(err_cut), (np.median(err_whole), np.median(err_cut))
+    assert np.median(reach_cut) > -3.0  # the cut labels' refiner keeps the edge near the picture's

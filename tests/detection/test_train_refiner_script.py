@@ -38,3 +38,49 @@ def test_only_matching_no_picture_is_one_line_naming_it(tmp_path):
     assert r.returncode == 2
     assert "--only 'NOPE_*': no P-GPR train picture matches" in r.stderr.strip().splitlines()[-1]
     assert not (tmp_path / "ref.pt").exists()
+
+
+def test_several_gprmax_files_are_all_read_each_with_its_hold_out(tmp_path):
+    """``--gprmax A:N B:M`` trains on both files' records, each less its last N / M, and names both in the weights."""
+    from gpr3d.detection.refine import load_refiner
+    from gpr3d.io.packed import PackedDataset
+
+    a, b = REPO / "datasets" / "gprmax_survey_train.h5", REPO / "datasets" / "gprmax400.h5"
+    na, nb = len(PackedDataset(a)), len(PackedDataset(b))
+    out = tmp_path / "ref.pt"
+    r = subprocess.run([sys.executable, str(SCRIPT), "--out", str(out), "--pgpr", "none", "--gprmax",
+                        f"{a}:{na - 3}", f"{b}:{nb - 2}", "--epochs", "1", "--per-label", "1"],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    prov = load_refiner(out).provenance
+    assert prov["data"] == (f"gprmax_survey_train.h5 (3 records, its last {na - 3} left out) + "
+                            f"gprmax400.h5 (2 records, its last {nb - 2} left out)")
+    assert "credit" not in prov  # no P-GPR label read
+
+
+@pytest.mark.parametrize("spec, says", [("nowhere.h5", "no such file"), ("datasets/gprmax400.h5:x", "a whole number"),
+                                        ("datasets/gprmax400.h5:-3", "a whole number")])
+def test_a_wrong_gprmax_file_is_one_line_before_any_work(tmp_path, spec, says):
+    r = subprocess.run([sys.executable, str(SCRIPT), "--out", str(tmp_path / "ref.pt"), "--pgpr", "none", "--gprmax",
+                        str(REPO / spec)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    last = r.stderr.strip().splitlines()[-1]
+    assert f"--gprmax {REPO / spec}" in last and says in last
+    assert not (tmp_path / "ref.pt").exists()
+
+
+def test_nothing_to_train_on_is_one_line(tmp_path):
+    r = subprocess.run([sys.executable, str(SCRIPT), "--out", str(tmp_path / "ref.pt"), "--pgpr", "none"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert "nothing to train on" in r.stderr.strip().splitlines()[-1]
+
+
+def test_a_file_that_is_not_a_packed_dataset_is_one_line(tmp_path):
+    bad = tmp_path / "bad.h5"
+    bad.write_bytes(b"not hdf5 at all")
+    r = subprocess.run([sys.executable, str(SCRIPT), "--out", str(tmp_path / "ref.pt"), "--pgpr", "none", "--gprmax",
+                        str(bad)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+    assert r.stderr.strip().splitlines()[-1].startswith("train_refiner.py: ") and "bad.h5" in r.stderr
+    assert not (tmp_path / "ref.pt").exists()

@@ -48,6 +48,7 @@ def test_the_table_splits_by_kind_echo_cut_and_contrast():
     (("--score", "0"), "--score must lie in (0, 1], got 0.0"),
     (("--set", "/no/such.h5"), "--set /no/such.h5: no such file"),
     (("--refiner", "/no/r.pt"), "--refiner /no/r.pt: no such file (or default, none)"),
+    (("--detector", "/no/d.pt"), "--detector /no/d.pt: no such file (or default)"),
     (("--out", "/no/such/folder"), "--out /no/such/folder: not a folder"),
     (("--threads", "0"), "--threads must lie in 1..256, got 0"),
     (("--name", "../x.md"), "--name ../x.md: a file name ending in .md (no folder: --out says where)"),

@@ -267,13 +267,19 @@ class Detector:
                      float(np.clip(b[2], 0, survey.n_traces - 1)), float(np.clip(b[3], 0, t_end))]
                 if s >= score_threshold and b[2] > b[0] and b[3] > b[1]:
                     kind = kinds[int(labels[j]) - 1] if kinds else "target"
-                    kept.append((b, s, kind, float(shares[j]) if kinds else None))
+                    kept.append((b, s, kind, float(shares[j]) if kinds else None, boxes[j]))
             # cut boxes take their width from the record's whole ones (one wave speed, one trace step)
-            rate = width_rate([b for b, s, _, _ in kept if s >= 0.5], survey.n_traces, t_end, survey.frequency_hz)
+            rate = width_rate([b for b, s, *_ in kept if s >= 0.5], survey.n_traces, t_end, survey.frequency_hz)
             targets = []
-            for b, s, kind, share in kept:
+            whole = self.refiner is not None and getattr(self.refiner, "whole", False)
+            for b, s, kind, share, raw in kept:
                 at, att = apex_of_box(plain, b, s_per_row, frequency_hz=survey.frequency_hz, n_traces=survey.n_traces,
                                       width_per_s=rate)
+                if whole:  # a refiner of whole hyperbolas reaches past the record's end: the apex is its centre
+                    from gpr3d.detection.refine import whole_apex
+
+                    wa = whole_apex(raw, survey.n_traces)
+                    at = at if wa is None else wa
                 t = {"box": b, "score": float(s), "apex_trace": int(round(at)), "apex_time_s": float(att),
                      "kind": kind, "kind_score": share}
                 if survey.positions_xyz is not None and survey.distances_m is not None:

@@ -36,7 +36,7 @@ from gpr3d.io.weights import half_state_dict, read_weights_file
 
 __all__ = ["CROP", "EXPAND", "JITTER", "MIRROR", "PASSES", "MAX_PASSES", "DEFAULT_REFINER", "DEFAULT_REFINER_ONNX",
            "record_image", "record_pixmap", "box_deltas", "apply_deltas", "mirror_deltas", "check_application",
-           "jitter_boxes", "pair_iou", "build_refiner", "crop_array", "crops", "BoxRefiner", "OnnxBoxRefiner",
+           "jitter_boxes", "whole_boxes", "whole_apex", "pair_iou", "build_refiner", "crop_array", "crops", "BoxRefiner", "OnnxBoxRefiner",
            "load_refiner", "save_refiner", "train_refiner", "export_refiner_onnx"]
 
 CROP = 64  #: crop side in pixels
@@ -87,6 +87,31 @@ def apply_deltas(boxes, deltas) -> np.ndarray:
     lo, hi = b[:, :2] + d[:, :2] * wh, b[:, 2:] + d[:, 2:] * wh
     mid = 0.5 * (lo + hi)
     return np.concatenate([np.minimum(lo, mid - 0.5), np.maximum(hi, mid + 0.5)], axis=1)
+
+
+def whole_boxes(boxes, apex_traces, n_traces: int) -> np.ndarray:
+    """Label boxes (k, 4; traces first) made whole where the record's first or last trace cuts them: a box that
+    reaches one end of the record (within half a trace) but not the other is mirrored about its apex trace, so it
+    reaches as far past that end as its uncut side reaches from the apex (hyperbolas are symmetric about their
+    apex). Boxes cut on both sides or on none stay as they are."""
+    b = np.array(boxes, float).reshape(-1, 4)
+    a = np.asarray(apex_traces, float).reshape(-1)
+    left, right = b[:, 0] <= 0.5, b[:, 2] >= n_traces - 1.5
+    only_left, only_right = left & ~right, right & ~left
+    b[only_left, 0] = np.minimum(b[only_left, 0], 2 * a[only_left] - b[only_left, 2])
+    b[only_right, 2] = np.maximum(b[only_right, 2], 2 * a[only_right] - b[only_right, 0])
+    return b
+
+
+def whole_apex(box, n_traces: int, reach: float = 1.0) -> float | None:
+    """The apex trace of a box refined by a refiner of whole hyperbolas (:func:`whole_boxes`): where the box reaches
+    more than ``reach`` traces past exactly one end of the record, its centre (kept inside the record); else None
+    (a box inside the record, or past both ends: the label rule's apex applies)."""
+    i0, i1 = float(box[0]), float(box[2])
+    past_first, past_last = i0 < -reach, i1 > n_traces - 1 + reach
+    if past_first == past_last:
+        return None
+    return float(np.clip(0.5 * (i0 + i1), 0, n_traces - 1))
 
 
 def mirror_deltas(deltas) -> np.ndarray:
@@ -236,6 +261,12 @@ class BoxRefiner:
     def __init__(self, net, provenance: dict | None = None):
         self.net, self.provenance = net.eval(), provenance or {}
 
+    @property
+    def whole(self) -> bool:
+        """Trained on whole hyperbolas' boxes (``train_refiner.py --whole``): a box it moves past the record's end
+        has its apex at its centre (:func:`whole_apex`)."""
+        return bool(self.provenance.get("whole", False))
+
     @classmethod
     def load(cls, path=None) -> "BoxRefiner":
         p = Path(path) if path is not None else DEFAULT_REFINER
@@ -351,22 +382,32 @@ def export_refiner_onnx(weights=None, out=DEFAULT_REFINER_ONNX) -> dict:
 
 def train_refiner(samples, *, epochs: int = 9, per_label: int = 24, batch: int = 128, lr: float = 2e-3,
                   seed: int = 0, log=None):
-    """A refiner trained on ``samples``: an iterable of ``(image (3, rows, cols), label boxes px (k, 4))``.
+    """A refiner trained on ``samples``: an iterable of ``(image (3, rows, cols), label boxes px (k, 4))`` or
+    ``(image, label boxes, target boxes (k, 4))``.
 
     Each label gives ``per_label`` boxes drawn about it (:func:`jitter_boxes`), each crop
-    mirrored at random; the target is the label. One-cycle AdamW, smooth L1 on the edge
-    moves. Returns the network in eval mode.
+    mirrored at random; the target is the label. Where a sample gives target boxes (a
+    hyperbola cut by the record's first or last trace, whose whole box reaches past
+    it: :func:`whole_boxes`), the boxes are drawn about the target and half of them are
+    cut to the picture's columns, as a detector's boxes are: the refiner learns to
+    reach past the record's end to the whole hyperbola. One-cycle AdamW, smooth L1 on
+    the edge moves. Returns the network in eval mode.
     """
     torch = require("torch")
     if epochs < 1 or per_label < 1 or batch < 1:
         raise InvalidDataError(f"epochs, per_label and batch must be positive, got {epochs}, {per_label}, {batch}")
     rng = np.random.default_rng(seed)
     xs, ys = [], []
-    for image, labels in samples:
-        g = np.asarray(labels, float).reshape(-1, 4)
+    for image, labels, *whole in samples:
+        g = np.asarray(whole[0] if whole else labels, float).reshape(-1, 4)
         if not len(g):
             continue
         jb = jitter_boxes(g, per_label, rng)
+        if whole:  # half of them cut to the record's traces (pixel c + 0.5 is trace c), as the detector's are
+            cols = np.asarray(image).shape[-1]
+            cut = rng.random(len(jb)) < 0.5
+            jb[cut, 0] = np.clip(jb[cut, 0], 0.5, cols - 2.5)
+            jb[cut, 2] = np.clip(jb[cut, 2], jb[cut, 0] + 2, cols - 0.5)
         xs.append(crops(image, jb))
         ys.append(torch.as_tensor(box_deltas(jb, np.repeat(g, per_label, axis=0)), dtype=torch.float32))
     if not xs:
