@@ -829,9 +829,9 @@ def test_training_on_whole_boxes_teaches_the_refiner_to_reach_past_the_picture()
     box's centre finds the apex better than the cut box's rule-free centre; trained on the cut labels alone, it
     does not reach past."""
     rng = np.random.default_rng(0)
-    train = _cut_records(80, rng)
-    whole_net = R.BoxRefiner(R.train_refiner(train, epochs=6, per_label=16, batch=64))
-    cut_net = R.BoxRefiner(R.train_refiner([(i, lab) for i, lab, _ in train], epochs=6, per_label=16, batch=64))
+    train = _cut_records(60, rng)
+    whole_net = R.BoxRefiner(R.train_refiner(train, epochs=6, per_label=12, batch=64))
+    cut_net = R.BoxRefiner(R.train_refiner([(i, lab) for i, lab, _ in train], epochs=6, per_label=12, batch=64))
     err_whole, err_cut, reach_cut = [], [], []
     for img, label, whole in _cut_records(20, np.random.default_rng(1)):
         apex = 0.5 * (whole[0, 0] + whole[0, 2])
@@ -840,6 +840,6 @@ def test_training_on_whole_boxes_teaches_the_refiner_to_reach_past_the_picture()
         err_whole.append(abs(0.5 * (moved[0, 0] + moved[0, 2]) - apex))
         err_cut.append(abs(0.5 * (start[0, 0] + start[0, 2]) - apex))
         reach_cut.append(R.apply_deltas(start, cut_net.predict(img[None], start))[0, 0])
-    # (measured: 0.31 trace against 7.6; a refiner taught the cut labels instead stays within 1.5 traces of them)
+    # (measured: 0.69 trace against 7.6; a refiner taught the cut labels instead stays within 1.5 traces of them)
     assert np.median(err_whole) < 0.3 * np.median(err_cut), (np.median(err_whole), np.median(err_cut))
     assert np.median(reach_cut) > -3.0  # the cut labels' refiner keeps the edge near the picture's
