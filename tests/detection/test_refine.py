@@ -761,6 +761,16 @@ def test_whole_boxes_mirror_a_cut_box_about_its_apex():
     # the last: its mirror (8.0) lies inside the box, so the box keeps its own edge (a box never shrinks)
     np.testing.assert_allclose(R.whole_boxes([[0.0, 0, 10.0, 1]], [3.0], 100), [[-4.0, 0, 10.0, 1]])
     assert np.asarray(boxes).tolist()[0] == [0.0, 1.0, 30.0, 2.0]  # the input is not changed
+    # the ends' bounds exactly: 0.5 is cut, 1.0 is not; 98.5 (n - 1.5) is cut, 98.0 is not; a box inside with its
+    # apex off its centre stays; a right-cut box whose mirror lies inside keeps its right edge (not its bottom)
+    edges = R.whole_boxes([[0.5, 0, 20.0, 1], [1.0, 0, 20.0, 1], [60.0, 0, 98.5, 1], [60.0, 0, 98.0, 1],
+                           [20.0, 0, 40.0, 1], [70.0, 1.0, 99.0, 150.0]], [5.0, 5.0, 90.0, 90.0, 25.0, 80.0], 100)
+    np.testing.assert_allclose(edges, [[-10.0, 0, 20.0, 1], [1.0, 0, 20.0, 1], [60.0, 0, 120.0, 1],
+                                       [60.0, 0, 98.0, 1], [20.0, 0, 40.0, 1], [70.0, 1.0, 99.0, 150.0]])
+    # integer boxes and a column of apexes give the same float boxes
+    got = R.whole_boxes(np.array([[0, 1, 30, 2]]), np.array([[12.25]]), 100)
+    assert got.dtype == float
+    np.testing.assert_allclose(got, [[-5.5, 1, 30, 2]])
 
 
 def test_the_apex_of_a_whole_box_is_its_centre_where_it_reaches_past_one_end():
@@ -771,6 +781,12 @@ def test_the_apex_of_a_whole_box_is_its_centre_where_it_reaches_past_one_end():
     assert R.whole_apex([-1.5, 0, 30.0, 1], 100, reach=2.0) is None
     assert R.whole_apex([-1.5, 0, 30.0, 1], 100) == 14.25
     assert R.whole_apex([20.0, 0, 40.0, 1], 100) is None and R.whole_apex([-5.0, 0, 105.0, 1], 100) is None
+    # exactly a trace past is not past; just inside the last trace is not past; past the first, a centre before
+    # trace 0 is kept at 0
+    assert R.whole_apex([-1.0, 0, 30.0, 1], 100) is None and R.whole_apex([50.0, 0, 100.0, 1], 100) is None
+    assert R.whole_apex([50.0, 0, 99.5, 1], 100) is None
+    assert R.whole_apex([60.0, 0, 101.5, 1], 100) == 80.75
+    assert R.whole_apex([-50.0, 0, 10.0, 1], 100) == 0.0
 
 
 class _Whole:
@@ -792,14 +808,16 @@ def test_a_whole_refiner_s_box_past_the_first_trace_gives_its_apex_as_its_centre
 
     s = _survey(n_traces=256)
     cfg = WindowConfig(traces=256, rows=128, overlap=0.0)
-    det = _one_box_detector(cfg, boxes=[[0.0, 30.0, 60.0, 60.0]])
+    det = _one_box_detector(cfg, boxes=[[0.0, 30.0, 60.0, 60.0], [150.0, 30.0, 200.0, 60.0]], scores=[0.9, 0.8])
     det.refiner = _Fixed([-1.0, 0.0, 0.0, 0.0])  # the left edge one box width further left: past trace 0
     rule = det.detect(s)["targets"]
     det.refiner.provenance = {"name": "fixed moves", "whole": True}
     det.refiner.whole = True
     whole = det.detect(s)["targets"]
-    assert len(rule) == len(whole) == 1
-    np.testing.assert_allclose(whole[0]["box"], rule[0]["box"], rtol=1e-12)
+    assert len(rule) == len(whole) == 2
+    np.testing.assert_allclose([t["box"] for t in whole], [t["box"] for t in rule], rtol=1e-12)
+    # the second box stays inside the record (moved to traces 99.5..199.5): the label rule's apex, its centre
+    assert whole[1]["apex_trace"] == rule[1]["apex_trace"] == 150
     assert whole[0]["box"][0] == 0.0  # reported cut to the record
     # the network's box: pixels 0..60 are traces -0.5..59.5; moved one width left: -60.5..59.5, centre -0.5 -> 0
     assert whole[0]["apex_trace"] == 0
@@ -843,3 +861,44 @@ def test_training_on_whole_boxes_teaches_the_refiner_to_reach_past_the_picture()
     # (measured: 0.69 trace against 7.6; a refiner taught the cut labels instead stays within 1.5 traces of them)
     assert np.median(err_whole) < 0.3 * np.median(err_cut), (np.median(err_whole), np.median(err_cut))
     assert np.median(reach_cut) > -3.0  # the cut labels' refiner keeps the edge near the picture's
+
+
+def test_whole_targets_are_learned_from_boxes_drawn_about_them_half_cut_to_the_picture(monkeypatch):
+    """What ``train_refiner`` crops and aims at for a sample with whole target boxes: boxes drawn about the whole
+    box, half of them cut to the record's traces (left edge within pixels 0.5..cols - 2.5, right edge at most cols -
+    0.5 and at least 2 pixels right of the left), the target the whole box itself."""
+    seen = {}
+    real_crops, real_deltas = R.crops, R.box_deltas
+
+    def spy_crops(image, boxes):
+        seen.setdefault("boxes", []).append(np.array(boxes))
+        return real_crops(image, boxes)
+
+    def spy_deltas(boxes, targets):
+        seen.setdefault("targets", []).append(np.array(targets))
+        return real_deltas(boxes, targets)
+
+    monkeypatch.setattr(R, "crops", spy_crops)
+    monkeypatch.setattr(R, "box_deltas", spy_deltas)
+    img = np.zeros((3, 40, 50), np.float32)
+    cases = [([[0.5, 5.0, 20.0, 15.0]], [[-10.0, 5.0, 20.0, 15.0]]),    # cut by the first trace
+             ([[46.0, 5.0, 49.5, 15.0]], [[46.0, 5.0, 60.0, 15.0]]),    # by the last, its left edge near it
+             ([[0.5, 5.0, 2.5, 15.0]], [[-30.0, 5.0, -20.0, 15.0]])]    # wholly before the picture
+    R.train_refiner([(img, np.array(lab), np.array(whole)) for lab, whole in cases], epochs=1, per_label=400,
+                    batch=4000)
+    for k, (lab, whole) in enumerate(cases):
+        jb, tg = seen["boxes"][k], seen["targets"][k]
+        np.testing.assert_array_equal(tg, np.repeat(whole, 400, axis=0))  # aimed at the whole box
+        cut = (jb[:, 0] >= 0.5) & (jb[:, 0] <= 47.5) & (jb[:, 2] <= 49.5) & (jb[:, 2] >= jb[:, 0] + 2)
+        if k == 0:
+            assert 0.4 < np.mean(jb[:, 0] == 0.5) < 0.6  # half cut to the first pixel
+            assert np.mean(jb[:, 0] < 0) > 0.4  # the others drawn about the whole box, past it
+        if k == 1:
+            assert 0.4 < np.mean(jb[:, 2] == 49.5) < 0.6
+            assert jb[jb[:, 2] == 49.5, 0].max() == 47.5  # a cut box's left edge stops 2 pixels short of the end
+            assert np.all(jb[cut, 2] == 49.5)
+        if k == 2:
+            assert 0.4 < np.mean(cut) < 0.6
+            np.testing.assert_array_equal(jb[cut, 0], 0.5)
+            np.testing.assert_array_equal(jb[cut, 2], 2.5)  # at least 2 pixels wide
+            assert np.all(jb[~cut, 2] < -10)
