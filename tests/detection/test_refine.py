@@ -768,9 +768,9 @@ def test_whole_boxes_mirror_a_cut_box_about_its_apex():
     np.testing.assert_allclose(edges, [[-10.0, 0, 20.0, 1], [1.0, 0, 20.0, 1], [60.0, 0, 120.0, 1],
                                        [60.0, 0, 98.0, 1], [20.0, 0, 40.0, 1], [70.0, 1.0, 99.0, 150.0]])
     # integer boxes and a column of apexes give the same float boxes
-    got = R.whole_boxes(np.array([[0, 1, 30, 2]]), np.array([[12.25]]), 100)
+    got = R.whole_boxes(np.array([[0, 1, 30, 2], [0, 1, 40, 2]]), np.array([[12.25], [15.0]]), 100)
     assert got.dtype == float
-    np.testing.assert_allclose(got, [[-5.5, 1, 30, 2]])
+    np.testing.assert_allclose(got, [[-5.5, 1, 30, 2], [-10.0, 1, 40, 2]])
 
 
 def test_the_apex_of_a_whole_box_is_its_centre_where_it_reaches_past_one_end():
