@@ -204,7 +204,13 @@ def main(argv=None):
     from gpr3d.io.packed import labelled_records
 
     torch.set_num_threads(args.threads)
-    det = load_detector(None if args.detector == "default" else args.detector, engine="torch", refiner=args.refiner)
+    from gpr3d.core.errors import GPR3DError
+
+    try:  # a file that is not a detector's (or a refiner's) weights: one line, before any work
+        det = load_detector(None if args.detector == "default" else args.detector, engine="torch",
+                            refiner=args.refiner)
+    except GPR3DError as exc:
+        p.error(str(exc))
     t0 = time.perf_counter()
     false: list = []
     rows = target_rows(det, labelled_records(args.set), args.score, false)

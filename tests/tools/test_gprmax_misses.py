@@ -56,3 +56,10 @@ def test_the_table_splits_by_kind_echo_cut_and_contrast():
 ])
 def test_a_wrong_setting_is_one_line_naming_it(args, says):
     assert refusal("gprmax_misses.py", *args).endswith(says)
+
+
+@pytest.mark.parametrize("option", ["--detector", "--refiner"])
+def test_a_file_that_is_not_weights_is_one_line_naming_it(option):
+    pytest.importorskip("torch")
+    says = refusal("gprmax_misses.py", option, str(ROOT / "README.md"), "--out", str(ROOT / "benchmarks" / "results"))
+    assert "README.md: not a readable weights file" in says

@@ -272,12 +272,12 @@ class Detector:
             rate = width_rate([b for b, s, *_ in kept if s >= 0.5], survey.n_traces, t_end, survey.frequency_hz)
             targets = []
             whole = self.refiner is not None and getattr(self.refiner, "whole", False)
+            if whole:
+                from gpr3d.detection.refine import whole_apex
             for b, s, kind, share, raw in kept:
                 at, att = apex_of_box(plain, b, s_per_row, frequency_hz=survey.frequency_hz, n_traces=survey.n_traces,
                                       width_per_s=rate)
                 if whole:  # a refiner of whole hyperbolas reaches past the record's end: the apex is its centre
-                    from gpr3d.detection.refine import whole_apex
-
                     wa = whole_apex(raw, survey.n_traces)
                     at = at if wa is None else wa
                 t = {"box": b, "score": float(s), "apex_trace": int(round(at)), "apex_time_s": float(att),

@@ -383,7 +383,8 @@ def export_refiner_onnx(weights=None, out=DEFAULT_REFINER_ONNX) -> dict:
 def train_refiner(samples, *, epochs: int = 9, per_label: int = 24, batch: int = 128, lr: float = 2e-3,
                   seed: int = 0, log=None):
     """A refiner trained on ``samples``: an iterable of ``(image (3, rows, cols), label boxes px (k, 4))`` or
-    ``(image, label boxes, target boxes (k, 4))``.
+    ``(image, label boxes, whole boxes (k, 4))`` (then the label boxes, the whole ones cut to the record, are
+    not read: the boxes drawn and aimed at are the whole ones).
 
     Each label gives ``per_label`` boxes drawn about it (:func:`jitter_boxes`), each crop
     mirrored at random; the target is the label. Where a sample gives target boxes (a
