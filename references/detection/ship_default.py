@@ -6,7 +6,8 @@
 Writes ``src/gpr3d/detection/default_detector.pt`` and ``.onnx`` (the torch-free engine's export), and adds the
 stage to ``default_detector.json`` with the file's SHA-256, the weights' own provenance (credit included) and the
 fixed check set's metrics re-measured (``survey_sample(777, i)``, i < 4, score 0.5), which the test suite holds
-the shipped weights to.
+the shipped weights to. Weights calibrated by ``calibrate_scores.py`` have their Platt map copied to the JSON's
+``score_calibration``.
 """
 
 from __future__ import annotations
@@ -41,6 +42,10 @@ def main(argv=None):
              "steps_done": prov.get("steps_done"), "train_wall_s": prov.get("train_wall_s"),
              "data": prov.get("data"), "credit": prov.get("credit"), **json.loads(args.extra)}
     meta["training"][args.stage] = {k: v for k, v in stage.items() if v is not None}
+    if prov.get("score_calibration"):  # (calibrate_scores.py: the Platt map every score goes through)
+        meta["score_calibration"] = prov["score_calibration"]
+    else:
+        meta.pop("score_calibration", None)
     meta["sha256"] = hashlib.sha256(DEFAULT_WEIGHTS.read_bytes()).hexdigest()
     model, _, _ = load_weights(DEFAULT_WEIGHTS)
     meta["kinds"] = getattr(model, "gpr3d_kinds", None)

@@ -376,3 +376,23 @@ def test_the_auto_trace_scale_stretches_a_record_to_the_training_records_width()
     det.trace_scales, det.reference_width = ("auto",), None
     with pytest.raises(InvalidDataError, match="^trace scale 'auto' needs the width of the detector's training "):
         det.detect(survey)
+
+
+def test_a_calibrated_detector_thresholds_and_reports_calibrated_scores(spies):
+    # a = 2, b = 0: s -> s^2 / (s^2 + (1 - s)^2); by hand: 0.95 -> 0.9025 / 0.905, 0.45 -> 0.2025 / 0.505
+    cal = {"method": "platt", "a": 2.0, "b": 0.0}
+    det = infer.Detector(_Net(), WindowConfig(equalise=True), provenance={"score_calibration": cal})
+    assert det.calibration == cal
+    out = det.detect(_survey(), score_threshold=0.45)
+    # 0.45 calibrates to 0.401, under the threshold: only the boxes raw 0.95 and 0.5 (which stays 0.5) are kept
+    assert [t["score"] for t in out["targets"]] == pytest.approx([0.9025 / 0.905, 0.5], abs=1e-12)
+    assert [t["box"][0] for t in out["targets"]] == [20.0, 0.0] and out["calibrated"] is True
+    plain = infer.Detector(_Net(), WindowConfig(equalise=True)).detect(_survey(), score_threshold=0.45)
+    assert plain["calibrated"] is False and len(plain["targets"]) == 3
+
+
+@pytest.mark.parametrize("bad", [{"method": "isotonic"}, {"method": "platt", "a": 0.0, "b": 1.0},
+                                 {"method": "platt", "a": 1.0, "b": float("nan")}, [1, 2]])
+def test_a_bad_score_calibration_in_the_weights_is_one_line(bad):
+    with pytest.raises(GPR3DError, match="^net x: score_calibration: "):
+        infer.Detector(_Net(), WindowConfig(), provenance={"name": "net x", "score_calibration": bad})

@@ -134,6 +134,11 @@ class Detector:
                  batch: int = 8):
         self.model, self.window, self.provenance, self.device, self.batch = model, window, provenance or {}, device, batch
         self.reference_width = self.provenance.get("trace_width")  # a fine-tune's real pictures (finetune_pgpr.py)
+        from gpr3d.detection.calibration import check_calibration
+
+        #: the Platt map its scores go through (:mod:`gpr3d.detection.calibration`); None: the network's own
+        self.calibration = check_calibration(self.provenance.get("score_calibration"),
+                                             f"{self.provenance.get('name', 'detector')}: score_calibration")
 
     @classmethod
     def load(cls, path=None, *, device: str = "cpu") -> "Detector":
@@ -245,6 +250,10 @@ class Detector:
             raise InvalidDataError(f"score threshold must lie in 0..1, got {score_threshold!r}")
         t0 = time.perf_counter()
         plain, proc, boxes, scores, labels, shares, n_windows = self._views(survey)
+        if self.calibration is not None:  # (increasing: the boxes' order stays; the threshold keeps calibrated ones)
+            from gpr3d.detection.calibration import calibrate
+
+            scores = calibrate(scores, self.calibration)
         if self.refiner is not None and len(boxes):
             with stage("refine"):
                 from gpr3d.detection.refine import record_image
@@ -293,5 +302,5 @@ class Detector:
                                                              "passes": int(self.refiner.passes)},
                 "views": {"trace_scales": [f if f == "auto" else float(f) for f in self.trace_scales],
                           "mirror": bool(self.mirror)},
-                "score_threshold": score_threshold,
+                "score_threshold": score_threshold, "calibrated": self.calibration is not None,
                 "wall_s": time.perf_counter() - t0, "targets": targets}
