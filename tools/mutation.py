@@ -90,6 +90,7 @@ MODULES = {
                         "tests/detection/test_refine.py::test_how_a_refiner_is_applied_is_checked_in_one_line",
                         "tests/detection/test_refine.py::test_a_whole_refiner_s_box_past_the_first_trace_gives_its_apex_as_its_centre"],
     "detection.refine": ["tests/detection/test_refine.py", "-m", "not slow"],
+    "detection.calibration": ["tests/detection/test_calibration.py", "tests/detection/test_infer_by_hand.py"],
     "detection.ort": ["tests/detection/test_onnx_runtime.py", "tests/detection/test_onnx_int8.py"],
     "detection.train": ["tests/detection/test_train_by_hand.py", "tests/detection/test_kinds.py"],
     "detection.weights": ["tests/detection/test_weights_train.py", "tests/detection/test_kinds.py", "-k",
