@@ -47,6 +47,7 @@ def test_calibrate_is_the_formula_by_hand_and_keeps_the_order():
     c = calibrate(s, cal)
     assert np.all(np.diff(c) > 0) and np.all((c > 0) & (c < 1))  # the ends clipped, not infinite
     assert np.array_equal(calibrate(s, None), s) and calibrate(s, None) is not s
+    assert calibrate(s.astype(np.float32), None).dtype == np.float64  # the same type calibrated or not
     # float32 scores are mapped in float64: the logit of 0.9 in float32 is off by ~1e-7
     got = calibrate(np.array([0.9], np.float32), {"method": "platt", "a": 1.0, "b": 0.0})
     assert got.dtype == np.float64 and got[0] == pytest.approx(float(np.float32(0.9)), abs=1e-12)

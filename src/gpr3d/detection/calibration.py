@@ -92,11 +92,10 @@ def box_truth(found_boxes, found_scores, true_boxes, *, iou: float = 0.5) -> np.
     (:func:`gpr3d.detection.evaluate.box_matches`, kinds ignored). Boxes in one unit per axis."""
     from gpr3d.detection.evaluate import box_matches
 
-    found = np.asarray(found_boxes, float).reshape(-1, 4)
-    true = np.asarray(true_boxes, float).reshape(-1, 4)
-    hits = box_matches(list(true), ["target"] * len(true), list(found), ["target"] * len(found),
-                       list(np.asarray(found_scores, float).reshape(-1)), iou=iou)
-    ok = np.zeros(len(found), bool)
+    n = len(found_boxes)
+    hits = box_matches(list(true_boxes), [None] * len(true_boxes), list(found_boxes), [None] * n,
+                       [float(s) for s in np.ravel(found_scores)], iou=iou)
+    ok = np.zeros(n, bool)
     for h in hits:
         if h is not None:
             ok[h[0]] = True
