@@ -396,3 +396,8 @@ def test_a_calibrated_detector_thresholds_and_reports_calibrated_scores(spies):
 def test_a_bad_score_calibration_in_the_weights_is_one_line(bad):
     with pytest.raises(GPR3DError, match="^net x: score_calibration: "):
         infer.Detector(_Net(), WindowConfig(), provenance={"name": "net x", "score_calibration": bad})
+
+
+def test_a_bad_score_calibration_of_unnamed_weights_names_the_detector():
+    with pytest.raises(GPR3DError, match=r"^detector: score_calibration: a must be"):
+        infer.Detector(_Net(), WindowConfig(), provenance={"score_calibration": {"method": "platt", "a": -1, "b": 0}})
