@@ -76,16 +76,27 @@ def main(argv=None):
     args = p.parse_args(argv)
     if not Path(args.weights).is_file():
         p.error(f"{args.weights}: no such file")
+    if not str(args.weights).endswith(".pt"):
+        p.error(f"{args.weights}: calibrate a .pt weights file (then export it: its graph carries the map)")
     if not str(args.out).endswith(".pt") or not Path(args.out).resolve().parent.is_dir():
         p.error(f"--out {args.out}: a .pt file in an existing folder")
     if not 1 <= args.threads <= 256:
         p.error(f"--threads must lie in 1..256, got {args.threads}")
     if args.refiner not in ("default", "none") and not Path(args.refiner).is_file():
         p.error(f"--refiner {args.refiner}: no such file (or default, none)")
+    from gpr3d.core.errors import GPR3DError
+    from gpr3d.io.packed import PackedDataset
+
     packed = [_pair(x, "--packed", p) for x in args.packed]
-    for path, _ in packed:
+    for path, n in packed:  # each opened before any work: not a packed dataset, or too few records, is one line
         if not Path(path).is_file():
             p.error(f"--packed {path}: no such file")
+        try:
+            size = len(PackedDataset(path))
+        except GPR3DError as exc:
+            p.error(f"--packed {path}: {exc}")
+        if n > size:
+            p.error(f"--packed {path}:{n}: the file holds {size} records")
     synthetic = []
     for x in args.synthetic:
         seed, n = _pair(x, "--synthetic", p)
@@ -100,7 +111,6 @@ def main(argv=None):
     import torch
 
     from gpr3d.core.atomic import atomic_path
-    from gpr3d.core.errors import GPR3DError
     from gpr3d.detection.calibration import calibrate, fit_platt
     from gpr3d.detection.infer import load_detector
     from gpr3d.detection.weights import FORMAT
@@ -114,8 +124,8 @@ def main(argv=None):
         p.error(str(exc))
     det.calibration = None  # the network's own scores are what the map is fitted to
     t0 = time.perf_counter()
-    scores, truth = collect(det, records(packed, synthetic))
-    try:
+    try:  # (a record that cannot be read, or marks that cannot be fitted: one line)
+        scores, truth = collect(det, records(packed, synthetic))
         a, b = fit_platt(scores, truth)
     except GPR3DError as exc:
         p.error(str(exc))

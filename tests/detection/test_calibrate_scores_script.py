@@ -23,13 +23,25 @@ WEIGHTS = REPO / "src" / "gpr3d" / "detection" / "default_detector.pt"
     (["--synthetic", "abc:3"], "the seed must be a whole number"),
     (["--packed", "absent.h5:3"], "--packed absent.h5: no such file"),
     (["--packed", "datasets/gprmax400.h5:0"], "expected NAME:N with N a whole number >= 1"),
+    (["--packed", "datasets/gprmax400.h5:401"], "--packed datasets/gprmax400.h5:401: the file holds 400 records"),
+    (["--packed", "README.md:3"], "--packed README.md: README.md: HDF5 content is corrupt or truncated"),
+    (["--out", "cal.txt", "--synthetic", "5:1"], "--out cal.txt: a .pt file in an existing folder"),
 ])
 def test_wrong_arguments_are_one_line_and_write_nothing(tmp_path, extra, said):
     out = tmp_path / "cal.pt"
-    r = subprocess.run([sys.executable, str(SCRIPT), str(WEIGHTS), "--out", str(out), *extra], capture_output=True,
+    first = [] if "--out" in extra else ["--out", str(out)]
+    r = subprocess.run([sys.executable, str(SCRIPT), str(WEIGHTS), *first, *extra], capture_output=True,
                        text=True, timeout=120, cwd=REPO)
     assert r.returncode == 2 and said in r.stderr.strip().splitlines()[-1]
     assert not out.exists()
+
+
+def test_weights_that_are_not_a_pt_file_are_one_line(tmp_path):
+    onnx = REPO / "src" / "gpr3d" / "detection" / "default_detector.onnx"
+    r = subprocess.run([sys.executable, str(SCRIPT), str(onnx), "--out", str(tmp_path / "c.pt"), "--synthetic", "5:1"],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and r.stderr.strip().splitlines()[-1].endswith(
+        "default_detector.onnx: calibrate a .pt weights file (then export it: its graph carries the map)")
 
 
 def test_the_fit_lands_in_the_weights_and_every_score_goes_through_it(tmp_path):

@@ -238,3 +238,24 @@ def test_export_writes_a_graph_with_its_names_metadata_and_pytorch_s_answer(tmp_
     (b, s), = det.predict_windows([im])
     (b0, s0), = Detector.load().predict_windows([im])
     assert b.shape == b0.shape and np.abs(np.sort(s) - np.sort(s0)).max() < 2e-3
+
+
+def test_an_export_of_calibrated_weights_carries_the_map_and_applies_it(tmp_path):
+    from gpr3d.detection.calibration import calibrate
+    from gpr3d.detection.ort import export_onnx
+    from gpr3d.simulation.surveys import survey_sample
+
+    obj = torch.load(DEFAULT_WEIGHTS, weights_only=True)
+    cal = {"method": "platt", "a": 0.8, "b": -1.5}
+    obj["provenance"] = {**obj["provenance"], "score_calibration": cal}
+    torch.save(obj, tmp_path / "cal.pt")
+    export_onnx(tmp_path / "cal.pt", tmp_path / "cal.onnx")
+    det = OnnxDetector.load(tmp_path / "cal.onnx")
+    assert det.calibration == cal
+    s, _ = survey_sample(777, 5)
+    got = det.detect(s, score_threshold=0.0)
+    raw = OnnxDetector.load().detect(s, score_threshold=0.0)  # the shipped graph: the same network, no map
+    assert got["calibrated"] and not raw["calibrated"] and len(got["targets"]) == len(raw["targets"]) > 0
+    # (the two exports of one network agree to ONNX Runtime's rounding; the map moves scores by up to ~0.5)
+    np.testing.assert_allclose([t["score"] for t in got["targets"]],
+                               calibrate([t["score"] for t in raw["targets"]], cal), atol=1e-4)
