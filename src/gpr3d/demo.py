@@ -433,8 +433,11 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
 
     hyb = depth["random_walk"]["eps_r"]
     t = time.perf_counter()
+    # images compared in migrated time (focus_eps's default window), 4 cm cells: on a fixed depth grid of 5 cm
+    # cells the entropy drifts down at high eps_r and a detector with 18 more boxes moved the focus from 8.6 to 12.7
+    # (benchmarks/results/intel/focus_window.md)
     foc = focus_eps(survey, boxes=boxes, eps_grid=np.linspace(np.sqrt(0.6 * hyb), np.sqrt(1.8 * hyb), 7) ** 2,
-                    spacing_m=0.05, max_depth_m=0.8)
+                    spacing_m=0.04, max_depth_m=0.8)
     depth["random_walk"]["focus"] = {"eps_r": foc["eps_r"], "at_edge": foc["at_edge"], "wall_s": time.perf_counter() - t}
     log(f"      migration focus (3D, from the poses) eps_r {foc['eps_r']:5.2f} in {time.perf_counter() - t:.0f} s "
         f"(the hybrid's {hyb:.2f}; true {depth['random_walk']['eps_r_true']:g})")

@@ -55,7 +55,7 @@ def _stub(monkeypatch, entropy_of_eps):
     tried = []
 
     def fake(survey, cfg, boxes=None):
-        tried.append((cfg.eps_r, cfg.spacing_m, cfg.max_depth_m, cfg.aperture_deg, boxes))
+        tried.append((cfg.eps_r, cfg.spacing_m, cfg.max_depth_m, cfg.aperture_deg, boxes, cfg.depth_spacing_m))
         return types.SimpleNamespace(envelope=cfg.eps_r)
 
     monkeypatch.setattr(rec, "reconstruct", fake)
@@ -66,11 +66,34 @@ def _stub(monkeypatch, entropy_of_eps):
 def test_the_best_eps_is_the_parabola_vertex_in_slowness(monkeypatch):
     """Entropy (sqrt(eps) - 2.9)^2 + 1 over the default grid: the vertex in sqrt(eps_r) is exact, 2.9^2 = 8.41."""
     tried = _stub(monkeypatch, lambda eps: (np.sqrt(eps) - 2.9) ** 2 + 1.0)
-    r = focus_eps("survey", boxes=[[1, 2, 3, 4]], spacing_m=0.05, max_depth_m=0.8, aperture_deg=40.0)
+    r = focus_eps("survey", boxes=[[1, 2, 3, 4]], spacing_m=0.05, max_depth_m=0.8, aperture_deg=40.0, window="depth")
     assert r["eps_r"] == pytest.approx(8.41, rel=1e-9, abs=0) and not r["at_edge"]
     np.testing.assert_allclose(r["eps_grid"], np.linspace(np.sqrt(3.0), np.sqrt(25.0), 12) ** 2)
     np.testing.assert_allclose(r["entropy"], (np.sqrt(r["eps_grid"]) - 2.9) ** 2 + 1.0)
-    assert [t[1:] for t in tried] == [(0.05, 0.8, 40.0, [[1, 2, 3, 4]])] * 12
+    assert [t[1:] for t in tried] == [(0.05, 0.8, 40.0, [[1, 2, 3, 4]], None)] * 12
+
+
+def test_in_migrated_time_the_depth_range_and_cell_follow_the_wave_speed(monkeypatch):
+    """window="time" (the default): at eps_r 4, 9 and 36 the middle is sqrt(4 x 36) = 12, so the depth and the depth
+    cell are the given ones x sqrt(12 / eps_r) (1.732, 1.155, 0.577): the two-way time to the grid's bottom is the
+    same at every eps_r. The lateral cell stays."""
+    tried = _stub(monkeypatch, lambda eps: (np.sqrt(eps) - 3.0) ** 2)
+    focus_eps("s", eps_grid=[4.0, 9.0, 36.0], spacing_m=0.05, max_depth_m=0.8)
+    k = np.sqrt(12.0 / np.array([4.0, 9.0, 36.0]))
+    np.testing.assert_allclose([t[2] for t in tried], 0.8 * k, rtol=1e-12)
+    np.testing.assert_allclose([t[5] for t in tried], 0.05 * k, rtol=1e-12)
+    assert [t[1] for t in tried] == [0.05] * 3
+    # the time to the bottom, 2 depth / v, v = c / sqrt(eps_r): one value for all three
+    times = 2 * 0.8 * k * np.sqrt([4.0, 9.0, 36.0]) / 299792458.0
+    np.testing.assert_allclose(times, times[0], rtol=1e-12)
+    tried.clear()
+    focus_eps("s", eps_grid=[4.0, 9.0, 36.0])  # no depth given: the record's (or its signal's) scales by itself
+    assert [(t[2], t[5]) for t in tried] == [(None, pytest.approx(0.04 * kk, rel=1e-12)) for kk in k]
+    tried.clear()
+    focus_eps("s", eps_grid=[4.0, 9.0, 36.0], spacing_m=None, max_depth_m=0.5)  # the data's cell: left to them
+    assert [t[5] for t in tried] == [None] * 3
+    with pytest.raises(InvalidDataError, match="^window must be 'time' or 'depth', got 'migrated'$"):
+        focus_eps("s", eps_grid=[4.0, 9.0, 36.0], window="migrated")
 
 
 def test_a_best_eps_at_the_grid_edge_is_flagged(monkeypatch):
@@ -116,6 +139,7 @@ def test_entropy_in_float64_and_the_defaults_passed_on(monkeypatch):
     r = focus_eps("the survey", eps_grid=[[4.0], [9.0], [16.0]])  # any shape: flattened
     assert set(seen) == {"the survey"} and r["eps_grid"] == [4.0, 9.0, 16.0]
     assert [t[1:4] for t in tried] == [(0.04, None, 50.0)] * 3
+    np.testing.assert_allclose([t[5] for t in tried], 0.04 * np.sqrt(8.0 / np.array([4.0, 9.0, 16.0])), rtol=1e-12)
     assert focus_eps("s", eps_grid=[1.0, 4.0, 9.0])["eps_grid"][0] == 1.0  # eps_r 1 is allowed
     assert focus_eps("s", eps_grid=[4.0, 4.5, 5.0])["eps_grid"] == [4.0, 4.5, 5.0]  # steps under one
 

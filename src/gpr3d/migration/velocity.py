@@ -7,6 +7,12 @@ with the right wave speed every trace's echo lands on the target and the image i
 echoes smear. The sharpness is measured by the entropy of the image's energy (lower: more focused), over a grid
 of eps_r, refined by a parabola through the best three.
 
+The images compared hold the same samples on the same cells of migrated time (``window="time"``): a slower wave
+puts a record's time window at a shallower depth, so the depth range and the depth cell follow the wave speed.
+On a fixed depth grid (``window="depth"``) a slower wave reads more of the record into the same cells, and the
+entropy drifts down at high eps_r: on the demo's survey, 5 cm cells put the best value at the grid's top end
+(``benchmarks/results/focus_window.md``).
+
 >>> r = focus_eps(survey, boxes=boxes)                                  # doctest: +SKIP
 >>> r["eps_r"]                                                          # doctest: +SKIP
 """
@@ -31,21 +37,31 @@ def image_entropy(image) -> float:
 
 
 def focus_eps(survey, *, boxes=None, eps_grid=None, spacing_m: float = 0.04, max_depth_m: float | None = None,
-              aperture_deg: float = 50.0) -> dict:
+              aperture_deg: float = 50.0, window: str = "time") -> dict:
     """eps_r that focuses the migrated image of ``survey`` best (inside ``boxes`` only, when given).
 
-    ``eps_grid``: the values tried (default 3 to 25, 12 steps even in sqrt(eps_r), i.e. in slowness). Returns
-    ``eps_r``, the grid and its entropies, and ``at_edge`` (the best lies at an end of the grid: widen it)."""
+    ``eps_grid``: the values tried (default 3 to 25, 12 steps even in sqrt(eps_r), i.e. in slowness).
+    ``window``: ``"time"`` (every image on the same cells of migrated time: ``spacing_m`` and ``max_depth_m`` are
+    the depth cell and depth at the grid's middle eps_r, the geometric mean of its ends, and scale with the wave
+    speed, sqrt(middle / eps_r); with no ``max_depth_m`` the record's or its signal's depth scales by itself) or
+    ``"depth"`` (one depth grid for all). Returns ``eps_r``, the grid and its entropies, and ``at_edge`` (the best
+    lies at an end of the grid: widen it)."""
     from gpr3d.migration.reconstruct import ReconstructConfig, reconstruct
 
+    if window not in ("time", "depth"):
+        raise InvalidDataError(f"window must be 'time' or 'depth', got {window!r}")
     grid = (np.linspace(np.sqrt(3.0), np.sqrt(25.0), 12) ** 2 if eps_grid is None
             else np.asarray(eps_grid, dtype=float).reshape(-1))
     if grid.size < 3 or not np.all(np.isfinite(grid)) or np.any(grid < 1.0) or np.any(np.diff(grid) <= 0):
         raise InvalidDataError("eps_grid must hold at least three increasing values >= 1")
+    middle = float(np.sqrt(grid[0] * grid[-1]))
     ent = []
     for eps in grid:
-        r = reconstruct(survey, ReconstructConfig(eps_r=float(eps), spacing_m=spacing_m, max_depth_m=max_depth_m,
-                                                  aperture_deg=aperture_deg), boxes=boxes)
+        k = float(np.sqrt(middle / eps)) if window == "time" else 1.0
+        cfg = ReconstructConfig(eps_r=float(eps), spacing_m=spacing_m, aperture_deg=aperture_deg,
+                                depth_spacing_m=None if window == "depth" or spacing_m is None else spacing_m * k,
+                                max_depth_m=None if max_depth_m is None else max_depth_m * k)
+        r = reconstruct(survey, cfg, boxes=boxes)
         ent.append(image_entropy(r.envelope))
     ent = np.array(ent)
     if not np.any(np.isfinite(ent)):
