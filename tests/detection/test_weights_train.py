@@ -8,7 +8,7 @@ torch = pytest.importorskip("torch")
 pytest.importorskip("torchvision")
 
 from gpr3d.core.errors import FormatError, GPR3DError  # noqa: E402
-from gpr3d.detection.infer import Detector  # noqa: E402
+from gpr3d.detection.infer import Detector, load_detector  # noqa: E402
 from gpr3d.detection.models import build_model  # noqa: E402
 from gpr3d.detection.train import TrainConfig, train_detector  # noqa: E402
 from gpr3d.detection.weights import DEFAULT_WEIGHTS, load_weights, save_weights  # noqa: E402
@@ -77,7 +77,10 @@ def test_training_checkpoints_and_resumes(tmp_path):
 
 
 def test_detector_finds_separate_pipes_at_their_apexes():
-    det = Detector.load()
+    """The shipped detector as ``gpr3d detect`` runs it (with the box refiner): all 9 visible targets found on this
+    record, the PVC pipe under a rebar included (stage 5; its network's own boxes, ``Detector.load()``, place one
+    rebar's apex 0.163 ns off, past the 0.156 allowed)."""
+    det = load_detector(engine="torch")
     s, lab = survey_sample(4242, 3, augment=False)
     res = det.detect(s, score_threshold=0.5)
     true = [(x["apex_trace"], x["apex_time_s"]) for x in lab["labels"] if x["visible"]]
