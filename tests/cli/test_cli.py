@@ -211,7 +211,7 @@ def test_demo_end_to_end(tmp_path):
         assert (pg["image"], pg["n_labelled"]) == ("IECAS_0032.png", 9) and "detections_pgpr.png" in names
         assert 0 <= pg["right_kind"] <= pg["found_iou50"] <= 9 and sum(pg["kinds"].values()) == pg["n_detections"]
         # its boxes placed by the shipped refiner, beside the network's own (one image: either may fit better)
-        assert pg["refiner"] == "refiner_pgpr_synth_whole" and set(pg["mean_iou"]) == {"refined", "network", "mirrored"}
+        assert pg["refiner"] == "refiner_pgpr_synth_gprmax_whole" and set(pg["mean_iou"]) == {"refined", "network", "mirrored"}
         assert pg["refine"] == {"mirror": True, "passes": 2}  # the default application, as detect reports it
         assert all(0.3 < v <= 1 for v in pg["mean_iou"].values()) and pg["mean_iou"]["refined"] != pg["mean_iou"]["network"]
         # and seen mirrored too: the two views' boxes fused move them

@@ -30,7 +30,7 @@ def test_detect_on_the_real_dzt_writes_the_contract(tmp_path):
     assert times["stages"]["network"] <= d["wall_s"]  # the detector's own clock spans its stages
     inner = ("prepare", "windows", "network", "merge", "refine", "apexes")
     assert sum(times["stages"][k] for k in inner) <= d["wall_s"] + 1e-3
-    assert d["refiner"] == "refiner_pgpr_synth_whole"  # the shipped box refiner placed the shipped detector's boxes
+    assert d["refiner"] == "refiner_pgpr_synth_gprmax_whole"  # the shipped box refiner placed the shipped detector's boxes
     assert d["n_traces"] == 1040 and d["dt_s"] == pytest.approx(48e-9 / 512, rel=1e-9, abs=0)
     assert d["input"] == str(src)
     for t in d["targets"]:
