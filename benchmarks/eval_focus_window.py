@@ -52,14 +52,22 @@ def main(argv=None):
     ap.add_argument("--spacings", type=float, nargs="+", default=[0.05, 0.03])
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     args = ap.parse_args(argv)
+    if not all(np.isfinite(e) and 1.0 <= e <= 80.0 for e in args.eps):
+        ap.error(f"--eps must be relative permittivities in 1..80, got {args.eps}")
+    if not all(np.isfinite(sp) and 0.005 <= sp <= 0.2 for sp in args.spacings):
+        ap.error(f"--spacings must be cell sizes in 0.005..0.2 m, got {args.spacings}")
+    if not all(sd >= 0 for sd in args.seeds):
+        ap.error(f"--seeds must be whole numbers >= 0, got {args.seeds}")
     cases = []
     if args.demo:
         d = Path(args.demo)
         for name in ("random_walk_survey.h5", "detections.json"):
             if not (d / name).exists():
                 ap.error(f"{d / name} is missing: run `gpr3d demo --out {d}` with the dl extra first")
-        found = json.loads((d / "detections.json").read_text())
-        boxes = [tg["box"] for tg in found["targets"]]
+        try:
+            boxes = [[float(v) for v in tg["box"]] for tg in json.loads((d / "detections.json").read_text())["targets"]]
+        except (ValueError, KeyError, TypeError) as exc:
+            ap.error(f"{d / 'detections.json'} is not a gpr3d detect output ({type(exc).__name__}: {exc})")
         cases.append((f"demo survey, {len(boxes)} detected boxes, to 0.8 m", 9.0,
                       lambda: Survey.load(d / "random_walk_survey.h5"), boxes, 0.8))
     for eps in args.eps:

@@ -11,7 +11,7 @@ The images compared hold the same samples on the same cells of migrated time (``
 puts a record's time window at a shallower depth, so the depth range and the depth cell follow the wave speed.
 On a fixed depth grid (``window="depth"``) a slower wave reads more of the record into the same cells, and the
 entropy drifts down at high eps_r: on the demo's survey, 5 cm cells put the best value at the grid's top end
-(``benchmarks/results/focus_window.md``).
+(``benchmarks/results/intel/focus_window.md``).
 
 >>> r = focus_eps(survey, boxes=boxes)                                  # doctest: +SKIP
 >>> r["eps_r"]                                                          # doctest: +SKIP
