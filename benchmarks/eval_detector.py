@@ -79,6 +79,9 @@ def main(argv=None):
                    help="torch (default) or onnx ('default' weights only: the shipped export)")
     p.add_argument("--refiner", nargs="*", default=[], help="box refiners (.pt/.onnx; 'default': the shipped one): "
                    "each detector is measured without a refiner, then with each")
+    p.add_argument("--quality-weights", nargs="+", default=["own"], metavar="W",
+                   help="a refiner with a quality head is measured with each of these weights on the scores "
+                        "(0: the network's scores; own, the default: the weight the refiner gives each rule)")
     p.add_argument("--score", type=float, default=0.5, help="score threshold for apex recall / false targets")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
     p.add_argument("--name", default="detector_eval", help="the result files' name in --out (.md and .csv)")
@@ -92,8 +95,16 @@ def main(argv=None):
     from gpr3d.detection.infer import load_detector
     from gpr3d.detection.models import count_parameters
 
+    from refiner_variants import refiner_variants
+
+    from gpr3d.core.errors import GPR3DError
+
+    try:
+        variants = refiner_variants(args.refiner, args.quality_weights)
+    except GPR3DError as exc:
+        p.error(str(exc))
     rows = []
-    for w, refiner in [(w, r) for w in args.weights for r in [None, *args.refiner]]:
+    for w, (refiner, qw) in [(w, r) for w in args.weights for r in [(None, None), *variants]]:
         det = load_detector(None if w == "default" else w, engine=args.runtime, refiner="none")
         det.refiner = None
         prov = det.provenance
@@ -104,8 +115,10 @@ def main(argv=None):
         if refiner:
             from gpr3d.detection.refine import load_refiner
 
-            det.refiner = load_refiner(None if refiner == "default" else refiner)
+            det.refiner = load_refiner(None if refiner == "default" else refiner, quality_weight=qw)
             name += f" + refiner {'shipped' if refiner == 'default' else Path(refiner).name}"
+            if det.refiner.quality:
+                name += " (its own quality weights)" if qw is None else f" (quality weight {qw:g})"
         for kind in args.sets:
             if kind == "gprmax400" and not (ROOT / "datasets" / "gprmax400.h5").exists():
                 continue

@@ -129,6 +129,9 @@ def main(argv=None):
     p.add_argument("--name", default="pgpr.md", help="the result file's name in --out")
     p.add_argument("--refiner", nargs="*", default=[], help="box refiners (.pt/.onnx; 'default': the shipped one): "
                    "each detector is measured without a refiner, then with each")
+    p.add_argument("--quality-weights", nargs="+", default=["own"], metavar="W",
+                   help="a refiner with a quality head is measured with each of these weights on the scores "
+                        "(0: the network's scores; own, the default: the weight the refiner gives each rule)")
     p.add_argument("--worst", type=int, default=0, help="overlays of the K B-scans with the most missed labels "
                    "(first detector), into --figures")
     p.add_argument("--figures", default=str(ROOT / "docs" / "figures" / "pgpr"))
@@ -147,7 +150,7 @@ def main(argv=None):
             raise ValueError
     except ValueError:
         p.error(f"--trace-scales must be numbers in 0.25..4 or auto, separated by commas, got {args.trace_scales!r}")
-    from gpr3d.core.errors import FormatError
+    from gpr3d.core.errors import FormatError, GPR3DError
 
     for part in args.split.split(","):  # before any work: a folder that is not there is one line
         if not (Path(args.pgpr) / part).is_dir():
@@ -175,7 +178,13 @@ def main(argv=None):
              "| detector | set, metric kind | mAP@0.5 | mAP@0.75 | mAP@[.5:.95] | AR@10 | AR@100 | recall@0.5 |",
              "|---|---|---|---|---|---|---|---|"]
     timing = []
-    for spec, refiner in [(d, r) for d in args.detectors for r in [None, *args.refiner]]:
+    from refiner_variants import refiner_variants
+
+    try:
+        variants = refiner_variants(args.refiner, args.quality_weights)
+    except GPR3DError as exc:
+        p.error(str(exc))
+    for spec, (refiner, qw) in [(d, r) for d in args.detectors for r in [(None, None), *variants]]:
         det, name = load(spec)
         det.refiner = None
         det.trace_scales, det.mirror, det.fuse_average, det.vote = scales, args.mirror, not args.no_average, args.vote
@@ -190,8 +199,10 @@ def main(argv=None):
         if refiner:
             from gpr3d.detection.refine import load_refiner
 
-            det.refiner = load_refiner(None if refiner == "default" else refiner)
+            det.refiner = load_refiner(None if refiner == "default" else refiner, quality_weight=qw)
             name += f" + refiner {'shipped' if refiner == 'default' else Path(refiner).name}"
+            if det.refiner.quality:
+                name += " (its own quality weights)" if qw is None else f" (quality weight {qw:g})"
         for part, sub in [(what, recs)] + [(f"{what} {d} only", v) for d, v in devices.items()]:
             m = evaluate(det, sub)
             lines.append(_row(name, f"{part}, class-agnostic", m))
@@ -201,7 +212,7 @@ def main(argv=None):
             if part == what:
                 timing.append(f"{name}: {m['s_per_window'] * 1e3:.0f} ms per window, {m['wall_s']:.0f} s for the set")
             print(lines[-1], flush=True)
-        if args.worst and spec == args.detectors[0] and refiner == ([None, *args.refiner][-1]):
+        if args.worst and spec == args.detectors[0] and (refiner, qw) == ([(None, None), *variants][-1]):
             lines += ["", *worst_cases(det, recs, args.worst, Path(args.figures)), ""]
     for name, m50, m, rec in PUBLISHED:
         lines.append(f"| {name} | P-GPR test, class-averaged | {m50:.3f} | - | {m:.3f} | - | - | "

@@ -31,10 +31,10 @@ from eval_pgpr import PGPR_DEFAULT, pgpr_records  # noqa: E402
 from finetune_pgpr import PGPR_CREDIT  # noqa: E402  (beside this file)
 
 
-def samples(records, window, whole: bool = False):
-    """``(image, label boxes px)`` of each record, rendered as the detector's windows are; with ``whole``, records
-    whose labels name their apexes (simulated ones) and hold a box cut by the record's first or last trace give
-    ``(image, label boxes px, whole boxes px)`` (``gpr3d.detection.refine.whole_boxes``)."""
+def samples(records, window, whole: bool = False, head: int = 0):
+    """``(image, label boxes px, whole boxes px or None, head)`` of each record, rendered as the detector's windows
+    are; with ``whole``, records whose labels name their apexes (simulated ones) and hold a box cut by the record's
+    first or last trace give their whole boxes (``gpr3d.detection.refine.whole_boxes``), the others None."""
     from gpr3d.detection.refine import record_image, record_pixmap, whole_boxes
     from gpr3d.detection.windows import prepare
 
@@ -47,9 +47,9 @@ def samples(records, window, whole: bool = False):
             wb = whole_boxes([x["box"] for x in vis], [x["apex_trace"] for x in vis], survey.n_traces)
             wpx = np.asarray([pm.box_to_px(b) for b in wb], float).reshape(-1, 4)
             if not np.array_equal(wpx, boxes):
-                yield image, boxes, wpx
+                yield image, boxes, wpx, head
                 continue
-        yield image, boxes
+        yield image, boxes, None, head
 
 
 def main(argv=None):
@@ -68,10 +68,37 @@ def main(argv=None):
     p.add_argument("--whole", action="store_true",
                    help="simulated labels cut by the record's ends taught as the whole hyperbola's box (reaching past "
                         "the record), whose centre is the apex: gpr3d.detection.refine.whole_boxes")
+    p.add_argument("--rule-heads", action="store_true",
+                   help="one head a label rule: P-GPR's pictures teach the 'pgpr' head, the synthetic and gprMax "
+                        "records the 'gpr3d' head (gpr3d detect picks the head by its input: pgpr for pictures)")
+    p.add_argument("--quality", type=int, default=0, metavar="N",
+                   help="also learn each box's IoU with its label (a quality head that rescales the detector's "
+                        "scores) from N boxes a label drawn wider and N a label anywhere in the picture")
+    p.add_argument("--quality-weights", nargs="+", default=[], metavar="RULE=W",
+                   help="with --quality: the weight of the quality on the scores for each rule's head, recorded in "
+                        "the weights (gpr3d detect's default; 1 for a rule not named); the shipped refiner: "
+                        "gpr3d=1 pgpr=0 (benchmarks/results/intel/refiner_rules_quality.md)")
     p.add_argument("--onnx", default=None, help="also export the refiner (crops in, edge moves out) to this .onnx")
     args = p.parse_args(argv)
     if args.pgpr == "none" and not args.synthetic and not args.gprmax:
         p.error("nothing to train on: --pgpr none with neither --synthetic nor --gprmax")
+    if args.rule_heads and (args.pgpr == "none" or not (args.synthetic or args.gprmax)):
+        p.error("--rule-heads needs both rules' data: P-GPR's pictures and --synthetic or --gprmax records")
+    if args.quality < 0:
+        p.error(f"--quality must be a whole number >= 0, got {args.quality}")
+    from gpr3d.detection.refine import RULES
+
+    quality_weights = {}
+    for spec in args.quality_weights:
+        rule, _, w = spec.partition("=")
+        try:
+            quality_weights[rule] = float(w)
+        except ValueError:
+            quality_weights[rule] = -1.0
+        if rule not in RULES or not 0.0 <= quality_weights[rule] <= 8.0:
+            p.error(f"--quality-weights {spec}: a rule ({', '.join(RULES)}) = a number in 0..8")
+    if quality_weights and not args.quality:
+        p.error("--quality-weights weigh a quality head: give --quality N too")
     for spec in args.gprmax:  # checked before any work: a wrong one is one line
         path, _, held = spec.partition(":")
         if not Path(path).is_file():
@@ -84,7 +111,9 @@ def main(argv=None):
     from gpr3d.detection.weights import load_weights
 
     _, window, _ = load_weights()
-    records, parts = [], []
+    rules = list(RULES) if args.rule_heads else None
+    pgpr_head = RULES.index("pgpr") if args.rule_heads else 0
+    pictures, records, parts = [], [], []
     if args.pgpr != "none":
         from gpr3d.core.errors import FormatError
 
@@ -92,7 +121,7 @@ def main(argv=None):
             recs = pgpr_records(args.pgpr, "train", args.only)
         except FormatError as exc:  # (read_yolo: a folder with no picture, or none that the glob names)
             p.error(f"--only {args.only!r}: no P-GPR train picture matches" if args.only else str(exc))
-        records += recs
+        pictures += recs
         parts.append(f"P-GPR train{f' {args.only}' if args.only else ''} ({len(recs)} B-scans)")
     if args.synthetic:
         from gpr3d.simulation.surveys import survey_sample
@@ -108,11 +137,18 @@ def main(argv=None):
         records += recs
         parts.append(f"{Path(path).name} ({len(recs)} records{f', its last {held} left out' if held else ''})")
     t0, cpu0 = time.perf_counter(), time.process_time()
-    net = train_refiner(samples(records, window, args.whole), epochs=args.epochs, per_label=args.per_label, seed=args.seed,
-                        log=lambda m: print(m, flush=True))
+    from itertools import chain
+
+    data = chain(samples(pictures, window, args.whole, pgpr_head), samples(records, window, args.whole, 0))
+    net = train_refiner(data, epochs=args.epochs, per_label=args.per_label, seed=args.seed,
+                        heads=len(rules) if rules else 1, quality=args.quality, log=lambda m: print(m, flush=True))
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     prov = {"name": args.name, "command": "python references/detection/train_refiner.py " + " ".join(argv or sys.argv[1:]),
-            "data": " + ".join(parts), "whole": args.whole, "epochs": args.epochs, "per_label": args.per_label, "seed": args.seed,
+            "data": " + ".join(parts), "whole": args.whole, "epochs": args.epochs,
+            **({"rules": rules} if rules else {}),
+            **({"quality": True, "quality_boxes": args.quality} if args.quality else {}),
+            **({"quality_weights": quality_weights} if quality_weights else {}),
+            "per_label": args.per_label, "seed": args.seed,
             "train_wall_s": round(wall, 1), "train_cpu_s": round(cpu, 1), "torch_threads": torch.get_num_threads(),
             "host": platform.processor() or platform.machine()}
     if args.pgpr != "none":
@@ -121,7 +157,9 @@ def main(argv=None):
     print(f"wrote {args.out}: {wall:.0f} s wall, {cpu:.0f} s CPU")
     if args.onnx:
         r = export_refiner_onnx(args.out, args.onnx)
-        print(f"wrote {r['file']} ({r['bytes']} bytes), largest difference from PyTorch {r['max_abs_diff']:.2e}")
+        q = "" if r["max_quality_diff"] is None else f", of its qualities {r['max_quality_diff']:.2e}"
+        print(f"wrote {r['file']} ({r['bytes']} bytes), largest difference of its moves from PyTorch's "
+              f"{r['max_abs_diff']:.2e}{q}")
 
 
 if __name__ == "__main__":

@@ -211,8 +211,10 @@ def test_demo_end_to_end(tmp_path):
         assert (pg["image"], pg["n_labelled"]) == ("IECAS_0032.png", 9) and "detections_pgpr.png" in names
         assert 0 <= pg["right_kind"] <= pg["found_iou50"] <= 9 and sum(pg["kinds"].values()) == pg["n_detections"]
         # its boxes placed by the shipped refiner, beside the network's own (one image: either may fit better)
-        assert pg["refiner"] == "refiner_pgpr_synth_gprmax_whole" and set(pg["mean_iou"]) == {"refined", "network", "mirrored"}
-        assert pg["refine"] == {"mirror": True, "passes": 2}  # the default application, as detect reports it
+        assert pg["refiner"] == "refiner_pgpr_synth_gprmax_whole_rules_quality"
+        assert set(pg["mean_iou"]) == {"refined", "network", "mirrored"}
+        # the default application, as detect reports it: P-GPR's head for a picture, its quality not weighing the scores
+        assert pg["refine"] == {"mirror": True, "passes": 2, "rule": "pgpr", "quality_weight": 0.0}
         assert all(0.3 < v <= 1 for v in pg["mean_iou"].values()) and pg["mean_iou"]["refined"] != pg["mean_iou"]["network"]
         # and seen mirrored too: the two views' boxes fused move them
         assert 0 <= pg["found_iou50_mirrored"] <= 9 and pg["mean_iou"]["mirrored"] != pg["mean_iou"]["refined"]

@@ -30,7 +30,7 @@ def test_detect_on_the_real_dzt_writes_the_contract(tmp_path):
     assert times["stages"]["network"] <= d["wall_s"]  # the detector's own clock spans its stages
     inner = ("prepare", "windows", "network", "merge", "refine", "apexes")
     assert sum(times["stages"][k] for k in inner) <= d["wall_s"] + 1e-3
-    assert d["refiner"] == "refiner_pgpr_synth_gprmax_whole"  # the shipped box refiner placed the shipped detector's boxes
+    assert d["refiner"] == "refiner_pgpr_synth_gprmax_whole_rules_quality"  # the shipped box refiner placed the shipped detector's boxes
     assert d["n_traces"] == 1040 and d["dt_s"] == pytest.approx(48e-9 / 512, rel=1e-9, abs=0)
     assert d["input"] == str(src)
     for t in d["targets"]:
@@ -75,6 +75,10 @@ def test_detect_on_the_embedded_dzt_imports_neither_scipy_signal_nor_ndimage(tmp
     (["--refine-passes", "6"], "--refine-passes must be a whole number in 1..5, got 6"),
     (["--refine-passes", "1", "--refiner", "none"], "say how the box refiner is applied: not with --refiner none"),
     (["--no-refine-mirror", "--refiner", "none"], "say how the box refiner is applied: not with --refiner none"),
+    (["--box-rule", "pgpr", "--refiner", "none"], "say how the box refiner is applied: not with --refiner none"),
+    (["--quality-weight", "0.5", "--refiner", "none"], "say how the box refiner is applied: not with --refiner none"),
+    (["--quality-weight", "-1"], "--quality-weight must be a number in 0..8, got -1.0"),
+    (["--quality-weight", "nan"], "--quality-weight must be a number in 0..8, got nan"),
 ])
 def test_detect_bad_arguments_one_line(tmp_path, args, msg):
     from gpr3d.core.survey import Survey
@@ -205,10 +209,11 @@ def test_detect_applies_the_refiner_as_told_and_says_so(tmp_path):
     r = run_cli("detect", src, "--out", out, "--depth", "none", "--refine-passes", "1", "--no-refine-mirror")
     assert r.returncode == 0, r.stderr
     d = json.loads(out.read_text())
-    assert d["refine"] == {"mirror": False, "passes": 1}
+    # (the shipped refiner: gpr3d's head for a recording, its quality weighing the scores)
+    assert d["refine"] == {"mirror": False, "passes": 1, "rule": "gpr3d", "quality_weight": 1.0}
     want = load_detector(refine_mirror=False, refine_passes=1).detect(read(src), score_threshold=0.5)
     default = load_detector().detect(read(src), score_threshold=0.5)
-    assert default["refine"] == {"mirror": True, "passes": 2}
+    assert default["refine"] == {"mirror": True, "passes": 2, "rule": "gpr3d", "quality_weight": 1.0}
     got = np.array([t["box"] for t in d["targets"]])
     assert got.shape == (len(want["targets"]), 4)
     assert np.allclose(got, [t["box"] for t in want["targets"]], rtol=1e-5, atol=0)

@@ -205,8 +205,9 @@ def test_the_engine_is_chosen_by_the_file_the_device_and_what_is_installed(monke
 
     monkeypatch.setattr(ort.OnnxDetector, "load", loaded("onnx"))
     monkeypatch.setattr(infer.Detector, "load", loaded("torch"))
-    monkeypatch.setattr(refine, "load_refiner", lambda p, engine, mirror, passes: refiners.append((p, engine)) or
-                        (p, engine, mirror, passes))
+    monkeypatch.setattr(refine, "load_refiner", lambda p, engine, mirror, passes, rule, quality_weight:
+                        refiners.append((p, engine)) or (p, engine, mirror, passes) +
+                        (() if (rule, quality_weight) == ("auto", refine.QUALITY_WEIGHT) else (rule, quality_weight)))
     shipped = tmp_path / "default.onnx"
     monkeypatch.setattr(ort, "DEFAULT_ONNX", shipped)
     import importlib.util
@@ -234,6 +235,7 @@ def test_the_engine_is_chosen_by_the_file_the_device_and_what_is_installed(monke
     assert infer.load_detector("m.pt", refiner="r.pt").refiner == ("r.pt", "torch", True, 2)  # the shipped way
     assert infer.load_detector("m.onnx", refiner="default", refine_passes=3).refiner == (None, "onnx", True, 3)
     assert infer.load_detector(refine_mirror=False).refiner == (None, "torch", False, 2)
+    assert infer.load_detector(box_rule="pgpr", quality_weight=0).refiner == (None, "torch", True, 2, "pgpr", 0.0)
     for kw, msg in [(dict(engine="tensorrt"), "unknown engine 'tensorrt'; choose one of auto, torch, onnx, int8"),
                     (dict(path="m.pt", engine="onnx"), "--runtime onnx needs an .onnx file (export one with python "
                      "references/detection/export_onnx.py m.pt OUT.onnx), not m.pt"),

@@ -84,3 +84,48 @@ def test_a_file_that_is_not_a_packed_dataset_is_one_line(tmp_path):
     assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
     assert r.stderr.strip().splitlines()[-1].startswith("train_refiner.py: ") and "bad.h5" in r.stderr
     assert not (tmp_path / "ref.pt").exists()
+
+
+def test_rule_heads_give_p_gpr_pictures_their_own_head_and_quality_a_head_output(tmp_path):
+    """``--rule-heads --quality N``: the weights name both rules and the quality head, the network has two heads of
+    five outputs, and the P-GPR pictures teach the 'pgpr' head (training a head on them alone moves its boxes, not
+    the other head's)."""
+    import numpy as np
+
+    from gpr3d.detection.refine import load_refiner
+
+    pgpr = real_file("pgpr_1600MHz")
+    a = REPO / "datasets" / "gprmax_survey_train.h5"
+    from gpr3d.io.packed import PackedDataset
+
+    out = tmp_path / "ref.pt"
+    r = subprocess.run([sys.executable, str(SCRIPT), "--out", str(out), "--pgpr", str(pgpr), "--only", "IECAS_00*",
+                        "--gprmax", f"{a}:{len(PackedDataset(a)) - 2}", "--rule-heads", "--quality", "2",
+                        "--quality-weights", "pgpr=0.5",
+                        "--epochs", "1", "--per-label", "2"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    ref = load_refiner(out)
+    assert ref.provenance["rules"] == ["gpr3d", "pgpr"] and ref.provenance["quality"] is True
+    assert ref.provenance["quality_boxes"] == 2 and (ref.rules, ref.quality) == (("gpr3d", "pgpr"), True)
+    assert ref.provenance["quality_weights"] == {"pgpr": 0.5}
+    o = ref.predict_crops(np.random.default_rng(0).random((2, 3, 64, 64), dtype=np.float32))
+    assert o.shape == (2, 10) and not np.allclose(o[:, :4], o[:, 5:9])
+
+
+@pytest.mark.parametrize("args, says", [(["--pgpr", "none", "--synthetic", "2", "--rule-heads"],
+                                         "--rule-heads needs both rules' data"),
+                                        (["--synthetic", "0", "--rule-heads"], "--rule-heads needs both rules' data"),
+                                        (["--pgpr", "none", "--synthetic", "2", "--quality", "-1"],
+                                         "--quality must be a whole number >= 0, got -1"),
+                                        (["--pgpr", "none", "--synthetic", "2", "--quality", "2", "--quality-weights",
+                                          "voc=1"], "--quality-weights voc=1: a rule (gpr3d, pgpr) = a number in 0..8"),
+                                        (["--pgpr", "none", "--synthetic", "2", "--quality", "2", "--quality-weights",
+                                          "pgpr=x"], "--quality-weights pgpr=x: a rule (gpr3d, pgpr) = a number"),
+                                        (["--pgpr", "none", "--synthetic", "2", "--quality-weights", "pgpr=0"],
+                                         "--quality-weights weigh a quality head: give --quality N too")])
+def test_rule_heads_without_both_rules_and_a_negative_quality_are_one_line(tmp_path, args, says):
+    r = subprocess.run([sys.executable, str(SCRIPT), "--out", str(tmp_path / "ref.pt"), *args],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert says in r.stderr.strip().splitlines()[-1]
+    assert not (tmp_path / "ref.pt").exists()

@@ -175,3 +175,27 @@ def test_the_report_opens_in_a_real_browser_draws_its_3d_view_and_names_the_targ
     img = np.asarray(Image.open(tmp_path / "view3d.png").convert("RGB")).reshape(-1, 3)
     colours = {tuple(c) for c in img[:: max(1, len(img) // 50_000)]}
     assert len(colours) > 50, len(colours)  # a drawn scene, not a blank canvas
+
+
+def test_the_detections_key_follows_the_shipped_models_files(tmp_path, monkeypatch):
+    """With the shipped models (no --weights, --refiner auto, no --depthnet) the detection stage's key holds the
+    shipped files' hashes: a gpr3d that ships another refiner, detector or DepthNet makes the detections again."""
+    from gpr3d.detection import refine, weights
+    from gpr3d.inversion import depthnet
+    from gpr3d.pipeline import run
+
+    cfg = RunConfig(input="x.h5", out=str(tmp_path / "r"))
+    before = run._models_key(cfg)
+    assert before["refiner"][0] == run._sha(refine.DEFAULT_REFINER)
+    for module, name in ((refine, "DEFAULT_REFINER"), (weights, "DEFAULT_WEIGHTS"), (depthnet, "DEFAULT_DEPTHNET")):
+        other = tmp_path / f"{name}.bin"
+        other.write_bytes(b"another model")
+        with monkeypatch.context() as m:
+            m.setattr(module, name, other)
+            assert run._models_key(cfg) != before, name
+    assert run._models_key(cfg) == before
+    mine = tmp_path / "mine.pt"
+    mine.write_bytes(b"weights")
+    own = run._models_key(RunConfig(input="x.h5", out=str(tmp_path / "r"), weights=str(mine)))
+    assert own["weights"] == run._sha(mine) and own["refiner"] == "auto"  # no refiner with other weights
+    assert run._models_key(RunConfig(input="x.h5", out=str(tmp_path / "r"), refiner="none"))["refiner"] == "none"

@@ -115,16 +115,22 @@ def _detector(args):
         raise GPR3DError(f"--score must lie in 0..1, got {args.score}")
     scales = _trace_scales(getattr(args, "trace_scales", None))
     passes, mirror_off = getattr(args, "refine_passes", None), bool(getattr(args, "no_refine_mirror", False))
+    rule, weight = getattr(args, "box_rule", "auto"), getattr(args, "quality_weight", None)
     if passes is not None and not 1 <= passes <= 5:
         raise GPR3DError(f"--refine-passes must be a whole number in 1..5, got {passes}")
-    if (passes is not None or mirror_off) and args.refiner == "none":
-        raise GPR3DError("--refine-passes and --no-refine-mirror say how the box refiner is applied: "
-                         "not with --refiner none")
+    if weight is not None and not 0.0 <= weight <= 8.0:
+        raise GPR3DError(f"--quality-weight must be a number in 0..8, got {weight}")
+    how = passes is not None or mirror_off or rule != "auto" or weight is not None
+    if how and args.refiner == "none":
+        raise GPR3DError("--refine-passes, --no-refine-mirror, --box-rule and --quality-weight say how the box "
+                         "refiner is applied: not with --refiner none")
     det = load_detector(args.weights, device=args.device, engine=args.runtime, refiner=args.refiner,
-                        refine_passes=passes, refine_mirror=False if mirror_off else None)
-    if (passes is not None or mirror_off) and det.refiner is None:
-        raise GPR3DError("--refine-passes and --no-refine-mirror say how the box refiner is applied: these weights "
-                         "come without one (give --refiner default or a refiner's file)")
+                        refine_passes=passes, refine_mirror=False if mirror_off else None, box_rule=rule,
+                        quality_weight=weight)
+    if how and det.refiner is None:
+        raise GPR3DError("--refine-passes, --no-refine-mirror, --box-rule and --quality-weight say how the box "
+                         "refiner is applied: these weights come without one (give --refiner default or a "
+                         "refiner's file)")
     if "auto" in scales and not det.reference_width:
         raise GPR3DError("--trace-scales auto needs a detector that knows how wide its training records' features "
                          "were (weights fine-tuned by references/detection/finetune_pgpr.py); these weights do not")
@@ -219,6 +225,13 @@ def add_view_args(sp):
     sp.add_argument("--no-refine-mirror", action="store_true",
                     help="the box refiner sees each box once, not also mirrored (by default the two edge moves "
                          "are averaged)")
+    sp.add_argument("--box-rule", default="auto", choices=("auto", "gpr3d", "pgpr"),
+                    help="where a refiner of several label rules ends the boxes: gpr3d's rule (docs/labels.md), "
+                         "P-GPR's labellers' (boxes higher up the legs), or auto (default: P-GPR's for pictures, "
+                         "gpr3d's for recordings)")
+    sp.add_argument("--quality-weight", type=float, default=None, metavar="W",
+                    help="a refiner with a quality head multiplies each refined box's score by its predicted IoU "
+                         "to the power W (0..8; default 1; 0: scores as the network gives them)")
 
 
 def add_depth_args(sp, flag):

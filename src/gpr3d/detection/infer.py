@@ -31,7 +31,7 @@ ENGINES = ("auto", "torch", "onnx", "int8")
 
 
 def load_detector(path=None, *, device: str = "cpu", engine: str = "auto", refiner="auto", refine_mirror=None,
-                  refine_passes=None) -> "Detector":
+                  refine_passes=None, box_rule: str = "auto", quality_weight=None) -> "Detector":
     """The detector in ``path`` (default: the shipped one), run by ``engine`` (see ``ENGINES``).
 
     ``path`` may be a ``.pt`` weights file (torch) or an ``.onnx`` export of one (onnx).
@@ -39,12 +39,17 @@ def load_detector(path=None, *, device: str = "cpu", engine: str = "auto", refin
     ``"auto"`` the shipped one with the shipped detector and none with other weights,
     ``"none"`` (or None) none, or a refiner's ``.pt``/``.onnx`` file; ``refine_mirror``,
     ``refine_passes``: how it is applied (None: the refiner's defaults,
-    :data:`gpr3d.detection.refine.MIRROR` and :data:`~gpr3d.detection.refine.PASSES`).
+    :data:`gpr3d.detection.refine.MIRROR` and :data:`~gpr3d.detection.refine.PASSES`); ``box_rule``: the
+    label rule of a refiner with several heads (``"auto"``: P-GPR's for pictures, gpr3d's for recordings);
+    ``quality_weight``: how much a refiner's quality head rescales the scores (None: as the refiner says for
+    each rule, :meth:`~gpr3d.detection.refine.BoxRefiner.weight_for`; 0: not at all).
     """
-    from gpr3d.detection.refine import MIRROR, PASSES, check_application
+    from gpr3d.detection.refine import MIRROR, PASSES, check_application, check_quality_weight, check_rule
 
     mirror, passes = check_application(MIRROR if refine_mirror is None else refine_mirror,
                                        PASSES if refine_passes is None else refine_passes)
+    box_rule = check_rule(box_rule)
+    quality_weight = check_quality_weight(quality_weight)
     det = _load_network(path, device=device, engine=engine)
     if refiner == "auto":
         refiner = "default" if path is None else None
@@ -53,7 +58,7 @@ def load_detector(path=None, *, device: str = "cpu", engine: str = "auto", refin
 
         onnx = det.model is None  # the ONNX engine: no PyTorch for the refiner either
         det.refiner = load_refiner(None if refiner == "default" else refiner, engine="onnx" if onnx else "torch",
-                                   mirror=mirror, passes=passes)
+                                   mirror=mirror, passes=passes, rule=box_rule, quality_weight=quality_weight)
     return det
 
 
@@ -151,6 +156,17 @@ class Detector:
     def kinds(self) -> list[str] | None:
         """The target kinds the network names (label ``k + 1`` is ``kinds[k]``); ``None``: one class."""
         return getattr(self.model, "gpr3d_kinds", None)
+
+    def _refine_settings(self, survey) -> dict:
+        """How the refiner was applied to ``survey``: mirror, passes and, where the refiner has them, the label rule
+        of the head it used and its quality head's weight on the scores."""
+        r = self.refiner
+        out = {"mirror": bool(r.mirror), "passes": int(r.passes)}
+        if r.rules:
+            out["rule"] = r.head_for(survey)[1]
+        if r.quality:
+            out["quality_weight"] = r.weight_for(survey)
+        return out
 
     def share_cores(self) -> None:
         """Leave the cores to other work between runs: the ONNX engine's threads stop spinning
@@ -262,8 +278,12 @@ class Detector:
                 sure = np.nonzero(np.asarray(scores, float) >= score_threshold)[0]
                 boxes = np.array(boxes, float).reshape(-1, 4)
                 if len(sure):
-                    boxes[sure] = self.refiner.refine(survey, self.window.rows, boxes[sure],
-                                                      record_image(proc, self.window.style))
+                    w = self.refiner.weight_for(survey) or 0.0
+                    boxes[sure], q = self.refiner.refine_scored(survey, self.window.rows, boxes[sure],
+                                                                record_image(proc, self.window.style), score=w > 0)
+                    if q is not None:  # the quality head's IoU rescales the scores of the boxes it moved
+                        scores = np.array(scores, float)
+                        scores[sure] = scores[sure] * np.clip(q, 0.0, 1.0) ** w
         with stage("apexes"):
             kinds = self.kinds
             s_per_row = rows_interval(survey, self.window)
@@ -298,8 +318,7 @@ class Detector:
                 "n_traces": survey.n_traces, "dt_s": survey.dt_s, "n_windows": n_windows,
                 "detector": self.provenance.get("name", "gpr3d detector"),
                 "refiner": None if self.refiner is None else self.refiner.provenance.get("name", "gpr3d box refiner"),
-                "refine": None if self.refiner is None else {"mirror": bool(self.refiner.mirror),
-                                                             "passes": int(self.refiner.passes)},
+                "refine": None if self.refiner is None else self._refine_settings(survey),
                 "views": {"trace_scales": [f if f == "auto" else float(f) for f in self.trace_scales],
                           "mirror": bool(self.mirror)},
                 "score_threshold": score_threshold, "calibrated": self.calibration is not None,

@@ -36,7 +36,8 @@ from gpr3d.io.weights import half_state_dict, read_weights_file
 
 __all__ = ["CROP", "EXPAND", "JITTER", "MIRROR", "PASSES", "MAX_PASSES", "DEFAULT_REFINER", "DEFAULT_REFINER_ONNX",
            "record_image", "record_pixmap", "box_deltas", "apply_deltas", "mirror_deltas", "check_application",
-           "jitter_boxes", "whole_boxes", "whole_apex", "pair_iou", "build_refiner", "crop_array", "crops", "BoxRefiner", "OnnxBoxRefiner",
+           "jitter_boxes", "whole_boxes", "whole_apex", "pair_iou", "best_iou", "build_refiner", "RULES", "WIDE_JITTER",
+           "QUALITY_WEIGHT", "check_rule", "check_quality_weight", "crop_array", "crops", "BoxRefiner", "OnnxBoxRefiner",
            "load_refiner", "save_refiner", "train_refiner", "export_refiner_onnx"]
 
 CROP = 64  #: crop side in pixels
@@ -45,6 +46,15 @@ EXPAND = 2.0  #: the crop covers the box's width and height times this, about it
 #: factors (log-normal sigma), top and bottom shifts (box heights): a detector's spread on
 #: real data (``benchmarks/results/pgpr_box_fit.md``)
 JITTER = {"centre": 0.06, "width": 0.2, "top": 0.1, "bottom": 0.15}
+#: the boxes a quality head also learns from (``train_refiner(quality=...)``): drawn this much wider about each
+#: label, and as many again anywhere in the picture, so that it sees boxes half on a hyperbola and none on one
+WIDE_JITTER = {"centre": 0.4, "width": 0.5, "top": 0.4, "bottom": 0.5}
+#: the label rules a refiner's heads may follow: gpr3d's (``docs/labels.md``: recordings, simulated data) and the
+#: P-GPR labellers' (their pictures: boxes ending higher up the legs)
+RULES = ("gpr3d", "pgpr")
+#: a detection's score times ``quality ** weight`` where the refiner has a quality head: None, the weight its
+#: provenance gives the head's rule (``"quality_weights"``, measured when it was shipped; 1 where it gives none)
+QUALITY_WEIGHT = None
 #: applied with each crop also mirrored, the two edge moves averaged
 MIRROR = True
 #: applied this many times, each pass from the box the one before moved
@@ -143,8 +153,10 @@ def jitter_boxes(boxes, n: int, rng, spread: dict | None = None) -> np.ndarray:
     return np.stack([cx - half, top, cx + half, bottom], axis=1)
 
 
-def build_refiner():
-    """A fresh refiner network: ``(n, 3, CROP, CROP)`` crops in, ``(n, 4)`` edge moves out."""
+def build_refiner(heads: int = 1, quality: bool = False):
+    """A fresh refiner network: ``(n, 3, CROP, CROP)`` crops in, ``(n, heads * (4 + quality))`` out: for each label
+    rule's head (:data:`RULES`) its four edge moves and, with ``quality``, the logit of the box's IoU with the label
+    it stands for."""
     torch = require("torch")
     nn = torch.nn
 
@@ -154,7 +166,8 @@ def build_refiner():
     torch.manual_seed(0)
     side = CROP // 16
     return nn.Sequential(stage(3, 32), stage(32, 48), stage(48, 64), stage(64, 96), nn.Flatten(),
-                         nn.Linear(96 * side * side, 256), nn.ReLU(inplace=True), nn.Linear(256, 4))
+                         nn.Linear(96 * side * side, 256), nn.ReLU(inplace=True),
+                         nn.Linear(256, heads * (4 + int(bool(quality)))))
 
 
 def _regions(boxes: np.ndarray):
@@ -218,25 +231,36 @@ def crops(image, boxes_px):
     return torch.from_numpy(crop_array(image, boxes_px))
 
 
-def _refined(survey, rows, boxes, image, predict_crops, *, mirror: bool, passes: int):
-    """Record boxes moved with ``predict_crops(crops (n, 3, CROP, CROP))`` (edge moves ``(n, 4)``), ``passes``
-    times; with ``mirror`` each pass averages the moves for the box and for its mirror image in the mirrored
-    picture: the crops mirrored (the same bins, in the other order), both looks in one batch."""
+def _refined(survey, rows, boxes, image, predict_crops, *, mirror: bool, passes: int, head: int = 0,
+             quality: bool = False, score: bool = False):
+    """Record boxes moved with ``predict_crops(crops (n, 3, CROP, CROP))`` (per head: edge moves, and with
+    ``quality`` the IoU logit; ``head`` picks the columns), ``passes`` times; with ``mirror`` each pass averages
+    the moves for the box and for its mirror image in the mirrored picture: the crops mirrored (the same bins, in
+    the other order), both looks in one batch. Returns ``(boxes, quality)``: with ``score`` (and a ``quality``
+    head) each final box's predicted IoU with its label (a last look at the boxes where they ended, both looks'
+    mean), else None."""
     b = np.asarray(boxes, float).reshape(-1, 4)
+    width = 4 + int(quality)
     if not len(b):
-        return b
+        return b, (np.zeros(0) if quality and score else None)
     pm = record_pixmap(survey, rows)
     px = np.array([pm.box_to_px(x) for x in b])
     img = np.asarray(image, np.float32)
-    for _ in range(passes):
+
+    def look(px):
         c = crop_array(img, px)
-        if mirror:
-            d = np.asarray(predict_crops(np.concatenate([c, c[..., ::-1]])), float)
-            d = 0.5 * (d[: len(c)] + mirror_deltas(d[len(c) :]))
-        else:
-            d = np.asarray(predict_crops(c), float)
+        out = np.asarray(predict_crops(np.concatenate([c, c[..., ::-1]]) if mirror else c), float)
+        return out[:, head * width : (head + 1) * width]
+
+    for _ in range(passes):
+        o = look(px)
+        d = 0.5 * (o[: len(px), :4] + mirror_deltas(o[len(px) :, :4])) if mirror else o[:, :4]
         px = apply_deltas(px, d)
-    return np.array([pm.px_to_box(x) for x in px])
+    q = None
+    if quality and score:
+        q = 1.0 / (1.0 + np.exp(-look(px)[:, 4]))
+        q = 0.5 * (q[: len(px)] + q[len(px) :]) if mirror else q
+    return np.array([pm.px_to_box(x) for x in px]), q
 
 
 def pair_iou(a, b) -> np.ndarray:
@@ -249,17 +273,62 @@ def pair_iou(a, b) -> np.ndarray:
     return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
 
 
+def _heads(provenance: dict, where) -> tuple[tuple, bool]:
+    """``(rules, quality)`` of a refiner from its provenance: the label rules of its heads (``()``: one head, the
+    rule of whatever it was trained on) and whether each head has a quality output; one line where they are not
+    what this gpr3d knows."""
+    rules, quality = provenance.get("rules") or (), provenance.get("quality", False)
+    if not isinstance(rules, (list, tuple)) or not all(r in RULES for r in rules) or len(set(rules)) != len(rules):
+        raise FormatError(where, f"a refiner whose heads follow the label rules {rules!r}; this gpr3d knows "
+                                 f"{', '.join(RULES)}")
+    if not isinstance(quality, bool):
+        raise FormatError(where, f"a refiner whose quality setting is {quality!r}, not true or false")
+    weights = provenance.get("quality_weights", {})
+    try:
+        ok = isinstance(weights, dict) and all(k in RULES and check_quality_weight(v) is not None
+                                               for k, v in weights.items())
+    except InvalidDataError:
+        ok = False
+    if not ok:
+        raise FormatError(where, f"a refiner whose quality weights are {weights!r}: a rule's weight is a number "
+                                 "in 0..8")
+    return tuple(rules), quality
+
+
+def check_rule(rule) -> str:
+    """A box rule as a refiner takes it: ``"auto"`` or one of :data:`RULES`; else one line naming it."""
+    if rule != "auto" and rule not in RULES:
+        raise InvalidDataError(f"box rule must be auto or one of {', '.join(RULES)}, got {rule!r}")
+    return rule
+
+
+def check_quality_weight(weight) -> float | None:
+    """The exponent of a refiner's quality on the scores (:data:`QUALITY_WEIGHT`): None (the refiner's own for each
+    rule) or a number in 0..8."""
+    if weight is None:
+        return None
+    if isinstance(weight, (bool, np.bool_)) or not isinstance(weight, (int, float, np.integer, np.floating)) \
+            or not 0.0 <= float(weight) <= 8.0:
+        raise InvalidDataError(f"the quality weight must be a number in 0..8, got {weight!r}")
+    return float(weight)
+
+
 class BoxRefiner:
     """A trained refiner (PyTorch); :meth:`refine` moves record boxes onto its label rule.
 
-    ``mirror`` and ``passes`` say how it is applied (:data:`MIRROR`, :data:`PASSES`).
+    ``mirror`` and ``passes`` say how it is applied (:data:`MIRROR`, :data:`PASSES`); ``rule`` which head
+    a refiner of several label rules uses (``"auto"``: P-GPR's for pictures, gpr3d's for recordings);
+    ``quality_weight`` how much a quality head's predicted IoU rescales the scores (:meth:`weight_for`).
     """
 
     mirror = MIRROR
     passes = PASSES
+    rule = "auto"
+    quality_weight = QUALITY_WEIGHT
 
     def __init__(self, net, provenance: dict | None = None):
         self.net, self.provenance = net.eval(), provenance or {}
+        self.rules, self.quality = _heads(self.provenance, "refiner")
 
     @property
     def whole(self) -> bool:
@@ -274,28 +343,64 @@ class BoxRefiner:
         if obj.get("crop") != CROP or obj.get("expand") != EXPAND:
             raise FormatError(p, f"a refiner for {obj.get('crop')} px crops x {obj.get('expand')}, this gpr3d makes "
                                  f"{CROP} px x {EXPAND}")
-        net = build_refiner()
+        rules, quality = _heads(obj.get("provenance") or {}, p)
+        net = build_refiner(max(len(rules), 1), quality)
         try:
             net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in obj["state_dict"].items()})
         except RuntimeError as exc:
             raise FormatError(p, f"weights do not fit the refiner: {str(exc).splitlines()[-1].strip()[:160]}") from None
         return cls(net, obj.get("provenance"))
 
+    def head_for(self, survey) -> tuple[int, str | None]:
+        """``(head, rule)`` this refiner applies to ``survey``'s boxes: with one head ``(0, None)``; else the head
+        of :attr:`rule`, or with ``"auto"`` P-GPR's for a picture (``metadata["format"] == "picture"``) and
+        gpr3d's for a recording."""
+        rule = check_rule(self.rule)
+        if not self.rules:
+            if rule != "auto":
+                raise InvalidDataError(f"box rule {rule}: this refiner has one head (no rules to choose from)")
+            return 0, None
+        if rule == "auto":
+            picture = (getattr(survey, "metadata", None) or {}).get("format") == "picture"
+            rule = "pgpr" if picture and "pgpr" in self.rules else ("gpr3d" if "gpr3d" in self.rules else self.rules[0])
+        if rule not in self.rules:
+            raise InvalidDataError(f"box rule {rule}: this refiner's heads follow {', '.join(self.rules)}")
+        return self.rules.index(rule), rule
+
+    def weight_for(self, survey) -> float | None:
+        """The weight of the quality on ``survey``'s scores (None: no quality head): :attr:`quality_weight` where
+        given, else the weight the refiner's provenance gives the rule of its head (``"quality_weights"``; 1 where
+        it gives none)."""
+        if not self.quality:
+            return None
+        if self.quality_weight is not None:
+            return float(self.quality_weight)
+        rule = self.head_for(survey)[1]
+        return float(self.provenance.get("quality_weights", {}).get(rule, 1.0))
+
     def predict_crops(self, crops_) -> np.ndarray:
-        """Edge moves ``(n, 4)`` of crops ``(n, 3, CROP, CROP)`` (:func:`crop_array`)."""
+        """The network's outputs ``(n, heads x (4 + quality))`` for crops ``(n, 3, CROP, CROP)`` (:func:`crop_array`):
+        each head's edge moves (and its quality logit)."""
         torch = require("torch")
         with torch.inference_mode():
             return self.net(torch.from_numpy(np.ascontiguousarray(crops_, np.float32))).numpy().astype(float)
 
     def predict(self, image, boxes_px) -> np.ndarray:
-        """Edge moves ``(k, 4)`` for boxes in pixels of ``image`` (1, 3, rows, cols)."""
+        """The outputs (:meth:`predict_crops`) for boxes in pixels of ``image`` (1, 3, rows, cols)."""
         return self.predict_crops(crop_array(np.asarray(image)[0], boxes_px))
 
     def refine(self, survey, rows: int, boxes, image):
         """``boxes`` (k, 4) of ``survey`` moved onto the label rule; ``image``: the record's :func:`record_image`
         of ``rows`` rows."""
+        return self.refine_scored(survey, rows, boxes, image, score=False)[0]
+
+    def refine_scored(self, survey, rows: int, boxes, image, *, score: bool = True):
+        """``(boxes moved onto the label rule, quality)``: with a quality head (and ``score``) each moved box's
+        predicted IoU with the label it stands for, in 0..1, else None."""
         mirror, passes = check_application(self.mirror, self.passes)
-        return _refined(survey, rows, boxes, image, self.predict_crops, mirror=mirror, passes=passes)
+        head, _ = self.head_for(survey)
+        return _refined(survey, rows, boxes, image, self.predict_crops, mirror=mirror, passes=passes, head=head,
+                        quality=self.quality, score=score)
 
 
 class OnnxBoxRefiner(BoxRefiner):
@@ -303,6 +408,7 @@ class OnnxBoxRefiner(BoxRefiner):
 
     def __init__(self, session, provenance: dict | None = None):
         self.session, self.provenance = session, provenance or {}
+        self.rules, self.quality = _heads(self.provenance, "refiner graph")
 
     @classmethod
     def load(cls, path=None) -> "OnnxBoxRefiner":
@@ -320,24 +426,35 @@ class OnnxBoxRefiner(BoxRefiner):
         if inputs != ["crops"]:
             raise FormatError(p, f"a refiner graph taking {', '.join(inputs)} (an export of an older gpr3d, which "
                                  "cropped inside the graph); export its weights again (export_refiner_onnx)")
+        rules, quality = _heads(meta.get("provenance") or {}, p)
+        width = sess.get_outputs()[0].shape[-1]
+        if width != max(len(rules), 1) * (4 + quality):
+            raise FormatError(p, f"a refiner graph of {width} outputs a box where its provenance says "
+                                 f"{max(len(rules), 1)} head(s){' with quality' if quality else ''}")
         return cls(sess, meta.get("provenance"))
 
     def predict_crops(self, crops_) -> np.ndarray:
         return self.session.run(None, {"crops": np.ascontiguousarray(crops_, np.float32)})[0].astype(float)
 
 
-def load_refiner(path=None, *, engine: str = "torch", mirror: bool = MIRROR, passes: int = PASSES) -> BoxRefiner:
+def load_refiner(path=None, *, engine: str = "torch", mirror: bool = MIRROR, passes: int = PASSES,
+                 rule: str = "auto", quality_weight: float = QUALITY_WEIGHT) -> BoxRefiner:
     """The refiner in ``path`` (default: the shipped one): ``.pt`` in PyTorch, ``.onnx`` in ONNX Runtime.
 
-    ``engine="onnx"`` with no path loads the shipped ONNX export. ``mirror``, ``passes``: how it
-    is applied (:meth:`BoxRefiner.refine`), checked before the file is read.
+    ``engine="onnx"`` with no path loads the shipped ONNX export. ``mirror``, ``passes``, ``rule``,
+    ``quality_weight``: how it is applied (:class:`BoxRefiner`), checked before the file is read (a rule the
+    refiner has no head for: one line once it is read).
     """
     mirror, passes = check_application(mirror, passes)
+    rule, quality_weight = check_rule(rule), check_quality_weight(quality_weight)
     if (path is not None and str(path).lower().endswith(".onnx")) or (path is None and engine == "onnx"):
         ref = OnnxBoxRefiner.load(path)
     else:
         ref = BoxRefiner.load(path)
-    ref.mirror, ref.passes = mirror, passes
+    ref.mirror, ref.passes, ref.rule, ref.quality_weight = mirror, passes, rule, quality_weight
+    if rule != "auto" and rule not in ref.rules:
+        raise InvalidDataError(f"box rule {rule}: this refiner's heads follow {', '.join(ref.rules)}" if ref.rules
+                               else f"box rule {rule}: this refiner has one head (no rules to choose from)")
     return ref
 
 
@@ -354,8 +471,9 @@ def export_refiner_onnx(weights=None, out=DEFAULT_REFINER_ONNX) -> dict:
     """Export a refiner weights file (default: the shipped one) to ONNX, atomically: crops
     ``(n, 3, CROP, CROP)`` in (input ``crops``, any ``n``), edge moves ``(n, 4)`` out.
 
-    Returns ``{"file", "bytes", "max_abs_diff"}``: the largest difference of the graph's
-    edge moves from PyTorch's on the crops of a test image.
+    Returns ``{"file", "bytes", "max_abs_diff", "max_quality_diff"}``: the largest difference of the graph's
+    edge moves from PyTorch's on the crops of a test image (noise: larger moves than real crops ask), and of its
+    predicted qualities (IoU, 0..1; None without a quality head).
     """
     torch = require("torch")
     require("onnx")
@@ -375,16 +493,47 @@ def export_refiner_onnx(weights=None, out=DEFAULT_REFINER_ONNX) -> dict:
                           dynamic_axes={"crops": {0: "n"}, "deltas": {0: "n"}})
         finish_export(tmp, _META, meta)
         sess = ort.InferenceSession(str(tmp), providers=["CPUExecutionProvider"])
-        got = sess.run(None, {"crops": test})[0]
-        diff = float(np.abs(got - ref.predict_crops(test)).max())
-    return {"file": str(out), "bytes": Path(out).stat().st_size, "max_abs_diff": diff}
+        got, want = sess.run(None, {"crops": test})[0], ref.predict_crops(test)
+    width = 4 + int(ref.quality)
+    moves = [c for c in range(got.shape[1]) if c % width < 4]
+    diff = float(np.abs(got[:, moves] - want[:, moves]).max())
+    qdiff = None
+    if ref.quality:
+        def sig(x):
+            return 1.0 / (1.0 + np.exp(-np.asarray(x, float)))
+        qdiff = float(np.abs(sig(got[:, 4::width]) - sig(want[:, 4::width])).max())
+    return {"file": str(out), "bytes": Path(out).stat().st_size, "max_abs_diff": diff, "max_quality_diff": qdiff}
+
+
+def _random_boxes(labels, n: int, cols: int, rows: int, rng) -> np.ndarray:
+    """``n`` boxes the size of ``labels``' (one drawn at random, its sides times a log-normal factor) placed anywhere
+    in a ``cols`` x ``rows`` picture."""
+    g = np.asarray(labels, float).reshape(-1, 4)[rng.integers(0, len(labels), n)]
+    w = np.minimum((g[:, 2] - g[:, 0]) * np.exp(rng.normal(0, 0.4, n)), cols - 1.0)
+    h = np.minimum((g[:, 3] - g[:, 1]) * np.exp(rng.normal(0, 0.4, n)), rows - 1.0)
+    x0, y0 = rng.uniform(0, cols - w), rng.uniform(0, rows - h)
+    return np.stack([x0, y0, x0 + w, y0 + h], axis=1)
+
+
+def best_iou(boxes, labels, cols: int | None = None) -> np.ndarray:
+    """Each of ``boxes`` (k, 4)' IoU with the label (m, 4) it overlaps most (0 where there is none); with ``cols``
+    the boxes are first cut to the picture's columns, as detections are cut to the record."""
+    b = np.asarray(boxes, float).reshape(-1, 4).copy()
+    g = np.asarray(labels, float).reshape(-1, 4)
+    if cols is not None:
+        b[:, [0, 2]] = np.clip(b[:, [0, 2]], 0.0, float(cols))
+    if not len(g) or not len(b):
+        return np.zeros(len(b))
+    return pair_iou(b[:, None, :], g[None, :, :]).max(axis=1)
 
 
 def train_refiner(samples, *, epochs: int = 9, per_label: int = 24, batch: int = 128, lr: float = 2e-3,
-                  seed: int = 0, log=None):
-    """A refiner trained on ``samples``: an iterable of ``(image (3, rows, cols), label boxes px (k, 4))`` or
-    ``(image, label boxes, whole boxes (k, 4))`` (then the label boxes, the whole ones cut to the record, are
-    not read: the boxes drawn and aimed at are the whole ones).
+                  seed: int = 0, log=None, heads: int = 1, quality: int = 0, quality_loss: float = 0.2):
+    """A refiner trained on ``samples``: an iterable of ``(image (3, rows, cols), label boxes px (k, 4))``,
+    ``(image, label boxes, whole boxes (k, 4) or None)`` or ``(image, label boxes, whole boxes or None, head)``
+    (the label rule's head, ``0 <= head < heads``, that the sample teaches; 0 where not given). Where whole boxes are
+    given the boxes drawn and aimed at are those (the label boxes, cut to the record, are what a quality head's
+    IoU is measured against).
 
     Each label gives ``per_label`` boxes drawn about it (:func:`jitter_boxes`), each crop
     mirrored at random; the target is the label. Where a sample gives target boxes (a
@@ -392,29 +541,53 @@ def train_refiner(samples, *, epochs: int = 9, per_label: int = 24, batch: int =
     it: :func:`whole_boxes`), the boxes are drawn about the target and half of them are
     cut to the picture's columns, as a detector's boxes are: the refiner learns to
     reach past the record's end to the whole hyperbola. One-cycle AdamW, smooth L1 on
-    the edge moves. Returns the network in eval mode.
+    the edge moves. With ``quality`` > 0 each head also learns the IoU of a box with the
+    label it stands for (binary cross-entropy on the logit, weighted ``quality_loss``),
+    from those boxes and ``quality`` more a label drawn wider (:data:`WIDE_JITTER`) and
+    as many anywhere in the picture (:func:`best_iou`). Crops are held in float16.
+    Returns the network in eval mode.
     """
     torch = require("torch")
-    if epochs < 1 or per_label < 1 or batch < 1:
-        raise InvalidDataError(f"epochs, per_label and batch must be positive, got {epochs}, {per_label}, {batch}")
+    if epochs < 1 or per_label < 1 or batch < 1 or heads < 1 or quality < 0:
+        raise InvalidDataError(f"epochs, per_label, batch and heads must be positive and quality not negative, got "
+                               f"{epochs}, {per_label}, {batch}, {heads}, {quality}")
     rng = np.random.default_rng(seed)
-    xs, ys = [], []
-    for image, labels, *whole in samples:
-        g = np.asarray(whole[0] if whole else labels, float).reshape(-1, 4)
+    xs, ys, masks, qs, hs = [], [], [], [], []
+    for image, labels, *rest in samples:
+        whole = rest[0] if rest and rest[0] is not None else None
+        head = int(rest[1]) if len(rest) > 1 else 0
+        if not 0 <= head < heads:
+            raise InvalidDataError(f"a sample names head {head}, the refiner has {heads}")
+        lab = np.asarray(labels, float).reshape(-1, 4)
+        g = np.asarray(whole if whole is not None else labels, float).reshape(-1, 4)
         if not len(g):
             continue
         jb = jitter_boxes(g, per_label, rng)
-        if whole:  # half of them cut to the record's traces (pixel c + 0.5 is trace c), as the detector's are
-            cols = np.asarray(image).shape[-1]
+        rows, cols = np.asarray(image).shape[-2:]
+        if whole is not None:  # half cut to the record's traces (pixel c + 0.5 is trace c), as the detector's are
             cut = rng.random(len(jb)) < 0.5
             jb[cut, 0] = np.clip(jb[cut, 0], 0.5, cols - 2.5)
             jb[cut, 2] = np.clip(jb[cut, 2], jb[cut, 0] + 2, cols - 0.5)
-        xs.append(crops(image, jb))
-        ys.append(torch.as_tensor(box_deltas(jb, np.repeat(g, per_label, axis=0)), dtype=torch.float32))
+        y = box_deltas(jb, np.repeat(g, per_label, axis=0))
+        mask = np.ones(len(jb), bool)
+        if quality:
+            more = np.concatenate([jitter_boxes(lab if len(lab) else g, quality, rng, WIDE_JITTER),
+                                   _random_boxes(lab if len(lab) else g, quality * max(len(lab), 1), cols, rows, rng)])
+            jb = np.concatenate([jb, more])
+            y = np.concatenate([y, np.zeros((len(more), 4))])
+            mask = np.concatenate([mask, np.zeros(len(more), bool)])
+            qs.append(torch.as_tensor(best_iou(jb, lab, cols), dtype=torch.float32))
+        xs.append(crops(image, jb).half())
+        ys.append(torch.as_tensor(y, dtype=torch.float32))
+        masks.append(torch.as_tensor(mask))
+        hs.append(torch.full((len(jb),), head, dtype=torch.int64))
     if not xs:
         raise InvalidDataError("no labelled boxes to train the refiner on")
-    x_all, y_all = torch.cat(xs), torch.cat(ys)
-    net = build_refiner()
+    x_all, y_all, m_all, h_all = torch.cat(xs), torch.cat(ys), torch.cat(masks), torch.cat(hs)
+    del xs
+    q_all = torch.cat(qs) if quality else None
+    width = 4 + int(bool(quality))
+    net = build_refiner(heads, bool(quality))
     torch.manual_seed(seed)
     opt = torch.optim.AdamW(net.parameters(), lr / 2, weight_decay=1e-4)
     n = len(x_all)
@@ -424,11 +597,15 @@ def train_refiner(samples, *, epochs: int = 9, per_label: int = 24, batch: int =
         order, total = torch.randperm(n), 0.0
         for i in range(0, n, batch):
             idx = order[i : i + batch]
-            x, y = x_all[idx].clone(), y_all[idx].clone()
+            x, y = x_all[idx].float(), y_all[idx].clone()
             flip = torch.rand(len(idx)) < 0.5  # mirrored: left and right edges swap, and change sign
             x[flip] = x[flip].flip(-1)
             y[flip, 0], y[flip, 2] = -y_all[idx][flip, 2], -y_all[idx][flip, 0]
-            loss = torch.nn.functional.smooth_l1_loss(net(x), y, beta=0.05)
+            out = net(x).view(len(idx), heads, width)[torch.arange(len(idx)), h_all[idx]]
+            m = m_all[idx]
+            loss = torch.nn.functional.smooth_l1_loss(out[m, :4], y[m], beta=0.05) if bool(m.any()) else out.sum() * 0
+            if quality:
+                loss = loss + quality_loss * torch.nn.functional.binary_cross_entropy_with_logits(out[:, 4], q_all[idx])
             opt.zero_grad()
             loss.backward()
             opt.step()

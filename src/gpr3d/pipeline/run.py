@@ -62,6 +62,29 @@ def _sha(path) -> str | None:
     return None if path is None else file_sha256(path)
 
 
+def _models_key(cfg) -> dict:
+    """The detection stage's models as file hashes: the files named, and where the shipped ones are used (no
+    --weights, --refiner auto, no --depthnet) the shipped files themselves, so that a gpr3d that ships other
+    models makes the detections again rather than keeping those of the old ones."""
+    from gpr3d.detection.ort import DEFAULT_ONNX
+    from gpr3d.detection.refine import DEFAULT_REFINER, DEFAULT_REFINER_ONNX
+    from gpr3d.detection.weights import DEFAULT_WEIGHTS
+    from gpr3d.inversion.depthnet import DEFAULT_DEPTHNET
+
+    def shipped(*paths):
+        return [_sha(x) if Path(x).is_file() else None for x in paths]
+
+    shipped_net = cfg.weights is None
+    refiner = cfg.refiner
+    if refiner == "auto" and shipped_net:
+        refiner = shipped(DEFAULT_REFINER, DEFAULT_REFINER_ONNX)
+    elif refiner not in (None, "auto", "none"):
+        refiner = _sha(refiner)
+    return {"weights": shipped(DEFAULT_WEIGHTS, DEFAULT_ONNX) if shipped_net else _sha(cfg.weights),
+            "refiner": refiner,
+            "depthnet": shipped(DEFAULT_DEPTHNET) if cfg.depthnet is None else _sha(cfg.depthnet)}
+
+
 def _key(*parts) -> str:
     return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
@@ -245,8 +268,7 @@ def run_pipeline(cfg: RunConfig, *, log=print, progress: bool | None = None) -> 
     settings.pop("out")
     keys = {}
     keys["survey"] = _key("survey", files, {k: settings[k] for k in ("format", "channel", "trace_spacing_m")})
-    refiner = cfg.refiner if cfg.refiner in (None, "auto", "none") else _sha(cfg.refiner)
-    keys["detections"] = _key("detections", keys["survey"], _sha(cfg.weights), _sha(cfg.depthnet), refiner,
+    keys["detections"] = _key("detections", keys["survey"], _models_key(cfg),
                               {k: settings[k] for k in ("eps_r", "depth", "score")})
     keys["reconstruction"] = _key("reconstruction", keys["detections"], {k: settings[k] for k in ("eps_r", "reconstruct")})
     work = {"survey": _survey_stage, "detections": _detections_stage, "reconstruction": _reconstruction_stage}
