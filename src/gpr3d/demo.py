@@ -87,6 +87,9 @@ class DemoConfig:
     walk_seed: int = 0
 
 
+#: how the demo names the box refiner's label rules (gpr3d.detection.refine.RULES)
+_RULE_NAMES = {"gpr3d": "gpr3d's label rule (recordings)", "pgpr": "P-GPR's label rule (pictures)"}
+
 def _process(survey, cfg: DemoConfig, *, gain: bool = True):
     s = survey.time_zero(method=cfg.time_zero_method, threshold=cfg.time_zero_threshold)
     s = s.dewow()
@@ -416,8 +419,14 @@ def _detection_stage(out: Path, real_path: str, log) -> dict:
                    title=f"{Path(real_path).name}: {len(real_found['targets'])} detections (score >= 0.5)")
     log(f"[5/8] detection: {len(boxes)} hyperbolas in the {survey.n_traces}-trace survey ({found['n_windows']} "
         f"windows in {t_det:.1f} s), {len(real_found['targets'])} in {Path(real_path).name}")
+    how = found.get("refine") or {}
+    if how.get("rule") or how.get("quality_weight"):
+        log(f"      boxes placed by the refiner's head for {_RULE_NAMES.get(how.get('rule'), 'its rule')}"
+            + (f", each score times the box's predicted fit (IoU with its label) to the power "
+               f"{how['quality_weight']:g}" if how.get("quality_weight") else ""))
     row = {"n_boxes": len(boxes), "detect_s": t_det, "n_windows": found["n_windows"],
-           "real_detections": len(real_found["targets"]), "pgpr": _pgpr_rows(det, out, log)}
+           "real_detections": len(real_found["targets"]), "refine": found.get("refine"),
+           "pgpr": _pgpr_rows(det, out, log)}
     if not boxes:
         log("      no boxes: depth estimation and masked migration skipped")
         return row
@@ -517,7 +526,8 @@ def _pgpr_rows(det, out: Path, log) -> dict:
         how = res["refine"]
         looks = f"{'each box also seen mirrored, ' if how['mirror'] else ''}{how['passes']} pass" + \
             ("es" if how["passes"] > 1 else "")
-        log(f"      boxes placed by the box refiner ({res['refiner']}; {looks}): mean IoU with the labels "
+        rule = f"{_RULE_NAMES[how['rule']]}, " if how.get("rule") in _RULE_NAMES else ""
+        log(f"      boxes placed by the box refiner ({res['refiner']}; {rule}{looks}): mean IoU with the labels "
             f"{fit['refined']:.2f}, the network's own boxes {fit['network']:.2f}")
     log(f"      seen mirrored too (--mirror, the two views' boxes fused): {found_both} of {len(truth)} found, mean IoU "
         f"{fit['mirrored']:.2f}")

@@ -207,6 +207,9 @@ def test_demo_end_to_end(tmp_path):
         cfg = json.loads((tmp_path / "d" / "reconstruction_masked" / "config.json").read_text())
         assert cfg["eps_r"] == pytest.approx(depth["focus"]["eps_r"])
         assert det["depth"]["real"]["eps_r_header"] == 6.0
+        # the survey's boxes by gpr3d's rule, their scores weighed by the refiner's quality head (a recording)
+        assert det["refine"] == {"mirror": True, "passes": 2, "rule": "gpr3d", "quality_weight": 1.0}
+        assert "each score times the box's predicted fit (IoU with its label) to the power 1" in r.stdout
         pg = det["pgpr"]  # the real P-GPR B-scan against its label file (9 lines: 7 steel, 2 pipe)
         assert (pg["image"], pg["n_labelled"]) == ("IECAS_0032.png", 9) and "detections_pgpr.png" in names
         assert 0 <= pg["right_kind"] <= pg["found_iou50"] <= 9 and sum(pg["kinds"].values()) == pg["n_detections"]
