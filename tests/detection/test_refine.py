@@ -1078,7 +1078,7 @@ def test_two_heads_learn_their_own_rules_and_the_quality_head_ranks_boxes_by_the
     from scipy.stats import spearmanr
 
     rng = np.random.default_rng(0)
-    net = R.train_refiner(_two_rule_records(50, rng), epochs=6, per_label=12, batch=64, heads=2, quality=6)
+    net = R.train_refiner(_two_rule_records(30, rng), epochs=5, per_label=8, batch=64, heads=2, quality=4)
     assert net[-1].out_features == 10
     ref = R.BoxRefiner(net, {"rules": ["gpr3d", "pgpr"], "quality": True})
     moved_iou = {(h, rule): [] for h in (0, 1) for rule in (0, 1)}
@@ -1101,4 +1101,4 @@ def test_two_heads_learn_their_own_rules_and_the_quality_head_ranks_boxes_by_the
     assert m[0, 0] > np.concatenate(start_iou).mean() + 0.1, m
     assert m[0, 0] > m[1, 0] + 0.1 and m[1, 1] > m[0, 1] + 0.1, m
     rho = spearmanr(np.concatenate(q), np.concatenate(true)).statistic
-    assert rho > 0.6, rho
+    assert rho > 0.8, rho  # (0.93 measured; the two heads' boxes 0.87 / 0.67 on their rules, 0.58 / 0.46 crossed)
