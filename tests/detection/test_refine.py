@@ -1102,3 +1102,19 @@ def test_two_heads_learn_their_own_rules_and_the_quality_head_ranks_boxes_by_the
     assert m[0, 0] > m[1, 0] + 0.1 and m[1, 1] > m[0, 1] + 0.1, m
     rho = spearmanr(np.concatenate(q), np.concatenate(true)).statistic
     assert rho > 0.8, rho  # (0.93 measured; the two heads' boxes 0.87 / 0.67 on their rules, 0.58 / 0.46 crossed)
+
+
+def test_quality_of_looks_at_the_boxes_where_they_are():
+    s = _survey()
+    rows = 256
+    image = np.zeros((3, rows, s.n_traces), np.float32)
+    image[:, :, :150] = 1.0
+    box = np.array([[120.0, 2e-9, 160.0, 4e-9]])
+    ref = _TwoRules()
+    ref.quality_of = R.BoxRefiner.quality_of.__get__(ref)
+    crop = R.crop_array(image, np.array([R.record_pixmap(s, rows).box_to_px(b) for b in box]))
+    a = 4.0 * (crop[0, 0, :, : R.CROP // 2].mean() - crop[0, 0, :, R.CROP // 2 :].mean())
+    np.testing.assert_allclose(ref.quality_of(s, rows, box, image), [1 / (1 + np.exp(-a))], rtol=1e-5)
+    ref.quality = False
+    with pytest.raises(InvalidDataError, match="^two rules has no quality head$"):
+        ref.quality_of(s, rows, box, image)

@@ -394,6 +394,17 @@ class BoxRefiner:
         of ``rows`` rows."""
         return self.refine_scored(survey, rows, boxes, image, score=False)[0]
 
+    def quality_of(self, survey, rows: int, boxes, image) -> np.ndarray:
+        """Each of ``boxes``' predicted IoU with the label it stands for, where they are (not moved first): the
+        quality head of the rule :meth:`head_for` picks, both looks' mean with :attr:`mirror`. A refiner without a
+        quality head: one line."""
+        if not self.quality:
+            raise InvalidDataError(f"{self.provenance.get('name', 'this refiner')} has no quality head")
+        mirror, _ = check_application(self.mirror, self.passes)
+        head, _ = self.head_for(survey)
+        return _refined(survey, rows, boxes, image, self.predict_crops, mirror=mirror, passes=0, head=head,
+                        quality=True, score=True)[1]
+
     def refine_scored(self, survey, rows: int, boxes, image, *, score: bool = True):
         """``(boxes moved onto the label rule, quality)``: with a quality head (and ``score``) each moved box's
         predicted IoU with the label it stands for, in 0..1, else None."""
