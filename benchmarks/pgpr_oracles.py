@@ -54,17 +54,19 @@ def _with_proxies(det, survey):
 
     from gpr3d.detection.refine import apply_deltas, mirror_deltas, pair_iou, record_image, record_pixmap
 
-    proc, boxes, scores, labels, _, _ = det._views(survey)
+    _, proc, boxes, scores, labels, *_ = det._views(survey)
     ref, pm = det.refiner, record_pixmap(survey, det.window.rows)
+    head = ref.head_for(survey)[0]
+    moves = slice(head * (4 + int(ref.quality)), head * (4 + int(ref.quality)) + 4)  # its head's edge moves
     image = np.ascontiguousarray(record_image(proc, det.window.style)[None], dtype=np.float32)
     mirrored, w = np.ascontiguousarray(image[..., ::-1]), image.shape[-1]
     steps = [np.array([pm.box_to_px(b) for b in np.asarray(boxes, float).reshape(-1, 4)]).reshape(-1, 4)]
     agree = []
     for _ in range(ref.passes if len(steps[0]) else 0):
         at = np.ascontiguousarray(steps[-1], dtype=np.float32)
-        direct = np.asarray(ref.predict(image, at), float)
+        direct = np.asarray(ref.predict(image, at), float)[:, moves]
         flip = np.ascontiguousarray(np.stack([w - at[:, 2], at[:, 1], w - at[:, 0], at[:, 3]], axis=1))
-        back = mirror_deltas(np.asarray(ref.predict(mirrored, flip), float))
+        back = mirror_deltas(np.asarray(ref.predict(mirrored, flip), float)[:, moves])
         agree.append(pair_iou(apply_deltas(steps[-1], direct), apply_deltas(steps[-1], back)))
         steps.append(apply_deltas(steps[-1], 0.5 * (direct + back)))
     final = np.array([pm.px_to_box(b) for b in steps[-1]]).reshape(-1, 4)

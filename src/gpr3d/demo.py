@@ -522,6 +522,16 @@ def _pgpr_rows(det, out: Path, log) -> dict:
     log(f"      real P-GPR B-scan {name} (1.6 GHz wall; Yue et al., CC BY 4.0): {len(kinds)} hyperbolas ({named}) "
         f"in {wall:.1f} s; of its {len(truth)} labelled ({truth_kinds.count('rebar')} rebar, "
         f"{truth_kinds.count('pvc_pipe')} pipe) {found} found at IoU >= 0.5, {right} of them of the right kind")
+    shares = [tg["kind_shares"] for tg in res["targets"] if tg.get("kind_shares")]
+    sure = None
+    if shares:  # how sure the detector was of the kinds it named: the mean share, and its least sure box's two best
+        least = min(shares, key=lambda sh: max(sh.values()))
+        two = sorted(least, key=least.get, reverse=True)[:2]
+        sure = {"mean": float(np.mean([max(sh.values()) for sh in shares])),
+                "least_sure": {k: float(least[k]) for k in two}}
+        log(f"      kinds named with a mean share of {sure['mean']:.2f}; the least sure box: "
+            f"{two[0]} {least[two[0]]:.2f}, {two[1]} {least[two[1]]:.2f} (every kind's share in detections: "
+            "kind_shares)")
     if "network" in fit:
         how = res["refine"]
         looks = f"{'each box also seen mirrored, ' if how['mirror'] else ''}{how['passes']} pass" + \
@@ -533,7 +543,7 @@ def _pgpr_rows(det, out: Path, log) -> dict:
         f"{fit['mirrored']:.2f}")
     return {"image": name, "n_detections": len(kinds), "kinds": {k: kinds.count(k) for k in set(kinds)},
             "n_labelled": len(truth), "found_iou50": found, "found_iou50_mirrored": found_both, "right_kind": right,
-            "detect_s": wall,
+            "kind_shares": sure, "detect_s": wall,
             "mean_iou": fit, "refiner": res["refiner"], "refine": res["refine"],
             "figure": "detections_pgpr.png"}
 

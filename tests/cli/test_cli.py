@@ -213,6 +213,11 @@ def test_demo_end_to_end(tmp_path):
         pg = det["pgpr"]  # the real P-GPR B-scan against its label file (9 lines: 7 steel, 2 pipe)
         assert (pg["image"], pg["n_labelled"]) == ("IECAS_0032.png", 9) and "detections_pgpr.png" in names
         assert 0 <= pg["right_kind"] <= pg["found_iou50"] <= 9 and sum(pg["kinds"].values()) == pg["n_detections"]
+        # how sure of the kinds: the least sure box's two best shares are at most the mean best share, and its best
+        sure = pg["kind_shares"]
+        best, second = sure["least_sure"].values()
+        assert 0.2 <= best <= sure["mean"] <= 1 and 0 <= second <= best and best + second <= 1 + 1e-3
+        assert f"kinds named with a mean share of {sure['mean']:.2f}; the least sure box: " in r.stdout
         # its boxes placed by the shipped refiner, beside the network's own (one image: either may fit better)
         assert pg["refiner"] == "refiner_pgpr_synth_gprmax_whole_rules_quality"
         assert set(pg["mean_iou"]) == {"refined", "network", "mirrored"}

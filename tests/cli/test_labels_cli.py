@@ -44,8 +44,12 @@ def test_detect_takes_a_picture_with_its_time_axis(tmp_path):
     for t in d["targets"]:
         if kinds:  # the kind it names, with its share of the score: at least an even one
             assert t["kind"] in kinds and 1 / len(kinds) - 1e-6 <= t["kind_score"] <= 1
+            # every kind's share, the best of them the kind named (rounded to 4 places)
+            sh = t["kind_shares"]
+            assert list(sh) == kinds and abs(sum(sh.values()) - 1) < 1e-3 and max(sh, key=sh.get) == t["kind"]
+            assert sh[t["kind"]] == pytest.approx(t["kind_score"], abs=1e-4)
         else:  # a one-class model names no kind
-            assert t["kind"] == "target" and t["kind_score"] is None
+            assert t["kind"] == "target" and t["kind_score"] is None and "kind_shares" not in t
         assert 0 <= t["box"][0] <= t["box"][2] <= 299 and 0 <= t["box"][1] <= t["box"][3] <= 63 * 3.125e-11
 
 

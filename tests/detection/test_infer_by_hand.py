@@ -165,6 +165,40 @@ def test_detect_names_each_kept_box_by_its_place_in_the_windows(spies):
     assert [t["score"] for t in out["targets"]] == [0.95, 0.5, 0.45]
     assert [t["kind"] for t in out["targets"]] == ["pvc_pipe", "pvc_pipe", "rebar"]
     assert [t["kind_score"] for t in out["targets"]] == pytest.approx([0.6, 0.9, 0.8])
+    # a network that gives no other kinds' shares (an ONNX graph exported before them): the best kind's alone
+    assert [t["kind_shares"] for t in out["targets"]] == [{"rebar": 0.0, "pvc_pipe": 0.6, "void": 0.0},
+                                                          {"rebar": 0.0, "pvc_pipe": 0.9, "void": 0.0},
+                                                          {"rebar": 0.8, "pvc_pipe": 0.0, "void": 0.0}]
+
+
+class _KindProbsNet(_KindNet):
+    """:class:`_KindNet` with every kind's share: window k's box gives kind (k + 1) % 3 the rest."""
+
+    def __call__(self, batch):
+        out = super().__call__(batch)
+        for im, r in zip(batch, out):
+            k = int(im[0, 0, 0])
+            probs = torch.zeros(2, 3)
+            probs[0, k % 3] = 0.5 + 0.1 * k
+            probs[0, (k + 1) % 3] = 0.5 - 0.1 * k
+            probs[1, 0] = 1.0
+            r["kind_probs"] = probs
+        return out
+
+
+def test_detect_gives_every_kind_s_share_of_each_kept_box(spies):
+    det = infer.Detector(_KindProbsNet(), WindowConfig(equalise=False))
+    spies["merge_index"] = np.array([4, 1, 0, 2, 3, 3])
+    out = det.detect(_survey(), score_threshold=0.45)
+    # kept: the boxes of windows 1 (pvc_pipe 0.6, void 0.4), 4 (pvc_pipe 0.9, void 0.1) and 3 (rebar 0.8,
+    # pvc_pipe 0.2), as the merge index places them
+    assert [t["kind_shares"] for t in out["targets"]] == [{"rebar": 0.0, "pvc_pipe": 0.6, "void": 0.4},
+                                                          {"rebar": 0.0, "pvc_pipe": 0.9, "void": 0.1},
+                                                          {"rebar": 0.8, "pvc_pipe": 0.2, "void": 0.0}]
+    assert [t["kind"] for t in out["targets"]] == ["pvc_pipe", "pvc_pipe", "rebar"]
+    # a one-class network's targets have none
+    assert all("kind_shares" not in t for t in infer.Detector(_Net(), WindowConfig(equalise=False))
+               .detect(_survey(), score_threshold=0.45)["targets"])
 
 
 def test_detect_without_positions_equalising_or_a_name(spies):
@@ -313,7 +347,7 @@ def test_a_view_s_boxes_come_back_to_the_record_s_traces(factor, mirror, half):
     net.factor = factor
     det = infer.Detector(net, _PLAIN)
     survey = _one_bright_trace()
-    boxes, scores, labels, shares, n_windows, proc = det._view(survey, None, factor, mirror)
+    boxes, scores, labels, shares, probs, n_windows, proc = det._view(survey, None, factor, mirror)
     # the bright trace 37 is seen at column 37 f (mirrored: (79 - 37) f), the box's 6 columns are 6 / f traces
     left = 0.01 if (42 if mirror else 37) * factor < 60 else 0.0  # where the fake network saw the bright trace
     assert n_windows == 1 and labels.tolist() == [1] and scores.tolist() == [pytest.approx(0.5 + factor / 10 + left)]

@@ -107,6 +107,9 @@ def test_kind_head_inference_in_full():
     assert r["scores"].tolist() == pytest.approx([0.9, 0.4], abs=1e-6)
     assert r["labels"].tolist() == [1, 2]
     assert r["kind_scores"].tolist() == pytest.approx([0.5 / 0.9, 0.3 / 0.4], abs=1e-6)
+    # every kind's share of the box's score: RoI 0 rebar 0.5 and pipe 0.4 of 0.9, RoI 2 0.1 and 0.3 of 0.4
+    torch.testing.assert_close(r["kind_probs"], torch.tensor([[0.5 / 0.9, 0.4 / 0.9], [0.1 / 0.4, 0.3 / 0.4]]),
+                               rtol=0, atol=1e-6)
     torch.testing.assert_close(r["boxes"], torch.tensor([[10.0, 10, 50, 30], [104, 40, 144, 60]]), rtol=0, atol=1e-4)
     # boxes are clipped to the image (RoI 2, past its right edge, loses all its width and goes); a lower
     # threshold keeps RoI 3 (score 0.005)
@@ -125,6 +128,9 @@ def test_kind_head_limits_small_boxes_overlap_and_training():
     # RoI 2 is 0.005 px wide: under the 0.01 px that torchvision's head also drops (RoI 4, 0.5 px, stays);
     # RoI 1 is suppressed by RoI 0
     assert r["scores"].tolist() == pytest.approx([0.9, 0.7, 0.1], abs=1e-6) and r["labels"].tolist() == [1, 1, 1]
+    # the shares travel with their boxes through the cuts (RoIs 0, 3 and 4 kept)
+    torch.testing.assert_close(r["kind_probs"], torch.tensor([[5 / 9, 4 / 9], [6 / 7, 1 / 7], [0.5, 0.5]]), rtol=0,
+                               atol=1e-6)
     # a score equal to the threshold is not above it: at RoI 0's own score nothing is left; just under it, RoI 0
     thresh = float(torch.softmax(probs.log(), -1)[0, 1:].sum())
     (r,), _ = _kind_heads(probs.log(), torch.zeros(5, 12), score_thresh=thresh)({}, proposals, [(256, 256)])
@@ -170,6 +176,7 @@ def test_with_one_kind_the_head_is_torchvision_s():
     assert torch.equal(a["boxes"], b["boxes"]) and torch.equal(a["labels"], b["labels"])
     torch.testing.assert_close(a["scores"], b["scores"], rtol=0, atol=1e-6)
     assert torch.equal(b["kind_scores"], torch.ones_like(b["scores"]))
+    assert torch.equal(b["kind_probs"], torch.ones_like(b["scores"])[:, None])
 
 
 def test_training_labels_follow_the_kinds():
@@ -280,6 +287,51 @@ def test_evaluation_averages_over_the_kinds_a_detector_names():
     assert m["mAP@0.5"] == pytest.approx(1.0)  # class-agnostic: both found
     assert m["by_kind"] == {**want, "kinds": ["pvc_pipe", "rebar"]}
     assert m["by_kind"]["mAP@0.5"] == pytest.approx(0.5)  # the pipe called a rebar: pipe AP 0
+    assert m["by_kind_top"] == m["by_kind"]  # no shares: each box stands under its kind alone either way
+
+
+def test_class_averaged_metrics_score_a_box_under_every_kind_by_its_share():
+    pytest.importorskip("pycocotools")
+    from gpr3d.detection.evaluate import coco_metrics, evaluate_detector, kind_shares
+
+    dt = 1e-10
+    s = Survey(data=np.zeros((100, 80), np.float32), dt_s=dt, frequency_hz=1e9)
+    a, b, c, f = [10, 1e-9, 30, 3e-9], [50, 2e-9, 70, 4e-9], [75, 1e-9, 95, 3e-9], [30, 5e-9, 45, 7e-9]
+    lab = {"labels": [{"box": a, "apex_trace": 20, "apex_time_s": 1.1e-9, "kind": "rebar"},
+                      {"box": b, "apex_trace": 60, "apex_time_s": 2.1e-9, "kind": "pvc_pipe"},
+                      {"box": c, "apex_trace": 85, "apex_time_s": 1.1e-9, "kind": "pvc_pipe"}]}
+
+    def target(box, score, kind, shares):
+        return {"box": box, "score": score, "apex_trace": int(box[0]) + 10, "apex_time_s": box[1] + 1e-10,
+                "kind": kind, "kind_shares": dict(zip(["rebar", "pvc_pipe", "void"], shares))}
+
+    class Stub:
+        kinds = ["rebar", "pvc_pipe", "void"]
+
+        def detect(self, survey, score_threshold):  # f: a false box, its kind unsure
+            return {"n_windows": 1, "targets": [target(f, 0.95, "rebar", [0.6, 0.4, 0.0]),
+                                                target(a, 0.9, "rebar", [0.8, 0.2, 0.0]),
+                                                target(b, 0.8, "rebar", [0.6, 0.3, 0.1]),
+                                                target(c, 0.5, "pvc_pipe", [0.1, 0.9, 0.0])]}
+
+    m = evaluate_detector(Stub(), [(s, lab)])
+    px = np.array([1, 1 / dt, 1, 1 / dt])
+    gt = [np.array([x["box"] for x in lab["labels"]]) * px]
+    # every box under the kind it names at its score, and under every other kind of a share above 0 at score x
+    # share (no rows for the 'void' shares of 0)
+    boxes = np.array([f, f, a, a, b, b, b, c, c]) * px
+    scores = np.array([0.95, 0.38, 0.9, 0.18, 0.8, 0.24, 0.08, 0.05, 0.5])
+    kinds = ["rebar", "pvc_pipe", "rebar", "pvc_pipe", "rebar", "pvc_pipe", "void", "rebar", "pvc_pipe"]
+    want = coco_metrics(gt, [boxes], [scores], gt_kinds=[["rebar", "pvc_pipe", "pvc_pipe"]], det_kinds=[kinds],
+                        kinds=Stub.kinds)
+    assert m["by_kind"] == {**want, "kinds": ["pvc_pipe", "rebar"]}
+    # worked out: rebar: f (0.95, false) above a (0.9): AP 1/2 (at score x share, 0.57 under a's 0.72, it would be
+    # 1); pvc_pipe: c (0.5) found, f (0.38) false, b (0.24) found: precision 1 to recall 1/2, 2/3 to 1 (COCO's 101
+    # recall points: (51 + 50 x 2/3) / 101)
+    assert m["by_kind"]["mAP@0.5"] == pytest.approx((0.5 + (51 + 50 * 2 / 3) / 101) / 2, abs=1e-6)
+    # under the named kind alone the pipe b is lost: recall 1/2 for pipes
+    assert m["by_kind_top"]["recall@0.5"] == pytest.approx(0.75) and m["by_kind"]["recall@0.5"] == pytest.approx(1.0)
+    assert kind_shares({"kind": "rebar"}) == {"rebar": 1.0} and kind_shares({}) == {"target": 1.0}
     Stub.kinds = None
     assert "by_kind" not in evaluate_detector(Stub(), [(s, lab)])
 

@@ -101,6 +101,23 @@ def test_shipped_onnx_is_the_shipped_weights_and_detects_the_same():
         assert abs(x["score"] - y["score"]) < 2e-3 and x["apex_trace"] == y["apex_trace"]
 
 
+def test_a_graph_exported_before_every_kind_s_share_gives_its_best_kind_s_alone(tmp_path):
+    onnx = pytest.importorskip("onnx")
+    g = onnx.load(str(DEFAULT_ONNX))
+    assert [o.name for o in g.graph.output][-2:] == ["kind_scores", "kind_probs"]
+    g.graph.output.pop()  # the graph as exports made before 2026-12-06 were
+    onnx.save(g, str(tmp_path / "old.onnx"))
+    old, new = OnnxDetector.load(tmp_path / "old.onnx"), OnnxDetector.load()
+    im = np.random.default_rng(4).random((3, new.window.rows, new.window.traces), dtype=np.float32)
+    (b0, s0, l0, k0, p0), = old.predict_windows_kinds([im])
+    (b1, s1, l1, k1, p1), = new.predict_windows_kinds([im])
+    assert len(b0) > 3 and np.array_equal(b0, b1) and np.array_equal(s0, s1) and np.array_equal(k0, k1)
+    want = np.zeros_like(p1)
+    want[np.arange(len(l0)), l0 - 1] = k0
+    assert np.array_equal(p0, want) and not np.array_equal(p1, want)
+    np.testing.assert_allclose(p1[np.arange(len(l1)), l1 - 1], k1, atol=1e-6)
+
+
 def test_a_detector_sharing_the_cores_stops_spinning_and_detects_the_same():
     """Live mode's detector: its session's threads sleep between runs (ONNX Runtime's session option), and the
     boxes are what they were."""
@@ -216,7 +233,8 @@ def test_export_writes_a_graph_with_its_names_metadata_and_pytorch_s_answer(tmp_
     assert [i.name for i in g.graph.input] == ["image"]
     model, _, _ = load_weights()
     kinds = model.gpr3d_kinds
-    assert [o.name for o in g.graph.output] == ["boxes", "labels", "scores"] + (["kind_scores"] if kinds else [])
+    assert [o.name for o in g.graph.output] == ["boxes", "labels", "scores"] + (["kind_scores", "kind_probs"] if kinds
+                                                                             else [])
     assert OPSET == 17 and {o.domain: o.version for o in g.opset_import}[""] == 17
     meta = json.loads({p.key: p.value for p in g.metadata_props}["gpr3d.detector"])
     _, window, prov = load_weights()
@@ -227,13 +245,15 @@ def test_export_writes_a_graph_with_its_names_metadata_and_pytorch_s_answer(tmp_
     assert det.window == window and det.provenance == prov and det.kinds == kinds
     # the graph names the kinds PyTorch names, with the same shares
     im = np.random.default_rng(4).random((3, window.rows, window.traces), dtype=np.float32)
-    (b1, s1, l1, k1), = det.predict_windows_kinds([im])
-    (b2, s2, l2, k2), = Detector.load().predict_windows_kinds([im])
+    (b1, s1, l1, k1, p1), = det.predict_windows_kinds([im])
+    (b2, s2, l2, k2, p2), = Detector.load().predict_windows_kinds([im])
     # each of the ONNX graph's five best boxes against PyTorch's nearest (near-equal scores may come out in
     # another order on another CPU, so boxes are paired by place, not rank; float16 weights in both: 2e-3)
     for j in np.argsort(-s1)[:5]:
         near = int(np.argmin(np.abs(b2 - b1[j]).max(axis=1)))
         assert np.abs(b2[near] - b1[j]).max() < 0.1 and l2[near] == l1[j] and abs(k2[near] - k1[j]) < 2e-3
+        # every kind's share too (a row summing to 1, its best the kind named)
+        assert np.abs(p2[near] - p1[j]).max() < 2e-3 and abs(p1[j].sum() - 1) < 1e-5 and np.argmax(p1[j]) == l1[j] - 1
     im = np.random.default_rng(3).random((3, window.rows, window.traces), dtype=np.float32)
     (b, s), = det.predict_windows([im])
     (b0, s0), = Detector.load().predict_windows([im])

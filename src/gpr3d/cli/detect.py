@@ -16,8 +16,8 @@ EPILOG = ("examples:\n  gpr3d detect FILE____032.DZT --out det.json --overlay de
              "  gpr3d detect line.h5 --out det.json --weights my_detector.pt --score 0.3\n"
              "  gpr3d detect bscan.png --pixel-map s_per_px=3.125e-11 --frequency 1.6e9 --out det.json\n\n"
              "output: {input, n_traces, dt_s, targets: [{box: [trace_start, t_start_s, trace_end, t_end_s], score,\n"
-             "apex_trace, apex_time_s, kind, kind_score}]}; times from the first recorded sample; a list for\n"
-             "multi-channel files")
+             "apex_trace, apex_time_s, kind, kind_score, kind_shares}]}; times from the first recorded sample; a list\n"
+             "for multi-channel files")
 
 
 def add_arguments(sp):

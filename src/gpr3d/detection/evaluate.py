@@ -2,9 +2,15 @@
 
 Each record is one COCO image whose pixels are traces (x) and samples (y); IoU
 does not change when an axis is scaled, so the metrics are those of the record
-itself, whatever the window size. For a detector that names kinds, ``by_kind`` holds the
-same metrics averaged over the kinds the true boxes hold (a box counts only under its kind). ``pycocotools`` computes mAP@0.5, mAP@0.75
-(one class, ``hyperbola``; all box sizes), AR@10 and AR@100.
+itself, whatever the window size. ``pycocotools`` computes mAP@0.5, mAP@0.75 (one class,
+``hyperbola``; all box sizes), AR@10 and AR@100.
+
+For a detector that names kinds, ``by_kind`` holds the same metrics averaged over the kinds
+the true boxes hold, a box counting only under the kind it stands under: each box stands
+under the kind it names at its score (as the detect contract reports it) and once more
+under every other kind it gives a share of (``kind_shares``) at its score times that
+share, as a multi-class detector offers its other readings. ``by_kind_top``: each box
+under the kind it names alone.
 
 Apex recall: a true apex counts as found when a detection (score >= the
 threshold) has its apex within ``apex_traces`` traces and a quarter period
@@ -22,7 +28,7 @@ import numpy as np
 
 from gpr3d.core.deps import require
 
-__all__ = ["coco_metrics", "apex_matches", "box_matches", "evaluate_detector"]
+__all__ = ["coco_metrics", "apex_matches", "box_matches", "kind_shares", "evaluate_detector"]
 
 
 def coco_metrics(gt_boxes: list[np.ndarray], det_boxes: list[np.ndarray], det_scores: list[np.ndarray], *,
@@ -127,10 +133,17 @@ def box_matches(true_boxes, true_kinds, found_boxes, found_kinds, found_scores, 
     return out
 
 
+def kind_shares(target: dict) -> dict:
+    """A detection's share of each kind (the detect contract's ``kind_shares``); one that has none (a one-class
+    detector's, or one written before them): all of it its ``kind``."""
+    return target.get("kind_shares") or {target.get("kind", "target"): 1.0}
+
+
 def evaluate_detector(detector, records, *, score_threshold: float = 0.5, apex_traces: float = 3.0,
                       log=None) -> dict:
     """Metrics of ``detector`` over ``records`` (iterable of ``(Survey, labels)``), with per-record rows."""
     gts, dboxes, dscores, rows, gkinds, dkinds = [], [], [], [], [], []
+    kboxes, kscores, kkinds = [], [], []  # a row a target and kind: the class-averaged metrics' detections
     found_total = true_total = false_total = 0
     by_kind: dict = {}
     t_windows = n_windows = 0.0
@@ -147,6 +160,11 @@ def evaluate_detector(detector, records, *, score_threshold: float = 0.5, apex_t
         dscores.append(np.asarray([t["score"] for t in tg], float))
         gkinds.append([lab.get("kind", "target") for lab in vis])
         dkinds.append([t.get("kind", "target") for t in tg])
+        per_kind = [row for t in tg for row in [(t["box"], t["score"], t.get("kind", "target"))] + [
+            (t["box"], t["score"] * p, k) for k, p in kind_shares(t).items() if p > 0 and k != t.get("kind", "target")]]
+        kboxes.append(np.asarray([b for b, _, _ in per_kind], float).reshape(-1, 4) * to_px)
+        kscores.append(np.asarray([s for _, s, _ in per_kind], float))
+        kkinds.append([k for _, _, k in per_kind])
         sel = [t for t in tg if t["score"] >= score_threshold]
         quarter = 0.25 / (survey.frequency_hz or 1e9)
         found, false, hit = apex_matches([[lab["apex_trace"], lab["apex_time_s"]] for lab in vis],
@@ -168,8 +186,10 @@ def evaluate_detector(detector, records, *, score_threshold: float = 0.5, apex_t
     named = sorted({k for g in gkinds for k in g})
     kinds = getattr(detector, "kinds", None)
     if kinds and named and set(named) <= set(kinds):  # class-averaged over the kinds the records hold
-        m["by_kind"] = coco_metrics(gts, dboxes, dscores, gt_kinds=gkinds, det_kinds=dkinds, kinds=kinds)
+        m["by_kind"] = coco_metrics(gts, kboxes, kscores, gt_kinds=gkinds, det_kinds=kkinds, kinds=kinds)
         m["by_kind"]["kinds"] = named
+        m["by_kind_top"] = coco_metrics(gts, dboxes, dscores, gt_kinds=gkinds, det_kinds=dkinds, kinds=kinds)
+        m["by_kind_top"]["kinds"] = named
     m.update({"apex_recall": found_total / max(true_total, 1), "false_per_true": false_total / max(true_total, 1),
               "n_records": len(rows), "n_true": true_total, "s_per_window": t_windows / max(n_windows, 1),
               "score_threshold": score_threshold, "rows": rows,

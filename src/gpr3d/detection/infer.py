@@ -110,12 +110,19 @@ def _load_network(path, *, device: str, engine: str) -> "Detector":
     return Detector.load(path, device=device)
 
 
-def _kept(kinds, boxes, scores, labels, shares):
-    """One window's network output as float64 arrays; a one-class network's label-1 boxes only."""
+def _kept(kinds, boxes, scores, labels, shares, probs=None):
+    """One window's network output as float64 arrays ``(boxes, scores, labels, shares, probs)``; a one-class
+    network's label-1 boxes only. ``probs`` (a row a box, a column a kind): every kind's share; a network that gives
+    none (an ONNX graph exported before it did) has its best kind's share there and 0 for the others."""
     labels = np.asarray(labels, dtype=np.int64)
     keep = labels == 1 if not kinds else (labels >= 1) & (labels <= len(kinds))
     shares = np.ones(len(labels)) if shares is None else np.asarray(shares, dtype=np.float64)
-    return (np.asarray(boxes, np.float64)[keep], np.asarray(scores, np.float64)[keep], labels[keep], shares[keep])
+    if probs is None:
+        probs = np.zeros((len(labels), len(kinds) if kinds else 1))
+        probs[np.nonzero(keep)[0], labels[keep] - 1] = shares[keep]
+    probs = np.asarray(probs, np.float64).reshape(len(labels), len(kinds) if kinds else 1)
+    return (np.asarray(boxes, np.float64)[keep], np.asarray(scores, np.float64)[keep], labels[keep], shares[keep],
+            probs[keep])
 
 
 class Detector:
@@ -174,10 +181,10 @@ class Detector:
 
     def predict_windows(self, images: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
         """Raw network output per window image ``(3, rows, traces)``: ``(boxes px (k, 4), scores (k,))``."""
-        return [(b, s) for b, s, _, _ in self.predict_windows_kinds(images)]
+        return [(b, s) for b, s, *_ in self.predict_windows_kinds(images)]
 
     def predict_windows_kinds(self, images: list[np.ndarray]) -> list[tuple]:
-        """Per window ``(boxes px (k, 4), scores (k,), labels (k,), kind shares (k,))``.
+        """Per window ``(boxes px (k, 4), scores (k,), labels (k,), kind shares (k,), every kind's share (k, kinds))``.
 
         One-class networks: only label 1 (hyperbola) is kept and every share is 1.
         """
@@ -190,13 +197,15 @@ class Detector:
                 for r in self.model(batch):
                     out.append(_kept(self.kinds, r["boxes"].cpu().numpy(), r["scores"].cpu().numpy(),
                                      r["labels"].cpu().numpy(),
-                                     r["kind_scores"].cpu().numpy() if "kind_scores" in r else None))
+                                     r["kind_scores"].cpu().numpy() if "kind_scores" in r else None,
+                                     r["kind_probs"].cpu().numpy() if "kind_probs" in r else None))
         return out
 
     def _view(self, survey, proc: np.ndarray | None, factor: float, mirror: bool):
-        """One view's merged boxes in the record's traces and seconds, their scores, labels and kind shares, its
-        window count and the processed record (``proc``, made here where None): that record stretched along its
-        traces by ``factor`` (old trace ``i`` at ``i * factor``) and, with ``mirror``, its traces reversed."""
+        """One view's merged boxes in the record's traces and seconds, their scores, labels, kind shares and every
+        kind's share, its window count and the processed record (``proc``, made here where None): that record
+        stretched along its traces by ``factor`` (old trace ``i`` at ``i * factor``) and, with ``mirror``, its traces
+        reversed."""
         from gpr3d.detection.augment import stretch_traces
 
         with stage("windows"):
@@ -213,16 +222,20 @@ class Detector:
             wins = windows(survey, self.window, processed=np.ascontiguousarray(view))
         with stage("network"):
             raw = self.predict_windows_kinds([w.image for w in wins])
+            # (a subclass's four items, without every kind's share: the named kind's alone)
+            raw = [r if len(r) > 4 else _kept(self.kinds, *r) for r in raw]
         with stage("merge"):
-            boxes, scores, index = merge([(w, b, s) for w, (b, s, _, _) in zip(wins, raw)], view.shape[0],
+            boxes, scores, index = merge([(w, b, s) for w, (b, s, *_) in zip(wins, raw)], view.shape[0],
                                          survey.dt_s, nms=self.nms, return_index=True)
         labels = np.concatenate([r[2] for r in raw])[index] if raw else np.zeros(0, np.int64)
         shares = np.concatenate([r[3] for r in raw])[index] if raw else np.zeros(0)
+        probs = (np.concatenate([r[4] for r in raw])[index] if raw
+                 else np.zeros((0, len(self.kinds) if self.kinds else 1)))
         boxes = np.asarray(boxes, float).reshape(-1, 4).copy()
         boxes[:, [0, 2]] /= factor
         if mirror:
             boxes[:, [0, 2]] = (n - 1.0) - boxes[:, [2, 0]]
-        return boxes, np.asarray(scores, float), labels, shares, len(wins), proc
+        return boxes, np.asarray(scores, float), labels, shares, probs, len(wins), proc
 
     def auto_scale(self, proc: np.ndarray) -> float:
         """The stretch that makes a processed record's features as wide as the training records' were:
@@ -233,8 +246,8 @@ class Detector:
         """The record seen as it is and, where ``trace_scales``/``mirror`` ask, stretched along its traces and
         mirrored; the views' boxes in one set, overlapping ones (IoU >= 0.5, time in samples) merged into the
         best-scored one, whose corners become the score-weighted mean of the group's (see ``trace_scales``).
-        Returns ``(plain, proc, boxes, scores, labels, shares, n_windows)``: ``proc`` the record as the network
-        sees it, ``plain`` the same before its rows are equalised."""
+        Returns ``(plain, proc, boxes, scores, labels, shares, probs, n_windows)``: ``proc`` the record as the
+        network sees it, ``plain`` the same before its rows are equalised."""
         if "auto" in self.trace_scales and not self.reference_width:
             raise InvalidDataError("trace scale 'auto' needs the width of the detector's training records "
                                    "(Detector.reference_width, traces); this detector has none")
@@ -244,28 +257,29 @@ class Detector:
             plain = prepare(survey, replace(self.window, equalise=False))
             proc = equalise_rows(plain) if self.window.equalise else plain
         parts = [self._view(survey, proc, f, m) for f, m in views]
-        n_windows = sum(p[4] for p in parts)
+        n_windows = sum(p[5] for p in parts)
         if len(parts) == 1:
-            return (plain, proc, *parts[0][:4], n_windows)
+            return (plain, proc, *parts[0][:5], n_windows)
         with stage("merge"):
             boxes = np.concatenate([p[0] for p in parts])
             scores = np.concatenate([p[1] for p in parts])
             labels = np.concatenate([p[2] for p in parts]).astype(np.int64)
             shares = np.concatenate([np.asarray(p[3], float) for p in parts])
+            probs = np.concatenate([np.asarray(p[4], float) for p in parts])
             if self.vote:
                 keep, fused, fscores = fuse_views(boxes, scores, survey.dt_s, average=self.fuse_average,
                                                   n_views=len(parts))
             else:
                 keep, fused = fuse_views(boxes, scores, survey.dt_s, average=self.fuse_average)
                 fscores = scores[keep]
-        return plain, proc, fused, fscores, labels[keep], shares[keep], n_windows
+        return plain, proc, fused, fscores, labels[keep], shares[keep], probs[keep], n_windows
 
     def detect(self, survey, *, score_threshold: float = 0.5, input_name: str | None = None) -> dict:
         """Detections of one record as the ``gpr3d detect`` contract (CONVENTIONS.md)."""
         if not 0.0 <= score_threshold <= 1.0:
             raise InvalidDataError(f"score threshold must lie in 0..1, got {score_threshold!r}")
         t0 = time.perf_counter()
-        plain, proc, boxes, scores, labels, shares, n_windows = self._views(survey)
+        plain, proc, boxes, scores, labels, shares, probs, n_windows = self._views(survey)
         if self.calibration is not None:  # (increasing: the boxes' order stays; the threshold keeps calibrated ones)
             from gpr3d.detection.calibration import calibrate
 
@@ -296,14 +310,14 @@ class Detector:
                      float(np.clip(b[2], 0, survey.n_traces - 1)), float(np.clip(b[3], 0, t_end))]
                 if s >= score_threshold and b[2] > b[0] and b[3] > b[1]:
                     kind = kinds[int(labels[j]) - 1] if kinds else "target"
-                    kept.append((b, s, kind, float(shares[j]) if kinds else None, boxes[j]))
+                    kept.append((b, s, kind, float(shares[j]) if kinds else None, boxes[j], probs[j]))
             # cut boxes take their width from the record's whole ones (one wave speed, one trace step)
             rate = width_rate([b for b, s, *_ in kept if s >= 0.5], survey.n_traces, t_end, survey.frequency_hz)
             targets = []
             whole = self.refiner is not None and getattr(self.refiner, "whole", False)
             if whole:
                 from gpr3d.detection.refine import whole_apex
-            for b, s, kind, share, raw in kept:
+            for b, s, kind, share, raw, pr in kept:
                 at, att = apex_of_box(plain, b, s_per_row, frequency_hz=survey.frequency_hz, n_traces=survey.n_traces,
                                       width_per_s=rate)
                 if whole:  # a refiner of whole hyperbolas reaches past the record's end: the apex is its centre
@@ -311,6 +325,8 @@ class Detector:
                     at = at if wa is None else wa
                 t = {"box": b, "score": float(s), "apex_trace": int(round(at)), "apex_time_s": float(att),
                      "kind": kind, "kind_score": share}
+                if kinds:
+                    t["kind_shares"] = {k: round(float(p), 4) for k, p in zip(kinds, pr)}
                 if survey.positions_xyz is not None and survey.distances_m is not None:
                     t["x_m"] = float(np.interp(at, np.arange(survey.n_traces), survey.distances_m))
                 targets.append(t)

@@ -99,7 +99,7 @@ def export_onnx(weights=None, out=DEFAULT_ONNX) -> dict:
         meta["kinds"] = kinds
     with atomic_path(out, suffix=".onnx.part") as tmp, _gathered_levels():
         torch.onnx.export(model, ([example],), str(tmp), opset_version=OPSET, input_names=["image"],
-                          output_names=["boxes", "labels", "scores"] + (["kind_scores"] if kinds else []),
+                          output_names=["boxes", "labels", "scores"] + (["kind_scores", "kind_probs"] if kinds else []),
                           dynamo=False)
         finish_export(tmp, _META, meta)
         # the graph must give PyTorch's answer (float16 weights in both)
@@ -259,5 +259,7 @@ class OnnxDetector(Detector):
         for im in images:
             got = self.session.run(None, {"image": np.ascontiguousarray(im, dtype=np.float32)})
             boxes, labels, scores = got[:3]
-            out.append(_kept(self.kinds, boxes, scores, labels, got[3] if len(got) > 3 else None))
+            # (kind_probs: a graph exported before it was an output has none)
+            out.append(_kept(self.kinds, boxes, scores, labels, got[3] if len(got) > 3 else None,
+                             got[4] if len(got) > 4 else None))
         return out
