@@ -179,8 +179,8 @@ class _KindProbsNet(_KindNet):
         for im, r in zip(batch, out):
             k = int(im[0, 0, 0])
             probs = torch.zeros(2, 3)
-            probs[0, k % 3] = 0.5 + 0.1 * k
-            probs[0, (k + 1) % 3] = 0.5 - 0.1 * k
+            probs[0, k % 3] = 0.5 + 0.1 * k + 4e-5  # (kept to 4 places: 0.6 from 0.60004)
+            probs[0, (k + 1) % 3] = 0.5 - 0.1 * k - 4e-5
             probs[1, 0] = 1.0
             r["kind_probs"] = probs
         return out
@@ -199,6 +199,16 @@ def test_detect_gives_every_kind_s_share_of_each_kept_box(spies):
     # a one-class network's targets have none
     assert all("kind_shares" not in t for t in infer.Detector(_Net(), WindowConfig(equalise=False))
                .detect(_survey(), score_threshold=0.45)["targets"])
+
+    class FourItems(infer.Detector):  # a detector of the caller's own that gives no other kinds' shares
+        def predict_windows_kinds(self, images):
+            return [r[:4] for r in super().predict_windows_kinds(images)]
+
+    four = FourItems(_KindProbsNet(), WindowConfig(equalise=False)).detect(_survey(), score_threshold=0.45)
+    assert [t["kind"] for t in four["targets"]] == ["pvc_pipe", "pvc_pipe", "rebar"]
+    assert [t["kind_shares"] for t in four["targets"]] == [{"rebar": 0.0, "pvc_pipe": 0.6, "void": 0.0},
+                                                           {"rebar": 0.0, "pvc_pipe": 0.9, "void": 0.0},
+                                                           {"rebar": 0.8, "pvc_pipe": 0.0, "void": 0.0}]
 
 
 def test_detect_without_positions_equalising_or_a_name(spies):

@@ -297,9 +297,11 @@ def test_class_averaged_metrics_score_a_box_under_every_kind_by_its_share():
     dt = 1e-10
     s = Survey(data=np.zeros((100, 80), np.float32), dt_s=dt, frequency_hz=1e9)
     a, b, c, f = [10, 1e-9, 30, 3e-9], [50, 2e-9, 70, 4e-9], [75, 1e-9, 95, 3e-9], [30, 5e-9, 45, 7e-9]
+    d = [5, 5e-9, 25, 7e-9]
     lab = {"labels": [{"box": a, "apex_trace": 20, "apex_time_s": 1.1e-9, "kind": "rebar"},
                       {"box": b, "apex_trace": 60, "apex_time_s": 2.1e-9, "kind": "pvc_pipe"},
-                      {"box": c, "apex_trace": 85, "apex_time_s": 1.1e-9, "kind": "pvc_pipe"}]}
+                      {"box": c, "apex_trace": 85, "apex_time_s": 1.1e-9, "kind": "pvc_pipe"},
+                      {"box": d, "apex_trace": 15, "apex_time_s": 5.1e-9, "kind": "pvc_pipe"}]}
 
     def target(box, score, kind, shares):
         return {"box": box, "score": score, "apex_trace": int(box[0]) + 10, "apex_time_s": box[1] + 1e-10,
@@ -312,25 +314,27 @@ def test_class_averaged_metrics_score_a_box_under_every_kind_by_its_share():
             return {"n_windows": 1, "targets": [target(f, 0.95, "rebar", [0.6, 0.4, 0.0]),
                                                 target(a, 0.9, "rebar", [0.8, 0.2, 0.0]),
                                                 target(b, 0.8, "rebar", [0.6, 0.3, 0.1]),
-                                                target(c, 0.5, "pvc_pipe", [0.1, 0.9, 0.0])]}
+                                                target(c, 0.5, "pvc_pipe", [0.1, 0.9, 0.0]),
+                                                target(d, 0.7, "rebar", [1.0, 0.0, 0.0])]}  # no pipe share
 
     m = evaluate_detector(Stub(), [(s, lab)])
     px = np.array([1, 1 / dt, 1, 1 / dt])
     gt = [np.array([x["box"] for x in lab["labels"]]) * px]
     # every box under the kind it names at its score, and under every other kind of a share above 0 at score x
-    # share (no rows for the 'void' shares of 0)
-    boxes = np.array([f, f, a, a, b, b, b, c, c]) * px
-    scores = np.array([0.95, 0.38, 0.9, 0.18, 0.8, 0.24, 0.08, 0.05, 0.5])
-    kinds = ["rebar", "pvc_pipe", "rebar", "pvc_pipe", "rebar", "pvc_pipe", "void", "rebar", "pvc_pipe"]
-    want = coco_metrics(gt, [boxes], [scores], gt_kinds=[["rebar", "pvc_pipe", "pvc_pipe"]], det_kinds=[kinds],
-                        kinds=Stub.kinds)
+    # share (no rows for the shares of 0: d is no pipe)
+    boxes = np.array([f, f, a, a, b, b, b, c, c, d]) * px
+    scores = np.array([0.95, 0.38, 0.9, 0.18, 0.8, 0.24, 0.08, 0.05, 0.5, 0.7])
+    kinds = ["rebar", "pvc_pipe", "rebar", "pvc_pipe", "rebar", "pvc_pipe", "void", "rebar", "pvc_pipe", "rebar"]
+    want = coco_metrics(gt, [boxes], [scores], gt_kinds=[["rebar", "pvc_pipe", "pvc_pipe", "pvc_pipe"]],
+                        det_kinds=[kinds], kinds=Stub.kinds)
     assert m["by_kind"] == {**want, "kinds": ["pvc_pipe", "rebar"]}
     # worked out: rebar: f (0.95, false) above a (0.9): AP 1/2 (at score x share, 0.57 under a's 0.72, it would be
-    # 1); pvc_pipe: c (0.5) found, f (0.38) false, b (0.24) found: precision 1 to recall 1/2, 2/3 to 1 (COCO's 101
-    # recall points: (51 + 50 x 2/3) / 101)
-    assert m["by_kind"]["mAP@0.5"] == pytest.approx((0.5 + (51 + 50 * 2 / 3) / 101) / 2, abs=1e-6)
-    # under the named kind alone the pipe b is lost: recall 1/2 for pipes
-    assert m["by_kind_top"]["recall@0.5"] == pytest.approx(0.75) and m["by_kind"]["recall@0.5"] == pytest.approx(1.0)
+    # 1); pvc_pipe: c (0.5) found, f (0.38) false, b (0.24) found, d never: precision 1 to recall 1/3, 2/3 to 2/3
+    # (COCO's 101 recall points: (34 + 33 x 2/3) / 101)
+    assert m["by_kind"]["mAP@0.5"] == pytest.approx((0.5 + (34 + 33 * 2 / 3) / 101) / 2, abs=1e-6)
+    # recall: rebar 1, pipes 2 of 3; under the named kind alone the pipe b is lost too: 1 of 3
+    assert m["by_kind"]["recall@0.5"] == pytest.approx((1 + 2 / 3) / 2)
+    assert m["by_kind_top"]["recall@0.5"] == pytest.approx((1 + 1 / 3) / 2)
     assert kind_shares({"kind": "rebar"}) == {"rebar": 1.0} and kind_shares({}) == {"target": 1.0}
     Stub.kinds = None
     assert "by_kind" not in evaluate_detector(Stub(), [(s, lab)])
