@@ -1104,22 +1104,6 @@ def test_two_heads_learn_their_own_rules_and_the_quality_head_ranks_boxes_by_the
     assert rho > 0.8, rho  # (0.93 measured; the two heads' boxes 0.87 / 0.67 on their rules, 0.58 / 0.46 crossed)
 
 
-def test_quality_of_looks_at_the_boxes_where_they_are():
-    s = _survey()
-    rows = 256
-    image = np.zeros((3, rows, s.n_traces), np.float32)
-    image[:, :, :150] = 1.0
-    box = np.array([[120.0, 2e-9, 160.0, 4e-9]])
-    ref = _TwoRules()
-    ref.quality_of = R.BoxRefiner.quality_of.__get__(ref)
-    crop = R.crop_array(image, np.array([R.record_pixmap(s, rows).box_to_px(b) for b in box]))
-    a = 4.0 * (crop[0, 0, :, : R.CROP // 2].mean() - crop[0, 0, :, R.CROP // 2 :].mean())
-    np.testing.assert_allclose(ref.quality_of(s, rows, box, image), [1 / (1 + np.exp(-a))], rtol=1e-5)
-    ref.quality = False
-    with pytest.raises(InvalidDataError, match="^two rules has no quality head$"):
-        ref.quality_of(s, rows, box, image)
-
-
 def test_random_boxes_take_a_label_s_size_times_a_log_normal_factor_anywhere_in_the_picture():
     labels = np.array([[5.0, 10.0, 45.0, 20.0], [60.0, 0.0, 70.0, 30.0]])  # 40 x 10 and 10 x 30 (x1 - y0 != w)
     got = R._random_boxes(labels, 6000, 200, 100, np.random.default_rng(0))
@@ -1201,7 +1185,7 @@ def test_the_head_for_a_record_follows_its_kind_then_gpr3d_s_then_the_first():
     assert str(e.value) == "box rule gpr3d: this refiner has one head (no rules to choose from)"
 
 
-def test_quality_of_uses_the_record_s_head_and_both_looks():
+def test_quality_of_looks_at_the_boxes_where_they_are_with_the_record_s_head_and_both_looks():
     s = _survey()
     rows = 256
     image = np.zeros((3, rows, s.n_traces), np.float32)
@@ -1211,14 +1195,18 @@ def test_quality_of_uses_the_record_s_head_and_both_looks():
     ref.quality_of = R.BoxRefiner.quality_of.__get__(ref)
     crop = R.crop_array(image, np.array([R.record_pixmap(s, rows).box_to_px(b) for b in box]))
     a = 4.0 * (crop[0, 0, :, : R.CROP // 2].mean() - crop[0, 0, :, R.CROP // 2 :].mean())
+    # a recording: gpr3d's head, the box not moved first
+    np.testing.assert_allclose(ref.quality_of(s, rows, box, image), [1 / (1 + np.exp(-a))], rtol=1e-5)
     picture = Survey(data=s.data, dt_s=s.dt_s, metadata={"format": "picture"})
     # P-GPR's head: its logit one more than gpr3d's
     np.testing.assert_allclose(ref.quality_of(picture, rows, box, image), [1 / (1 + np.exp(-a - 1))], rtol=1e-5)
     ref.mirror = True  # the mirrored look's logit is -a: the two looks' mean
     want = 0.5 * (1 / (1 + np.exp(-a - 1)) + 1 / (1 + np.exp(a - 1)))
     np.testing.assert_allclose(ref.quality_of(picture, rows, box, image), [want], rtol=1e-5)
-    ref.provenance = {}
     ref.quality = False
+    with pytest.raises(InvalidDataError, match="^two rules has no quality head$"):
+        ref.quality_of(s, rows, box, image)
+    ref.provenance = {}
     with pytest.raises(InvalidDataError) as e:
         ref.quality_of(s, rows, box, image)
     assert str(e.value) == "this refiner has no quality head"
