@@ -1006,6 +1006,23 @@ def test_the_detector_multiplies_refined_scores_by_the_quality_to_its_weight_and
     # only the boxes at or above the threshold are refined and rescaled; rescaled below it, they are not reported
     assert det.detect(s, score_threshold=0.5)["targets"] == []
     assert [t["score"] for t in det.detect(s, score_threshold=0.4)["targets"]] == pytest.approx([0.45])
+    # no weight given: the refiner's own (1 here) for simulated records, none for a real radar's recording
+    det.refiner.quality_weight = None
+    det.refiner.provenance = {"name": "two rules", "rules": ["gpr3d", "pgpr"], "quality": True}
+    det.refiner.weight_for = R.BoxRefiner.weight_for.__get__(det.refiner)
+    assert sorted(t["score"] for t in det.detect(s, score_threshold=0.0)["targets"]) == pytest.approx([0.15, 0.45])
+    for fmt in ("dzt", "dt1", "rd3", "segy"):
+        real = Survey(data=s.data, dt_s=s.dt_s, metadata={"format": fmt})
+        got = det.detect(real, score_threshold=0.0)
+        assert got["refine"]["quality_weight"] == 0.0, fmt
+        assert sorted(t["score"] for t in got["targets"]) == sorted(t["score"] for t in plain["targets"]), fmt
+    for fmt in ("gprmax", "forward", "synthetic", "packed"):
+        sim = Survey(data=s.data, dt_s=s.dt_s, metadata={"format": fmt})
+        assert det.detect(sim, score_threshold=0.0)["refine"]["quality_weight"] == 1.0, fmt
+    det.refiner.quality_weight = 2.0  # told: every record alike
+    got = det.detect(Survey(data=s.data, dt_s=s.dt_s, metadata={"format": "dzt"}), score_threshold=0.0)
+    assert got["refine"]["quality_weight"] == 2.0
+    assert sorted(t["score"] for t in got["targets"]) == pytest.approx([0.075, 0.225])
 
 
 def test_refiner_files_say_which_heads_they_have_and_a_rule_they_lack_is_one_line(tmp_path):

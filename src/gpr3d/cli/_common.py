@@ -231,7 +231,8 @@ def add_view_args(sp):
                          "gpr3d's for recordings)")
     sp.add_argument("--quality-weight", type=float, default=None, metavar="W",
                     help="a refiner with a quality head multiplies each refined box's score by its predicted IoU "
-                         "to the power W (0..8; default 1; 0: scores as the network gives them)")
+                         "to the power W (0..8; default: the refiner's own for simulated records, 0 for real radar "
+                         "files and pictures; 0: scores as the network gives them)")
 
 
 def add_depth_args(sp, flag):
