@@ -81,15 +81,13 @@ def metrics(recs, kinds, scores) -> dict:
     class-agnostic mAP@[.5:.95] of ``scores`` (one array a record)."""
     import numpy as np
 
-    from gpr3d.detection.evaluate import coco_metrics
+    from gpr3d.detection.evaluate import coco_metrics, kind_rows
 
-    boxes, sc, names, plain = [], [], [], []
+    boxes, sc, names = [], [], []
     for r, s in zip(recs, scores):
-        rows = []
-        for b, x, p in zip(r["bpx"], s, r["probs"]):
-            best = int(np.argmax(p))
-            rows.append((b, x, kinds[best]))
-            rows += [(b, x * p[k], kinds[k]) for k in range(len(kinds)) if k != best and p[k] > 0]
+        rows = [(b, score, kind) for b, x, p in zip(r["bpx"], s, r["probs"])
+                for kind, score in kind_rows({"score": x, "kind": kinds[int(np.argmax(p))],
+                                              "kind_shares": dict(zip(kinds, p))})]
         boxes.append(np.array([x[0] for x in rows], float).reshape(-1, 4))
         sc.append(np.array([x[1] for x in rows], float))
         names.append([x[2] for x in rows])

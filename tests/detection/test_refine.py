@@ -1358,7 +1358,9 @@ def test_the_export_reports_how_far_the_graph_s_qualities_are_from_pytorch_s(tmp
     monkeypatch.setattr(R.BoxRefiner, "predict_crops", shifted)
     r = R.export_refiner_onnx(p, tmp_path / "two.onnx")
     assert r["max_abs_diff"] < 1e-3
-    assert 0.2 < r["max_quality_diff"] <= 1 / (1 + np.exp(-0.5)) - 1 / (1 + np.exp(0.5)) + 1e-6, r
+    # (the ceiling plus 1e-3: the graph's float32 logits may differ from PyTorch's by rounding, which moves a
+    # sigmoid by at most a quarter of it; the mutants this guards against move the gap by 0.05 or more)
+    assert 0.2 < r["max_quality_diff"] <= 1 / (1 + np.exp(-0.5)) - 1 / (1 + np.exp(0.5)) + 1e-3, r
 
 
 def test_a_quality_weight_of_8_is_the_largest_allowed():

@@ -28,7 +28,7 @@ import numpy as np
 
 from gpr3d.core.deps import require
 
-__all__ = ["coco_metrics", "apex_matches", "box_matches", "kind_shares", "evaluate_detector"]
+__all__ = ["coco_metrics", "apex_matches", "box_matches", "kind_shares", "kind_rows", "evaluate_detector"]
 
 
 def coco_metrics(gt_boxes: list[np.ndarray], det_boxes: list[np.ndarray], det_scores: list[np.ndarray], *,
@@ -139,6 +139,14 @@ def kind_shares(target: dict) -> dict:
     return target.get("kind_shares") or {target.get("kind", "target"): 1.0}
 
 
+def kind_rows(target: dict) -> list[tuple[str, float]]:
+    """The ``(kind, score)`` a detection stands under in the class-averaged metrics: its named kind at its score, and
+    every other kind it gives a share of at its score times that share."""
+    named = target.get("kind", "target")
+    return [(named, target["score"])] + [(k, target["score"] * p) for k, p in kind_shares(target).items()
+                                         if p > 0 and k != named]
+
+
 def evaluate_detector(detector, records, *, score_threshold: float = 0.5, apex_traces: float = 3.0,
                       log=None) -> dict:
     """Metrics of ``detector`` over ``records`` (iterable of ``(Survey, labels)``), with per-record rows."""
@@ -160,8 +168,7 @@ def evaluate_detector(detector, records, *, score_threshold: float = 0.5, apex_t
         dscores.append(np.asarray([t["score"] for t in tg], float))
         gkinds.append([lab.get("kind", "target") for lab in vis])
         dkinds.append([t.get("kind", "target") for t in tg])
-        per_kind = [row for t in tg for row in [(t["box"], t["score"], t.get("kind", "target"))] + [
-            (t["box"], t["score"] * p, k) for k, p in kind_shares(t).items() if p > 0 and k != t.get("kind", "target")]]
+        per_kind = [(t["box"], score, kind) for t in tg for kind, score in kind_rows(t)]
         kboxes.append(np.asarray([b for b, _, _ in per_kind], float).reshape(-1, 4) * to_px)
         kscores.append(np.asarray([s for _, s, _ in per_kind], float))
         kkinds.append([k for _, _, k in per_kind])
