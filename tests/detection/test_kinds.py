@@ -336,6 +336,11 @@ def test_class_averaged_metrics_score_a_box_under_every_kind_by_its_share():
     assert m["by_kind"]["recall@0.5"] == pytest.approx((1 + 2 / 3) / 2)
     assert m["by_kind_top"]["recall@0.5"] == pytest.approx((1 + 1 / 3) / 2)
     assert kind_shares({"kind": "rebar"}) == {"rebar": 1.0} and kind_shares({}) == {"target": 1.0}
+    from gpr3d.detection.evaluate import kind_rows
+
+    assert kind_rows({"score": 0.5}) == [("target", 0.5)]  # a one-class detection: its one row
+    assert kind_rows({"score": 0.5, "kind": "void", "kind_shares": {"rebar": 0.25, "void": 0.75, "tank": 0.0}}) \
+        == [("void", 0.5), ("rebar", 0.125)]
     Stub.kinds = None
     assert "by_kind" not in evaluate_detector(Stub(), [(s, lab)])
 
