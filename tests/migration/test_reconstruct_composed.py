@@ -95,6 +95,48 @@ def test_reconstruct_is_composed_of_its_parts(kw, boxes):
     assert rec.updates_per_s == pytest.approx(60 * grid.size / rec.timings_s["migrate"], rel=1e-9, abs=0)
 
 
+@pytest.mark.parametrize("method", ["backprojection", "pseudo3d"])
+def test_an_image_alone_skips_the_noise_map_and_the_targets_and_keeps_the_rest(monkeypatch, method):
+    """with_noise_map / with_targets False (what the focus search asks): the same image, envelope and fold as the
+    whole reconstruction, no noise map, no targets, and the data outside the boxes never migrated."""
+    if method == "pseudo3d":  # a grid of lines along x (pseudo-3D's input)
+        xs = np.tile(np.linspace(0.0, 0.4, 30), 4)
+        ys = np.repeat([0.0, 0.1, 0.2, 0.3], 30)
+        rng = np.random.default_rng(3)
+        s = Survey(data=rng.standard_normal((120, 70)).astype(np.float32), dt_s=0.05e-9, offset_m=0.0,
+                   positions_xyz=np.c_[xs, ys, np.zeros(120)], frequency_hz=1.2e9, eps_r=7.0)
+        boxes = [[3, 0.5e-9, 100, 2.5e-9]]
+    else:
+        s = _area_survey()
+        boxes = [[3, 0.5e-9, 40, 2.5e-9]]
+    cfg = ReconstructConfig(time_zero="none", remove_background=False, spacing_m=0.04, min_line_m=0.05,
+                            method=method)
+    whole = reconstruct(s, cfg, boxes=boxes)
+    assert whole.noise_map is not None and whole.targets  # (the case has both to leave out)
+    import gpr3d.migration.operator as operator
+    import gpr3d.migration.traditional as traditional
+
+    seen = []  # the data each migration is given: inside the boxes only
+    adjoint, p3d = operator.BackProjection.adjoint, traditional.pseudo3d
+    monkeypatch.setattr(operator.BackProjection, "adjoint",
+                        lambda op, data, **kw: seen.append(np.array(data)) or adjoint(op, data, **kw))
+    monkeypatch.setattr(traditional, "pseudo3d", lambda sv, *a, **kw: seen.append(np.array(sv.data)) or p3d(sv, *a, **kw))
+    for nm, tg in ((False, True), (True, False), (False, False)):
+        seen.clear()
+        part = reconstruct(s, cfg, boxes=boxes, with_noise_map=nm, with_targets=tg)
+        np.testing.assert_array_equal(part.image, whole.image)
+        np.testing.assert_array_equal(part.envelope, whole.envelope)
+        if method == "backprojection":
+            np.testing.assert_array_equal(part.fold, whole.fold)
+        assert (part.noise_map is not None) == nm
+        if nm:
+            np.testing.assert_array_equal(part.noise_map, whole.noise_map)
+        else:  # nothing outside the boxes was migrated: each migration saw the masked data (zero out there)
+            assert seen and all(not d[:, :8].any() for d in seen)  # (the mask starts at sample 8)
+        assert [(t.kind, t.n_voxels) for t in part.targets] == (
+            [(t.kind, t.n_voxels) for t in whole.targets] if tg else [])
+
+
 def test_site_tiles_in_this_process_give_the_same_volumes(tmp_path):
     s = _area_survey()
     boxes = [[3, 0.5e-9, 40, 2.5e-9]]

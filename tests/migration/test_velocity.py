@@ -54,7 +54,8 @@ def _stub(monkeypatch, entropy_of_eps):
 
     tried = []
 
-    def fake(survey, cfg, boxes=None):
+    def fake(survey, cfg, boxes=None, **parts):
+        assert parts == {"with_noise_map": False, "with_targets": False}  # the envelope is all it reads
         tried.append((cfg.eps_r, cfg.spacing_m, cfg.max_depth_m, cfg.aperture_deg, boxes, cfg.depth_spacing_m))
         return types.SimpleNamespace(envelope=cfg.eps_r)
 
@@ -131,9 +132,9 @@ def test_entropy_in_float64_and_the_defaults_passed_on(monkeypatch):
 
     inner = rec.reconstruct
 
-    def spy(survey, cfg, boxes=None):
+    def spy(survey, cfg, boxes=None, **parts):
         seen.append(survey)
-        return inner(survey, cfg, boxes=boxes)
+        return inner(survey, cfg, boxes=boxes, **parts)
 
     monkeypatch.setattr(rec, "reconstruct", spy)
     r = focus_eps("the survey", eps_grid=[[4.0], [9.0], [16.0]])  # any shape: flattened

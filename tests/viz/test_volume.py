@@ -32,3 +32,41 @@ def test_top_and_front_views_show_the_envelope_maxima_cell_by_cell_unless_too_la
     front = saved["front.png"].axes[0].images[0]
     np.testing.assert_array_equal(front.get_array(), rec.envelope.max(axis=1).T)
     assert top.get_interpolation() == want and front.get_interpolation() == want
+
+
+@pytest.mark.parametrize("noise", [False, True])
+def test_the_views_of_a_3d_image_are_laid_out_by_hand_with_every_label_inside_the_picture(tmp_path, monkeypatch,
+                                                                                         noise):
+    """The three views skip tight_layout (it draws each figure twice); their fixed margins must still hold every
+    title, tick label and colour-bar label inside the written picture (one panel, or two with the noise map)."""
+    real = V.save_figure
+    kept = {}
+
+    def keep(fig, path, **kw):
+        kept[path.name] = (fig, kw)
+        real(fig, path, close=False, **kw)
+
+    monkeypatch.setattr(V, "save_figure", keep)
+    rec = _rec(60, 40)
+    if noise:
+        rec.noise_map = 0.5 * rec.envelope
+    V.reconstruction_figures(rec, tmp_path)
+    assert set(kept) == {"top.png", "front.png", "view3d.png"}
+    for name, (fig, kw) in kept.items():
+        assert kw.get("tight") is False, name
+        assert (tmp_path / name).stat().st_size > 10_000
+        fig.canvas.draw()  # (at the figure's own dpi: savefig's renderer drew at another)
+        renderer = fig.canvas.get_renderer()
+        box = fig.bbox
+        texts = []
+        for ax in fig.axes:  # titles, axis labels and the tick labels inside each axis' view (colour bars too)
+            texts += [ax.title, ax.xaxis.label, ax.yaxis.label] + ([ax.zaxis.label] if hasattr(ax, "zaxis") else [])
+            for axis in (ax.xaxis, ax.yaxis):
+                lo, hi = sorted(axis.get_view_interval())
+                texts += [tk.label1 for tk in axis.get_major_ticks() if lo <= tk.get_loc() <= hi]
+        texts = [t for t in texts if t.get_visible() and t.get_text().strip()]
+        assert len(texts) > 10, name
+        for t in texts:
+            e = t.get_window_extent(renderer)
+            assert e.x0 >= box.x0 - 1 and e.x1 <= box.x1 + 1 and e.y0 >= box.y0 - 1 and e.y1 <= box.y1 + 1, \
+                (name, t.get_text(), e.bounds, box.bounds)

@@ -262,8 +262,12 @@ def time_zero_search_s(survey) -> float:
     return min(survey.time_window_s / 4, 10e-9)
 
 
-def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log=None) -> "Reconstruction":
-    """Migrate ``survey`` in 3D and extract targets (see :class:`Reconstruction`)."""
+def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log=None, with_noise_map: bool = True,
+                with_targets: bool = True) -> "Reconstruction":
+    """Migrate ``survey`` in 3D and extract targets (see :class:`Reconstruction`). ``with_noise_map=False``: with
+    boxes, the data outside them are not migrated (``noise_map`` None; it costs as much as the image);
+    ``with_targets=False``: no targets extracted (an empty list). What a caller that reads only the image needs
+    (:func:`gpr3d.migration.velocity.focus_eps`, one image per eps_r tried)."""
     cfg = cfg or ReconstructConfig()
     log = log or (lambda msg: None)
     check_config(cfg)
@@ -295,7 +299,7 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     tx, rx = antenna_positions(s.positions_xyz, s.orientations_quat_wxyz, s.offset_m)
     width = cross_line_extent(s.positions_xyz)
     if cfg.method == "pseudo3d":
-        result = _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s, log)
+        result = _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s, log, with_noise_map, with_targets)
         result.spacing = spacing_info
         return result
     if width < max(2 * cfg.spacing_m, 0.05):
@@ -355,8 +359,9 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
         mask = box_mask(s.n_traces, s.n_samples, s.dt_s, shifted, taper_traces=cfg.taper_traces)
         with stage("migrate"):
             out = migrate(s.data * mask, want_fold)
-        with stage("noise map"):
-            noise_map = image_envelope(migrate(s.data * (1 - mask), False, "noise"))
+        if with_noise_map:
+            with stage("noise map"):
+                noise_map = image_envelope(migrate(s.data * (1 - mask), False, "noise"))
     else:
         with stage("migrate"):
             out = migrate(s.data, want_fold)
@@ -376,7 +381,9 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
     with stage("envelope"):
         env = image_envelope(image)
     with stage("targets"):
-        if frame is None:
+        if not with_targets:
+            targets = []
+        elif frame is None:
             targets = volume_targets(env, grid, cfg, v, survey.frequency_hz)
         else:
             targets = extract_profile_targets(env[:, 0, :], grid.x, grid.depth, threshold=cfg.threshold,
@@ -513,7 +520,8 @@ def whole_record_fold_max(op: BackProjection, eps_r: float, positions, cfg: Reco
     return best
 
 
-def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s, log=None) -> "Reconstruction":
+def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s, log=None, with_noise_map=True,
+                          with_targets=True) -> "Reconstruction":
     """``reconstruct`` with ``method="pseudo3d"``: the lines of a grid survey migrated one by one (2D Kirchhoff),
     their envelopes interpolated between lines; the same target extraction."""
     from gpr3d.migration.traditional import pseudo3d, survey_lines
@@ -540,13 +548,14 @@ def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s, log=None) -> "Recon
     if boxes:
         shifted = [[b[0], b[1] - cut_s, b[2], b[3] - cut_s] for b in boxes]
         mask = box_mask(s.n_traces, s.n_samples, s.dt_s, shifted, taper_traces=cfg.taper_traces)
-        noise_map, _ = pseudo3d(s.replace(data=s.data * (1 - mask)), grid, eps_r=eps, aperture_deg=aperture,
-                                engine=cfg.engine, air_gap_m=cfg.air_gap_m)
+        if with_noise_map:
+            noise_map, _ = pseudo3d(s.replace(data=s.data * (1 - mask)), grid, eps_r=eps, aperture_deg=aperture,
+                                    engine=cfg.engine, air_gap_m=cfg.air_gap_m)
         data = s.data * mask
     env, _ = pseudo3d(s.replace(data=data), grid, eps_r=eps, aperture_deg=aperture, engine=cfg.engine,
                       air_gap_m=cfg.air_gap_m)
     t_mig = time.perf_counter() - t
-    targets = volume_targets(env, grid, cfg, v, s.frequency_hz)
+    targets = volume_targets(env, grid, cfg, v, s.frequency_hz) if with_targets else []
     # the envelopes of the line images are all there is (no signed 3D image): the image is the envelope
     return Reconstruction(image=env, envelope=env, noise_map=noise_map, fold=None, grid=grid, targets=targets,
                           eps_r=float(eps), config=asdict(cfg), n_traces=s.n_traces,

@@ -82,7 +82,7 @@ def reconstruction_figures(rec, out) -> list[str]:
         ax.set_xlabel("x (m)")
         ax.set_ylabel("depth (m)")
         ax.set_title("front view: max envelope over y; cyan: extracted targets", fontsize=9)
-        fig.subplots_adjust(left=0.08, right=0.9, bottom=0.13, top=0.92)
+        fig.subplots_adjust(left=0.1, right=0.9, bottom=0.13, top=0.92)
         figs["front.png"] = fig
     else:
         fig, ax = plt.subplots(figsize=(6.8, 6))
@@ -128,7 +128,7 @@ def reconstruction_figures(rec, out) -> list[str]:
     ax.set_ylabel("y (m)")
     ax.set_zlabel("z (m)")
     ax.set_title("3D: voxels above the threshold, extracted targets (blue)", fontsize=9)
-    fig.subplots_adjust(left=0.0, right=0.9, bottom=0.03, top=0.97)
+    fig.subplots_adjust(left=0.0, right=0.9, bottom=0.03, top=0.94)
     figs["view3d.png"] = fig
     # the views of a 3D image and the 3D scatter are laid out above (tight_layout measured a third of their time);
     # a profile's map and section keep it
