@@ -163,3 +163,52 @@ def test_the_envelope_in_slabs_of_a_wide_image():
     want = np.abs(hilbert(img, N=32, axis=2))[:, :, :16]
     np.testing.assert_allclose(image_envelope(img, chunk_voxels=2000), want, atol=1e-5)
     assert np.abs(np.abs(hilbert(img, axis=2)) - want).max() > 0.05  # (the unpadded transform differs)
+
+
+@pytest.mark.parametrize("taper_traces, taper_s", [(3.0, None), (0.0, 0.35e-9), (7.5, 1e-9)])
+def test_many_boxes_give_the_largest_weight_of_each_whole_window(taper_traces, taper_s):
+    """A hundred boxes, some over the data's edges, some overlapping: the mask equals, bit for bit, the largest of
+    each box's own window (its trace taper times its time taper over the whole record, by hand here), however
+    little of the record each box's taper reaches."""
+    rng = np.random.default_rng(5)
+    n, ns, dt = 700, 160, 0.1e-9
+    boxes = []
+    for _ in range(100):
+        i0, t0 = rng.uniform(-4, n - 1), rng.uniform(0, ns * dt * 0.95)
+        boxes.append([i0, t0, i0 + rng.uniform(0, 60), t0 + rng.uniform(0.05e-9, 3e-9)])
+    boxes += [[0, 0.0, 2, 0.3e-9], [n - 1, 15.5e-9, n - 1, ns * dt]]  # corners: one trace, to the record's end
+
+    def taper(m, lo, hi, width):
+        i = np.arange(m, dtype=float)
+        d = np.maximum(lo - i, 0) + np.maximum(i - hi, 0)
+        if width <= 0:
+            return (d == 0).astype(float)
+        return 0.5 * (1 + np.cos(np.pi * np.minimum(d / width, 1.0)))
+
+    tw = taper_s / dt if taper_s else 3.0
+    want = np.zeros((n, ns))
+    for i0, t0, i1, t1 in boxes:
+        want = np.maximum(want, np.outer(taper(n, i0, i1, taper_traces), taper(ns, t0 / dt, t1 / dt, tw)))
+    got = box_mask(n, ns, dt, boxes, taper_traces=taper_traces, taper_s=taper_s)
+    assert got.dtype == np.float32
+    np.testing.assert_array_equal(got, want.astype(np.float32))
+    assert 0.05 < (got > 0).mean() < 0.9 and got[0, 0] == 1.0 and got[-1, -1] == 1.0
+
+
+def test_each_box_costs_its_own_window_not_the_record(monkeypatch):
+    """The product of a box's tapers is formed only over the traces and samples where both are non-zero (a
+    hundred boxes over a whole record took seconds); a box whose window holds one sample, or none, still counts
+    (or adds nothing)."""
+    n, ns, dt = 300, 120, 0.1e-9
+    shapes = []
+    outer = np.outer
+    monkeypatch.setattr(np, "outer", lambda a, b: shapes.append((len(a), len(b))) or outer(a, b))
+    m = box_mask(n, ns, dt, [[100, 5e-9, 110, 6e-9]], taper_traces=3.0, taper_s=0.25e-9)
+    # traces 98..112 (3 beyond 100 and 110 the half-cosine is 0), samples 48..62 (2.5 samples of taper)
+    assert shapes == [(15, 15)] and np.array_equal(np.flatnonzero(m.any(axis=1)), np.arange(98, 113))
+    shapes.clear()
+    tiny = 1e-15  # (a taper of 1e-5 samples: the box's own samples only)
+    m = box_mask(n, ns, dt, [[10, 1.0e-9, 12, 1.05e-9], [50, 2.02e-9, 52, 2.08e-9]], taper_traces=0.0,
+                 taper_s=tiny)
+    assert shapes == [(3, 1)]  # the second box holds no whole sample
+    assert m.sum() == 3.0 and m[10:13, 10].tolist() == [1.0, 1.0, 1.0]
