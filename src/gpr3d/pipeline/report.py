@@ -45,14 +45,18 @@ def _bscan_figure(go, survey, found):
     t_ns = np.arange(0, s.n_samples, step_s) * s.dt_s * 1e9
     fig = go.Figure(go.Heatmap(z=img, x=traces, y=t_ns, colorscale="Greys", zmin=-clip, zmax=clip, showscale=False,
                                hovertemplate="trace %{x}<br>%{y:.2f} ns<extra></extra>"))
-    for k, t in enumerate((found or {}).get("targets", [])):
+    shapes, notes = [], []
+    for t in (found or {}).get("targets", []):
         b = t["box"]
-        fig.add_shape(type="rect", x0=b[0], x1=b[2], y0=b[1] * 1e9, y1=b[3] * 1e9, line=dict(color="#e4572e", width=2))
+        shapes.append(dict(type="rect", x0=b[0], x1=b[2], y0=b[1] * 1e9, y1=b[3] * 1e9,
+                           line=dict(color="#e4572e", width=2)))
         label = t.get("kind") or "target"
         if t.get("depth_m") is not None:
             label += f" {t['depth_m']:.2f} m"
-        fig.add_annotation(x=b[0], y=b[1] * 1e9, text=label, showarrow=False, xanchor="left", yanchor="bottom",
-                           font=dict(color="#e4572e", size=11))
+        notes.append(dict(x=b[0], y=b[1] * 1e9, text=label, showarrow=False, xanchor="left", yanchor="bottom",
+                          font=dict(color="#e4572e", size=11)))
+    # all at once: plotly checks the whole layout again at each add_shape / add_annotation (5 s for 99 boxes)
+    fig.update_layout(shapes=shapes, annotations=notes)
     fig.update_yaxes(autorange="reversed", title="two-way time (ns)")
     fig.update_xaxes(title="trace")
     fig.update_layout(height=420, margin=dict(l=60, r=20, t=30, b=50),
