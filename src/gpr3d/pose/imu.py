@@ -22,7 +22,7 @@ GRAVITY = 9.80665  #: m/s^2
 
 
 def skew(v) -> np.ndarray:
-    x, y, z = (float(a) for a in v)
+    x, y, z = np.asarray(v, dtype=float).tolist()
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
