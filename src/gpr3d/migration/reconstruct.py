@@ -520,8 +520,7 @@ def whole_record_fold_max(op: BackProjection, eps_r: float, positions, cfg: Reco
     return best
 
 
-def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s, log=None, with_noise_map=True,
-                          with_targets=True) -> "Reconstruction":
+def _reconstruct_pseudo3d(s, cfg, eps, boxes, t_prep, cut_s, log, with_noise_map, with_targets) -> "Reconstruction":
     """``reconstruct`` with ``method="pseudo3d"``: the lines of a grid survey migrated one by one (2D Kirchhoff),
     their envelopes interpolated between lines; the same target extraction."""
     from gpr3d.migration.traditional import pseudo3d, survey_lines
