@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from gpr3d.core.errors import GPR3DError
+from gpr3d.core.timing import stage
 
 __all__ = ["RunConfig", "run_pipeline", "STAGES"]
 
@@ -180,12 +181,14 @@ def _survey_stage(cfg: RunConfig, out: Path, log):
         if s.timestamps_s is None:
             raise GPR3DError(f"{cfg.input} has no trace times: the fused poses cannot be given to its traces "
                              "(give --poses, one per trace)")
-        fused = fuse_recordings(imu=cfg.imu, odometry=cfg.odometry, wheel=cfg.wheel, rig=cfg.rig, log=log)
-        s = attach_poses(s, poses_at_traces(fused.trajectory, s, source=str(cfg.input)), by="index")
+        with stage("poses"):  # (the fusion: the whole IMU recording through the filter and its smoother)
+            fused = fuse_recordings(imu=cfg.imu, odometry=cfg.odometry, wheel=cfg.wheel, rig=cfg.rig, log=log)
+            s = attach_poses(s, poses_at_traces(fused.trajectory, s, source=str(cfg.input)), by="index")
         how = f"poses fused from {Path(cfg.imu).name}" + (f" and {Path(cfg.odometry).name}" if cfg.odometry else "")
     if s.positions_xyz is None:
         raise GPR3DError(f"{cfg.input} holds no trace positions: give --poses, --imu, --track or --trace-spacing")
-    s.save(out / "survey.h5")
+    with stage("write survey"):
+        s.save(out / "survey.h5")
     return f"{s.n_traces} traces x {s.n_samples} samples, placed by {how}"
 
 
@@ -200,7 +203,8 @@ def _detections_stage(cfg: RunConfig, out: Path, log):
     s = gpr3d.read(out / "survey.h5")
     found = det.detect(s, score_threshold=cfg.score, input_name=str(cfg.input))
     if estimate and (found["targets"] or cfg.depth != "fit"):
-        add_depths(s, found, cfg.depth, net, None)
+        with stage("depths"):
+            add_depths(s, found, cfg.depth, net, None)
     write_detections([found], out / "detections.json")
     p = found.get("permittivity")
     eps = f"; host eps_r {p['eps_r']:.2f} +- {p['sigma_eps_r']:.2f} ({cfg.depth})" if p else ""
