@@ -22,7 +22,7 @@ GRAVITY = 9.80665  #: m/s^2
 
 
 def skew(v) -> np.ndarray:
-    x, y, z = np.asarray(v, dtype=float).tolist()
+    x, y, z = np.asarray(v).tolist()  # (Python numbers: the 0.0 entries make the matrix float)
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
