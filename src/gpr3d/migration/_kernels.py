@@ -439,12 +439,16 @@ def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap
         r2 = treach * treach
         # each column's cone at its deepest summed voxel, one voxel deeper for rounding, squared: a trace whose
         # midpoint lies farther from the column starts below its range and sums nothing into it (skipped before its
-        # legs and depths are worked out); -1 for a column with no range
+        # legs and depths are worked out); -1 for a column with no range. Only where some column's range ends above
+        # the grid's bottom (``check``): with every depth, the test passes nearly every trace and cost 7 % more
         cr2 = np.empty(TILE * TILE, np.float32)
+        check = False
         for ix in range(tx0, tx1):
             for iy in range(ty0, ty1):
                 c = (ix - tx0) * TILE + (iy - ty0)
                 khi = min(krange[ix, iy, 1], nd)
+                if krange[ix, iy, 0] < khi < nd:
+                    check = True
                 if krange[ix, iy, 0] >= khi:
                     cr2[c] = f32(-1.0)
                 elif tan_ap > 0.0:
@@ -471,7 +475,10 @@ def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap
                     for ix in range(tx0, tx1):
                         for iy in range(ty0, ty1):
                             ci = (ix - tx0) * TILE + (iy - ty0)
-                            if (x[ix] - mx) * (x[ix] - mx) + (y[iy] - my) * (y[iy] - my) > cr2[ci]:
+                            if check:
+                                if (x[ix] - mx) * (x[ix] - mx) + (y[iy] - my) * (y[iy] - my) > cr2[ci]:
+                                    continue
+                            elif krange[ix, iy, 0] >= krange[ix, iy, 1]:
                                 continue
                             ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
                             k0 = max(start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd), krange[ix, iy, 0])
