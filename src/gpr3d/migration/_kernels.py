@@ -398,11 +398,8 @@ def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap
     ``fold``: the adjoint of a trace of ones is summed into ``fold_img`` in the same pass.
     ``krange`` ``(nx, ny, 2)``: each column's depths ``[lo, hi)`` to sum (the others are left as they are in
     ``image``); a tile whose columns all have none is skipped, and the others look only as far as their deepest
-    voxel's cone reaches (a shallow range visits fewer traces); within a tile, a trace is passed over for each
-    column whose cone at its deepest summed voxel (one voxel deeper, for rounding) does not reach the trace's
-    midpoint, before its legs and depths are worked out (a coarse-to-fine refinement's short ranges cost what they
-    sum, not what the tile's deepest reaches). Each summed voxel gets the same terms, in the same order, as with
-    every depth.
+    voxel's cone reaches (a shallow range visits fewer traces). Each summed voxel gets the same terms, in the same
+    order, as with every depth.
     """
     nx, ny, nd = image.shape
     d0, dd = depth_axis(depth, nd)
@@ -437,25 +434,6 @@ def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap
         j_lo = max(int(math.floor((ya - treach - by0) / bsize)) - 1, 0)
         j_hi = min(int(math.floor((yb + treach - by0) / bsize)) + 1, nby - 1)
         r2 = treach * treach
-        # each column's cone at its deepest summed voxel, one voxel deeper for rounding, squared: a trace whose
-        # midpoint lies farther from the column starts below its range and sums nothing into it (skipped before its
-        # legs and depths are worked out); -1 for a column with no range. Only where some column's range ends above
-        # the grid's bottom (``check``): with every depth, the test passes nearly every trace and cost 7 % more
-        cr2 = np.empty(TILE * TILE, np.float32)
-        check = False
-        for ix in range(tx0, tx1):
-            for iy in range(ty0, ty1):
-                c = (ix - tx0) * TILE + (iy - ty0)
-                khi = min(krange[ix, iy, 1], nd)
-                if krange[ix, iy, 0] < khi < nd:
-                    check = True
-                if krange[ix, iy, 0] >= khi:
-                    cr2[c] = f32(-1.0)
-                elif tan_ap > 0.0:
-                    rc = tan_ap * (depth[off + khi - 1] + dd)
-                    cr2[c] = rc * rc
-                else:
-                    cr2[c] = f32(3.0e38)  # (no aperture: every trace; fastmath assumes no infinities)
         for bi in range(i_lo, i_hi + 1):
             for bj in range(j_lo, j_hi + 1):
                 b = bi * nby + bj
@@ -470,15 +448,9 @@ def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap
                     ha = tx[j, 2]
                     hb = rx[j, 2]
                     g = gap[j]
-                    mx = mid[j, 0]
-                    my = mid[j, 1]
                     for ix in range(tx0, tx1):
                         for iy in range(ty0, ty1):
-                            ci = (ix - tx0) * TILE + (iy - ty0)
-                            if check:
-                                if (x[ix] - mx) * (x[ix] - mx) + (y[iy] - my) * (y[iy] - my) > cr2[ci]:
-                                    continue
-                            elif krange[ix, iy, 0] >= krange[ix, iy, 1]:
+                            if krange[ix, iy, 0] >= krange[ix, iy, 1]:
                                 continue
                             ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
                             k0 = max(start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd), krange[ix, iy, 0])
@@ -488,7 +460,7 @@ def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap
                                 k1 = end_depth(ax, ay, bx, by, ha, hb, lmax2, d0, dd, nd)
                             k1 = min(k1, krange[ix, iy, 1])
                             if k0 < k1:
-                                c = ci
+                                c = (ix - tx0) * TILE + (iy - ty0)
                                 if path and g <= 0:
                                     _stack(row, depth, slow, acc[c], facc[c], h2a, h2b, ha, hb, t0, inv_dt, umax,
                                            k0 + off, min(nblk, (k1 + off + W - 1) // W), mode, fold, path)
