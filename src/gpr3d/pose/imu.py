@@ -31,7 +31,7 @@ def so3_exp(rotvec) -> np.ndarray:
 
     One vector (what the filter asks at every IMU sample) by Rodrigues' formula in scalar arithmetic, ten times
     faster than SciPy's ``Rotation`` for one (its per-call overhead was half of the pose fusion's time,
-    ``benchmarks/results/intel/pose_speed.md``); several by SciPy."""
+    ``benchmarks/results/intel/bench_pose.md``); several by SciPy."""
     w = np.asarray(rotvec)
     if w.shape != (3,):
         return Rotation.from_rotvec(w).as_matrix()
