@@ -38,7 +38,7 @@ def so3_exp(rotvec) -> np.ndarray:
     x, y, z = float(w[0]), float(w[1]), float(w[2])
     t2 = x * x + y * y + z * z
     if not math.isfinite(t2):  # NaN or inf: NaN, as SciPy gives (math.sin of inf would raise)
-        return Rotation.from_rotvec(w.astype(float)).as_matrix()
+        return Rotation.from_rotvec(w).as_matrix()  # (a NaN or inf makes w float already)
     if t2 < 1e-8:  # sin(t)/t and (1 - cos t)/t^2 by their series (what is left out moves R by under 1e-17)
         a = 1.0 - t2 / 6.0
         b = 0.5
