@@ -68,16 +68,16 @@ def main(argv=None):
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     args = ap.parse_args(argv)
     if args.repeat < 1:
-        raise SystemExit(f"--repeat must be 1 or more, got {args.repeat}")
+        ap.error(f"--repeat must be 1 or more, got {args.repeat}")
     if not 10 <= args.seconds <= 3600:  # (also NaN)
-        raise SystemExit(f"--seconds must lie in 10..3600, got {args.seconds:g}")
+        ap.error(f"--seconds must lie in 10..3600, got {args.seconds:g}")
     out = Path(args.out)
     if out.exists() and not out.is_dir():
-        raise SystemExit(f"--out {out}: not a folder")
+        ap.error(f"--out {out}: not a folder")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise SystemExit(f"--out {out}: {exc.strerror}") from None
+        ap.error(f"--out {out}: {exc.strerror}")
     fusion, info = fusion_rows(args.seconds, args.repeat)
     rot = rotation_rows(args.repeat)
     lines = [f"Host CPU: {cpu_name()}; best of {args.repeat}", "", "| what | seconds or microseconds |", "|---|---|"]
