@@ -210,10 +210,10 @@ def test_detect_applies_the_refiner_as_told_and_says_so(tmp_path):
     assert r.returncode == 0, r.stderr
     d = json.loads(out.read_text())
     # (the shipped refiner: gpr3d's head for a recording; a real radar's file: its quality not weighing the scores)
-    assert d["refine"] == {"mirror": False, "passes": 1, "rule": "gpr3d", "quality_weight": 0.0}
+    assert d["refine"] == {"mirror": False, "passes": 1, "duplicate_iou": 0.5, "rule": "gpr3d", "quality_weight": 0.0}
     want = load_detector(refine_mirror=False, refine_passes=1).detect(read(src), score_threshold=0.5)
     default = load_detector().detect(read(src), score_threshold=0.5)
-    assert default["refine"] == {"mirror": True, "passes": 2, "rule": "gpr3d", "quality_weight": 0.0}
+    assert default["refine"] == {"mirror": True, "passes": 2, "duplicate_iou": 0.5, "rule": "gpr3d", "quality_weight": 0.0}
     assert default["targets"]  # (weighed by the quality, the quick start's processed copy kept none at 0.5)
     got = np.array([t["box"] for t in d["targets"]])
     assert got.shape == (len(want["targets"]), 4)

@@ -300,10 +300,10 @@ def test_the_detector_refines_its_merged_boxes_before_it_reports_them():
     plain, plain_refine = plain["targets"], plain["refine"]
     det.refiner = _Fixed([0.0, 0.0, 0.2, 0.1])
     found = det.detect(s)
-    assert found["refiner"] == "fixed moves" and found["refine"] == {"mirror": False, "passes": 1}
+    assert found["refiner"] == "fixed moves" and found["refine"] == {"mirror": False, "passes": 1, "duplicate_iou": 0.5}
     assert plain_refine is None
     det.refiner.mirror, det.refiner.passes = True, 3  # the JSON says how the refiner was applied
-    assert det.detect(s)["refine"] == {"mirror": True, "passes": 3}
+    assert det.detect(s)["refine"] == {"mirror": True, "passes": 3, "duplicate_iou": 0.5}
     det.refiner.mirror, det.refiner.passes = False, 1
     moved = found["targets"]
     assert len(plain) == len(moved) == 1  # one window
@@ -312,6 +312,46 @@ def test_the_detector_refines_its_merged_boxes_before_it_reports_them():
     np.testing.assert_allclose(b[2] - a[2], 0.2 * (a[2] - a[0]), rtol=1e-6)
     np.testing.assert_allclose(b[3] - a[3], 0.1 * (a[3] - a[1]), rtol=1e-6)
     assert moved[0]["score"] == plain[0]["score"]
+
+
+class _Onto(_Fixed):
+    """A refiner that moves the second of the boxes it is given onto the first, five traces to the right."""
+
+    provenance = {"name": "onto the first"}
+
+    def refine_scored(self, survey, rows, boxes, image, *, score=True):
+        out = np.array(boxes, float)
+        out[1] = out[0] + [5.0, 0.0, 5.0, 0.0]
+        return out, None
+
+
+def test_a_box_the_refiner_moves_onto_a_surer_one_is_scored_lower():
+    from gpr3d.detection.windows import WindowConfig
+
+    s = _survey(n_traces=256)
+    # two hyperbolas far apart (the merge keeps both), the second moved by the refiner onto the first
+    det = _one_box_detector(WindowConfig(traces=256, rows=128, overlap=0.0),
+                            boxes=((40.0, 30.0, 90.0, 60.0), (150.0, 30.0, 200.0, 60.0)), scores=(0.9, 0.8))
+    plain = det.detect(s, score_threshold=0.1)["targets"]
+    assert [t["score"] for t in plain] == pytest.approx([0.9, 0.8], rel=1e-6)
+    det.refiner = _Onto([0.0] * 4)
+    found = det.detect(s, score_threshold=0.1)["targets"]
+    a, b = (np.asarray(t["box"]) for t in found)
+    assert np.allclose(b - a, [5.0, 0.0, 5.0, 0.0], rtol=0, atol=1e-9)
+    # the same height, 50 traces wide, 5 apart: IoU 45 / 55
+    assert [t["score"] for t in found] == pytest.approx([0.9, 0.8 * (1 - 45 / 55)], rel=1e-6)
+    # at the usual threshold the duplicate is not reported; the surer box stays as it was
+    kept = det.detect(s)["targets"]
+    assert len(kept) == 1 and kept[0]["box"] == found[0]["box"] and kept[0]["score"] == found[0]["score"]
+    # another overlap (the JSON says which), or none: the refined boxes keep their scores
+    det.duplicate_iou = 0.9
+    got = det.detect(s, score_threshold=0.1)
+    assert [t["score"] for t in got["targets"]] == pytest.approx([0.9, 0.8], rel=1e-6)
+    assert got["refine"]["duplicate_iou"] == 0.9
+    det.duplicate_iou = None
+    got = det.detect(s, score_threshold=0.1)
+    assert [t["score"] for t in got["targets"]] == pytest.approx([0.9, 0.8], rel=1e-6)
+    assert got["refine"]["duplicate_iou"] is None
 
 
 def test_the_refiner_sees_the_record_as_the_windows_render_it_and_is_timed():
@@ -995,7 +1035,7 @@ def test_the_detector_multiplies_refined_scores_by_the_quality_to_its_weight_and
     plain = _one_box_detector(cfg, boxes=[[40.0, 30.0, 90.0, 60.0], [150.0, 20.0, 200.0, 70.0]],
                               scores=[0.9, 0.3]).detect(s, score_threshold=0.0)
     got = det.detect(s, score_threshold=0.0)
-    assert got["refine"] == {"mirror": False, "passes": 1, "rule": "gpr3d", "quality_weight": 1.0}
+    assert got["refine"] == {"mirror": False, "passes": 1, "duplicate_iou": 0.5, "rule": "gpr3d", "quality_weight": 1.0}
     assert sorted(t["score"] for t in got["targets"]) == pytest.approx([0.15, 0.45])
     det.refiner.quality_weight = 2.0
     assert sorted(t["score"] for t in det.detect(s, score_threshold=0.0)["targets"]) == pytest.approx([0.075, 0.225])

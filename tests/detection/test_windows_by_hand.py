@@ -316,6 +316,43 @@ def test_fuse_views_by_hand():
         fuse_views(boxes, scores[:4], dt)
 
 
+def test_soften_duplicates_by_hand():
+    from gpr3d.detection.windows import DUPLICATE_IOU, soften_duplicates
+
+    assert DUPLICATE_IOU == 0.5  # the merge's own overlap
+    dt = 1e-10
+    boxes = np.array([[10.0, 1e-9, 20.0, 3e-9],  # A, score 0.9
+                      [11.0, 1e-9, 21.0, 3e-9],  # B: IoU 9/11 with A
+                      [40.0, 5e-9, 44.0, 6e-9],  # C: alone
+                      [15.0, 1e-9, 25.0, 3e-9],  # D: IoU 5/15 with A, 6/14 with B: under the overlap
+                      [12.0, 1e-9, 22.0, 3e-9]])  # E: IoU 8/12 with A, 9/11 with B, 7/13 with D: B's is the largest
+    scores = np.array([0.9, 0.8, 0.7, 0.6, 0.5])
+    got = soften_duplicates(boxes, scores, dt)
+    want = [0.9, 0.8 * (1 - 9 / 11), 0.7, 0.6, 0.5 * (1 - 9 / 11)]
+    assert got == pytest.approx(want, rel=1e-12, abs=0)
+    assert scores.tolist() == [0.9, 0.8, 0.7, 0.6, 0.5]  # the caller's scores stay as they were
+    # one pass, with the scores as given: E is compared with B at B's own 0.8, though B itself is lowered under E
+    # the order is the scores', not the boxes': the same boxes listed backwards give the same scores backwards
+    assert soften_duplicates(boxes[::-1], scores[::-1], dt) == pytest.approx(want[::-1], rel=1e-12, abs=0)
+    # only a surer box lowers a score: with B the surer of the pair, A is lowered
+    assert soften_duplicates(boxes[:2], [0.7, 0.8], dt) == pytest.approx([0.7 * (1 - 9 / 11), 0.8], rel=1e-12)
+    # an overlap of exactly ``iou`` counts (A's left half has IoU 1/2 with A); one just under it does not
+    half = np.array([[0.0, 0.0, 2.0, 1.0], [0.0, 0.0, 1.0, 1.0]])
+    assert soften_duplicates(half, [0.9, 0.8], 1.0).tolist() == [0.9, 0.4]
+    assert soften_duplicates(half, [0.9, 0.8], 1.0, iou=0.51).tolist() == [0.9, 0.8]
+    assert soften_duplicates(half[:, [1, 0, 3, 2]], [0.9, 0.8], 1.0).tolist() == [0.9, 0.4]  # the halves in time
+    # a tie keeps the boxes' order: of two equal boxes at one score the second falls to 0
+    assert soften_duplicates(boxes[[0, 0]], [0.5, 0.5], dt).tolist() == [0.5, 0.0]
+    # the IoU is taken with time in samples: the same boxes in seconds at another dt alike
+    assert soften_duplicates(boxes * [1, 10, 1, 10], scores, 10 * dt) == pytest.approx(want, rel=1e-12, abs=0)
+    assert soften_duplicates(np.zeros((0, 4)), np.zeros(0), dt).shape == (0,)
+    with pytest.raises(InvalidDataError, match="^5 boxes but 4 scores$"):
+        soften_duplicates(boxes, scores[:4], dt)
+    for bad in (0.0, 1.5, float("nan")):
+        with pytest.raises(InvalidDataError, match=r"^the duplicates' overlap must lie in \(0, 1\], got "):
+            soften_duplicates(boxes, scores, dt, iou=bad)
+
+
 def _half_width_by_brute_force(x):
     """The lag where the rows' summed autocorrelation (np.correlate, each row's mean removed) first falls to half."""
     x = x - x.mean(axis=0, keepdims=True)

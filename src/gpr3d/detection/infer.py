@@ -16,8 +16,8 @@ import numpy as np
 from gpr3d.core.deps import require
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.timing import stage
-from gpr3d.detection.windows import (WindowConfig, apex_of_box, fuse_views, merge, prepare, rows_interval, trace_width,
-                                     width_rate, windows)
+from gpr3d.detection.windows import (DUPLICATE_IOU, WindowConfig, apex_of_box, fuse_views, merge, prepare,
+                                     rows_interval, soften_duplicates, trace_width, width_rate, windows)
 from gpr3d.processing.analytic import running_mean
 from gpr3d.processing.image import equalise_rows
 
@@ -147,6 +147,9 @@ class Detector:
     #: their median): what a trace scale of ``"auto"`` stretches each record to; None: unknown
     reference_width = None
     fuse_average = True  #: the fused views' boxes: the score-weighted mean of each group's corners (else the best's)
+    #: a refined box overlapping a surer one by this IoU or more has its score lowered as a duplicate
+    #: (:func:`~gpr3d.detection.windows.soften_duplicates`); None: the refined boxes keep their scores
+    duplicate_iou = DUPLICATE_IOU
 
     def __init__(self, model, window: WindowConfig, *, provenance: dict | None = None, device: str = "cpu",
                  batch: int = 8):
@@ -171,10 +174,11 @@ class Detector:
         return getattr(self.model, "gpr3d_kinds", None)
 
     def _refine_settings(self, survey) -> dict:
-        """How the refiner was applied to ``survey``: mirror, passes and, where the refiner has them, the label rule
-        of the head it used and its quality head's weight on the scores."""
+        """How the refiner was applied to ``survey``: mirror, passes, the overlap from which a refined box's score is
+        lowered as a surer one's duplicate (:func:`~gpr3d.detection.windows.soften_duplicates`) and, where the refiner
+        has them, the label rule of the head it used and its quality head's weight on the scores."""
         r = self.refiner
-        out = {"mirror": bool(r.mirror), "passes": int(r.passes)}
+        out = {"mirror": bool(r.mirror), "passes": int(r.passes), "duplicate_iou": self.duplicate_iou}
         if r.rules:
             out["rule"] = r.head_for(survey)[1]
         if r.quality:
@@ -313,6 +317,10 @@ class Detector:
                     if q is not None:  # the quality head's IoU rescales the scores of the boxes it moved
                         scores = np.array(scores, float)
                         scores[sure] = scores[sure] * np.clip(q, 0.0, 1.0) ** w
+                    if self.duplicate_iou is not None:  # two boxes moved onto one hyperbola: the less sure ranks lower
+                        scores = np.array(scores, float)
+                        scores[sure] = soften_duplicates(boxes[sure], scores[sure], survey.dt_s,
+                                                         iou=self.duplicate_iou)
         with stage("apexes"):
             kinds = self.kinds
             s_per_row = rows_interval(survey, self.window)

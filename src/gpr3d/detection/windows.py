@@ -26,7 +26,7 @@ from gpr3d.processing.image import network_view, record_scale, render_channels a
 
 __all__ = ["WindowConfig", "Window", "prepare", "windows", "make_window", "record_scale", "rows_interval", "render",
            "width_rate",
-           "merge", "fuse_views", "trace_width", "apex_of_box", "window_targets"]
+           "merge", "fuse_views", "soften_duplicates", "DUPLICATE_IOU", "trace_width", "apex_of_box", "window_targets"]
 
 
 @dataclass
@@ -217,6 +217,53 @@ def trace_width(processed: np.ndarray) -> float:
     return float(k - 1 + (ac[k - 1] - 0.5) / (ac[k - 1] - ac[k]))
 
 
+def _overlaps(sc: np.ndarray, area: np.ndarray, i: int) -> np.ndarray:
+    """IoU of box ``i`` of ``sc`` (``(k, 4)``, one unit per axis) with every box of it (``area``: their areas)."""
+    w = np.maximum(np.minimum(sc[i, 2], sc[:, 2]) - np.maximum(sc[i, 0], sc[:, 0]), 0)
+    h = np.maximum(np.minimum(sc[i, 3], sc[:, 3]) - np.maximum(sc[i, 1], sc[:, 1]), 0)
+    inter = w * h
+    union = area[i] + area - inter
+    return np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+
+
+def _in_samples(boxes, scores, dt_s: float):
+    """Checked ``(boxes in traces and samples, their areas, scores)`` of boxes in traces and seconds."""
+    b = np.asarray(boxes, float).reshape(-1, 4)
+    s = np.asarray(scores, float).reshape(-1)
+    if len(b) != len(s):
+        raise InvalidDataError(f"{len(b)} boxes but {len(s)} scores")
+    sc = b.copy()
+    sc[:, [1, 3]] /= dt_s
+    area = np.maximum(sc[:, 2] - sc[:, 0], 0) * np.maximum(sc[:, 3] - sc[:, 1], 0)
+    return sc, area, s
+
+
+#: overlap (IoU, time in samples) from which a refined box counts as a surer one's duplicate: the merge's own
+DUPLICATE_IOU = 0.5
+
+
+def soften_duplicates(boxes, scores, dt_s: float, *, iou: float = DUPLICATE_IOU) -> np.ndarray:
+    """The scores of a record's refined boxes (``(k, 4)`` in traces and seconds), a duplicate's lowered.
+
+    :func:`merge` leaves no two boxes overlapping by ``iou`` or more, but a box refiner moves each box on its own, and
+    two boxes on one hyperbola (its whole and a part, or two of its sizes) can end on nearly the same place. In order
+    of score, each box whose largest overlap ``o`` (IoU, time in samples) with a surer box reaches ``iou`` has its
+    score multiplied by ``1 - o`` (linear soft-NMS, Bodla et al. 2017, in one pass: the overlaps are taken with the
+    scores as given). The box stays, lower in the ranking, so that where it fits the hyperbola better than the
+    surer one it still counts at strict IoU; a caller's threshold may drop it. Ties keep the boxes' order.
+    """
+    if not 0.0 < iou <= 1.0:
+        raise InvalidDataError(f"the duplicates' overlap must lie in (0, 1], got {iou!r}")
+    sc, area, s = _in_samples(boxes, scores, dt_s)
+    out = s.copy()
+    order = np.argsort(-s, kind="stable")
+    for n, i in enumerate(order[1:], start=1):
+        o = float(_overlaps(sc, area, i)[order[:n]].max())
+        if o >= iou:
+            out[i] = s[i] * (1.0 - o)
+    return out
+
+
 def fuse_views(boxes, scores, dt_s: float, *, iou: float = 0.5, average: bool = True, n_views: int | None = None):
     """Boxes of several views of one record (``(k, 4)`` in traces and seconds) fused: ``(kept indices, boxes)``,
     and with ``n_views`` a third item, the fused scores: each group's scores summed over ``n_views`` (at most 1),
@@ -227,24 +274,15 @@ def fuse_views(boxes, scores, dt_s: float, *, iou: float = 0.5, average: bool = 
     otherwise its own), and the rest of the group is dropped. The kept indices carry scores, kinds and the like.
     """
     b = np.asarray(boxes, float).reshape(-1, 4)
-    s = np.asarray(scores, float).reshape(-1)
-    if len(b) != len(s):
-        raise InvalidDataError(f"{len(b)} boxes but {len(s)} scores")
+    sc, area, s = _in_samples(b, scores, dt_s)
     if not len(b):
         return (np.zeros(0, np.int64), np.zeros((0, 4))) + ((np.zeros(0),) if n_views else ())
-    sc = b.copy()
-    sc[:, [1, 3]] /= dt_s
-    area = np.maximum(sc[:, 2] - sc[:, 0], 0) * np.maximum(sc[:, 3] - sc[:, 1], 0)
     free = np.ones(len(b), bool)
     keep, out, fs = [], [], []
     for i in np.argsort(-s, kind="stable"):
         if not free[i]:
             continue
-        w = np.maximum(np.minimum(sc[i, 2], sc[:, 2]) - np.maximum(sc[i, 0], sc[:, 0]), 0)
-        h = np.maximum(np.minimum(sc[i, 3], sc[:, 3]) - np.maximum(sc[i, 1], sc[:, 1]), 0)
-        inter = w * h
-        union = area[i] + area - inter
-        ov = np.where(union > 0, inter / np.where(union > 0, union, 1.0), 0.0)
+        ov = _overlaps(sc, area, i)
         group = free & (ov >= iou)
         group[i] = True
         free &= ~group

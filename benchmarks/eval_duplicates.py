@@ -1,0 +1,122 @@
+"""Boxes the refiner moved onto one hyperbola: kept as they are, scored lower (the shipped rule), or removed.
+
+    python benchmarks/eval_duplicates.py [--pgpr P-GPR_FOLDER] [--set datasets/gprmax_survey.h5]
+        [--ious 0.5,0.6,0.7,0.8] [--out DIR] [--name soft_duplicates.md]
+
+The shipped detector and refiner (the pair ``gpr3d detect`` uses) find every box of P-GPR's validation pictures and
+of the held-out gprMax survey set once, at score 0 and with refined boxes keeping their scores
+(``Detector.duplicate_iou = None``). Each rule below is then applied to those boxes alone, and the boxes scored as
+``benchmarks/eval_pgpr.py`` (class-averaged over P-GPR's kinds) and ``benchmarks/eval_detector.py`` (the gprMax
+set's apex recall and false targets per true one at score 0.5) score them:
+
+* ``kept``: the refined boxes as they are (what ``gpr3d detect`` did before ``soften_duplicates``);
+* ``soft, IoU t``: ``gpr3d.detection.windows.soften_duplicates`` at overlap ``t``: a box that overlaps a surer one
+  by ``t`` or more has its score multiplied by one minus that overlap (``t = 0.5``, the merge's own overlap, is the
+  shipped rule, ``DUPLICATE_IOU``);
+* ``removed, IoU t``: such a box dropped (greedy non-maximum suppression, ``fuse_views(average=False)``).
+
+Both sets are ones no model trains on; the shipped overlap was not chosen on them alone (it is the merge's), and
+the rows at other overlaps show how flat the choice is.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from _report import cpu_name, write_table  # noqa: E402
+from eval_pgpr import PGPR_DEFAULT, load, pgpr_records  # noqa: E402
+
+
+class Replay:
+    """A stand-in detector that gives back results found before, in order (for ``evaluate_detector``)."""
+
+    def __init__(self, kinds, results):
+        self.kinds, self._results = kinds, iter(results)
+
+    def detect(self, survey, *, score_threshold: float = 0.5):
+        return next(self._results)
+
+
+def apply(rule: str, iou: float | None, result: dict) -> dict:
+    """``result`` (the detect contract, every box) with the rule applied to its targets' scores or list."""
+    from gpr3d.detection.windows import fuse_views, soften_duplicates
+
+    tg = result["targets"]
+    if rule == "kept" or not tg:
+        return result
+    boxes = [t["box"] for t in tg]
+    scores = [t["score"] for t in tg]
+    if rule == "soft":
+        new = soften_duplicates(boxes, scores, result["dt_s"], iou=iou)
+        tg = [{**t, "score": float(s)} for t, s in zip(tg, new)]
+    else:
+        keep, _ = fuse_views(boxes, scores, result["dt_s"], iou=iou, average=False)
+        tg = [tg[i] for i in sorted(keep)]
+    return {**result, "targets": tg}
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--pgpr", default=str(PGPR_DEFAULT), help="P-GPR folder (its val/ split is used)")
+    p.add_argument("--set", default=str(ROOT / "datasets" / "gprmax_survey.h5"), help="the held-out gprMax set")
+    p.add_argument("--ious", default="0.5,0.6,0.7,0.8", help="overlaps tried, separated by commas (each in 0..1)")
+    p.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "intel"))
+    p.add_argument("--name", default="soft_duplicates.md")
+    args = p.parse_args(argv)
+    try:
+        ious = [float(v) for v in args.ious.split(",")]
+        if not ious or not all(0.0 < v <= 1.0 for v in ious):
+            raise ValueError
+    except ValueError:
+        p.error(f"--ious must be numbers in (0, 1], separated by commas, got {args.ious!r}")
+    if not (Path(args.pgpr) / "val").is_dir():
+        p.error(f"--pgpr {args.pgpr}: no val/ folder in it (P-GPR's validation split)")
+    if not Path(args.set).is_file():
+        p.error(f"--set {args.set}: no such file")
+    if Path(args.name).name != args.name or not args.name.endswith(".md"):
+        p.error(f"--name {args.name}: a file name ending in .md (no folder: --out says where)")
+    if not Path(args.out).is_dir():
+        p.error(f"--out {args.out}: not a folder")
+    from gpr3d.detection.evaluate import evaluate_detector
+    from gpr3d.detection.refine import load_refiner
+    from gpr3d.io.packed import labelled_records
+
+    det, _ = load("default")
+    det.refiner = load_refiner(None)
+    det.duplicate_iou = None  # every refined box keeps its score: the rules are applied below
+    t0 = time.perf_counter()
+    sets = {}
+    for name, records in (("pgpr", pgpr_records(args.pgpr, "val")), ("gprmax", list(labelled_records(args.set)))):
+        sets[name] = (records, [det.detect(s, score_threshold=0.0) for s, _ in records])
+        print(f"{name}: {len(records)} records detected ({time.perf_counter() - t0:.0f} s)", flush=True)
+    rules = [("kept", None)] + [("soft", v) for v in ious] + [("removed", v) for v in ious]
+    lines = [f"The shipped detector and refiner ({det.provenance.get('name', 'default')}, "
+             f"{det.refiner.provenance.get('name', 'refiner')}) on P-GPR val ({len(sets['pgpr'][0])} real B-scans) "
+             f"and {Path(args.set).name} ({len(sets['gprmax'][0])} gprMax B-scans); each rule applied to the same "
+             f"refined boxes; host CPU {cpu_name()}, detection {time.perf_counter() - t0:.0f} s", "",
+             "| refined boxes that overlap a surer one | P-GPR class-averaged mAP@0.5 | mAP@0.75 | mAP@[.5:.95] | "
+             "AR@100 | recall@0.5 | class-agnostic mAP@0.5 | gprMax mAP@0.75 | AR@100 | apex recall | "
+             "false per true |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for rule, iou in rules:
+        m = {}
+        for name, (records, results) in sets.items():
+            m[name] = evaluate_detector(Replay(det.kinds, [apply(rule, iou, r) for r in results]), records)
+        k, g = m["pgpr"]["by_kind"], m["gprmax"]
+        label = "kept" if rule == "kept" else f"{rule}, IoU >= {iou:g}" + (" (shipped)" if rule == "soft" and
+                                                                           iou == 0.5 else "")
+        lines.append(f"| {label} | {k['mAP@0.5']:.3f} | {k['mAP@0.75']:.3f} | {k['mAP']:.3f} | {k['AR@100']:.3f} | "
+                     f"{k['recall@0.5']:.3f} | {m['pgpr']['mAP@0.5']:.3f} | {g['mAP@0.75']:.3f} | "
+                     f"{g['AR@100']:.3f} | {g['apex_recall']:.3f} | {g['false_per_true']:.3f} |")
+        print(lines[-1], flush=True)
+    write_table(Path(args.out), args.name, "\n".join(lines), "eval_duplicates.py", argv)
+
+
+if __name__ == "__main__":
+    main()
