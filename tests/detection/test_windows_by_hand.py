@@ -345,6 +345,25 @@ def test_soften_duplicates_by_hand():
     assert soften_duplicates(boxes[[0, 0]], [0.5, 0.5], dt).tolist() == [0.5, 0.0]
     # the IoU is taken with time in samples: the same boxes in seconds at another dt alike
     assert soften_duplicates(boxes * [1, 10, 1, 10], scores, 10 * dt) == pytest.approx(want, rel=1e-12, abs=0)
+    # boxes side by side in traces or in time share nothing, however small; two one-sample boxes on one place all
+    unit = [0.0, 0.0, 1.0, 1.0]
+    assert soften_duplicates([unit, [2.0, 0.0, 3.0, 1.0]], [0.9, 0.8], 1.0).tolist() == [0.9, 0.8]
+    assert soften_duplicates([unit, [0.0, 2.0, 1.0, 3.0]], [0.9, 0.8], 1.0).tolist() == [0.9, 0.8]
+    assert soften_duplicates([unit, unit], [0.9, 0.8], 1.0).tolist() == [0.9, 0.0]
+    assert soften_duplicates([unit, unit], [0.9, 0.8], 1.0, iou=1.0).tolist() == [0.9, 0.0]  # 1 is an overlap too
+    # boxes without an area overlap nothing, even on one place
+    flat = [5.0, 0.0, 5.0, 1.0]
+    assert soften_duplicates([flat, flat], [0.9, 0.8], 1.0).tolist() == [0.9, 0.8]
+    # whole numbers in, fractions out
+    assert soften_duplicates([[10, 0, 20, 2], [11, 0, 21, 2]], [1, 1], 1.0) == pytest.approx([1.0, 2 / 11], rel=1e-12)
+    # many boxes at two scores, each 0.01 traces right of the one before (IoU (10 - 0.01 d) / (10 + 0.01 d) at d apart):
+    # the odd ones (0.6) come first in their own order, so each odd one after the first is lowered by its odd
+    # neighbour two before it, and each even one (0.5) by an odd neighbour next to it (a sort that is not stable,
+    # as numpy's default on 40 numbers, takes the odd ones in another order)
+    many = np.array([[0.01 * k, 0.0, 10 + 0.01 * k, 1.0] for k in range(40)])
+    got = soften_duplicates(many, np.where(np.arange(40) % 2 == 1, 0.6, 0.5), 1.0)
+    want = [0.6 if k == 1 else 0.6 * 0.04 / 10.02 if k % 2 else 0.5 * 0.02 / 10.01 for k in range(40)]
+    assert got == pytest.approx(want, rel=1e-9)
     assert soften_duplicates(np.zeros((0, 4)), np.zeros(0), dt).shape == (0,)
     with pytest.raises(InvalidDataError, match="^5 boxes but 4 scores$"):
         soften_duplicates(boxes, scores[:4], dt)
