@@ -351,6 +351,8 @@ def test_soften_duplicates_by_hand():
     assert soften_duplicates([unit, [0.0, 2.0, 1.0, 3.0]], [0.9, 0.8], 1.0).tolist() == [0.9, 0.8]
     assert soften_duplicates([unit, unit], [0.9, 0.8], 1.0).tolist() == [0.9, 0.0]
     assert soften_duplicates([unit, unit], [0.9, 0.8], 1.0, iou=1.0).tolist() == [0.9, 0.0]  # 1 is an overlap too
+    tiny = [0.0, 0.0, 0.5, 0.5]  # (a quarter of a sample: the overlap is a share, whatever the boxes' size)
+    assert soften_duplicates([tiny, tiny], [0.9, 0.8], 1.0).tolist() == [0.9, 0.0]
     # boxes without an area overlap nothing, even on one place
     flat = [5.0, 0.0, 5.0, 1.0]
     assert soften_duplicates([flat, flat], [0.9, 0.8], 1.0).tolist() == [0.9, 0.8]
