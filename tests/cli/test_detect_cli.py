@@ -77,6 +77,12 @@ def test_detect_on_the_embedded_dzt_imports_neither_scipy_signal_nor_ndimage(tmp
     (["--no-refine-mirror", "--refiner", "none"], "say how the box refiner is applied: not with --refiner none"),
     (["--box-rule", "pgpr", "--refiner", "none"], "say how the box refiner is applied: not with --refiner none"),
     (["--quality-weight", "0.5", "--refiner", "none"], "say how the box refiner is applied: not with --refiner none"),
+    (["--duplicate-iou", "0.5", "--refiner", "none"], "say how the box refiner is applied: not with --refiner none"),
+    (["--duplicate-iou", "none", "--refiner", "none"], "say how the box refiner is applied: not with --refiner none"),
+    (["--duplicate-iou", "0"], "--duplicate-iou must be an overlap in (0, 1] or none, got '0'"),
+    (["--duplicate-iou", "1.01"], "--duplicate-iou must be an overlap in (0, 1] or none, got '1.01'"),
+    (["--duplicate-iou", "nan"], "--duplicate-iou must be an overlap in (0, 1] or none, got 'nan'"),
+    (["--duplicate-iou", "half"], "--duplicate-iou must be an overlap in (0, 1] or none, got 'half'"),
     (["--quality-weight", "-1"], "--quality-weight must be a number in 0..8, got -1.0"),
     (["--quality-weight", "nan"], "--quality-weight must be a number in 0..8, got nan"),
 ])
@@ -196,6 +202,24 @@ def test_detect_with_depths_on_one_file_of_every_real_folder(tmp_path):
         eps = d["permittivity"]["eps_r"] if d.get("permittivity") else None
         # a record with positions (or a DZT's marks) has its host permittivity; one without says why not
         assert (eps is not None and 1 <= eps <= 81) or "no trace positions" in r.stderr, (src, d.get("permittivity"), r.stderr)
+
+
+@pytest.mark.parametrize("given, want", [("none", None), ("0.7", 0.7), ("NONE", None), ("1", 1.0)])
+def test_detect_lowers_duplicates_as_told_and_says_so(tmp_path, given, want):
+    """``--duplicate-iou``: the scores the library gives with that overlap (or none), and the JSON says which."""
+    from gpr3d.detection.infer import load_detector
+    from gpr3d.io.registry import read
+
+    src = real_file("gprpy_gssi_400MHz/FILE____032.DZT")
+    out = tmp_path / "det.json"
+    r = run_cli("detect", src, "--out", out, "--depth", "none", "--score", "0.05", "--duplicate-iou", given)
+    assert r.returncode == 0, r.stderr
+    d = json.loads(out.read_text())
+    assert d["refine"]["duplicate_iou"] == want
+    det = load_detector()
+    det.duplicate_iou = want
+    lib = det.detect(read(src), score_threshold=0.05)
+    assert [t["score"] for t in d["targets"]] == pytest.approx([t["score"] for t in lib["targets"]], rel=1e-6)
 
 
 def test_detect_applies_the_refiner_as_told_and_says_so(tmp_path):

@@ -116,26 +116,43 @@ def _detector(args):
     scales = _trace_scales(getattr(args, "trace_scales", None))
     passes, mirror_off = getattr(args, "refine_passes", None), bool(getattr(args, "no_refine_mirror", False))
     rule, weight = getattr(args, "box_rule", "auto"), getattr(args, "quality_weight", None)
+    dup = _duplicate_iou(getattr(args, "duplicate_iou", None))
     if passes is not None and not 1 <= passes <= 5:
         raise GPR3DError(f"--refine-passes must be a whole number in 1..5, got {passes}")
     if weight is not None and not 0.0 <= weight <= 8.0:
         raise GPR3DError(f"--quality-weight must be a number in 0..8, got {weight}")
-    how = passes is not None or mirror_off or rule != "auto" or weight is not None
+    how = passes is not None or mirror_off or rule != "auto" or weight is not None or dup != "default"
+    flags = "--refine-passes, --no-refine-mirror, --box-rule, --quality-weight and --duplicate-iou"
     if how and args.refiner == "none":
-        raise GPR3DError("--refine-passes, --no-refine-mirror, --box-rule and --quality-weight say how the box "
-                         "refiner is applied: not with --refiner none")
+        raise GPR3DError(f"{flags} say how the box refiner is applied: not with --refiner none")
     det = load_detector(args.weights, device=args.device, engine=args.runtime, refiner=args.refiner,
                         refine_passes=passes, refine_mirror=False if mirror_off else None, box_rule=rule,
                         quality_weight=weight)
     if how and det.refiner is None:
-        raise GPR3DError("--refine-passes, --no-refine-mirror, --box-rule and --quality-weight say how the box "
-                         "refiner is applied: these weights come without one (give --refiner default or a "
-                         "refiner's file)")
+        raise GPR3DError(f"{flags} say how the box refiner is applied: these weights come without one (give "
+                         "--refiner default or a refiner's file)")
+    if dup != "default":
+        det.duplicate_iou = dup
     if "auto" in scales and not det.reference_width:
         raise GPR3DError("--trace-scales auto needs a detector that knows how wide its training records' features "
                          "were (weights fine-tuned by references/detection/finetune_pgpr.py); these weights do not")
     det.trace_scales, det.mirror = scales, bool(getattr(args, "mirror", False))
     return det
+
+
+def _duplicate_iou(text):
+    """``--duplicate-iou``: ``"default"`` when not given, None for ``none``, else the overlap in (0, 1]."""
+    if text is None:
+        return "default"
+    if text.strip().lower() == "none":
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not 0.0 < v <= 1.0:  # (NaN fails too)
+        raise GPR3DError(f"--duplicate-iou must be an overlap in (0, 1] or none, got {text!r}")
+    return v
 
 
 def _trace_scales(text) -> tuple:
@@ -229,6 +246,10 @@ def add_view_args(sp):
                     help="where a refiner of several label rules ends the boxes: gpr3d's rule (docs/labels.md), "
                          "P-GPR's labellers' (boxes higher up the legs), or auto (default: P-GPR's for pictures, "
                          "gpr3d's for recordings)")
+    sp.add_argument("--duplicate-iou", default=None, metavar="O",
+                    help="a refined box that overlaps a surer one by IoU O or more has its score multiplied by one "
+                         "minus that overlap (0 < O <= 1; default 0.5, the merge's own overlap; none: the refined "
+                         "boxes keep their scores)")
     sp.add_argument("--quality-weight", type=float, default=None, metavar="W",
                     help="a refiner with a quality head multiplies each refined box's score by its predicted IoU "
                          "to the power W (0..8; default: the refiner's own for simulated records, 0 for real radar "
