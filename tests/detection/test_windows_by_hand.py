@@ -314,6 +314,8 @@ def test_fuse_views_by_hand():
     assert k.shape == (0,) and b.shape == (0, 4)
     with pytest.raises(InvalidDataError, match="^5 boxes but 4 scores$"):
         fuse_views(boxes, scores[:4], dt)
+    with pytest.raises(InvalidDataError, match=r"^the sample interval must be a positive number of seconds, got 0\.0$"):
+        fuse_views(boxes, scores, 0.0)
 
 
 def test_soften_duplicates_by_hand():
@@ -372,6 +374,9 @@ def test_soften_duplicates_by_hand():
     for bad in (0.0, 1.5, float("nan")):
         with pytest.raises(InvalidDataError, match=r"^the duplicates' overlap must lie in \(0, 1\], got "):
             soften_duplicates(boxes, scores, dt, iou=bad)
+    for bad in (0.0, -dt, float("nan"), float("inf"), "1e-10", None):
+        with pytest.raises(InvalidDataError, match="^the sample interval must be a positive number of seconds, got "):
+            soften_duplicates(boxes, scores, bad)
 
 
 def _half_width_by_brute_force(x):

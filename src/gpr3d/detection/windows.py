@@ -14,6 +14,7 @@ hyperbola inside a box.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -232,6 +233,8 @@ def _in_samples(boxes, scores, dt_s: float):
     s = np.asarray(scores, float).reshape(-1)
     if len(b) != len(s):
         raise InvalidDataError(f"{len(b)} boxes but {len(s)} scores")
+    if not (isinstance(dt_s, (int, float, np.floating)) and math.isfinite(dt_s) and dt_s > 0):
+        raise InvalidDataError(f"the sample interval must be a positive number of seconds, got {dt_s!r}")
     sc = b.copy()
     sc[:, [1, 3]] /= dt_s
     area = np.maximum(sc[:, 2] - sc[:, 0], 0) * np.maximum(sc[:, 3] - sc[:, 1], 0)
