@@ -374,7 +374,7 @@ def test_soften_duplicates_by_hand():
     for bad in (0.0, 1.5, float("nan")):
         with pytest.raises(InvalidDataError, match=r"^the duplicates' overlap must lie in \(0, 1\], got "):
             soften_duplicates(boxes, scores, dt, iou=bad)
-    for bad in (0.0, -dt, float("nan"), float("inf"), "1e-10", None):
+    for bad in (0.0, -dt, float("nan"), float("inf"), "1e-10", None, True):
         with pytest.raises(InvalidDataError, match="^the sample interval must be a positive number of seconds, got "):
             soften_duplicates(boxes, scores, bad)
 

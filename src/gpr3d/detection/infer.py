@@ -314,11 +314,10 @@ class Detector:
                     w = self._quality_weight(survey) or 0.0
                     boxes[sure], q = self.refiner.refine_scored(survey, self.window.rows, boxes[sure],
                                                                 record_image(proc, self.window.style), score=w > 0)
+                    scores = np.array(scores, float)  # (a copy: the scores below are the refined boxes')
                     if q is not None:  # the quality head's IoU rescales the scores of the boxes it moved
-                        scores = np.array(scores, float)
                         scores[sure] = scores[sure] * np.clip(q, 0.0, 1.0) ** w
                     if self.duplicate_iou is not None:  # two boxes moved onto one hyperbola: the less sure ranks lower
-                        scores = np.array(scores, float)
                         scores[sure] = soften_duplicates(boxes[sure], scores[sure], survey.dt_s,
                                                          iou=self.duplicate_iou)
         with stage("apexes"):

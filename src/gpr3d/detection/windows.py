@@ -233,7 +233,8 @@ def _in_samples(boxes, scores, dt_s: float):
     s = np.asarray(scores, float).reshape(-1)
     if len(b) != len(s):
         raise InvalidDataError(f"{len(b)} boxes but {len(s)} scores")
-    if not (isinstance(dt_s, (int, float, np.floating)) and math.isfinite(dt_s) and dt_s > 0):
+    if isinstance(dt_s, bool) or not (isinstance(dt_s, (int, float, np.integer, np.floating))
+                                      and math.isfinite(dt_s) and dt_s > 0):
         raise InvalidDataError(f"the sample interval must be a positive number of seconds, got {dt_s!r}")
     sc = b.copy()
     sc[:, [1, 3]] /= dt_s
