@@ -69,8 +69,9 @@ def main(argv=None):
                    help="simulated labels cut by the record's ends taught as the whole hyperbola's box (reaching past "
                         "the record), whose centre is the apex: gpr3d.detection.refine.whole_boxes")
     p.add_argument("--rule-heads", action="store_true",
-                   help="one head a label rule: P-GPR's pictures teach the 'pgpr' head, the synthetic and gprMax "
-                        "records the 'gpr3d' head (gpr3d detect picks the head by its input: pgpr for pictures)")
+                   help="one head a label rule whose data are given: P-GPR's pictures teach the 'pgpr' head, the "
+                        "synthetic and gprMax records the 'gpr3d' head (gpr3d detect picks the head by its input: "
+                        "pgpr for pictures)")
     p.add_argument("--quality", type=int, default=0, metavar="N",
                    help="also learn each box's IoU with its label (a quality head that rescales the detector's "
                         "scores) from N boxes a label drawn wider and N a label anywhere in the picture")
@@ -78,12 +79,20 @@ def main(argv=None):
                    help="with --quality: the weight of the quality on the scores for each rule's head, recorded in "
                         "the weights (gpr3d detect's default; 1 for a rule not named); the shipped refiner: "
                         "gpr3d=1 pgpr=0 (benchmarks/results/intel/refiner_rules_quality.md)")
+    p.add_argument("--members", type=int, default=1,
+                   help="train this many networks (seeds --seed, --seed + 1, ...) on boxes drawn anew for each, and "
+                        "write them as one refiner that averages their moves")
+    p.add_argument("--jitter-scale", type=float, default=1.0,
+                   help="the training boxes' spread about each label times this (JITTER): 0.5 trains a fine stage, "
+                        "applied after the first refiner (gpr3d.detection.refine.FINE_JITTER_SCALE)")
     p.add_argument("--onnx", default=None, help="also export the refiner (crops in, edge moves out) to this .onnx")
     args = p.parse_args(argv)
     if args.pgpr == "none" and not args.synthetic and not args.gprmax:
         p.error("nothing to train on: --pgpr none with neither --synthetic nor --gprmax")
-    if args.rule_heads and (args.pgpr == "none" or not (args.synthetic or args.gprmax)):
-        p.error("--rule-heads needs both rules' data: P-GPR's pictures and --synthetic or --gprmax records")
+    if args.members < 1:
+        p.error(f"--members must be a whole number >= 1, got {args.members}")
+    if not 0.0 < args.jitter_scale <= 4.0:
+        p.error(f"--jitter-scale must be a number in (0, 4], got {args.jitter_scale}")
     if args.quality < 0:
         p.error(f"--quality must be a whole number >= 0, got {args.quality}")
     from gpr3d.detection.refine import RULES
@@ -107,12 +116,15 @@ def main(argv=None):
             p.error(f"--gprmax {spec}: N after the colon is the count of records left out, a whole number")
     import torch
 
-    from gpr3d.detection.refine import export_refiner_onnx, save_refiner, train_refiner
+    from gpr3d.detection.refine import build_refiner, export_refiner_onnx, save_refiner, train_refiner
     from gpr3d.detection.weights import load_weights
 
     _, window, _ = load_weights()
-    rules = list(RULES) if args.rule_heads else None
-    pgpr_head = RULES.index("pgpr") if args.rule_heads else 0
+    # with --rule-heads, a head for each rule whose data are given: P-GPR's pictures teach 'pgpr', records 'gpr3d'
+    rules = [r for r in RULES if (r == "pgpr" and args.pgpr != "none") or
+             (r == "gpr3d" and (args.synthetic or args.gprmax))] if args.rule_heads else None
+    pgpr_head = rules.index("pgpr") if rules and "pgpr" in rules else 0
+    gpr3d_head = rules.index("gpr3d") if rules and "gpr3d" in rules else 0
     pictures, records, parts = [], [], []
     if args.pgpr != "none":
         from gpr3d.core.errors import FormatError
@@ -139,9 +151,20 @@ def main(argv=None):
     t0, cpu0 = time.perf_counter(), time.process_time()
     from itertools import chain
 
-    data = chain(samples(pictures, window, args.whole, pgpr_head), samples(records, window, args.whole, 0))
-    net = train_refiner(data, epochs=args.epochs, per_label=args.per_label, seed=args.seed,
-                        heads=len(rules) if rules else 1, quality=args.quality, log=lambda m: print(m, flush=True))
+    nets = []
+    for k in range(args.members):  # each member on boxes drawn anew (its own seed)
+        if args.members > 1:
+            print(f"member {k + 1}/{args.members}", flush=True)
+        data = chain(samples(pictures, window, args.whole, pgpr_head), samples(records, window, args.whole, gpr3d_head))
+        nets.append(train_refiner(data, epochs=args.epochs, per_label=args.per_label, seed=args.seed + k,
+                                  heads=len(rules) if rules else 1, quality=args.quality,
+                                  jitter_scale=args.jitter_scale, log=lambda m: print(m, flush=True)))
+    net = nets[0]
+    if args.members > 1:
+        net = build_refiner(len(rules) if rules else 1, bool(args.quality), args.members)
+        for member, trained in zip(net.members, nets):
+            member.load_state_dict(trained.state_dict())
+        net.eval()
     wall, cpu = time.perf_counter() - t0, time.process_time() - cpu0
     prov = {"name": args.name, "command": "python references/detection/train_refiner.py " + " ".join(argv or sys.argv[1:]),
             "data": " + ".join(parts), "whole": args.whole, "epochs": args.epochs,
@@ -149,6 +172,8 @@ def main(argv=None):
             **({"quality": True, "quality_boxes": args.quality} if args.quality else {}),
             **({"quality_weights": quality_weights} if quality_weights else {}),
             "per_label": args.per_label, "seed": args.seed,
+            **({"jitter_scale": args.jitter_scale} if args.jitter_scale != 1.0 else {}),
+            **({"members": args.members} if args.members > 1 else {}),
             "train_wall_s": round(wall, 1), "train_cpu_s": round(cpu, 1), "torch_threads": torch.get_num_threads(),
             "host": platform.processor() or platform.machine()}
     if args.pgpr != "none":

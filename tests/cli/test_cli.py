@@ -208,7 +208,8 @@ def test_demo_end_to_end(tmp_path):
         assert cfg["eps_r"] == pytest.approx(depth["focus"]["eps_r"])
         assert det["depth"]["real"]["eps_r_header"] == 6.0
         # the survey's boxes by gpr3d's rule, their scores weighed by the refiner's quality head (a recording)
-        assert det["refine"] == {"mirror": True, "passes": 2, "duplicate_iou": 0.5, "rule": "gpr3d", "quality_weight": 1.0}
+        assert det["refine"] == {"mirror": True, "passes": 2, "fine": None, "duplicate_iou": 0.5, "rule": "gpr3d",
+                                 "quality_weight": 1.0}
         assert "each score times the box's predicted fit (IoU with its label) to the power 1" in r.stdout
         pg = det["pgpr"]  # the real P-GPR B-scan against its label file (9 lines: 7 steel, 2 pipe)
         assert (pg["image"], pg["n_labelled"]) == ("IECAS_0032.png", 9) and "detections_pgpr.png" in names
@@ -222,7 +223,8 @@ def test_demo_end_to_end(tmp_path):
         assert pg["refiner"] == "refiner_pgpr_synth_gprmax_whole_rules_quality"
         assert set(pg["mean_iou"]) == {"refined", "network", "mirrored"}
         # the default application, as detect reports it: P-GPR's head for a picture, its quality not weighing the scores
-        assert pg["refine"] == {"mirror": True, "passes": 2, "duplicate_iou": 0.5, "rule": "pgpr", "quality_weight": 0.0}
+        assert pg["refine"] == {"mirror": True, "passes": 2, "fine": "refiner_fine_pgpr_5", "duplicate_iou": 0.5,
+                                "rule": "pgpr", "quality_weight": 0.0}
         assert all(0.3 < v <= 1 for v in pg["mean_iou"].values()) and pg["mean_iou"]["refined"] != pg["mean_iou"]["network"]
         # and seen mirrored too: the two views' boxes fused move them
         assert 0 <= pg["found_iou50_mirrored"] <= 9 and pg["mean_iou"]["mirrored"] != pg["mean_iou"]["refined"]

@@ -83,6 +83,9 @@ def test_detect_on_the_embedded_dzt_imports_neither_scipy_signal_nor_ndimage(tmp
     (["--duplicate-iou", "1.01"], "--duplicate-iou must be an overlap in (0, 1] or none, got '1.01'"),
     (["--duplicate-iou", "nan"], "--duplicate-iou must be an overlap in (0, 1] or none, got 'nan'"),
     (["--duplicate-iou", "half"], "--duplicate-iou must be an overlap in (0, 1] or none, got 'half'"),
+    (["--fine-refiner", "none", "--refiner", "none"], "say how the box refiner is applied: not with --refiner none"),
+    (["--fine-refiner", "{missing}"], "--fine-refiner {missing}: no such file"),
+    (["--fine-refiner", "{junk}"], "junk.pt: not a readable"),
     (["--quality-weight", "-1"], "--quality-weight must be a number in 0..8, got -1.0"),
     (["--quality-weight", "nan"], "--quality-weight must be a number in 0..8, got nan"),
 ])
@@ -100,7 +103,9 @@ def test_detect_bad_arguments_one_line(tmp_path, args, msg):
         obj = torch.load(DEFAULT_WEIGHTS, weights_only=True)
         obj["provenance"].pop("trace_width", None)
         torch.save(obj, tmp_path / "plain.pt")
-    args = [a.format(junk=tmp_path / "junk.pt", txt=tmp_path / "x.txt", plain=tmp_path / "plain.pt") for a in args]
+    names = {"junk": tmp_path / "junk.pt", "txt": tmp_path / "x.txt", "plain": tmp_path / "plain.pt",
+             "missing": tmp_path / "nope.pt"}
+    args, msg = [a.format(**names) for a in args], msg.format(**names)
     base = ["detect", src, "--out", tmp_path / "d.json"]
     if "--out" in args:
         base = ["detect", src]
@@ -234,10 +239,12 @@ def test_detect_applies_the_refiner_as_told_and_says_so(tmp_path):
     assert r.returncode == 0, r.stderr
     d = json.loads(out.read_text())
     # (the shipped refiner: gpr3d's head for a recording; a real radar's file: its quality not weighing the scores)
-    assert d["refine"] == {"mirror": False, "passes": 1, "duplicate_iou": 0.5, "rule": "gpr3d", "quality_weight": 0.0}
+    assert d["refine"] == {"mirror": False, "passes": 1, "fine": None, "duplicate_iou": 0.5, "rule": "gpr3d",
+                           "quality_weight": 0.0}
     want = load_detector(refine_mirror=False, refine_passes=1).detect(read(src), score_threshold=0.5)
     default = load_detector().detect(read(src), score_threshold=0.5)
-    assert default["refine"] == {"mirror": True, "passes": 2, "duplicate_iou": 0.5, "rule": "gpr3d", "quality_weight": 0.0}
+    assert default["refine"] == {"mirror": True, "passes": 2, "fine": None, "duplicate_iou": 0.5, "rule": "gpr3d",
+                                 "quality_weight": 0.0}
     assert default["targets"]  # (weighed by the quality, the quick start's processed copy kept none at 0.5)
     got = np.array([t["box"] for t in d["targets"]])
     assert got.shape == (len(want["targets"]), 4)

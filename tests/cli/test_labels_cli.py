@@ -113,3 +113,31 @@ def test_wrong_label_arguments_get_one_line(tmp_path, args, msg):
     assert r.returncode == 1, r.stdout
     assert msg.format(**fill) in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert not (tmp_path / "x.json").exists() and not (tmp_path / "t").exists()
+
+
+def test_detect_on_a_real_picture_moves_its_boxes_once_more_by_the_fine_stage_unless_told(tmp_path):
+    """The shipped P-GPR validation picture: by default the refiner's fine stage (P-GPR's rule) moves each box once
+    more after the refiner's passes, and the JSON names it; ``--fine-refiner none`` leaves the passes' boxes. Each
+    is the library's detection of the same picture."""
+    from importlib.resources import files
+
+    from gpr3d.detection.infer import load_detector
+    from gpr3d.io.userlabels import read_picture
+
+    png = files("gpr3d") / "data" / "pgpr" / "images" / "IECAS_0032.png"
+    survey = read_picture(png, PM, frequency_hz=1.6e9)
+    got = {}
+    for fine in ("auto", "none"):
+        out = tmp_path / f"{fine}.json"
+        r = run_cli("detect", png, "--pixel-map", PM, "--frequency", "1.6e9", "--depth", "none", "--fine-refiner", fine,
+                    "--out", out)
+        assert r.returncode == 0, r.stderr
+        got[fine] = json.loads(out.read_text())
+        lib = load_detector(fine_refiner=fine).detect(survey, score_threshold=0.5)
+        assert got[fine]["refine"] == lib["refine"]
+        assert np.allclose([t["box"] for t in got[fine]["targets"]], [t["box"] for t in lib["targets"]], rtol=1e-6)
+    assert got["auto"]["refine"]["fine"] == "refiner_fine_pgpr_5" and got["none"]["refine"]["fine"] is None
+    assert got["auto"]["refine"]["rule"] == got["none"]["refine"]["rule"] == "pgpr"
+    a = np.array([t["box"] for t in got["auto"]["targets"]])
+    b = np.array([t["box"] for t in got["none"]["targets"]])
+    assert len(a) == len(b) >= 5 and not np.allclose(a, b)  # the same boxes, moved

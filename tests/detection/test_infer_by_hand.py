@@ -249,9 +249,10 @@ def test_the_engine_is_chosen_by_the_file_the_device_and_what_is_installed(monke
 
     monkeypatch.setattr(ort.OnnxDetector, "load", loaded("onnx"))
     monkeypatch.setattr(infer.Detector, "load", loaded("torch"))
-    monkeypatch.setattr(refine, "load_refiner", lambda p, engine, mirror, passes, rule, quality_weight:
+    monkeypatch.setattr(refine, "load_refiner", lambda p, engine, mirror, passes, rule, quality_weight, fine:
                         refiners.append((p, engine)) or (p, engine, mirror, passes) +
-                        (() if (rule, quality_weight) == ("auto", refine.QUALITY_WEIGHT) else (rule, quality_weight)))
+                        (() if (rule, quality_weight) == ("auto", refine.QUALITY_WEIGHT) else (rule, quality_weight)) +
+                        (() if fine == "auto" else (fine,)))
     shipped = tmp_path / "default.onnx"
     monkeypatch.setattr(ort, "DEFAULT_ONNX", shipped)
     import importlib.util
@@ -280,6 +281,9 @@ def test_the_engine_is_chosen_by_the_file_the_device_and_what_is_installed(monke
     assert infer.load_detector("m.onnx", refiner="default", refine_passes=3).refiner == (None, "onnx", True, 3)
     assert infer.load_detector(refine_mirror=False).refiner == (None, "torch", False, 2)
     assert infer.load_detector(box_rule="pgpr", quality_weight=0).refiner == (None, "torch", True, 2, "pgpr", 0.0)
+    # the fine stage as asked (auto: the refiner's loader picks the shipped one for the shipped refiner)
+    assert infer.load_detector(fine_refiner="none").refiner == (None, "torch", True, 2, "none")
+    assert infer.load_detector("m.pt", refiner="r.pt", fine_refiner="f.pt").refiner == ("r.pt", "torch", True, 2, "f.pt")
     for kw, msg in [(dict(engine="tensorrt"), "unknown engine 'tensorrt'; choose one of auto, torch, onnx, int8"),
                     (dict(path="m.pt", engine="onnx"), "--runtime onnx needs an .onnx file (export one with python "
                      "references/detection/export_onnx.py m.pt OUT.onnx), not m.pt"),

@@ -252,8 +252,9 @@ class _Fixed:
         self.seen.append(crops.copy())
         return np.repeat(self.d[None], len(crops), 0)
 
-    rules, quality, rule, quality_weight = (), False, "auto", R.QUALITY_WEIGHT  # one head, no quality
+    rules, quality, rule, quality_weight, fine = (), False, "auto", R.QUALITY_WEIGHT, None  # one head, no quality
     refine, refine_scored, head_for = R.BoxRefiner.refine, R.BoxRefiner.refine_scored, R.BoxRefiner.head_for
+    fine_for = R.BoxRefiner.fine_for
     weight_for = R.BoxRefiner.weight_for
 
 
@@ -300,10 +301,11 @@ def test_the_detector_refines_its_merged_boxes_before_it_reports_them():
     plain, plain_refine = plain["targets"], plain["refine"]
     det.refiner = _Fixed([0.0, 0.0, 0.2, 0.1])
     found = det.detect(s)
-    assert found["refiner"] == "fixed moves" and found["refine"] == {"mirror": False, "passes": 1, "duplicate_iou": 0.5}
+    assert found["refiner"] == "fixed moves" and found["refine"] == {"mirror": False, "passes": 1, "fine": None,
+                                                                            "duplicate_iou": 0.5}
     assert plain_refine is None
     det.refiner.mirror, det.refiner.passes = True, 3  # the JSON says how the refiner was applied
-    assert det.detect(s)["refine"] == {"mirror": True, "passes": 3, "duplicate_iou": 0.5}
+    assert det.detect(s)["refine"] == {"mirror": True, "passes": 3, "fine": None, "duplicate_iou": 0.5}
     det.refiner.mirror, det.refiner.passes = False, 1
     moved = found["targets"]
     assert len(plain) == len(moved) == 1  # one window
@@ -687,8 +689,9 @@ class _ToBrightest:
         shift = ((at + 0.5) / R.CROP - 0.5) * R.EXPAND  # bin i's centre, in box widths from the box's centre
         return np.stack([shift, np.zeros(len(at)), shift, np.full(len(at), 0.1)], axis=1)
 
-    rules, quality, rule, quality_weight = (), False, "auto", R.QUALITY_WEIGHT  # one head, no quality
+    rules, quality, rule, quality_weight, fine = (), False, "auto", R.QUALITY_WEIGHT, None  # one head, no quality
     refine, refine_scored, head_for = R.BoxRefiner.refine, R.BoxRefiner.refine_scored, R.BoxRefiner.head_for
+    fine_for = R.BoxRefiner.fine_for
     weight_for = R.BoxRefiner.weight_for
 
 
@@ -978,8 +981,9 @@ class _TwoRules:
 
     provenance = {"name": "two rules", "rules": ["gpr3d", "pgpr"], "quality": True}
     mirror, passes, rule, quality_weight = False, 1, "auto", 1.0
-    rules, quality = ("gpr3d", "pgpr"), True
+    rules, quality, fine, whole = ("gpr3d", "pgpr"), True, None, False
     refine, refine_scored, head_for = R.BoxRefiner.refine, R.BoxRefiner.refine_scored, R.BoxRefiner.head_for
+    fine_for = R.BoxRefiner.fine_for
     weight_for = R.BoxRefiner.weight_for
 
     def predict_crops(self, crops):
@@ -1035,7 +1039,8 @@ def test_the_detector_multiplies_refined_scores_by_the_quality_to_its_weight_and
     plain = _one_box_detector(cfg, boxes=[[40.0, 30.0, 90.0, 60.0], [150.0, 20.0, 200.0, 70.0]],
                               scores=[0.9, 0.3]).detect(s, score_threshold=0.0)
     got = det.detect(s, score_threshold=0.0)
-    assert got["refine"] == {"mirror": False, "passes": 1, "duplicate_iou": 0.5, "rule": "gpr3d", "quality_weight": 1.0}
+    assert got["refine"] == {"mirror": False, "passes": 1, "fine": None, "duplicate_iou": 0.5, "rule": "gpr3d",
+                             "quality_weight": 1.0}
     assert sorted(t["score"] for t in got["targets"]) == pytest.approx([0.15, 0.45])
     det.refiner.quality_weight = 2.0
     assert sorted(t["score"] for t in det.detect(s, score_threshold=0.0)["targets"]) == pytest.approx([0.075, 0.225])
@@ -1368,8 +1373,15 @@ def test_quality_training_draws_wide_and_anywhere_boxes_and_checks_its_heads(mon
     labels = np.array([[10.0, 8.0, 30.0, 20.0], [50.0, 5.0, 80.0, 30.0]])
     net = R.train_refiner([(img, labels, None, 1)], epochs=1, per_label=3, batch=64, heads=2, quality=5)
     assert net[-1].out_features == 10
-    assert spreads == [(3, None), (5, R.WIDE_JITTER)] and anywhere == [(10, 90, 40)]
+    assert spreads == [(3, R.JITTER), (5, R.WIDE_JITTER)] and anywhere == [(10, 90, 40)]
     assert inspect.signature(R.train_refiner).parameters["quality_loss"].default == 0.2
+    spreads.clear()  # a fine stage: the boxes about the labels drawn closer by the scale, the wide ones as they were
+    R.train_refiner([(img, labels, None, 1)], epochs=1, per_label=3, batch=64, heads=2, quality=5, jitter_scale=0.5)
+    assert spreads == [(3, {"centre": 0.03, "width": 0.1, "top": 0.05, "bottom": 0.075}), (5, R.WIDE_JITTER)]
+    for bad in (0, -0.5, 4.5, True, "0.5", float("nan")):
+        with pytest.raises(InvalidDataError) as e:
+            R.train_refiner([(img, labels)], jitter_scale=bad)
+        assert str(e.value) == f"the jitter scale must be a number in (0, 4], got {bad!r}"
     with pytest.raises(InvalidDataError) as e:
         R.train_refiner([(img, labels, None, 2)], epochs=1, heads=2)
     assert str(e.value) == "a sample names head 2, the refiner has 2"
@@ -1409,3 +1421,185 @@ def test_a_quality_weight_of_8_is_the_largest_allowed():
     for bad in (8.001, 9, -1e-9):
         with pytest.raises(InvalidDataError, match=f"^the quality weight must be a number in 0..8, got {bad!r}$"):
             R.check_quality_weight(bad)
+
+
+class _Stage:
+    """A fine stage whose network asks fixed edge moves of every crop, per head: ``moves`` (heads, 4)."""
+
+    quality, whole = False, False
+
+    def __init__(self, moves, rules=(), name="fixed fine stage"):
+        self.moves, self.rules, self.seen = np.asarray(moves, float).reshape(-1, 4), tuple(rules), []
+        self.provenance = {"name": name}
+
+    def predict_crops(self, crops):
+        self.seen.append(crops.copy())
+        return np.repeat(self.moves.reshape(1, -1), len(crops), 0)
+
+
+def test_a_fine_stage_moves_each_box_once_more_after_the_passes_from_where_they_ended():
+    s = _survey()
+    rows = 256
+    image = _coordinates(rows, s.n_traces)
+    boxes = np.array([[70.0, 3e-9, 110.0, 4e-9], [150.0, 2.5e-9, 190.0, 3.5e-9]])
+    first, fine = _Fixed([0.1, 0.0, 0.1, 0.0]), _Stage([0.0, -0.25, 0.0, 0.5])
+    first.passes = 2
+    first.fine = fine
+    got = first.refine(s, rows, boxes, image)
+    pm = R.record_pixmap(s, rows)
+    px = np.array([pm.box_to_px(b) for b in boxes])
+    after = R.apply_deltas(R.apply_deltas(px, [[0.1, 0.0, 0.1, 0.0]] * 2), [[0.1, 0.0, 0.1, 0.0]] * 2)
+    want = R.apply_deltas(after, [[0.0, -0.25, 0.0, 0.5]] * 2)
+    np.testing.assert_allclose(got, [pm.px_to_box(b) for b in want], rtol=1e-9)
+    assert len(first.seen) == 2 and len(fine.seen) == 1  # two passes, then the fine stage once
+    np.testing.assert_allclose([_box_of(c) for c in fine.seen[0]], after, rtol=1e-5)  # cut where the passes ended
+    first.fine = None  # without it: the passes' boxes
+    np.testing.assert_allclose(first.refine(s, rows, boxes, image), [pm.px_to_box(b) for b in after], rtol=1e-9)
+
+
+def test_a_fine_stage_sees_each_box_mirrored_too_and_takes_the_head_of_the_first_refiner_s_rule():
+    s = _survey()
+    rows = 256
+    image = np.zeros((3, rows, s.n_traces), np.float32)
+    box = np.array([[120.0, 2e-9, 160.0, 4e-9]])
+    ref = _TwoRules()
+    ref.quality_weight = None
+    ref.fine = _Stage([[0.0, 0.0, 0.3, 0.0], [0.2, 0.0, 0.0, 0.0]], rules=("gpr3d", "pgpr"))
+    moved, _ = ref.refine_scored(s, rows, box, image)  # gpr3d's head: 124 -> right edge + 0.3 x 36
+    np.testing.assert_allclose(moved[0, [0, 2]], [124.0, 160.0 + 0.3 * 36.0], rtol=1e-9)
+    picture = Survey(data=s.data, dt_s=s.dt_s, metadata={"format": "picture"})
+    moved_p, _ = ref.refine_scored(picture, rows, box, image)  # P-GPR's head: 116 -> left edge + 0.2 x 44
+    np.testing.assert_allclose(moved_p[0, [0, 2]], [116.0 + 0.2 * 44.0, 160.0], rtol=1e-9)
+    ref.mirror = True  # each look averaged with the mirror's: the first refiner's left move halves, so does the fine's
+    both, _ = ref.refine_scored(picture, rows, box, image)
+    # the first look: left edge 0.05 x 40 out, the right edge as much (the mirror's left move): 118..162, 44 wide
+    np.testing.assert_allclose(both[0, [0, 2]], [118.0 + 0.5 * 0.2 * 44, 162.0 - 0.5 * 0.2 * 44], rtol=1e-9)
+    assert len(ref.fine.seen[-1]) == 2  # both looks in one batch
+
+
+def test_the_quality_is_read_where_the_fine_stage_left_each_box():
+    s = _survey()
+    rows = 256
+    image = np.zeros((3, rows, s.n_traces), np.float32)
+    image[:, :, :150] = 1.0
+    box = np.array([[120.0, 2e-9, 160.0, 4e-9]])
+    ref = _TwoRules()
+    ref.fine = _Stage([[0.5, 0.0, 0.5, 0.0], [0.0, 0.0, 0.0, 0.0]], rules=("gpr3d", "pgpr"))
+    moved, q = ref.refine_scored(s, rows, box, image)
+    np.testing.assert_allclose(moved[0, [0, 2]], [124.0 + 18.0, 160.0 + 18.0], rtol=1e-9)
+    crop = R.crop_array(image, np.array([R.record_pixmap(s, rows).box_to_px(b) for b in moved]))
+    a = 4.0 * (crop[0, 0, :, : R.CROP // 2].mean() - crop[0, 0, :, R.CROP // 2 :].mean())
+    np.testing.assert_allclose(q, [1 / (1 + np.exp(-a))], rtol=1e-5)
+
+
+def test_a_fine_stage_must_fit_the_refiner_it_follows():
+    ref = R.BoxRefiner(R.build_refiner(2, True), {"name": "first", "rules": ["gpr3d", "pgpr"], "quality": True,
+                                                   "whole": True})
+    ok = R.BoxRefiner(R.build_refiner(2), {"name": "fine", "rules": ["gpr3d", "pgpr"], "whole": True})
+    assert ref.with_fine(ok) is ref and ref.fine is ok
+    assert ref.with_fine(None).fine is None
+    one = R.BoxRefiner(R.build_refiner(1), {"name": "one head", "whole": True})
+    with pytest.raises(InvalidDataError, match="^one head: a fine stage whose heads follow one rule, the refiner's "
+                                               "gpr3d, pgpr$"):
+        ref.with_fine(one)
+    q = R.BoxRefiner(R.build_refiner(2, True), {"name": "q", "rules": ["gpr3d", "pgpr"], "quality": True,
+                                                 "whole": True})
+    with pytest.raises(InvalidDataError, match=r"^q: a fine stage with a quality head \(the first refiner's is used\)$"):
+        ref.with_fine(q)
+    part = R.BoxRefiner(R.build_refiner(2), {"name": "cut", "rules": ["gpr3d", "pgpr"]})
+    with pytest.raises(InvalidDataError, match="^cut: a fine stage not trained on whole hyperbolas' boxes, the "
+                                               "refiner so$"):
+        ref.with_fine(part)
+    assert ref.fine is None  # a refused stage is not taken
+    pictures = R.BoxRefiner(R.build_refiner(1), {"name": "pictures", "rules": ["pgpr"]})
+    assert ref.with_fine(pictures).fine is pictures  # P-GPR's rule alone: its pictures name no apexes, none is whole
+    lone = R.BoxRefiner(R.build_refiner(1), {"name": "lone"})
+    with pytest.raises(InvalidDataError, match="^lone: a fine stage not trained on whole hyperbolas' boxes, the "
+                                               "refiner so$"):
+        R.BoxRefiner(R.build_refiner(1), {"name": "one", "whole": True}).with_fine(lone)
+
+
+def test_load_refiner_takes_a_fine_stage_from_a_file_and_none_from_auto_with_another_refiner(tmp_path):
+    first, fine = tmp_path / "first.pt", tmp_path / "fine.pt"
+    R.save_refiner(R.build_refiner(), first, provenance={"name": "first"})
+    R.save_refiner(R.build_refiner(), fine, provenance={"name": "fine", "jitter_scale": 0.5})
+    assert R.load_refiner(first).fine is None  # auto: another refiner comes without the shipped fine stage
+    assert R.load_refiner(first, fine="none").fine is None
+    got = R.load_refiner(first, fine=fine)
+    assert got.fine.provenance["name"] == "fine"
+    x = np.random.default_rng(0).normal(size=(3, 3, R.CROP, R.CROP)).astype(np.float32)
+    np.testing.assert_array_equal(got.fine.predict_crops(x), R.BoxRefiner.load(fine).predict_crops(x))
+    with pytest.raises(InvalidDataError, match="^the fine stage must be auto, none, default or a refiner's file, "
+                                               "got 3$"):
+        R.load_refiner(first, fine=3)
+    with pytest.raises(FormatError, match="no such box refiner weights file"):
+        R.load_refiner(first, fine=tmp_path / "missing.pt")
+
+
+def test_a_refiner_of_several_members_averages_their_outputs_and_its_file_says_how_many(tmp_path):
+    net = R.build_refiner(2, False, members=3, seed=5)
+    x = torch.from_numpy(np.random.default_rng(1).normal(size=(4, 3, R.CROP, R.CROP)).astype(np.float32))
+    net.eval()
+    with torch.inference_mode():
+        each = [m(x).numpy() for m in net.members]
+        np.testing.assert_allclose(net(x).numpy(), np.mean(each, axis=0), rtol=1e-5, atol=1e-7)
+        # member k is drawn from seed + k: the first is the one network of seed 5, the second that of seed 6
+        np.testing.assert_array_equal(each[1], R.build_refiner(2, seed=6).eval()(x).numpy())
+    assert not np.allclose(each[0], each[1])
+    path = tmp_path / "three.pt"
+    R.save_refiner(net, path, provenance={"name": "three", "rules": ["gpr3d", "pgpr"], "members": 3})
+    back = R.load_refiner(path)
+    np.testing.assert_allclose(back.predict_crops(x.numpy()), net(x).detach().numpy(), rtol=2e-2, atol=2e-3)  # float16
+    graph = R.export_refiner_onnx(path, tmp_path / "three.onnx")
+    assert graph["max_abs_diff"] < 1e-4
+    np.testing.assert_allclose(R.load_refiner(tmp_path / "three.onnx").predict_crops(x.numpy()),
+                               back.predict_crops(x.numpy()), rtol=1e-4, atol=1e-5)
+    R.save_refiner(net, tmp_path / "said_one.pt", provenance={"name": "three", "rules": ["gpr3d", "pgpr"]})
+    with pytest.raises(FormatError, match="said_one.pt: weights do not fit the refiner"):
+        R.load_refiner(tmp_path / "said_one.pt")
+    for bad in (0, 1.5, True, "3"):
+        R.save_refiner(net, tmp_path / "bad.pt", provenance={"members": bad})
+        with pytest.raises(FormatError) as e:
+            R.load_refiner(tmp_path / "bad.pt")
+        assert str(e.value).endswith(f"a refiner of {bad!r} members; a whole number >= 1 was expected")
+    for bad in (0, -1, 2.0, True):
+        with pytest.raises(InvalidDataError, match=f"^a refiner's members must be a whole number >= 1, got {bad!r}$"):
+            R.build_refiner(members=bad)
+
+
+def test_a_fine_stage_of_some_rules_moves_only_their_boxes():
+    s = _survey()
+    rows = 256
+    image = np.zeros((3, rows, s.n_traces), np.float32)
+    box = np.array([[120.0, 2e-9, 160.0, 4e-9]])
+    ref = _TwoRules()
+    ref.quality_weight = None
+    R.BoxRefiner.with_fine(ref, _Stage([0.2, 0.0, 0.0, 0.0], rules=("pgpr",)))
+    picture = Survey(data=s.data, dt_s=s.dt_s, metadata={"format": "picture"})
+    np.testing.assert_allclose(ref.refine(picture, rows, box, image)[0, [0, 2]], [116.0 + 0.2 * 44.0, 160.0],
+                               rtol=1e-9)  # P-GPR's rule: moved once more
+    assert ref.fine_for(picture)[1] == 0 and ref.fine_for(s) is None
+    np.testing.assert_allclose(ref.refine(s, rows, box, image)[0, [0, 2]], [124.0, 160.0], rtol=1e-9)  # gpr3d's: not
+
+
+def test_the_detector_names_the_fine_stage_that_moved_its_boxes():
+    from gpr3d.detection.windows import WindowConfig
+
+    s = _survey(n_traces=256)
+    det = _one_box_detector(WindowConfig(traces=256, rows=128, overlap=0.0))
+    det.refiner = _Fixed([0.0, 0.0, 0.2, 0.0])
+    first = det.detect(s)
+    det.refiner.fine = _Stage([0.0, 0.0, 0.0, 0.1])
+    both = det.detect(s)
+    assert both["refine"] == {"mirror": False, "passes": 1, "fine": "fixed fine stage", "duplicate_iou": 0.5}
+    a, b = np.asarray(first["targets"][0]["box"]), np.asarray(both["targets"][0]["box"])
+    np.testing.assert_allclose(b[:3], a[:3])
+    np.testing.assert_allclose(b[3] - a[3], 0.1 * (a[3] - a[1]), rtol=1e-6)  # the fine stage's move, after the first's
+    det.refiner.fine = _Stage([0.0, 0.0, 0.0, 0.1], rules=("pgpr",))  # a stage of another rule than the record's
+    det.refiner.rules, det.refiner.d = ("gpr3d", "pgpr"), np.tile(det.refiner.d, 2)  # two heads, moving alike
+    det.refiner.fine.provenance = {}
+    got = det.detect(s)
+    assert got["refine"]["fine"] is None and got["refine"]["rule"] == "gpr3d"
+    np.testing.assert_allclose(got["targets"][0]["box"], a)
+    picture = Survey(data=s.data, dt_s=s.dt_s, metadata={"format": "picture"})
+    assert det.detect(picture)["refine"]["fine"] == "fine stage"  # one that names itself not: so called

@@ -112,9 +112,39 @@ def test_rule_heads_give_p_gpr_pictures_their_own_head_and_quality_a_head_output
     assert o.shape == (2, 10) and not np.allclose(o[:, :4], o[:, 5:9])
 
 
-@pytest.mark.parametrize("args, says", [(["--pgpr", "none", "--synthetic", "2", "--rule-heads"],
-                                         "--rule-heads needs both rules' data"),
-                                        (["--synthetic", "0", "--rule-heads"], "--rule-heads needs both rules' data"),
+def test_a_fine_stage_of_p_gpr_s_rule_alone_averages_its_members(tmp_path):
+    """``--rule-heads`` with P-GPR's pictures alone: one head, of the 'pgpr' rule; ``--members 2 --jitter-scale
+    0.5``: two networks trained on boxes drawn half as far from the labels, in one file that averages their moves,
+    and the file says so."""
+    import numpy as np
+    import torch
+
+    from gpr3d.detection.refine import load_refiner
+
+    pgpr = real_file("pgpr_1600MHz")
+    out = tmp_path / "fine.pt"
+    r = subprocess.run([sys.executable, str(SCRIPT), "--out", str(out), "--pgpr", str(pgpr), "--only", "IECAS_002*",
+                        "--rule-heads", "--members", "2", "--jitter-scale", "0.5", "--epochs", "1", "--per-label",
+                        "2"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.count("member ") == 2
+    ref = load_refiner(out)
+    prov = ref.provenance
+    assert prov["rules"] == ["pgpr"] and prov["members"] == 2 and prov["jitter_scale"] == 0.5
+    assert ref.rules == ("pgpr",) and len(ref.net.members) == 2
+    x = np.random.default_rng(0).random((3, 3, 64, 64), dtype=np.float32)
+    with torch.inference_mode():
+        each = [m(torch.from_numpy(x)).numpy() for m in ref.net.members]
+    assert not np.allclose(each[0], each[1], atol=1e-3)  # two networks, not one twice
+    np.testing.assert_allclose(ref.predict_crops(x), 0.5 * (each[0] + each[1]), rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("args, says", [(["--pgpr", "none", "--synthetic", "2", "--members", "0"],
+                                         "--members must be a whole number >= 1, got 0"),
+                                        (["--pgpr", "none", "--synthetic", "2", "--jitter-scale", "0"],
+                                         "--jitter-scale must be a number in (0, 4], got 0.0"),
+                                        (["--pgpr", "none", "--synthetic", "2", "--jitter-scale", "nan"],
+                                         "--jitter-scale must be a number in (0, 4], got nan"),
                                         (["--pgpr", "none", "--synthetic", "2", "--quality", "-1"],
                                          "--quality must be a whole number >= 0, got -1"),
                                         (["--pgpr", "none", "--synthetic", "2", "--quality", "2", "--quality-weights",
@@ -123,7 +153,7 @@ def test_rule_heads_give_p_gpr_pictures_their_own_head_and_quality_a_head_output
                                           "pgpr=x"], "--quality-weights pgpr=x: a rule (gpr3d, pgpr) = a number"),
                                         (["--pgpr", "none", "--synthetic", "2", "--quality-weights", "pgpr=0"],
                                          "--quality-weights weigh a quality head: give --quality N too")])
-def test_rule_heads_without_both_rules_and_a_negative_quality_are_one_line(tmp_path, args, says):
+def test_wrong_members_jitter_scale_and_quality_settings_are_one_line(tmp_path, args, says):
     r = subprocess.run([sys.executable, str(SCRIPT), "--out", str(tmp_path / "ref.pt"), *args],
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr

@@ -179,7 +179,8 @@ def test_the_report_opens_in_a_real_browser_draws_its_3d_view_and_names_the_targ
 
 def test_the_detections_key_follows_the_shipped_models_files(tmp_path, monkeypatch):
     """With the shipped models (no --weights, --refiner auto, no --depthnet) the detection stage's key holds the
-    shipped files' hashes: a gpr3d that ships another refiner, detector or DepthNet makes the detections again."""
+    shipped files' hashes: a gpr3d that ships another refiner, fine stage, detector or DepthNet makes the detections
+    again."""
     from gpr3d.detection import refine, weights
     from gpr3d.inversion import depthnet
     from gpr3d.pipeline import run
@@ -187,7 +188,9 @@ def test_the_detections_key_follows_the_shipped_models_files(tmp_path, monkeypat
     cfg = RunConfig(input="x.h5", out=str(tmp_path / "r"))
     before = run._models_key(cfg)
     assert before["refiner"][0] == run._sha(refine.DEFAULT_REFINER)
-    for module, name in ((refine, "DEFAULT_REFINER"), (weights, "DEFAULT_WEIGHTS"), (depthnet, "DEFAULT_DEPTHNET")):
+    for module, name in ((refine, "DEFAULT_REFINER"), (refine, "DEFAULT_FINE_REFINER"),
+                         (refine, "DEFAULT_FINE_REFINER_ONNX"), (weights, "DEFAULT_WEIGHTS"),
+                         (depthnet, "DEFAULT_DEPTHNET")):
         other = tmp_path / f"{name}.bin"
         other.write_bytes(b"another model")
         with monkeypatch.context() as m:

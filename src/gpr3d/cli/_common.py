@@ -117,17 +117,21 @@ def _detector(args):
     passes, mirror_off = getattr(args, "refine_passes", None), bool(getattr(args, "no_refine_mirror", False))
     rule, weight = getattr(args, "box_rule", "auto"), getattr(args, "quality_weight", None)
     dup = _duplicate_iou(getattr(args, "duplicate_iou", None))
+    fine = getattr(args, "fine_refiner", "auto")
     if passes is not None and not 1 <= passes <= 5:
         raise GPR3DError(f"--refine-passes must be a whole number in 1..5, got {passes}")
     if weight is not None and not 0.0 <= weight <= 8.0:
         raise GPR3DError(f"--quality-weight must be a number in 0..8, got {weight}")
-    how = passes is not None or mirror_off or rule != "auto" or weight is not None or dup != "default"
-    flags = "--refine-passes, --no-refine-mirror, --box-rule, --quality-weight and --duplicate-iou"
+    how = passes is not None or mirror_off or rule != "auto" or weight is not None or dup != "default" \
+        or fine != "auto"
+    flags = "--refine-passes, --no-refine-mirror, --box-rule, --quality-weight, --duplicate-iou and --fine-refiner"
+    if fine not in ("auto", "none") and not Path(fine).is_file():
+        raise GPR3DError(f"--fine-refiner {fine}: no such file")
     if how and args.refiner == "none":
         raise GPR3DError(f"{flags} say how the box refiner is applied: not with --refiner none")
     det = load_detector(args.weights, device=args.device, engine=args.runtime, refiner=args.refiner,
                         refine_passes=passes, refine_mirror=False if mirror_off else None, box_rule=rule,
-                        quality_weight=weight)
+                        quality_weight=weight, fine_refiner=fine)
     if how and det.refiner is None:
         raise GPR3DError(f"{flags} say how the box refiner is applied: these weights come without one (give "
                          "--refiner default or a refiner's file)")
@@ -250,6 +254,10 @@ def add_view_args(sp):
                     help="a refined box that overlaps a surer one by IoU O or more has its score multiplied by one "
                          "minus that overlap (0 < O <= 1; default 0.5, the merge's own overlap; none: the refined "
                          "boxes keep their scores)")
+    sp.add_argument("--fine-refiner", default="auto", metavar="auto|none|FILE",
+                    help="the box refiner's fine stage, which moves each box once more after its passes (trained on "
+                         "boxes drawn closer to the labels): auto (default: the shipped one with the shipped refiner, "
+                         "none with another), none, or a fine stage's .pt/.onnx file")
     sp.add_argument("--quality-weight", type=float, default=None, metavar="W",
                     help="a refiner with a quality head multiplies each refined box's score by its predicted IoU "
                          "to the power W (0..8; default: the refiner's own for simulated records, 0 for real radar "

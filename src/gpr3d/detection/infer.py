@@ -31,7 +31,7 @@ ENGINES = ("auto", "torch", "onnx", "int8")
 
 
 def load_detector(path=None, *, device: str = "cpu", engine: str = "auto", refiner="auto", refine_mirror=None,
-                  refine_passes=None, box_rule: str = "auto", quality_weight=None) -> "Detector":
+                  refine_passes=None, box_rule: str = "auto", quality_weight=None, fine_refiner="auto") -> "Detector":
     """The detector in ``path`` (default: the shipped one), run by ``engine`` (see ``ENGINES``).
 
     ``path`` may be a ``.pt`` weights file (torch) or an ``.onnx`` export of one (onnx).
@@ -42,7 +42,9 @@ def load_detector(path=None, *, device: str = "cpu", engine: str = "auto", refin
     :data:`gpr3d.detection.refine.MIRROR` and :data:`~gpr3d.detection.refine.PASSES`); ``box_rule``: the
     label rule of a refiner with several heads (``"auto"``: P-GPR's for pictures, gpr3d's for recordings);
     ``quality_weight``: how much a refiner's quality head rescales the scores (None: as the refiner says for
-    each rule, :meth:`~gpr3d.detection.refine.BoxRefiner.weight_for`; 0: not at all).
+    each rule, :meth:`~gpr3d.detection.refine.BoxRefiner.weight_for`; 0: not at all); ``fine_refiner``: the
+    refiner's fine stage (:attr:`~gpr3d.detection.refine.BoxRefiner.fine`: ``"auto"`` the shipped one with the
+    shipped refiner, ``"none"``, or a file).
     """
     from gpr3d.detection.refine import MIRROR, PASSES, check_application, check_quality_weight, check_rule
 
@@ -58,7 +60,8 @@ def load_detector(path=None, *, device: str = "cpu", engine: str = "auto", refin
 
         onnx = det.model is None  # the ONNX engine: no PyTorch for the refiner either
         det.refiner = load_refiner(None if refiner == "default" else refiner, engine="onnx" if onnx else "torch",
-                                   mirror=mirror, passes=passes, rule=box_rule, quality_weight=quality_weight)
+                                   mirror=mirror, passes=passes, rule=box_rule, quality_weight=quality_weight,
+                                   fine=fine_refiner)
     return det
 
 
@@ -174,11 +177,14 @@ class Detector:
         return getattr(self.model, "gpr3d_kinds", None)
 
     def _refine_settings(self, survey) -> dict:
-        """How the refiner was applied to ``survey``: mirror, passes, the overlap from which a refined box's score is
-        lowered as a surer one's duplicate (:func:`~gpr3d.detection.windows.soften_duplicates`) and, where the refiner
-        has them, the label rule of the head it used and its quality head's weight on the scores."""
+        """How the refiner was applied to ``survey``: mirror, passes, the name of its fine stage (None: none), the
+        overlap from which a refined box's score is lowered as a surer one's duplicate
+        (:func:`~gpr3d.detection.windows.soften_duplicates`) and, where the refiner has them, the label rule of the
+        head it used and its quality head's weight on the scores."""
         r = self.refiner
-        out = {"mirror": bool(r.mirror), "passes": int(r.passes), "duplicate_iou": self.duplicate_iou}
+        out = {"mirror": bool(r.mirror), "passes": int(r.passes),
+               "fine": None if r.fine_for(survey) is None else r.fine.provenance.get("name", "fine stage"),
+               "duplicate_iou": self.duplicate_iou}
         if r.rules:
             out["rule"] = r.head_for(survey)[1]
         if r.quality:

@@ -34,7 +34,8 @@ from gpr3d.core.errors import FormatError, InvalidDataError
 from gpr3d.io.coco import PixelMap
 from gpr3d.io.weights import half_state_dict, read_weights_file
 
-__all__ = ["CROP", "EXPAND", "JITTER", "MIRROR", "PASSES", "MAX_PASSES", "DEFAULT_REFINER", "DEFAULT_REFINER_ONNX",
+__all__ = ["CROP", "EXPAND", "JITTER", "FINE_JITTER_SCALE", "MIRROR", "PASSES", "MAX_PASSES", "DEFAULT_REFINER",
+           "DEFAULT_REFINER_ONNX", "DEFAULT_FINE_REFINER", "DEFAULT_FINE_REFINER_ONNX",
            "record_image", "record_pixmap", "box_deltas", "apply_deltas", "mirror_deltas", "check_application",
            "jitter_boxes", "whole_boxes", "whole_apex", "pair_iou", "best_iou", "build_refiner", "RULES", "WIDE_JITTER",
            "QUALITY_WEIGHT", "check_rule", "check_quality_weight", "crop_array", "crops", "BoxRefiner", "OnnxBoxRefiner",
@@ -46,6 +47,9 @@ EXPAND = 2.0  #: the crop covers the box's width and height times this, about it
 #: factors (log-normal sigma), top and bottom shifts (box heights): a detector's spread on
 #: real data (``benchmarks/results/pgpr_box_fit.md``)
 JITTER = {"centre": 0.06, "width": 0.2, "top": 0.1, "bottom": 0.15}
+#: a fine stage's training boxes are drawn this much closer to their labels than :data:`JITTER`: the spread left
+#: after the first refiner's moves
+FINE_JITTER_SCALE = 0.5
 #: the boxes a quality head also learns from (``train_refiner(quality=...)``): drawn this much wider about each
 #: label, and as many again anywhere in the picture, so that it sees boxes half on a hyperbola and none on one
 WIDE_JITTER = {"centre": 0.4, "width": 0.5, "top": 0.4, "bottom": 0.5}
@@ -63,6 +67,8 @@ MAX_PASSES = 5
 FORMAT = "gpr3d.refiner"
 DEFAULT_REFINER = Path(__file__).with_name("default_refiner.pt")
 DEFAULT_REFINER_ONNX = Path(__file__).with_name("default_refiner.onnx")
+DEFAULT_FINE_REFINER = Path(__file__).with_name("default_refiner_fine.pt")
+DEFAULT_FINE_REFINER_ONNX = Path(__file__).with_name("default_refiner_fine.onnx")
 _META = "gpr3d.refiner"
 _MIN_SIDE = 2.0  # pixels: a box is never taken as thinner than this
 
@@ -153,21 +159,48 @@ def jitter_boxes(boxes, n: int, rng, spread: dict | None = None) -> np.ndarray:
     return np.stack([cx - half, top, cx + half, bottom], axis=1)
 
 
-def build_refiner(heads: int = 1, quality: bool = False):
+def build_refiner(heads: int = 1, quality: bool = False, members: int = 1, seed: int = 0):
     """A fresh refiner network: ``(n, 3, CROP, CROP)`` crops in, ``(n, heads * (4 + quality))`` out: for each label
     rule's head (:data:`RULES`) its four edge moves and, with ``quality``, the logit of the box's IoU with the label
-    it stands for."""
+    it stands for; its weights drawn from ``seed``. With ``members`` > 1, that many such networks (``.members``,
+    member ``k`` drawn from ``seed + k``) whose outputs are averaged: one file and one graph for an ensemble trained
+    member by member."""
     torch = require("torch")
     nn = torch.nn
+    if isinstance(members, bool) or not isinstance(members, int) or members < 1:
+        raise InvalidDataError(f"a refiner's members must be a whole number >= 1, got {members!r}")
 
     def stage(i, o):
         return nn.Sequential(nn.Conv2d(i, o, 3, 2, 1), nn.BatchNorm2d(o), nn.ReLU(inplace=True))
 
-    torch.manual_seed(0)
-    side = CROP // 16
-    return nn.Sequential(stage(3, 32), stage(32, 48), stage(48, 64), stage(64, 96), nn.Flatten(),
-                         nn.Linear(96 * side * side, 256), nn.ReLU(inplace=True),
-                         nn.Linear(256, heads * (4 + int(bool(quality)))))
+    def one(seed):
+        torch.manual_seed(seed)
+        side = CROP // 16
+        return nn.Sequential(stage(3, 32), stage(32, 48), stage(48, 64), stage(64, 96), nn.Flatten(),
+                             nn.Linear(96 * side * side, 256), nn.ReLU(inplace=True),
+                             nn.Linear(256, heads * (4 + int(bool(quality)))))
+
+    if members == 1:
+        return one(seed)
+
+    class Average(nn.Module):
+        def __init__(self, nets):
+            super().__init__()
+            self.members = nn.ModuleList(nets)
+
+        def forward(self, x):
+            return torch.stack([m(x) for m in self.members]).mean(dim=0)
+
+    return Average([one(seed + k) for k in range(members)])
+
+
+def _members(provenance: dict, where) -> int:
+    """How many networks a refiner file averages (its provenance's ``"members"``, 1 where it names none); one line
+    where that is not a whole number >= 1."""
+    m = provenance.get("members", 1)
+    if isinstance(m, bool) or not isinstance(m, int) or m < 1:
+        raise FormatError(where, f"a refiner of {m!r} members; a whole number >= 1 was expected")
+    return m
 
 
 def _regions(boxes: np.ndarray):
@@ -232,13 +265,14 @@ def crops(image, boxes_px):
 
 
 def _refined(survey, rows, boxes, image, predict_crops, *, mirror: bool, passes: int, head: int = 0,
-             quality: bool = False, score: bool = False):
+             quality: bool = False, score: bool = False, fine=None):
     """Record boxes moved with ``predict_crops(crops (n, 3, CROP, CROP))`` (per head: edge moves, and with
     ``quality`` the IoU logit; ``head`` picks the columns), ``passes`` times; with ``mirror`` each pass averages
     the moves for the box and for its mirror image in the mirrored picture: the crops mirrored (the same bins, in
-    the other order), both looks in one batch. Returns ``(boxes, quality)``: with ``score`` (and a ``quality``
-    head) each final box's predicted IoU with its label (a last look at the boxes where they ended, both looks'
-    mean), else None."""
+    the other order), both looks in one batch. ``fine``: ``(predict_crops, head)`` of a fine stage (edge moves
+    alone), applied once more after the passes, as they are. Returns ``(boxes, quality)``: with ``score`` (and a
+    ``quality`` head) each final box's predicted IoU with its label (a last look at the boxes where they ended,
+    both looks' mean), else None."""
     b = np.asarray(boxes, float).reshape(-1, 4)
     width = 4 + int(quality)
     if not len(b):
@@ -247,15 +281,19 @@ def _refined(survey, rows, boxes, image, predict_crops, *, mirror: bool, passes:
     px = np.array([pm.box_to_px(x) for x in b])
     img = np.asarray(image, np.float32)
 
-    def look(px):
+    def look(px, predict=predict_crops, hd=head, w=width):
         c = crop_array(img, px)
-        out = np.asarray(predict_crops(np.concatenate([c, c[..., ::-1]]) if mirror else c), float)
-        return out[:, head * width : (head + 1) * width]
+        out = np.asarray(predict(np.concatenate([c, c[..., ::-1]]) if mirror else c), float)
+        return out[:, hd * w : (hd + 1) * w]
+
+    def move(px, o):
+        d = 0.5 * (o[: len(px), :4] + mirror_deltas(o[len(px) :, :4])) if mirror else o[:, :4]
+        return apply_deltas(px, d)
 
     for _ in range(passes):
-        o = look(px)
-        d = 0.5 * (o[: len(px), :4] + mirror_deltas(o[len(px) :, :4])) if mirror else o[:, :4]
-        px = apply_deltas(px, d)
+        px = move(px, look(px))
+    if fine is not None:
+        px = move(px, look(px, fine[0], fine[1], 4))
     q = None
     if quality and score:
         q = 1.0 / (1.0 + np.exp(-look(px)[:, 4]))
@@ -325,6 +363,9 @@ class BoxRefiner:
     passes = PASSES
     rule = "auto"
     quality_weight = QUALITY_WEIGHT
+    #: a fine stage (a refiner trained on boxes drawn closer to the labels, :data:`FINE_JITTER_SCALE`) that moves
+    #: each box once more after the passes, with the head of the same rule; None: none (:meth:`with_fine`)
+    fine = None
 
     def __init__(self, net, provenance: dict | None = None):
         self.net, self.provenance = net.eval(), provenance or {}
@@ -344,7 +385,7 @@ class BoxRefiner:
             raise FormatError(p, f"a refiner for {obj.get('crop')} px crops x {obj.get('expand')}, this gpr3d makes "
                                  f"{CROP} px x {EXPAND}")
         rules, quality = _heads(obj.get("provenance") or {}, p)
-        net = build_refiner(max(len(rules), 1), quality)
+        net = build_refiner(max(len(rules), 1), quality, _members(obj.get("provenance") or {}, p))
         try:
             net.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in obj["state_dict"].items()})
         except RuntimeError as exc:
@@ -409,9 +450,39 @@ class BoxRefiner:
         """``(boxes moved onto the label rule, quality)``: with a quality head (and ``score``) each moved box's
         predicted IoU with the label it stands for, in 0..1, else None."""
         mirror, passes = check_application(self.mirror, self.passes)
-        head, _ = self.head_for(survey)
+        head, rule = self.head_for(survey)
         return _refined(survey, rows, boxes, image, self.predict_crops, mirror=mirror, passes=passes, head=head,
-                        quality=self.quality, score=score)
+                        quality=self.quality, score=score, fine=self.fine_for(survey))
+
+    def fine_for(self, survey):
+        """``(predict_crops, head)`` of the fine stage for ``survey``'s boxes: its head of the rule this refiner
+        applies (:meth:`head_for`), or its one head; None without a fine stage, or one with no head of that rule."""
+        if self.fine is None:
+            return None
+        rule = self.head_for(survey)[1]
+        if not self.fine.rules:
+            return self.fine.predict_crops, 0
+        return (self.fine.predict_crops, self.fine.rules.index(rule)) if rule in self.fine.rules else None
+
+    def with_fine(self, fine: "BoxRefiner | None") -> "BoxRefiner":
+        """This refiner with ``fine`` as its fine stage (None: none), after checking that ``fine`` has heads of this
+        refiner's label rules (some of them: the others' boxes are not moved again; or one head where this refiner
+        has one), the same kind of boxes (whole hyperbolas' or not, where it has gpr3d's rule or one head) and no
+        quality head of its own (the quality is this refiner's); returns ``self``."""
+        if fine is not None:
+            name = fine.provenance.get("name", "the fine stage")
+            if bool(fine.rules) != bool(self.rules) or not set(fine.rules) <= set(self.rules):
+                raise InvalidDataError(f"{name}: a fine stage whose heads follow "
+                                       f"{', '.join(fine.rules) or 'one rule'}, the refiner's "
+                                       f"{', '.join(self.rules) or 'one rule'}")
+            if fine.quality:
+                raise InvalidDataError(f"{name}: a fine stage with a quality head (the first refiner's is used)")
+            # (whole hyperbolas' boxes are taught where labels name apexes, gpr3d's rule; P-GPR's pictures have none)
+            if fine.whole != self.whole and (not fine.rules or "gpr3d" in fine.rules):
+                raise InvalidDataError(f"{name}: a fine stage {'not ' if not fine.whole else ''}trained on whole "
+                                       f"hyperbolas' boxes, the refiner {'not ' if not self.whole else ''}so")
+        self.fine = fine
+        return self
 
 
 class OnnxBoxRefiner(BoxRefiner):
@@ -449,23 +520,32 @@ class OnnxBoxRefiner(BoxRefiner):
 
 
 def load_refiner(path=None, *, engine: str = "torch", mirror: bool = MIRROR, passes: int = PASSES,
-                 rule: str = "auto", quality_weight: float = QUALITY_WEIGHT) -> BoxRefiner:
+                 rule: str = "auto", quality_weight: float = QUALITY_WEIGHT, fine="auto") -> BoxRefiner:
     """The refiner in ``path`` (default: the shipped one): ``.pt`` in PyTorch, ``.onnx`` in ONNX Runtime.
 
     ``engine="onnx"`` with no path loads the shipped ONNX export. ``mirror``, ``passes``, ``rule``,
     ``quality_weight``: how it is applied (:class:`BoxRefiner`), checked before the file is read (a rule the
-    refiner has no head for: one line once it is read).
+    refiner has no head for: one line once it is read). ``fine``: its fine stage (:attr:`BoxRefiner.fine`):
+    ``"auto"`` the shipped one with the shipped refiner and none with another, ``"none"`` (or None) none, or a
+    refiner's ``.pt``/``.onnx`` file.
     """
     mirror, passes = check_application(mirror, passes)
     rule, quality_weight = check_rule(rule), check_quality_weight(quality_weight)
-    if (path is not None and str(path).lower().endswith(".onnx")) or (path is None and engine == "onnx"):
-        ref = OnnxBoxRefiner.load(path)
-    else:
-        ref = BoxRefiner.load(path)
+    if fine == "auto":
+        fine = "default" if path is None else None
+    if fine not in (None, "none", "default") and not isinstance(fine, (str, Path)):
+        raise InvalidDataError(f"the fine stage must be auto, none, default or a refiner's file, got {fine!r}")
+    onnx = (path is not None and str(path).lower().endswith(".onnx")) or (path is None and engine == "onnx")
+    ref = OnnxBoxRefiner.load(path) if onnx else BoxRefiner.load(path)
     ref.mirror, ref.passes, ref.rule, ref.quality_weight = mirror, passes, rule, quality_weight
     if rule != "auto" and rule not in ref.rules:
         raise InvalidDataError(f"box rule {rule}: this refiner's heads follow {', '.join(ref.rules)}" if ref.rules
                                else f"box rule {rule}: this refiner has one head (no rules to choose from)")
+    if fine == "default":
+        fine = DEFAULT_FINE_REFINER_ONNX if onnx else DEFAULT_FINE_REFINER
+    if fine not in (None, "none"):
+        stage = OnnxBoxRefiner.load(fine) if str(fine).lower().endswith(".onnx") else BoxRefiner.load(fine)
+        ref.with_fine(stage)
     return ref
 
 
@@ -539,15 +619,17 @@ def best_iou(boxes, labels, cols: int | None = None) -> np.ndarray:
 
 
 def train_refiner(samples, *, epochs: int = 9, per_label: int = 24, batch: int = 128, lr: float = 2e-3,
-                  seed: int = 0, log=None, heads: int = 1, quality: int = 0, quality_loss: float = 0.2):
+                  seed: int = 0, log=None, heads: int = 1, quality: int = 0, quality_loss: float = 0.2,
+                  jitter_scale: float = 1.0):
     """A refiner trained on ``samples``: an iterable of ``(image (3, rows, cols), label boxes px (k, 4))``,
     ``(image, label boxes, whole boxes (k, 4) or None)`` or ``(image, label boxes, whole boxes or None, head)``
     (the label rule's head, ``0 <= head < heads``, that the sample teaches; 0 where not given). Where whole boxes are
     given the boxes drawn and aimed at are those (the label boxes, cut to the record, are what a quality head's
     IoU is measured against).
 
-    Each label gives ``per_label`` boxes drawn about it (:func:`jitter_boxes`), each crop
-    mirrored at random; the target is the label. Where a sample gives target boxes (a
+    Each label gives ``per_label`` boxes drawn about it (:func:`jitter_boxes`, its spread times
+    ``jitter_scale``: a fine stage, :data:`FINE_JITTER_SCALE`, learns the smaller moves left after the
+    first refiner's), each crop mirrored at random; the target is the label. Where a sample gives target boxes (a
     hyperbola cut by the record's first or last trace, whose whole box reaches past
     it: :func:`whole_boxes`), the boxes are drawn about the target and half of them are
     cut to the picture's columns, as a detector's boxes are: the refiner learns to
@@ -562,6 +644,9 @@ def train_refiner(samples, *, epochs: int = 9, per_label: int = 24, batch: int =
     if epochs < 1 or per_label < 1 or batch < 1 or heads < 1 or quality < 0:
         raise InvalidDataError(f"epochs, per_label, batch and heads must be positive and quality not negative, got "
                                f"{epochs}, {per_label}, {batch}, {heads}, {quality}")
+    if isinstance(jitter_scale, bool) or not isinstance(jitter_scale, (int, float)) or not 0.0 < jitter_scale <= 4.0:
+        raise InvalidDataError(f"the jitter scale must be a number in (0, 4], got {jitter_scale!r}")
+    spread = {k: v * jitter_scale for k, v in JITTER.items()}
     rng = np.random.default_rng(seed)
     xs, ys, masks, qs, hs = [], [], [], [], []
     for image, labels, *rest in samples:
@@ -573,7 +658,7 @@ def train_refiner(samples, *, epochs: int = 9, per_label: int = 24, batch: int =
         g = np.asarray(whole if whole is not None else labels, float).reshape(-1, 4)
         if not len(g):
             continue
-        jb = jitter_boxes(g, per_label, rng)
+        jb = jitter_boxes(g, per_label, rng, spread)
         rows, cols = np.asarray(image).shape[-2:]
         if whole is not None:  # half cut to the record's traces (pixel c + 0.5 is trace c), as the detector's are
             cut = rng.random(len(jb)) < 0.5
@@ -598,7 +683,7 @@ def train_refiner(samples, *, epochs: int = 9, per_label: int = 24, batch: int =
     del xs
     q_all = torch.cat(qs) if quality else None
     width = 4 + int(bool(quality))
-    net = build_refiner(heads, bool(quality))
+    net = build_refiner(heads, bool(quality), seed=seed)
     torch.manual_seed(seed)
     opt = torch.optim.AdamW(net.parameters(), lr / 2, weight_decay=1e-4)
     n = len(x_all)

@@ -68,7 +68,8 @@ def _models_key(cfg) -> dict:
     --weights, --refiner auto, no --depthnet) the shipped files themselves, so that a gpr3d that ships other
     models makes the detections again rather than keeping those of the old ones."""
     from gpr3d.detection.ort import DEFAULT_ONNX
-    from gpr3d.detection.refine import DEFAULT_REFINER, DEFAULT_REFINER_ONNX
+    from gpr3d.detection.refine import (DEFAULT_FINE_REFINER, DEFAULT_FINE_REFINER_ONNX, DEFAULT_REFINER,
+                                        DEFAULT_REFINER_ONNX)
     from gpr3d.detection.weights import DEFAULT_WEIGHTS
     from gpr3d.inversion.depthnet import DEFAULT_DEPTHNET
 
@@ -78,7 +79,7 @@ def _models_key(cfg) -> dict:
     shipped_net = cfg.weights is None
     refiner = cfg.refiner
     if refiner == "auto" and shipped_net:
-        refiner = shipped(DEFAULT_REFINER, DEFAULT_REFINER_ONNX)
+        refiner = shipped(DEFAULT_REFINER, DEFAULT_REFINER_ONNX, DEFAULT_FINE_REFINER, DEFAULT_FINE_REFINER_ONNX)
     elif refiner not in (None, "auto", "none"):
         refiner = _sha(refiner)
     return {"weights": shipped(DEFAULT_WEIGHTS, DEFAULT_ONNX) if shipped_net else _sha(cfg.weights),
