@@ -118,7 +118,7 @@ def main(argv=None):
     head = (f"The shipped detector ({det.provenance.get('name', 'default')}) and first refiner "
             f"({next(iter(refiners.values())).provenance.get('name', 'refiner')}), each fine stage applied to the same "
             f"network boxes; host CPU {cpu_name()}; {time.perf_counter() - t0:.0f} s in all. 'refine s': the seconds "
-            "for the set with the network's views already found (refining, scoring and the rest)")
+            "for the set: refining, scoring and the rest, and in each set's first row the network's views too")
     parts = [head, "", *pg]
     if len(sim) > 2:
         parts += ["", "Simulated sets (score 0.5 for apex recall and false targets):", "", *sim]
