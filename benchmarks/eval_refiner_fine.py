@@ -29,23 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from _report import cpu_name, write_table  # noqa: E402
 from eval_pgpr import PGPR_DEFAULT, load, pgpr_records  # noqa: E402
-
-
-def network_once(det):
-    """``det`` with its network's views of each record computed once (keyed by the record object), whatever
-    refines them afterwards."""
-    seen, plain = {}, det._views
-
-    def views(survey):
-        key = id(survey)
-        if key not in seen:
-            seen[key] = (survey, plain(survey))
-        return seen[key][1]
-
-    det._views = views
-    return det
-
-
+from eval_refiner_passes import network_once  # noqa: E402
 
 
 def main(argv=None):

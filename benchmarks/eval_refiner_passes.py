@@ -23,8 +23,9 @@ from _report import cpu_name, write_table  # noqa: E402
 KEYS = ("mAP@0.5", "mAP@0.75", "mAP", "AR@100", "recall@0.5")
 
 
-def _network_once(det):
-    """The detector's network views of each record computed once, whatever refines them afterwards."""
+def network_once(det):
+    """``det`` with its network's views of each record computed once (keyed by the record object), whatever refines
+    them afterwards."""
     seen, plain = {}, det._views
 
     def views(survey):
@@ -82,7 +83,7 @@ def main(argv=None):
             recs = list(labelled_records(args.gprmax_survey))
             head = (f"held-out gprMax survey set ({len(recs)} records): class-agnostic mAP@0.5 / mAP@0.75 / "
                     "mAP@[.5:.95] / AR@100 / recall@0.5, apex recall and false per true at score 0.5")
-        det = _network_once(load_detector(engine="torch", refiner="none"))
+        det = network_once(load_detector(engine="torch", refiner="none"))
         lines += [f"### {head}", "", "| refiner | mirror | passes | metrics | apex recall | false per true |",
                   "|---|---|---|---|---|---|"]
         for mirror, passes in settings:

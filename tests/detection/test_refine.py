@@ -1457,13 +1457,17 @@ def test_a_fine_stage_moves_each_box_once_more_after_the_passes_from_where_they_
     np.testing.assert_allclose(first.refine(s, rows, boxes, image), [pm.px_to_box(b) for b in after], rtol=1e-9)
 
 
-def test_a_fine_stage_sees_each_box_mirrored_too_and_takes_the_head_of_the_first_refiner_s_rule():
+def _dark_record_two_rules():
+    """A record, its rows, a black picture of it, one box 40 traces wide at trace 120 and a :class:`_TwoRules`
+    refiner whose quality does not weigh the scores: ``(survey, rows, image, box, refiner)``."""
     s = _survey()
-    rows = 256
-    image = np.zeros((3, rows, s.n_traces), np.float32)
-    box = np.array([[120.0, 2e-9, 160.0, 4e-9]])
     ref = _TwoRules()
     ref.quality_weight = None
+    return s, 256, np.zeros((3, 256, s.n_traces), np.float32), np.array([[120.0, 2e-9, 160.0, 4e-9]]), ref
+
+
+def test_a_fine_stage_sees_each_box_mirrored_too_and_takes_the_head_of_the_first_refiner_s_rule():
+    s, rows, image, box, ref = _dark_record_two_rules()
     ref.fine = _Stage([[0.0, 0.0, 0.3, 0.0], [0.2, 0.0, 0.0, 0.0]], rules=("gpr3d", "pgpr"))
     moved, _ = ref.refine_scored(s, rows, box, image)  # gpr3d's head: 124 -> right edge + 0.3 x 36
     np.testing.assert_allclose(moved[0, [0, 2]], [124.0, 160.0 + 0.3 * 36.0], rtol=1e-9)
@@ -1478,12 +1482,9 @@ def test_a_fine_stage_sees_each_box_mirrored_too_and_takes_the_head_of_the_first
 
 
 def test_the_quality_is_read_where_the_fine_stage_left_each_box():
-    s = _survey()
-    rows = 256
-    image = np.zeros((3, rows, s.n_traces), np.float32)
-    image[:, :, :150] = 1.0
-    box = np.array([[120.0, 2e-9, 160.0, 4e-9]])
-    ref = _TwoRules()
+    s, rows, image, box, _ = _dark_record_two_rules()
+    image[:, :, :150] = 1.0  # the left half of the record bright
+    ref = _TwoRules()  # (its own quality weight)
     ref.fine = _Stage([[0.5, 0.0, 0.5, 0.0], [0.0, 0.0, 0.0, 0.0]], rules=("gpr3d", "pgpr"))
     moved, q = ref.refine_scored(s, rows, box, image)
     np.testing.assert_allclose(moved[0, [0, 2]], [124.0 + 18.0, 160.0 + 18.0], rtol=1e-9)
@@ -1568,12 +1569,7 @@ def test_a_refiner_of_several_members_averages_their_outputs_and_its_file_says_h
 
 
 def test_a_fine_stage_of_some_rules_moves_only_their_boxes():
-    s = _survey()
-    rows = 256
-    image = np.zeros((3, rows, s.n_traces), np.float32)
-    box = np.array([[120.0, 2e-9, 160.0, 4e-9]])
-    ref = _TwoRules()
-    ref.quality_weight = None
+    s, rows, image, box, ref = _dark_record_two_rules()
     R.BoxRefiner.with_fine(ref, _Stage([0.2, 0.0, 0.0, 0.0], rules=("pgpr",)))
     picture = Survey(data=s.data, dt_s=s.dt_s, metadata={"format": "picture"})
     np.testing.assert_allclose(ref.refine(picture, rows, box, image)[0, [0, 2]], [116.0 + 0.2 * 44.0, 160.0],
