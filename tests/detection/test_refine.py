@@ -507,11 +507,23 @@ def test_the_shipped_refiner_comes_with_the_shipped_detector_in_either_engine(tm
     assert load_detector(engine="torch", refiner="none").refiner is None
     assert load_detector(DEFAULT_WEIGHTS, engine="torch").refiner is None  # other weights: their own boxes
     assert load_detector(DEFAULT_WEIGHTS, engine="torch", refiner=R.DEFAULT_REFINER).refiner is not None
+    # the shipped fine stage comes with the shipped refiner, in its engine; a refiner named by its file comes without
+    assert isinstance(onnx_det.refiner.fine, R.OnnxBoxRefiner)
+    fine = torch_det.refiner.fine
+    assert isinstance(fine, R.BoxRefiner) and not isinstance(fine, R.OnnxBoxRefiner)
+    assert fine.provenance["name"] == onnx_det.refiner.fine.provenance["name"] == "refiner_fine_pgpr_5"
+    assert fine.rules == ("pgpr",) and len(fine.net.members) == 5 and fine.provenance["jitter_scale"] == 0.5
+    assert load_detector(DEFAULT_WEIGHTS, engine="torch", refiner=R.DEFAULT_REFINER).refiner.fine is None
+    assert R.load_refiner(fine="none").fine is None and R.load_refiner(engine="onnx", fine=None).fine is None
+    fine_meta = onnx_det.refiner.fine.session.get_modelmeta().custom_metadata_map["gpr3d.refiner"]
+    crops_ = np.random.default_rng(9).random((3, 3, R.CROP, R.CROP), dtype=np.float32)
+    np.testing.assert_allclose(onnx_det.refiner.fine.predict_crops(crops_), fine.predict_crops(crops_), atol=3e-3)
     # the shipped ONNX graph is the export of the shipped weights and moves boxes as they do
     import hashlib
 
     meta = onnx_det.refiner.session.get_modelmeta().custom_metadata_map["gpr3d.refiner"]
     assert hashlib.sha256(R.DEFAULT_REFINER.read_bytes()).hexdigest() in meta
+    assert hashlib.sha256(R.DEFAULT_FINE_REFINER.read_bytes()).hexdigest() in fine_meta
     rng = np.random.default_rng(8)
     image = rng.random((1, 3, 256, 700), dtype=np.float32)
     boxes = np.array([[50, 30, 150, 80], [600, 100, 690, 200]], np.float32)
@@ -1378,6 +1390,17 @@ def test_quality_training_draws_wide_and_anywhere_boxes_and_checks_its_heads(mon
     spreads.clear()  # a fine stage: the boxes about the labels drawn closer by the scale, the wide ones as they were
     R.train_refiner([(img, labels, None, 1)], epochs=1, per_label=3, batch=64, heads=2, quality=5, jitter_scale=0.5)
     assert spreads == [(3, {"centre": 0.03, "width": 0.1, "top": 0.05, "bottom": 0.075}), (5, R.WIDE_JITTER)]
+    built = []
+    real_build = R.build_refiner
+
+    def spy_build(*a, **k):
+        built.append(k.get("seed"))
+        return real_build(*a, **k)
+
+    monkeypatch.setattr(R, "build_refiner", spy_build)
+    spreads.clear()  # the largest scale allowed; the network drawn from the training's seed
+    R.train_refiner([(img, labels)], epochs=1, per_label=2, batch=64, jitter_scale=4.0, seed=7)
+    assert spreads == [(2, {k: 4.0 * v for k, v in R.JITTER.items()})] and built == [7]
     for bad in (0, -0.5, 4.5, True, "0.5", float("nan")):
         with pytest.raises(InvalidDataError) as e:
             R.train_refiner([(img, labels)], jitter_scale=bad)
@@ -1512,6 +1535,14 @@ def test_a_fine_stage_must_fit_the_refiner_it_follows():
                                                "refiner so$"):
         ref.with_fine(part)
     assert ref.fine is None  # a refused stage is not taken
+    both = R.BoxRefiner(R.build_refiner(2), {"rules": ["gpr3d", "pgpr"], "whole": True})  # (it names itself not)
+    with pytest.raises(InvalidDataError, match="^the fine stage: a fine stage whose heads follow gpr3d, pgpr, the "
+                                               "refiner's one rule$"):
+        R.BoxRefiner(R.build_refiner(1), {"name": "one", "whole": True}).with_fine(both)
+    whole = R.BoxRefiner(R.build_refiner(1), {"name": "whole", "whole": True})
+    with pytest.raises(InvalidDataError, match="^whole: a fine stage trained on whole hyperbolas' boxes, the refiner "
+                                               "not so$"):
+        R.BoxRefiner(R.build_refiner(1), {"name": "cut"}).with_fine(whole)
     pictures = R.BoxRefiner(R.build_refiner(1), {"name": "pictures", "rules": ["pgpr"]})
     assert ref.with_fine(pictures).fine is pictures  # P-GPR's rule alone: its pictures name no apexes, none is whole
     lone = R.BoxRefiner(R.build_refiner(1), {"name": "lone"})
@@ -1562,7 +1593,7 @@ def test_a_refiner_of_several_members_averages_their_outputs_and_its_file_says_h
         R.save_refiner(net, tmp_path / "bad.pt", provenance={"members": bad})
         with pytest.raises(FormatError) as e:
             R.load_refiner(tmp_path / "bad.pt")
-        assert str(e.value).endswith(f"a refiner of {bad!r} members; a whole number >= 1 was expected")
+        assert str(e.value) == f"bad.pt: a refiner of {bad!r} members; a whole number >= 1 was expected"
     for bad in (0, -1, 2.0, True):
         with pytest.raises(InvalidDataError, match=f"^a refiner's members must be a whole number >= 1, got {bad!r}$"):
             R.build_refiner(members=bad)
