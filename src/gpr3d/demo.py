@@ -504,6 +504,12 @@ def _pgpr_rows(det, out: Path, log) -> dict:
             fit["network"] = _mean_best_iou(truth, det.detect(survey, score_threshold=0.5)["targets"], px)
         finally:
             det.refiner = refiner
+        if res["refine"].get("fine"):  # and without the refiner's fine stage: its passes' boxes
+            fine, refiner.fine = refiner.fine, None
+            try:
+                fit["no_fine"] = _mean_best_iou(truth, det.detect(survey, score_threshold=0.5)["targets"], px)
+            finally:
+                refiner.fine = fine
     # the picture seen mirrored too (gpr3d detect --mirror): both views' boxes fused
     mirror, det.mirror = det.mirror, True
     try:
@@ -537,8 +543,10 @@ def _pgpr_rows(det, out: Path, log) -> dict:
         looks = f"{'each box also seen mirrored, ' if how['mirror'] else ''}{how['passes']} pass" + \
             ("es" if how["passes"] > 1 else "")
         rule = f"{_RULE_NAMES[how['rule']]}, " if how.get("rule") in _RULE_NAMES else ""
-        log(f"      boxes placed by the box refiner ({res['refiner']}; {rule}{looks}): mean IoU with the labels "
-            f"{fit['refined']:.2f}, the network's own boxes {fit['network']:.2f}")
+        then = f", then its fine stage {how['fine']}" if how.get("fine") else ""
+        without = f" ({fit['no_fine']:.2f} without the fine stage)" if "no_fine" in fit else ""
+        log(f"      boxes placed by the box refiner ({res['refiner']}; {rule}{looks}{then}): mean IoU with the labels "
+            f"{fit['refined']:.2f}{without}, the network's own boxes {fit['network']:.2f}")
     log(f"      seen mirrored too (--mirror, the two views' boxes fused): {found_both} of {len(truth)} found, mean IoU "
         f"{fit['mirrored']:.2f}")
     return {"image": name, "n_detections": len(kinds), "kinds": {k: kinds.count(k) for k in set(kinds)},

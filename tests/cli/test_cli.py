@@ -221,7 +221,10 @@ def test_demo_end_to_end(tmp_path):
         assert f"kinds named with a mean share of {sure['mean']:.2f}; the least sure box: " in r.stdout
         # its boxes placed by the shipped refiner, beside the network's own (one image: either may fit better)
         assert pg["refiner"] == "refiner_pgpr_synth_gprmax_whole_rules_quality"
-        assert set(pg["mean_iou"]) == {"refined", "network", "mirrored"}
+        assert set(pg["mean_iou"]) == {"refined", "network", "no_fine", "mirrored"}
+        assert "then its fine stage refiner_fine_pgpr_5): mean IoU with the labels" in r.stdout
+        assert f"({pg['mean_iou']['no_fine']:.2f} without the fine stage)" in r.stdout
+        assert pg["mean_iou"]["no_fine"] != pg["mean_iou"]["refined"]  # the fine stage moved the boxes
         # the default application, as detect reports it: P-GPR's head for a picture, its quality not weighing the scores
         assert pg["refine"] == {"mirror": True, "passes": 2, "fine": "refiner_fine_pgpr_5", "duplicate_iou": 0.5,
                                 "rule": "pgpr", "quality_weight": 0.0}
