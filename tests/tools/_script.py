@@ -1,5 +1,7 @@
-"""Run a script of ``benchmarks/`` as a user would, for the tests of its one-line refusals."""
+"""Run a script of ``benchmarks/`` as a user would, for the tests of its one-line refusals, or load one (or a tool of
+``tools/``) as a module."""
 
+import importlib.util
 import subprocess
 import sys
 from pathlib import Path
@@ -14,3 +16,13 @@ def refusal(script: str, *args: str, timeout: float = 120) -> str:
                        timeout=timeout)
     assert r.returncode == 2 and r.stdout == "" and "Traceback" not in r.stderr, r.stderr
     return r.stderr.strip().splitlines()[-1]
+
+
+def load_script(relative: str):
+    """The script ``ROOT / relative`` (e.g. ``benchmarks/eval_duplicates.py``) loaded as a module of its file's name,
+    its ``main`` not run."""
+    path = ROOT / relative
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod

@@ -1,18 +1,9 @@
 """benchmarks/eval_duplicates.py: a wrong setting is one line before any work, and each rule does to a record's
 refined boxes what it says (the shipped rule through ``soften_duplicates`` itself)."""
 
-import importlib.util
-
 import pytest
 
-from tests.tools._script import ROOT, refusal
-
-
-def _module():
-    spec = importlib.util.spec_from_file_location("eval_duplicates", ROOT / "benchmarks" / "eval_duplicates.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from tests.tools._script import load_script, refusal
 
 
 @pytest.mark.parametrize("args, says", [
@@ -33,7 +24,7 @@ def test_a_wrong_setting_is_one_line_naming_it(tmp_path, args, says):
 
 
 def test_each_rule_on_a_record_s_boxes_by_hand():
-    mod = _module()
+    mod = load_script("benchmarks/eval_duplicates.py")
     dt = 1e-10
     # A (0.9); B on A, IoU 9/11; C alone; D on A at IoU 0.6 (A's upper 60 %: the same traces, 0.6 of its time)
     boxes = [[10.0, 1e-9, 20.0, 3e-9], [11.0, 1e-9, 21.0, 3e-9], [40.0, 5e-9, 44.0, 6e-9], [10.0, 1e-9, 20.0, 2.2e-9]]

@@ -1,18 +1,9 @@
 """benchmarks/eval_refiner_fine.py: a wrong setting is one line before any work, and the network sees each record
 once however many fine stages refine its boxes."""
 
-import importlib.util
-
 import pytest
 
-from tests.tools._script import ROOT, refusal
-
-
-def _module():
-    spec = importlib.util.spec_from_file_location("eval_refiner_fine", ROOT / "benchmarks" / "eval_refiner_fine.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from tests.tools._script import load_script, refusal
 
 
 @pytest.mark.parametrize("args, says", [
@@ -35,7 +26,7 @@ def test_a_wrong_setting_is_one_line_naming_it(tmp_path, args, says):
 
 
 def test_the_network_sees_each_record_once_whatever_refines_its_boxes_after():
-    mod = _module()
+    mod = load_script("benchmarks/eval_refiner_fine.py")
     calls = []
 
     class Det:

@@ -1,7 +1,6 @@
 """A few hundred seeded cases of the reader fuzzer (the full 10,000 per reader: ``python tools/fuzz_readers.py``),
 and the fuzzer's own parts: its mutations change what they say, and anything but a one-line refusal counts."""
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -9,15 +8,12 @@ import pytest
 
 import gpr3d
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.tools._script import ROOT, load_script
 
 
 @pytest.fixture(scope="module")
 def fz():
-    spec = importlib.util.spec_from_file_location("fuzz_readers", ROOT / "tools" / "fuzz_readers.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("tools/fuzz_readers.py")
 
 
 def test_seeded_cases_of_every_reader_have_no_escapes(fz):

@@ -1,23 +1,18 @@
 """tools/mutation.py: its equivalents list stays true to the code, and the CI guard re-runs every module of the
 stored results that changed since the commit it was scored at (none changed: nothing to run)."""
 
-import importlib.util
 import re
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.tools._script import ROOT, load_script
 
 
 def _tool():
-    spec = importlib.util.spec_from_file_location("mutation_tool", ROOT / "tools" / "mutation.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("tools/mutation.py")
 
 
 def test_every_listed_equivalent_is_still_in_its_module():
