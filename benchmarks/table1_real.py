@@ -192,7 +192,9 @@ def run_unit(split: str, model: str, runs, budget: float, pgpr, gprmax_n: int) -
             # the budget's measure: the steps' time on one thread (losses.csv, every sitting); the process's CPU time
             # beside it (set-up included: reading the pictures, compiling the simulator's kernels)
             state["train_s"] = step_seconds(d / "train" / "losses.csv")
-            state["cpu_s"] = time.process_time() - cpu0 + (state.get("cpu_s", 0.0) if resumed else 0.0)
+            state["cpu_s"] = time.process_time() - cpu0
+            if resumed:  # (a killed sitting's CPU time is not known)
+                state["cpu_s_of"] = "the last sitting only: the run resumed after a kill"
             state["steps"] = res["steps"]
             state["params_M"] = count_parameters(res["model"]) / 1e6
             save_weights(res["model"], model, cfg.window, weights, kinds=res["kinds"],
