@@ -72,30 +72,31 @@ def planned_steps(budget_s: float, s_per_step: float) -> int:
     return max(MIN_STEPS, int(budget_s // s_per_step))
 
 
+def _walls(losses_csv) -> list[float]:
+    """The ``wall_s`` column of a training run's ``losses.csv`` (seconds since its sitting began, a row a step)."""
+    import csv
+
+    with open(losses_csv, newline="") as f:
+        return [float(r["wall_s"]) for r in csv.DictReader(f)]
+
+
 def step_seconds(losses_csv) -> float:
     """Seconds of training the kept steps of a (resumed) run took, from its ``losses.csv``.
 
     Each sitting's ``wall_s`` counts from that sitting's start, so a resume shows as ``wall_s`` falling; the run's
     time is the sum of every sitting's last ``wall_s`` (steps dropped at a kill and redone count once)."""
-    import csv
-
     total = last = 0.0
-    with open(losses_csv, newline="") as f:
-        for row in csv.DictReader(f):
-            w = float(row["wall_s"])
-            if w < last:  # a new sitting
-                total += last
-            last = w
+    for w in _walls(losses_csv):
+        if w < last:  # a new sitting
+            total += last
+        last = w
     return total + last
 
 
 def probe_seconds(losses_csv, skip: int = PROBE_SKIP) -> float:
     """Seconds per step of a probe run: the mean over its steps after the first ``skip`` (start-up and the first
     steps of a fresh model are slower; the checkpoints every 10 steps are counted, as the real run writes them)."""
-    import csv
-
-    with open(losses_csv, newline="") as f:
-        walls = [float(r["wall_s"]) for r in csv.DictReader(f)]
+    walls = _walls(losses_csv)
     if len(walls) <= skip:
         raise ValueError(f"{losses_csv}: {len(walls)} steps, too few to time")
     return (walls[-1] - walls[skip - 1]) / (len(walls) - skip)
@@ -114,16 +115,15 @@ def train_config(split: str, model: str, steps: int, out, pgpr):
                        labels_frequency_hz=PGPR["frequency_hz"])
 
 
-def _train(cfg, max_seconds=None) -> dict:
+def _train(cfg) -> dict:
     from gpr3d.detection.train import train_detector
     from gpr3d.simulation.surveys import SurveySource
 
     wall = SurveySource(cfg.data_seed, profile="wall") if cfg.wall_fraction else None
-    return train_detector(cfg, SurveySource(cfg.data_seed), wall_source=wall, progress=False, log=lambda *_: None,
-                          max_seconds=max_seconds)
+    return train_detector(cfg, SurveySource(cfg.data_seed), wall_source=wall, progress=False, log=lambda *_: None)
 
 
-def test_sets(split: str, pgpr, gprmax_n: int):
+def judged_on(split: str, pgpr, gprmax_n: int):
     """``{set name: records}`` the split's models are judged on."""
     _, test_split, test_only, _ = SPLITS[split]
     sets = {"pgpr": pgpr_records(pgpr, test_split, test_only)}
@@ -206,7 +206,7 @@ def run_unit(split: str, model: str, runs, budget: float, pgpr, gprmax_n: int) -
             _write_json(state_path, state)
         dets = {"": load_detector(weights, refiner="none")}
     state.setdefault("metrics", {})
-    for set_name, records in test_sets(split, pgpr, gprmax_n).items():
+    for set_name, records in judged_on(split, pgpr, gprmax_n).items():
         for suffix, det in dets.items():
             key = set_name + suffix
             if key in state["metrics"]:
@@ -306,6 +306,12 @@ def main(argv=None):
         p.error(f"--jobs must be 1..16, got {args.jobs}")
     if args.gprmax < 0:
         p.error(f"--gprmax must be 0 or more records, got {args.gprmax}")
+    for name in ("runs", "out"):
+        if Path(getattr(args, name)).exists() and not Path(getattr(args, name)).is_dir():
+            p.error(f"--{name} {getattr(args, name)}: not a folder")
+    if args.unit and (args.unit.partition(":")[0] not in SPLITS
+                      or args.unit.partition(":")[2] not in (*MODELS, SHIPPED)):
+        p.error(f"--unit {args.unit}: not SPLIT:MODEL")
     for part in ("train", "val"):
         if not (Path(args.pgpr) / part).is_dir():
             p.error(f"--pgpr {args.pgpr}: no {part}/ folder in it (P-GPR's train/ and val/)")

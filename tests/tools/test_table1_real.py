@@ -88,11 +88,15 @@ def test_the_table_gives_each_done_unit_its_figures_and_the_rest_pending(mod, tm
     (("--pgpr", "{tmp}/absent"), "--pgpr {tmp}/absent: no train/ folder in it (P-GPR's train/ and val/)"),
     (("--pgpr", "{tmp}"), "not a YOLO dataset: no data.yaml and no images/ folder"),
     (("--models", "yolo"), "argument --models: invalid choice: 'yolo'"),
+    (("--out", "{tmp}/file.txt"), "--out {tmp}/file.txt: not a folder"),
+    (("--runs", "{tmp}/file.txt"), "--runs {tmp}/file.txt: not a folder"),
+    (("--unit", "std:yolo"), "--unit std:yolo: not SPLIT:MODEL"),
 ])
 def test_a_wrong_setting_is_one_line_naming_it(tmp_path, args, says):
     (tmp_path / "train").mkdir()
     (tmp_path / "val").mkdir()
-    base = ["--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "out")]
+    (tmp_path / "file.txt").write_text("x")
+    base = ["--runs", str(tmp_path / "runs"), "--out", str(tmp_path / "out")]  # (a setting given after wins)
     given = [a.replace("{tmp}", str(tmp_path)) for a in args]
     assert says.replace("{tmp}", str(tmp_path)) in refusal("table1_real.py", *base, *given)
     assert not (tmp_path / "runs").exists() and not (tmp_path / "out").exists()
