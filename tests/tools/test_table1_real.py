@@ -79,6 +79,13 @@ def test_the_table_gives_each_done_unit_its_figures_and_the_rest_pending(mod, tm
     assert lines.count("| ssdlite | | | | pending | | | | | | | |") == 2  # std and air
     assert lines.count("| frcnn_lean | | | | pending | | | | | | | |") == 1  # air only
     assert "| shipped default | | | | pending" in text and "Faster R-CNN (pretrained, published)" in text
+    # the held-out split carries its pretrained reference (pgpr_heldout.md), the standard one does not
+    ref = [ln for ln in lines if ln.startswith("| stage-3 pretrained")]
+    assert ref == ["| stage-3 pretrained (GPU) + 1,000 CPU steps, pgpr_heldout.md | 6.9 | 1000 | | class-averaged | "
+                   "0.410 | 0.045 | 0.139 | - | 0.271 | 0.693 | |",
+                   "| stage-3 pretrained (GPU) + 1,000 CPU steps, pgpr_heldout.md | 6.9 | 1000 | | class-agnostic | "
+                   "0.553 | - | - | - | - | 0.818 | |"]
+    assert lines.index(ref[0]) > next(i for i, ln in enumerate(lines) if ln.startswith("## device held out: AIR"))
 
 
 @pytest.mark.parametrize("args, says", [
