@@ -115,6 +115,24 @@ def test_the_one_stage_detectors(built):
         _batch_norm_trains(m)
 
 
+def test_fcos_box_distances_stay_positive_and_keep_their_gradient(built):
+    # torchvision's FCOS puts its box distances through a ReLU; once every output is negative the boxes are empty,
+    # the GIoU loss is 1 everywhere and no gradient reaches the head again. Ours is a softplus.
+    head = built["fcos_r18"].head.regression_head
+    conv = head.bbox_reg
+    with torch.no_grad():
+        conv.bias.fill_(-30.0)  # a head pushed far below zero, as a diverging step leaves it
+    x = torch.randn(1, 256, 4, 4, generator=torch.Generator().manual_seed(1))
+    out = conv(x)
+    pre = torch.nn.functional.conv2d(x, conv.weight, conv.bias, padding=1)
+    torch.testing.assert_close(out, torch.log1p(torch.exp(pre)))
+    assert (out > 0).all()
+    out.sum().backward()
+    assert conv.bias.grad.min() > 0  # a ReLU gives exactly 0 here
+    reg, _ = head([torch.randn(1, 256, 4, 4)])
+    assert reg.shape == (1, 16, 4) and (reg > 0).all()
+
+
 def test_ssdlite(built):
     m = built["ssdlite"]
     _transform_is_the_window(m)

@@ -14,7 +14,10 @@ kind is in doubt is still found (:class:`gpr3d.detection.kindheads.KindRoIHeads`
 * ``frcnn_r18``, ``frcnn_r50``, ``frcnn_r101``: Faster R-CNN with full ResNet FPN
   backbones (the reference's best model is ResNet-101).
 * ``frcnn_mobilenet``: Faster R-CNN MobileNetV3-Large FPN.
-* ``retinanet_r18``, ``fcos_r18``: one-stage detectors on a ResNet-18 FPN.
+* ``retinanet_r18``, ``fcos_r18``: one-stage detectors on a ResNet-18 FPN. FCOS's box
+  distances pass through a softplus rather than torchvision's ReLU: trained from scratch,
+  a ReLU head whose outputs all go negative predicts empty boxes, its GIoU loss sits at
+  1 with no gradient, and it never recovers (seen on a device-held-out split).
 * ``ssdlite``: SSDlite with MobileNetV3-Large (as the reference's SSD rows).
 
 Batch norm is trainable throughout (nothing is pretrained).
@@ -22,7 +25,7 @@ Batch norm is trainable throughout (nothing is pretrained).
 
 from __future__ import annotations
 
-from functools import partial
+from functools import lru_cache, partial
 
 from gpr3d.core.deps import require, resolve_device  # noqa: F401 - resolve_device kept here for callers
 from gpr3d.core.errors import InvalidDataError
@@ -106,6 +109,7 @@ def build_model(name: str = "frcnn_lean", *, image_size: int = 256, kinds=None):
 
             anchors = AnchorGenerator(sizes=tuple((8 * 2**k,) for k in range(5)), aspect_ratios=((1.0,),) * 5)
             model = det.FCOS(bb, num_classes=n_cls, anchor_generator=anchors, **kw)
+            model.head.regression_head.bbox_reg.__class__ = _softplus_conv()
     else:  # ssdlite
         from torchvision.models.detection import ssdlite
 
@@ -122,6 +126,19 @@ def build_model(name: str = "frcnn_lean", *, image_size: int = 256, kinds=None):
 
         model.roi_heads.__class__ = KindRoIHeads  # the same parts; only inference differs
     return model
+
+
+@lru_cache(maxsize=None)  # one class, made on first use: importing this module needs no torch
+def _softplus_conv():
+    import torch
+
+    class SoftplusConv2d(torch.nn.Conv2d):
+        """A convolution whose outputs pass through a softplus: positive, and never without gradient."""
+
+        def forward(self, x):
+            return torch.nn.functional.softplus(super().forward(x))
+
+    return SoftplusConv2d
 
 
 def widen_to_kinds(state_dict: dict, kinds, from_kinds=None) -> dict:
