@@ -66,7 +66,8 @@ SPLIT_TITLE = {"std": "P-GPR train -> P-GPR val (standard split)",
 SHIPPED = "shipped default"  #: the reference unit's model name (std split only)
 #: The device-held-out splits' reference rows, measured by ``benchmarks/results/pgpr_heldout.md`` (AMD znver5, one
 #: thread): the shipped recipe's stage-3 detector (synthetic pretraining on a GPU), then 1,000 CPU steps on the one
-#: radar with that split's recipe (wall 0.5, stretch 0.35-2.5). Class-averaged mAP@0.5, mAP@0.75, mAP@[.5:.95],
+#: radar (`--wall 0.5 --augment --stretch 0.35 2.5`: the units here draw the same wall share and stretch, without
+#: --augment's gain and noise). Class-averaged mAP@0.5, mAP@0.75, mAP@[.5:.95],
 #: AR@100, recall@0.5; class-agnostic mAP@0.5, recall@0.5.
 HELD_OUT_REFERENCE = {"air": (0.410, 0.045, 0.139, 0.271, 0.693, 0.553, 0.818),
                       "iecas": (0.178, 0.002, 0.035, 0.182, 0.613, 0.282, 0.761)}
