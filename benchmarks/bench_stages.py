@@ -7,7 +7,8 @@ over 4 m x 4 m (``bench_reconstruct.cart_path``, a trace every 2 cm), forward-mo
 ``eval_reconstruction.py`` (eps_r 9), written as ``survey.h5`` (no positions) and ``path.tum`` (one pose per
 trace): ``gpr3d reconstruct survey.h5 --poses path.tum --eps-r 9 --out rec`` at every other default.
 ``detect`` runs on the embedded 1040-trace DZT (``gpr3d.data.example_dzt``). ``reconstruct --coarse-to-fine``
-runs warm beside it (:mod:`gpr3d.migration.refine`).
+runs warm beside it (:mod:`gpr3d.migration.refine`), and so do ``--aperture-radius 1`` (the reference's own 1 m
+radius about each trace's midpoint, within the 50 deg cone) alone and with ``--coarse-to-fine``.
 
 Each command runs in a process of its own with ``gpr3d --timings`` (:mod:`gpr3d.core.timing`): the stages are
 the library's own (read, poses, prepare, grid, migrate, fold, envelope, targets, figures, writes, ...), numba's
@@ -168,6 +169,13 @@ def main(argv=None):
     c2f = rec[:-2] + ["--coarse-to-fine", "--out", work / "rec_c2f"]
     runs["reconstruct --coarse-to-fine, warm"] = best_of([timed_command(c2f, work, env, f"c2f{i + 1}")
                                                           for i in range(args.repeat)])
+    # the reference's own aperture (1 m about each trace's midpoint) beside the cone, alone and with coarse-to-fine
+    radius = rec[:-2] + ["--aperture-radius", "1", "--out", work / "rec_r1"]
+    runs["reconstruct --aperture-radius 1, warm"] = best_of([timed_command(radius, work, env, f"r1_{i + 1}")
+                                                             for i in range(args.repeat)])
+    both = rec[:-2] + ["--aperture-radius", "1", "--coarse-to-fine", "--out", work / "rec_r1_c2f"]
+    runs["reconstruct --aperture-radius 1 --coarse-to-fine, warm"] = best_of(
+        [timed_command(both, work, env, f"r1c2f{i + 1}") for i in range(args.repeat)])
     runs["detect, cold cache"] = timed_command(det, work, fresh("d"), "det0")
     runs["detect, warm"] = best_of([timed_command(det, work, env, f"det{i + 1}") for i in range(args.repeat)])
     if args.demo:
@@ -205,6 +213,9 @@ def main(argv=None):
     warm = runs["reconstruct, warm"]["wall_s"]
     warm_c2f = runs["reconstruct --coarse-to-fine, warm"]["wall_s"]
     refine = json.loads((work / "rec_c2f" / "config.json").read_text())["refine"]
+    warm_r1 = runs["reconstruct --aperture-radius 1, warm"]["wall_s"]
+    warm_r1c = runs["reconstruct --aperture-radius 1 --coarse-to-fine, warm"]["wall_s"]
+    refine_r1 = json.loads((work / "rec_r1_c2f" / "config.json").read_text())["refine"]
     cold = runs["reconstruct, cold cache"]["wall_s"]
     cold0 = runs["reconstruct, cold cache, no warm-up"]["wall_s"]
     lines += ["", "| reconstruct against the plain reference (same survey, same run) | seconds | x reference |",
@@ -217,6 +228,11 @@ def main(argv=None):
               f"| `gpr3d reconstruct --coarse-to-fine` end to end, warm (stride {refine.get('stride')}, "
               f"{100 * refine.get('refined_fraction', 1.0):.0f} % of the voxels refined) | {warm_c2f:.2f} | "
               f"{warm_c2f / w_ref:.2f} |",
+              f"| `gpr3d reconstruct --aperture-radius 1` end to end, warm (the reference's 1 m radius within the "
+              f"cone) | {warm_r1:.2f} | {warm_r1 / w_ref:.2f} |",
+              f"| `gpr3d reconstruct --aperture-radius 1 --coarse-to-fine` end to end, warm (stride "
+              f"{refine_r1.get('stride')}, {100 * refine_r1.get('refined_fraction', 1.0):.0f} % refined) | "
+              f"{warm_r1c:.2f} | {warm_r1c / w_ref:.2f} |",
               f"| `gpr3d reconstruct` end to end, cold cache (first run, background warm-up) | {cold:.2f} | "
               f"{cold / w_ref:.2f} |",
               f"| `gpr3d reconstruct` end to end, cold cache, no warm-up (GPR3D_WARMUP=0) | {cold0:.2f} | "

@@ -58,6 +58,8 @@ def test_replay_into_live_prints_traces_rate_and_lag(survey, tmp_path):  # noqa:
 
 @pytest.mark.parametrize("args, message", [
     (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--aperture", "0"], "--aperture must lie in (0, 90)"),
+    (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--aperture-radius", "-2", "--no-detect"],
+     "--aperture-radius must be positive, got -2.0"),
     (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--background-window", "1"],
      "--background-window must be at least 2"),
     (["live", "tcp://127.0.0.1:1", "--out", "{tmp}/o", "--refresh", "0"], "--refresh must be seconds"),

@@ -18,14 +18,14 @@ def fresh_cache(monkeypatch):
 
 def _consistent_problem(args):
     """The probe's arguments as the kernels take them: one float32 problem whose shapes agree (None if so, else
-    what is wrong). Positional: data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image, and
-    for the tiled kernel order, bin_start, bx0, by0, bsize, nbx, nby, mid, reach, fold_img."""
-    data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image = args[:14]
+    what is wrong). Positional: data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, rmax2, mode, image,
+    and for the tiled kernel order, bin_start, bx0, by0, bsize, nbx, nby, mid, reach, fold_img."""
+    data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, rmax2, mode, image = args[:15]
     arrays = dict(data=data, tx=tx, rx=rx, gap=gap, x=x, y=y, depth=depth, slow=slow, image=image)
     for name, a in arrays.items():
         if not (isinstance(a, np.ndarray) and a.dtype == np.float32):
             return f"{name} is not a float32 array"
-    for name, s in dict(t0=t0, inv_dt=inv_dt, umax=umax, tan_ap=tan_ap).items():
+    for name, s in dict(t0=t0, inv_dt=inv_dt, umax=umax, tan_ap=tan_ap, rmax2=rmax2).items():
         if not isinstance(s, np.float32):
             return f"{name} is not a float32 scalar"
     n = data.shape[0]
@@ -37,9 +37,11 @@ def _consistent_problem(args):
         return "the image does not match the grid"
     if not isinstance(mode, int):
         return "mode is not an int"
-    if len(args) == 14:
+    if not rmax2 > 0:
+        return "rmax2 (the aperture's squared radius) is not positive: every column would be cut off"
+    if len(args) == 15:
         return None
-    order, start, bx0, by0, bsize, nbx, nby, mid, reach, krange, fold = args[14:]
+    order, start, bx0, by0, bsize, nbx, nby, mid, reach, krange, fold = args[15:]
     if order.dtype != np.int64 or start.dtype != np.int64 or order.ndim != 1:
         return "the bins are not int64"
     if start.shape != (nbx * nby + 1,) or start[-1] != order.size or np.any(np.diff(start) < 0):
@@ -69,8 +71,8 @@ def test_the_probe_runs_one_consistent_float32_problem_in_every_weight_mode(extr
                    np.zeros((1, 2), np.float32), f32(1), np.array([[[0, 2]]], np.int32),
                    np.zeros((1, 1, 2), np.float32))
     assert _kernels._probe(fake, *(tiled_extra if extra else ())) is fake
-    assert [c[12] for c in calls] == [0, 1, 2, 3]
-    assert all(len(c) == (25 if extra else 14) for c in calls)
+    assert [c[13] for c in calls] == [0, 1, 2, 3]
+    assert all(len(c) == (26 if extra else 15) for c in calls)
 
 
 def test_a_kernel_that_fails_to_build_or_run_is_none():

@@ -39,8 +39,8 @@ def _composed(s, cfg, boxes=None):
                            depth_spacing_m=cfg.depth_spacing_m, pad_m=cfg.pad_m)
     tx, rx = antenna_positions(s.positions_xyz, s.orientations_quat_wxyz, s.offset_m)
     op = BackProjection(grid, tx, rx, dt_s=s.dt_s, n_samples=s.n_samples, t0_s=s.t0_s, eps_r=eps,
-                        aperture_deg=cfg.aperture_deg, obliquity=cfg.obliquity, spreading=cfg.spreading,
-                        air_gap_m=cfg.air_gap_m)
+                        aperture_deg=cfg.aperture_deg, aperture_m=cfg.aperture_m, obliquity=cfg.obliquity,
+                        spreading=cfg.spreading, air_gap_m=cfg.air_gap_m)
     data, noise = s.data, None
     if boxes is not None:
         mask = box_mask(s.n_traces, s.n_samples, s.dt_s, boxes, taper_traces=cfg.taper_traces)
@@ -68,6 +68,9 @@ CASES = [
     (dict(spacing_m=0.04, aperture_deg=None, obliquity=True, spreading=False, normalize="sqrt_fold",
           air_gap_m=0.05, taper_traces=1.0), [[3, 0.5e-9, 40, 2.5e-9]]),
     (dict(eps_r=9.0, spacing_m=0.04, normalize="none", min_line_m=0.05), [[0, 0.0, 59, 1.5e-9]]),
+    (dict(spacing_m=0.03, aperture_deg=60.0, aperture_m=0.12, obliquity=True, spreading=True, min_line_m=0.05),
+     [[3, 0.5e-9, 40, 2.5e-9]]),
+    (dict(spacing_m=0.03, aperture_deg=None, aperture_m=0.1, min_line_m=0.05), None),
 ]
 
 

@@ -16,7 +16,7 @@ GOOD = [
     {"min_target_depth_m": 0.0}, {"min_target_depth_m": 0.5}, {"taper_traces": 0.0}, {"taper_traces": 0.5},
     {"air_gap_m": 0.0}, {"obliquity": False}, {"spreading": False}, {"remove_background": False},
     {"time_zero": "first_break"}, {"time_zero": "none"}, {"normalize": "fold"}, {"normalize": "none"},
-    {"method": "pseudo3d"},
+    {"method": "pseudo3d"}, {"aperture_m": None}, {"aperture_m": 1e-6}, {"aperture_m": 3},
 ]
 
 BAD = [
@@ -34,6 +34,13 @@ BAD = [
     ({"aperture_deg": 90.0}, "aperture_deg must be < 90.0, got 90.0"),
     ({"aperture_deg": 90.5}, "aperture_deg must be < 90.0, got 90.5"),
     ({"aperture_deg": -1.0}, "aperture_deg must be > 0.0, got -1.0"),
+    ({"aperture_m": 0.0}, "aperture_m must be positive, got 0.0"),
+    ({"aperture_m": -0.5}, "aperture_m must be positive, got -0.5"),
+    ({"aperture_m": float("inf")}, "aperture_m must be a finite number, got inf"),
+    ({"aperture_m": "1 m"}, "aperture_m must be a finite number, got '1 m'"),
+    ({"method": "pseudo3d", "aperture_m": 1.0},
+     "method must be 'backprojection' for an aperture radius (aperture_m; pseudo-3D's lines take the cone alone), "
+     "got 'pseudo3d'"),
     ({"threshold": 0.0}, "threshold must be > 0.0, got 0.0"),
     ({"threshold": 1.01}, "threshold must be <= 1.0, got 1.01"),
     ({"min_line_m": -0.1}, "min_line_m must be >= 0.0, got -0.1"),

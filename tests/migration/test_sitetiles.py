@@ -71,6 +71,17 @@ def test_layered_velocity_travels_to_the_tiles():
     assert got.fold is None
 
 
+def test_an_aperture_radius_narrows_each_tile_s_traces_and_keeps_the_image():
+    """A radius (0.25 m) narrower than the cone at the grid's bottom: each tile takes fewer traces than with the
+    cone alone, and the tiles put together are the whole image with that radius."""
+    cone, capped = op(), op(aperture_m=0.25)
+    assert capped.reach_m < cone.reach_m
+    got = migrate_site(capped, DATA, tile_m=0.8)
+    np.testing.assert_array_equal(got.image, capped.adjoint(DATA))
+    wide = migrate_site(cone, DATA, tile_m=0.8)
+    assert sum(got.traces_per_tile) < sum(wide.traces_per_tile)
+
+
 def test_without_an_aperture_every_tile_takes_every_trace():
     o = op(aperture=None)
     got = migrate_site(o, DATA, tile_m=1.2)

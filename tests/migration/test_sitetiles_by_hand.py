@@ -317,7 +317,7 @@ def test_the_checkpoint_key_follows_every_setting():
     variants = [(o, DATA[::-1].copy(), True, tiles), (o, DATA, False, tiles), (o, DATA, True, tiles[:-1]),
                 (o, DATA, True, plan_tiles(GRID, 0.4))]
     for attr, value in [("dt", 0.2e-9), ("n_samples", 150), ("t0", 0.6e-9), ("obliquity", False),
-                        ("spreading", False), ("tan_ap", 0.5)]:
+                        ("spreading", False), ("tan_ap", 0.5), ("aperture_m", 0.3)]:
         changed = op("numpy")
         setattr(changed, attr, value)
         variants.append((changed, DATA, True, tiles))

@@ -14,7 +14,8 @@ torch = pytest.importorskip("torch")
 
 @pytest.mark.parametrize("kw", [{}, {"aperture_deg": 40, "obliquity": True}, {"spreading": True},
                                 {"aperture_deg": 30, "obliquity": True, "spreading": True},
-                                {"heights": True, "aperture_deg": 40}, {"heights": True, "t0_s": -2e-9}])
+                                {"heights": True, "aperture_deg": 40}, {"heights": True, "t0_s": -2e-9},
+                                {"aperture_m": 0.3, "obliquity": True}, {"aperture_deg": 40, "aperture_m": 0.25}])
 def test_torch_matches_the_numpy_reference_and_numba(kw):
     ref, nb, tc = make("numpy", **kw), make("numba", **kw), make("torch", **kw)
     d = RNG.standard_normal((25, 200)).astype(np.float32)

@@ -47,7 +47,7 @@ def survey():
 
 
 def _cfg(**kw):
-    rc = ReconstructConfig(spacing_m=0.03, aperture_deg=45.0)
+    rc = ReconstructConfig(spacing_m=0.03, aperture_deg=45.0, aperture_m=kw.pop("aperture_m", None))
     return LiveConfig(reconstruct=rc, background_window=kw.pop("background_window", 32), detect=False,
                       until_idle_s=kw.pop("until_idle_s", 3.0), refresh_s=kw.pop("refresh_s", 0.2),
                       time_zero_traces=40, **kw)
@@ -98,6 +98,19 @@ def test_live_over_tcp_equals_the_batch_volume(survey, tmp_path, trailing):
     assert abs(np.mean([p[0] for p in t.points_xyz]) - 0.6) < 0.05 and abs(t.depth_m - 0.22) < 0.05
     status = json.loads((tmp_path / "live.json").read_text())
     assert status["n_traces_migrated"] == survey.n_traces and status["summary"]["n_traces"] == survey.n_traces
+
+
+def test_live_with_an_aperture_radius_equals_the_batch_volume(survey, tmp_path):
+    """A radius narrower than the cone below 0.12 m of depth (the 45 deg cone reaches about 0.7 m at the grid's
+    bottom): live mode's tiles and reach follow it, and its volume is the batch one's with the same radius (the
+    image without the radius differs from it by more than 5 % of its peak, far beyond the tolerance)."""
+    th, port = _serve(survey, 4000.0)
+    run_live(open_source(f"tcp://127.0.0.1:{port}"), tmp_path, _cfg(aperture_m=0.12), log=None)
+    th.join(10)
+    batch = _batch_equals_live(survey, tmp_path)
+    assert batch.config["aperture_m"] == 0.12
+    wide = reconstruct(survey, ReconstructConfig(**{**batch.config, "aperture_m": None}))
+    assert np.abs(wide.image - batch.image).max() > 0.05 * np.abs(batch.image).max()
 
 
 def test_tiles_written_out_and_read_back_keep_the_volume(survey, tmp_path):

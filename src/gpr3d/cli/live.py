@@ -59,6 +59,10 @@ def add_arguments(sp):
     sp.add_argument("--max-depth", type=float, default=None, help="deepest voxel (m; default: the time window)")
     sp.add_argument("--aperture", type=float, default=rc.aperture_deg,
                     help=f"beam half-angle in degrees, in (0, 90) (default {rc.aperture_deg:g})")
+    sp.add_argument("--aperture-radius", type=float, default=rc.aperture_m,
+                    help="the aperture's horizontal radius (m): a trace adds only to the columns within it of its "
+                         "antennas' midpoint, at any depth (0: none, the cone alone; default "
+                         f"{'none' if rc.aperture_m is None else format(rc.aperture_m, 'g')})")
     sp.add_argument("--background-window", type=int, default=256,
                     help="traces in the moving background window (default 256), ending at each trace")
     sp.add_argument("--centred-background", action="store_true",
@@ -114,11 +118,12 @@ def run(args):
         eps = None  # the stream's header is the file's
     rc = ReconstructConfig(eps_r=eps, spacing_m=args.spacing, depth_spacing_m=args.depth_spacing,
                            max_depth_m=args.max_depth, aperture_deg=args.aperture,
+                           aperture_m=args.aperture_radius or None,
                            engine=_migration_engine(None, args.device), background_window=args.background_window,
                            background_trailing=not args.centred_background,
                            lattice=True)
     check_config(rc, names={"spacing_m": "--spacing", "depth_spacing_m": "--depth-spacing",
-                            "max_depth_m": "--max-depth", "eps_r": "--eps-r"})
+                            "max_depth_m": "--max-depth", "eps_r": "--eps-r", "aperture_m": "--aperture-radius"})
     detector = None
     if not args.no_detect:
         from gpr3d.detection.infer import fastest_engine

@@ -23,7 +23,7 @@ from gpr3d.core.errors import GPR3DError
 _RECONSTRUCT_FLAGS = {"spacing_m": "--spacing", "max_depth_m": "--max-depth", "aperture_deg": "--aperture",
                       "threshold": "--threshold", "min_line_m": "--min-line", "engine": "--engine",
                       "min_target_depth_m": "--min-depth", "method": "--method", "tile_m": "--tile",
-                      "air_gap_m": "--air-gap", "refine_level": "--refine-level"}
+                      "air_gap_m": "--air-gap", "refine_level": "--refine-level", "aperture_m": "--aperture-radius"}
 
 
 NAME = "reconstruct"
@@ -58,6 +58,11 @@ def add_arguments(sp):
                          "than their signal)")
     sp.add_argument("--aperture", type=float, default=rc.aperture_deg,
                     help=f"beam half-angle in degrees (0: none; default {rc.aperture_deg:g})")
+    sp.add_argument("--aperture-radius", type=float, default=rc.aperture_m,
+                    help="the aperture's horizontal radius (m): a trace adds only to the columns within it of its "
+                         "antennas' midpoint, at any depth, the cone still applying where it is narrower (0: none; "
+                         f"default {'none' if rc.aperture_m is None else format(rc.aperture_m, 'g')}; faster on deep "
+                         "grids, benchmarks/results/aperture_radius.md)")
     sp.add_argument("--threshold", type=float, default=rc.threshold,
                     help=f"target threshold, fraction of the image's 99.5th-percentile column maximum ({rc.threshold:g})")
     sp.add_argument("--min-line", type=float, default=rc.min_line_m, help=f"shortest line target (m; {rc.min_line_m:g})")
@@ -124,7 +129,8 @@ def run(args):
         raise GPR3DError("--refine-level sets how coarse-to-fine imaging refines: give --coarse-to-fine with it")
     engine = _migration_engine(args.engine, args.device)
     settings = dict(spacing_m=args.spacing, max_depth_m=args.max_depth,
-                    aperture_deg=None if args.aperture == 0 else args.aperture, threshold=args.threshold,
+                    aperture_deg=None if args.aperture == 0 else args.aperture,
+                    aperture_m=args.aperture_radius or None, threshold=args.threshold,
                     min_line_m=args.min_line, engine=engine, time_zero="none" if args.no_time_zero else "peak",
                     min_target_depth_m=args.min_depth, method=args.method, air_gap_m=args.air_gap,
                     coarse_to_fine=args.coarse_to_fine, signal_depth=args.signal_depth,

@@ -29,6 +29,9 @@ W = _simd.W
 _CACHE = {}
 #: columns per tile side in the tiled adjoint
 TILE = 8
+#: ``rmax2`` (the squared horizontal radius of the aperture) where there is none: the largest float32, not inf,
+#: which fastmath may assume never occurs
+NO_RADIUS = f32(np.finfo(np.float32).max)
 
 @njit(fastmath=True, cache=True, inline="always")
 def legs(px, py, tx, rx, j):
@@ -40,11 +43,16 @@ def legs(px, py, tx, rx, j):
     return ax, ay, bx, by, ax * ax + ay * ay, bx * bx + by * by
 
 @njit(fastmath=True, cache=True, inline="always")
-def start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd):
+def start_depth(ax, ay, bx, by, tan_ap, rmax2, d0, dd, nd):
+    # the first depth index inside the trace's aperture: the cone of half-angle atan(tan_ap) (<= 0: none) about the
+    # vertical through the tx-rx midpoint, cut off at the horizontal radius sqrt(rmax2) (inf: none); a column
+    # beyond that radius gets nd (no depths)
+    hm2 = 0.25 * ((ax + bx) * (ax + bx) + (ay + by) * (ay + by))
+    if hm2 > rmax2:
+        return nd
     if tan_ap <= 0.0:
         return 0
-    hm = math.sqrt(0.25 * ((ax + bx) * (ax + bx) + (ay + by) * (ay + by)))
-    k0 = int(math.ceil((hm / tan_ap - d0) / dd - 1e-6))
+    k0 = int(math.ceil((math.sqrt(hm2) / tan_ap - d0) / dd - 1e-6))
     return min(max(k0, 0), nd)
 
 @njit(fastmath=True, cache=True, inline="always")
@@ -144,7 +152,7 @@ def depth_axis(depth, nd):
     return depth[off], (depth[off + 1] - depth[off] if nd > 1 else f32(1.0))
 
 @njit(parallel=True, fastmath=True, cache=True)
-def adjoint(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image):
+def adjoint(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, rmax2, mode, image):
     # per (column, trace): pass 1 computes the sample positions and weights for all depths
     # (vectorised: two square roots per voxel), pass 2 gathers and accumulates; ``gap`` (per trace): the antennas'
     # height above the ground (> 0: the rays refract at the surface)
@@ -166,7 +174,7 @@ def adjoint(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode
             ha = tx[j, 2]
             hb = rx[j, 2]
             g = gap[j]
-            k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
+            k0 = start_depth(ax, ay, bx, by, tan_ap, rmax2, d0, dd, nd)
             if g > 0:
                 k1 = end_depth(ax, ay, bx, by, ha + g, hb + g, lmax2a, d0, dd, nd)
                 for k in range(k0, k1):
@@ -201,7 +209,7 @@ def adjoint(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode
             col[k] += acc[k]
 
 @njit(parallel=True, fastmath=True, cache=True)
-def forward(image, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, data):
+def forward(image, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, rmax2, mode, data):
     nx, ny, nd = image.shape
     n_tr = data.shape[0]
     d0, dd = depth_axis(depth, nd)
@@ -213,7 +221,7 @@ def forward(image, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mod
         for ix in range(nx):
             for iy in range(ny):
                 ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
-                k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
+                k0 = start_depth(ax, ay, bx, by, tan_ap, rmax2, d0, dd, nd)
                 col = image[ix, iy]
                 for k in range(k0, nd):
                     if g > 0:
@@ -290,7 +298,7 @@ def _stack(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, umax, k0, 
 
 
 @njit(parallel=True, fastmath=True, cache=True)
-def adjoint_simd(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image, path):
+def adjoint_simd(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, rmax2, mode, image, path):
     # the SIMD depth loop for antennas on the ground; a trace held above it (gap > 0) takes the scalar loop
     nx, ny, nd = image.shape
     n_tr = data.shape[0]
@@ -309,7 +317,7 @@ def adjoint_simd(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap,
         ww = np.empty(nd, np.float32)
         for j in range(n_tr):
             ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
-            k0 = start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd)
+            k0 = start_depth(ax, ay, bx, by, tan_ap, rmax2, d0, dd, nd)
             g = gap[j]
             if g > 0:
                 k1 = end_depth(ax, ay, bx, by, tx[j, 2] + g, rx[j, 2] + g, lmax2a, d0, dd, nd)
@@ -332,7 +340,8 @@ def _probe(fn, *extra):
     try:
         for mode in range(4):
             fn(np.zeros((1, 4), f32), one, one, np.zeros(1, f32), np.zeros(1, f32), np.zeros(1, f32), np.arange(W, dtype=f32),
-               np.ones(W, f32), f32(0), f32(1), f32(2), f32(0.5), mode, np.zeros((1, 1, 2), f32), *extra)
+               np.ones(W, f32), f32(0), f32(1), f32(2), f32(0.5), NO_RADIUS, mode,
+               np.zeros((1, 1, 2), f32), *extra)
     except Exception:  # noqa: BLE001 - any failure to build means: use the scalar kernel
         return None
     return fn
@@ -383,7 +392,7 @@ def _scalar_depths(row, depth, slow, acc, facc, h2a, h2b, ha, hb, t0, inv_dt, um
 
 
 @njit(parallel=True, fastmath=True, cache=True)
-def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, mode, image,
+def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap, rmax2, mode, image,
                   order, bin_start, bx0, by0, bsize, nbx, nby, mid, reach, krange, fold_img, path, fold):
     """The adjoint with an aperture, at a cost that follows the aperture.
 
@@ -453,7 +462,7 @@ def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap
                             if krange[ix, iy, 0] >= krange[ix, iy, 1]:
                                 continue
                             ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
-                            k0 = max(start_depth(ax, ay, bx, by, tan_ap, d0, dd, nd), krange[ix, iy, 0])
+                            k0 = max(start_depth(ax, ay, bx, by, tan_ap, rmax2, d0, dd, nd), krange[ix, iy, 0])
                             if g > 0:
                                 k1 = end_depth(ax, ay, bx, by, ha + g, hb + g, lmax2a, d0, dd, nd)
                             else:

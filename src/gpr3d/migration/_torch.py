@@ -58,11 +58,14 @@ def _geometry(op, xs, ys, idx, torch, dev):
         w = w * 0.5 * (za / torch.clamp(ra, min=1e-12) + zb / torch.clamp(rb, min=1e-12))
     if op.spreading:
         w = w * 0.5 * (ra + rb)
-    if op.tan_ap > 0:
+    if op.tan_ap > 0 or op.aperture_m is not None:
         hm = torch.sqrt((X - 0.5 * (col(tx, 0) + col(rx, 0))) ** 2 + (Y - 0.5 * (col(tx, 1) + col(rx, 1))) ** 2)
-        kmin = torch.ceil((hm / op.tan_ap - float(op.depth[0])) / op.grid.dd - 1e-12).to(f32)
         k = torch.arange(len(op.depth), dtype=f32, device=dev)[None, None, None, :]
-        w = torch.where(k >= kmin, w, torch.zeros((), dtype=f32, device=dev))
+        if op.tan_ap > 0:
+            kmin = torch.ceil((hm / op.tan_ap - float(op.depth[0])) / op.grid.dd - 1e-12).to(f32)
+            w = torch.where(k >= kmin, w, torch.zeros((), dtype=f32, device=dev))
+        if op.aperture_m is not None:  # columns beyond the aperture's radius: none of their depths
+            w = torch.where(hm <= op.aperture_m, w, torch.zeros((), dtype=f32, device=dev))
     u = torch.clamp(u, 0.0, float(op.n_samples))  # past the end: the zero padding
     return u, w
 

@@ -26,6 +26,9 @@ class ReconstructConfig:
     #: mode's tiles share, so that a batch image lands on the same voxels
     lattice: bool = False
     aperture_deg: float | None = 50.0
+    #: the aperture's horizontal radius (m): a trace adds only to the columns within it of its tx-rx midpoint, the
+    #: cone of ``aperture_deg`` still applying above the depth where it is the narrower (None: the cone alone)
+    aperture_m: float | None = None
     obliquity: bool = True
     spreading: bool = True
     time_zero: str = "peak"  #: "peak", "first_break" or "none" (data already start at time zero)

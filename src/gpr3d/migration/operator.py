@@ -132,6 +132,8 @@ class BackProjection:
     dt_s, n_samples : the data's time axis; ``t0_s`` is time zero (s after the first sample)
     eps_r / layers : the velocity (see :func:`effective_slowness`)
     aperture_deg : beam half-angle from the vertical (None: no limit)
+    aperture_m : the aperture's horizontal radius (m): a trace reaches only the columns within it of its tx-rx
+        midpoint, at any depth (None: no limit; with ``aperture_deg``, whichever is narrower)
     obliquity, spreading : weights ``cos(theta)`` and ``r``
     air_gap_m : the antennas' height above the ground (m): one number or one per trace (0: ground-coupled)
     engine : ``"numba"``, ``"numpy"``, or ``"torch"`` (PyTorch on the CPU; ``"torch:cuda"``, ``"torch:cuda:N"`` on
@@ -145,7 +147,7 @@ class BackProjection:
     """
 
     def __init__(self, grid: Grid3D, tx, rx, *, dt_s: float, n_samples: int, t0_s: float = 0.0, eps_r=None,
-                 layers=None, aperture_deg: float | None = None, obliquity: bool = False, spreading: bool = False,
+                 layers=None, aperture_deg: float | None = None, aperture_m: float | None = None, obliquity: bool = False, spreading: bool = False,
                  air_gap_m=0.0, engine: str = "numba"):
         self.grid = grid
         self.tx = np.ascontiguousarray(tx, dtype=np.float64)
@@ -170,6 +172,11 @@ class BackProjection:
         self.t0 = float(t0_s)
         self.slow = effective_slowness(grid.depth, eps_r, layers)
         self.tan_ap = 0.0 if aperture_deg is None else math.tan(math.radians(aperture_deg))
+        if aperture_m is not None and not (isinstance(aperture_m, (int, float)) and not isinstance(aperture_m, bool)
+                                           and math.isfinite(aperture_m) and aperture_m > 0):
+            raise InvalidDataError(f"aperture_m must be a positive number of metres (or None: no limit), got "
+                                   f"{aperture_m!r}")
+        self.aperture_m = None if aperture_m is None else float(aperture_m)
         self.obliquity = bool(obliquity)
         self.spreading = bool(spreading)
         self.engine = base
@@ -225,11 +232,13 @@ class BackProjection:
             w *= 0.5 * (za / np.maximum(ra, 1e-12) + zb / np.maximum(rb, 1e-12))  # r = 0 at an antenna: cos 0
         if self.spreading:
             w *= 0.5 * (ra + rb)
-        if self.tan_ap > 0:
+        if self.tan_ap > 0 or self.aperture_m is not None:
             hm = np.hypot(X - 0.5 * (self.tx[j, 0] + self.rx[j, 0]), Y - 0.5 * (self.tx[j, 1] + self.rx[j, 1]))
-            # the kernels start at the first depth sample at or below hm / tan
-            kmin = np.ceil((hm / self.tan_ap - self.depth[0]) / self.grid.dd - 1e-12)
-            w = np.where(np.arange(len(self.depth))[None, None, :] >= kmin, w, 0.0)
+            if self.tan_ap > 0:  # the kernels start at the first depth sample at or below hm / tan
+                kmin = np.ceil((hm / self.tan_ap - self.depth[0]) / self.grid.dd - 1e-12)
+                w = np.where(np.arange(len(self.depth))[None, None, :] >= kmin, w, 0.0)
+            if self.aperture_m is not None:  # and nothing beyond the aperture's radius
+                w = np.where(hm <= self.aperture_m, w, 0.0)
         u = np.clip(u, 0.0, self.n_samples)  # past the end: the zero padding
         i0 = np.floor(u).astype(np.int64)
         return u, i0, w
@@ -312,7 +321,7 @@ class BackProjection:
         # where the SIMD loop does not build here
         simd_path = path if self.simd else 0
         tiled = simd = None
-        if self.tan_ap > 0 and self.tiled:
+        if (self.tan_ap > 0 or self.aperture_m is not None) and self.tiled:
             tiled = _kernels.tiled_adjoint(simd_path, with_fold)
             if tiled is None and simd_path:
                 simd_path, tiled = 0, _kernels.tiled_adjoint(0, with_fold)
@@ -402,7 +411,8 @@ class BackProjection:
     def reach_m(self) -> float:
         """How far (horizontally, m) from a trace's tx-rx midpoint its aperture reaches at the deepest voxel (inf:
         no aperture)."""
-        return self.tan_ap * float(self.depth[-1]) + 1e-6 if self.tan_ap > 0 else math.inf
+        cone = self.tan_ap * float(self.depth[-1]) + 1e-6 if self.tan_ap > 0 else math.inf
+        return min(cone, self.aperture_m + 1e-6) if self.aperture_m is not None else cone
 
     def _kernel_args(self, xs=None, ys=None):
         f = np.float32
@@ -410,7 +420,8 @@ class BackProjection:
         ys = self.y if ys is None else ys
         mode = (1 if self.obliquity else 0) | (2 if self.spreading else 0)
         return (self.tx.astype(f), self.rx.astype(f), self.air_gap.astype(f), xs.astype(f), ys.astype(f), self.depth.astype(f),
-                self.slow.astype(f), f(self.t0), f(1.0 / self.dt), f(self.n_samples), f(self.tan_ap), mode)
+                self.slow.astype(f), f(self.t0), f(1.0 / self.dt), f(self.n_samples), f(self.tan_ap),
+                f(np.finfo(np.float32).max if self.aperture_m is None else self.aperture_m**2), mode)
 
 
 def dot_test(op: BackProjection, *, seed: int = 0) -> tuple[float, float]:

@@ -149,6 +149,7 @@ def check_config(cfg: ReconstructConfig, names: dict | None = None) -> None:
         number(name, positive=True, none_ok=True)
     number("pad_m", lo=0.0)
     number("aperture_deg", none_ok=True, lo=0.0, hi=90.0, lo_open=True, hi_open=True)
+    number("aperture_m", positive=True, none_ok=True)
     number("threshold", lo=0.0, hi=1.0, lo_open=True)  # relative to the image's reference level
     number("min_line_m", lo=0.0)
     number("min_target_depth_m", none_ok=True, lo=0.0)
@@ -168,6 +169,9 @@ def check_config(cfg: ReconstructConfig, names: dict | None = None) -> None:
     check_site_settings(cfg)
     if cfg.method == "pseudo3d" and (cfg.tile_m is not None or cfg.workers or cfg.scheduler or cfg.checkpoint):
         bad("method", "'backprojection' for site tiles (pseudo-3D migrates line by line)")
+    if cfg.method == "pseudo3d" and cfg.aperture_m is not None:
+        bad("method", f"'backprojection' for an aperture radius ({names.get('aperture_m', 'aperture_m')}; "
+                      "pseudo-3D's lines take the cone alone)")
 
 
 def cross_line_extent(positions_xyz) -> float:
@@ -325,8 +329,8 @@ def reconstruct(survey, cfg: ReconstructConfig | None = None, *, boxes=None, log
             grid = replace(grid, y0=0.0, ny=1)
         check_grid_fits(grid)  # (site tiles too: the whole volume is put together in memory)
         op = BackProjection(grid, tx, rx, dt_s=s.dt_s, n_samples=s.n_samples, t0_s=s.t0_s, eps_r=eps,
-                            aperture_deg=cfg.aperture_deg, obliquity=cfg.obliquity, spreading=cfg.spreading,
-                            air_gap_m=cfg.air_gap_m, engine=cfg.engine)
+                            aperture_deg=cfg.aperture_deg, aperture_m=cfg.aperture_m, obliquity=cfg.obliquity,
+                            spreading=cfg.spreading, air_gap_m=cfg.air_gap_m, engine=cfg.engine)
     t = time.perf_counter()
     noise_map = None
     # the fold (how many traces see each voxel inside their aperture and record) comes with the image: in the same
@@ -407,7 +411,7 @@ def _refine_plan(cfg, s, v, frame, site, op) -> dict:
         return {"skipped": "one profile, migrated in 2D"}
     if site:
         return {"skipped": "site tiles migrate every voxel"}
-    if op.tan_ap <= 0:
+    if op.tan_ap <= 0 and op.aperture_m is None:
         return {"skipped": "no aperture: every trace reaches every voxel"}
     if cfg.engine != "numba":
         return {"skipped": f"engine {cfg.engine!r} migrates every voxel"}
@@ -499,7 +503,8 @@ def whole_record_fold_max(op: BackProjection, eps_r: float, positions, cfg: Reco
 
     def fold_on(g):
         twin = BackProjection(g, op.tx, op.rx, dt_s=op.dt, n_samples=op.n_samples, t0_s=op.t0, eps_r=eps_r,
-                              aperture_deg=cfg.aperture_deg, obliquity=op.obliquity, spreading=op.spreading,
+                              aperture_deg=cfg.aperture_deg, aperture_m=op.aperture_m, obliquity=op.obliquity,
+                              spreading=op.spreading,
                               air_gap_m=op.air_gap, engine=cfg.engine)
         return twin.adjoint(np.zeros((op.n_traces, op.n_samples), np.float32), with_fold=True)[1]
 

@@ -126,7 +126,7 @@ def _fingerprint(op: BackProjection, data, with_fold: bool, tiles: list[Tile]) -
     h = hashlib.sha256()
     for a in (op.tx, op.rx, op.slow, np.ascontiguousarray(data, np.float32)):
         h.update(np.ascontiguousarray(a).tobytes())
-    h.update(json.dumps([op.grid.to_dict(), op.dt, op.n_samples, op.t0, op.tan_ap, op.obliquity, op.spreading,
+    h.update(json.dumps([op.grid.to_dict(), op.dt, op.n_samples, op.t0, op.tan_ap, op.aperture_m, op.obliquity, op.spreading,
                          with_fold, [t.window for t in tiles]], default=float).encode())
     return h.hexdigest()[:16]
 

@@ -943,8 +943,10 @@ class LiveReconstruction:
             raise GPR3DError(f"the record reaches {depth:.3f} m: too shallow for depth steps of {dd:g} m")
         self.depth_m = depth
         self.grid_base = Grid3D(0.0, 0.0, dd, rc.spacing_m, rc.spacing_m, dd, 1, 1, nd)
-        # how far from its antennas a trace reaches (the aperture cone at the deepest voxel), with a cell to spare
-        self.reach = self.grid_base.depth[-1] * math.tan(math.radians(rc.aperture_deg)) + 2 * rc.spacing_m
+        # how far from its antennas a trace reaches (the aperture cone at the deepest voxel, or its radius where
+        # that is the narrower), with a cell to spare
+        cone = self.grid_base.depth[-1] * math.tan(math.radians(rc.aperture_deg))
+        self.reach = (cone if rc.aperture_m is None else min(cone, rc.aperture_m)) + 2 * rc.spacing_m
 
     def add(self, data, poses, *, now=None):
         """Raw traces ``(k, n_samples)`` with poses ``(k, 7)`` (``x y z qw qx qy qz``), arrived at ``now``
@@ -1090,8 +1092,9 @@ class LiveReconstruction:
         na, nb = hi - lo + 1
         grid = replace(g, x0=float(lo[0] * T) * g.dx, y0=float(lo[1] * T) * g.dy, nx=int(na * T), ny=int(nb * T))
         op = BackProjection(grid, tx, rx, dt_s=self.h.dt_s, n_samples=self.n_out, t0_s=0.0, eps_r=self.eps,
-                            aperture_deg=self.rc.aperture_deg, obliquity=self.rc.obliquity,
-                            spreading=self.rc.spreading, air_gap_m=self.rc.air_gap_m, engine=self.rc.engine)
+                            aperture_deg=self.rc.aperture_deg, aperture_m=self.rc.aperture_m,
+                            obliquity=self.rc.obliquity, spreading=self.rc.spreading, air_gap_m=self.rc.air_gap_m,
+                            engine=self.rc.engine)
         img, fold = op.adjoint(traces, with_fold=True)
         for i in range(na):
             for j in range(nb):
