@@ -32,7 +32,7 @@ if __name__ == "__main__":  # numba reads the thread count at import
 import numpy as np  # noqa: E402
 
 from eval_coarse_to_fine import score, stages_survey, target_list  # noqa: E402
-from eval_scenes import make_scene, scene_survey  # noqa: E402
+from eval_scenes import make_scene, parse_seeds, scene_survey  # noqa: E402
 
 from gpr3d.core.units import velocity_from_eps_r  # noqa: E402
 from gpr3d.migration.config import ReconstructConfig  # noqa: E402
@@ -110,11 +110,7 @@ def main(argv=None):
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     args = ap.parse_args(argv)
     try:
-        if "-" in args.seeds:
-            a, b = (int(v) for v in args.seeds.split("-"))
-            seeds = list(range(a, b + 1))
-        else:
-            seeds = [int(v) for v in args.seeds.split(",")]
+        seeds = parse_seeds(args.seeds)
         radii = [parse_radius(v) for v in args.radii.split(",")]
     except ValueError:
         ap.error("--seeds takes A-B or A,B,...; --radii positive numbers ending in 'm' or 'wl', comma-separated")

@@ -155,6 +155,14 @@ def _pct(vals, q):
     return float(np.percentile(vals, q)) if len(vals) else math.nan
 
 
+def parse_seeds(text: str) -> list[int]:
+    """``"A-B"`` (both ends included) or ``"A,B,..."``: the scene seeds (ValueError otherwise)."""
+    if "-" in text:
+        a, b = (int(v) for v in text.split("-"))
+        return list(range(a, b + 1))
+    return [int(v) for v in text.split(",")]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", default="0-23", help="scene seeds: A-B or a comma list (default 0-23)")
@@ -163,11 +171,7 @@ def main(argv=None):
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     args = ap.parse_args(argv)
     try:
-        if "-" in args.seeds:
-            a, b = (int(v) for v in args.seeds.split("-"))
-            seeds = list(range(a, b + 1))
-        else:
-            seeds = [int(v) for v in args.seeds.split(",")]
+        seeds = parse_seeds(args.seeds)
     except ValueError:
         ap.error(f"--seeds must be A-B or a comma list of whole numbers, got {args.seeds!r}")
     if not seeds or args.traces < 1000:
