@@ -45,7 +45,7 @@ def legs(px, py, tx, rx, j):
 @njit(fastmath=True, cache=True, inline="always")
 def start_depth(ax, ay, bx, by, tan_ap, rmax2, d0, dd, nd):
     # the first depth index inside the trace's aperture: the cone of half-angle atan(tan_ap) (<= 0: none) about the
-    # vertical through the tx-rx midpoint, cut off at the horizontal radius sqrt(rmax2) (inf: none); a column
+    # vertical through the tx-rx midpoint, cut off at the horizontal radius sqrt(rmax2) (NO_RADIUS: none); a column
     # beyond that radius gets nd (no depths)
     hm2 = 0.25 * ((ax + bx) * (ax + bx) + (ay + by) * (ay + by))
     if hm2 > rmax2:

@@ -147,8 +147,8 @@ class BackProjection:
     """
 
     def __init__(self, grid: Grid3D, tx, rx, *, dt_s: float, n_samples: int, t0_s: float = 0.0, eps_r=None,
-                 layers=None, aperture_deg: float | None = None, aperture_m: float | None = None, obliquity: bool = False, spreading: bool = False,
-                 air_gap_m=0.0, engine: str = "numba"):
+                 layers=None, aperture_deg: float | None = None, aperture_m: float | None = None,
+                 obliquity: bool = False, spreading: bool = False, air_gap_m=0.0, engine: str = "numba"):
         self.grid = grid
         self.tx = np.ascontiguousarray(tx, dtype=np.float64)
         self.rx = np.ascontiguousarray(rx, dtype=np.float64)
