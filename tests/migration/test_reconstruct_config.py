@@ -79,6 +79,11 @@ def test_settings_outside_their_ranges_are_named_in_full(kw, words):
 def test_the_caller_s_names_and_the_site_settings():
     with pytest.raises(InvalidDataError, match=r"^--spacing must be positive, got -0\.02$"):
         check_config(ReconstructConfig(spacing_m=-0.02), {"spacing_m": "--spacing"})
+    with pytest.raises(InvalidDataError, match=re.escape(
+            "--method must be 'backprojection' for an aperture radius (--aperture-radius; pseudo-3D's lines take "
+            "the cone alone), got 'pseudo3d'")):
+        check_config(ReconstructConfig(method="pseudo3d", aperture_m=1.0),
+                     {"method": "--method", "aperture_m": "--aperture-radius"})
     with pytest.raises(InvalidDataError, match="^tile"):  # the site settings are checked too
         check_config(ReconstructConfig(tile_m=-1.0))
     with pytest.raises(InvalidDataError, match="^workers"):

@@ -177,3 +177,14 @@ def test_the_signal_s_stages_are_timed(noisy):
     with collect(compile_times=False) as t:
         reconstruct(noisy, ReconstructConfig(spacing_m=0.05, signal_depth=False))
     assert list(t.seconds) == ["prepare", "grid", "migrate", "fold", "envelope", "targets"]
+
+
+def test_the_whole_record_s_fold_floor_keeps_the_aperture_radius(noisy):
+    """With a radius narrower than the cone at depth (0.3 m), the largest fold searched over the whole record is
+    that of the full-depth grid with the same radius, not the cone's alone (which is larger by far)."""
+    cut = reconstruct(noisy, ReconstructConfig(spacing_m=0.03, signal_depth=True, aperture_m=0.3))
+    full = reconstruct(noisy, ReconstructConfig(spacing_m=0.03, aperture_m=0.3))
+    cone = reconstruct(noisy, ReconstructConfig(spacing_m=0.03))
+    assert cut.depth["how"] == "signal" and cut.config["aperture_m"] == 0.3
+    assert cut.depth["fold_max"] == pytest.approx(float(full.fold.max()), rel=1e-6)
+    assert float(full.fold.max()) < 0.8 * float(cone.fold.max())
