@@ -169,6 +169,12 @@ def test_demo_end_to_end(tmp_path):
     assert c2f["refine"]["stride"] > 1 and 0 < c2f["refine"]["refined_fraction"] < 0.5
     assert c2f["matched"] == rec["n_targets"] <= c2f["n_targets"] and c2f["largest_move_m"] <= 0.02
     assert c2f["false_targets"] <= rec["false_targets"]
+    # an aperture radius of 0.5 m: the pipes the whole cone finds over most of their length are still found so
+    rad = rec["aperture_radius"]
+    full = [r["completeness"] for r in rec["truth"]]
+    assert rad["radius_m"] == 0.5 and len(rad["completeness"]) == len(full) >= 2 and max(full) >= 0.9
+    assert all(c >= 0.9 for c, f in zip(rad["completeness"], full) if f >= 0.9)
+    assert rad["false_targets"] <= rec["false_targets"] + 2
     walk = summary["stages"]["random_motion"]
     # a trace every 1 cm of the antenna's path: the count follows the path length
     assert walk["n_traces"] == pytest.approx(100 * walk["path_m"], abs=2) and walk["path_m"] > 50
