@@ -62,15 +62,11 @@ def level(rec) -> float:
 
 
 def warm_up():
-    """The kernels compiled (or loaded from numba's cache) before anything is timed."""
-    from gpr3d.core.grid import Grid3D
-    from gpr3d.migration.operator import BackProjection
+    """The tiled kernel compiled (or loaded from numba's cache) before anything is timed, as the warm-up of
+    ``gpr3d.cli._warm`` builds it."""
+    from gpr3d.migration import _kernels
 
-    at = np.zeros((2, 3))
-    grid = Grid3D(0.0, 0.0, 0.0, 0.02, 0.02, 0.02, 8, 8, 16)
-    for radius in (None, 0.1):
-        BackProjection(grid, at, at, dt_s=1e-10, n_samples=64, eps_r=4.0, aperture_deg=50.0, aperture_m=radius,
-                       obliquity=True, spreading=True).adjoint(np.ones((2, 64), np.float32), with_fold=True)
+    _kernels.tiled_adjoint(_kernels.read_path(), True)
 
 
 def compare(name, s, pipes, spacing, radii, log):
@@ -94,7 +90,7 @@ def compare(name, s, pipes, spacing, radii, log):
                     "radius_m": r_m, "migrate_s": r.timings_s["migrate"], "wall_s": wall, "env_change": d,
                     "same": target_list(r) == target_list(full), **score(r, pipes)})
     for row in out:
-        log(f"{row['scene']:>10s} {row['setting']:>22s} r {row['radius_m']:.2f} m migrate {row['migrate_s']:6.2f} s  "
+        log(f"{row['scene']:>10s} {row['setting']:>22s} migrate {row['migrate_s']:6.2f} s  "
             f"completeness {row['completeness']:.3f}  pos {row['position_m']:.4f}  false {row['false']}  n {row['n']}  "
             f"env change {row['env_change']:.4f}  same {row['same']}")
     return out
@@ -147,7 +143,8 @@ def main(argv=None):
     lines += ["", "| scene | setting | radius m | migration s | completeness | position err m | false | targets | "
               "envelope change | same targets |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['scene']} | {r['setting']} | {r['radius_m']:.2f} | {r['migrate_s']:.2f} | "
+        radius = "-" if np.isnan(r["radius_m"]) else f"{r['radius_m']:.2f}"
+        lines.append(f"| {r['scene']} | {r['setting']} | {radius} | {r['migrate_s']:.2f} | "
                      f"{r['completeness']:.3f} | {r['position_m']:.4f} | {r['false']} | {r['n']} | "
                      f"{r['env_change']:.3f} | {'yes' if r['same'] else 'no'} |")
     write_table(args.out, "aperture_radius.md", "\n".join(lines), "eval_aperture.py", argv)
