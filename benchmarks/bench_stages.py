@@ -6,9 +6,10 @@ The survey: ``--traces`` raw A-scans (default 8000; 512 samples over 40 ns, 500 
 over 4 m x 4 m (``bench_reconstruct.cart_path``, a trace every 2 cm), forward-modelled over the L-pipe scene of
 ``eval_reconstruction.py`` (eps_r 9), written as ``survey.h5`` (no positions) and ``path.tum`` (one pose per
 trace): ``gpr3d reconstruct survey.h5 --poses path.tum --eps-r 9 --out rec`` at every other default.
-``detect`` runs on the embedded 1040-trace DZT (``gpr3d.data.example_dzt``). ``reconstruct --coarse-to-fine``
-runs warm beside it (:mod:`gpr3d.migration.refine`), and so do ``--aperture-radius 1`` (the reference's own 1 m
-radius about each trace's midpoint, within the 50 deg cone) alone and with ``--coarse-to-fine``.
+``detect`` runs on the embedded 1040-trace DZT (``gpr3d.data.example_dzt``). ``reconstruct --no-coarse-to-fine``
+(every voxel migrated; coarse-to-fine, :mod:`gpr3d.migration.refine`, is the default) runs warm beside it, and so
+do ``--aperture-radius 1`` (the reference's own 1 m radius about each trace's midpoint, within the 50 deg cone)
+alone and with ``--no-coarse-to-fine``.
 
 Each command runs in a process of its own with ``gpr3d --timings`` (:mod:`gpr3d.core.timing`): the stages are
 the library's own (read, poses, prepare, grid, migrate, fold, envelope, targets, figures, writes, ...), numba's
@@ -166,16 +167,16 @@ def main(argv=None):
     runs = {"reconstruct, cold cache, no warm-up": timed_command(rec, work, fresh("r0", False), "rec00")}
     runs["reconstruct, cold cache"] = timed_command(rec, work, env, "rec0")
     runs["reconstruct, warm"] = best_of([timed_command(rec, work, env, f"rec{i + 1}") for i in range(args.repeat)])
-    c2f = rec[:-2] + ["--coarse-to-fine", "--out", work / "rec_c2f"]
-    runs["reconstruct --coarse-to-fine, warm"] = best_of([timed_command(c2f, work, env, f"c2f{i + 1}")
-                                                          for i in range(args.repeat)])
-    # the reference's own aperture (1 m about each trace's midpoint) beside the cone, alone and with coarse-to-fine
+    every = rec[:-2] + ["--no-coarse-to-fine", "--out", work / "rec_every"]
+    runs["reconstruct --no-coarse-to-fine, warm"] = best_of([timed_command(every, work, env, f"every{i + 1}")
+                                                             for i in range(args.repeat)])
+    # the reference's own aperture (1 m about each trace's midpoint) beside the cone, coarse-to-fine and not
     radius = rec[:-2] + ["--aperture-radius", "1", "--out", work / "rec_r1"]
     runs["reconstruct --aperture-radius 1, warm"] = best_of([timed_command(radius, work, env, f"r1_{i + 1}")
                                                              for i in range(args.repeat)])
-    both = rec[:-2] + ["--aperture-radius", "1", "--coarse-to-fine", "--out", work / "rec_r1_c2f"]
-    runs["reconstruct --aperture-radius 1 --coarse-to-fine, warm"] = best_of(
-        [timed_command(both, work, env, f"r1c2f{i + 1}") for i in range(args.repeat)])
+    both = rec[:-2] + ["--aperture-radius", "1", "--no-coarse-to-fine", "--out", work / "rec_r1_every"]
+    runs["reconstruct --aperture-radius 1 --no-coarse-to-fine, warm"] = best_of(
+        [timed_command(both, work, env, f"r1every{i + 1}") for i in range(args.repeat)])
     runs["detect, cold cache"] = timed_command(det, work, fresh("d"), "det0")
     runs["detect, warm"] = best_of([timed_command(det, work, env, f"det{i + 1}") for i in range(args.repeat)])
     if args.demo:
@@ -211,11 +212,11 @@ def main(argv=None):
                                                for r in runs.values()) + " |")
     lines.append("| **process wall time** | " + " | ".join(f"**{r['wall_s']:.2f}**" for r in runs.values()) + " |")
     warm = runs["reconstruct, warm"]["wall_s"]
-    warm_c2f = runs["reconstruct --coarse-to-fine, warm"]["wall_s"]
-    refine = json.loads((work / "rec_c2f" / "config.json").read_text())["refine"]
+    warm_every = runs["reconstruct --no-coarse-to-fine, warm"]["wall_s"]
+    refine = cfg["refine"] or {}
     warm_r1 = runs["reconstruct --aperture-radius 1, warm"]["wall_s"]
-    warm_r1c = runs["reconstruct --aperture-radius 1 --coarse-to-fine, warm"]["wall_s"]
-    refine_r1 = json.loads((work / "rec_r1_c2f" / "config.json").read_text())["refine"]
+    warm_r1e = runs["reconstruct --aperture-radius 1 --no-coarse-to-fine, warm"]["wall_s"]
+    refine_r1 = json.loads((work / "rec_r1" / "config.json").read_text())["refine"] or {}
     cold = runs["reconstruct, cold cache"]["wall_s"]
     cold0 = runs["reconstruct, cold cache, no warm-up"]["wall_s"]
     lines += ["", "| reconstruct against the plain reference (same survey, same run) | seconds | x reference |",
@@ -223,16 +224,16 @@ def main(argv=None):
               f"| plain aperture-limited numba back projection, 3 x 3 x 2 cm to 1.3 m, 1 m aperture "
               f"({shape_ref[0]} x {shape_ref[1]} x {shape_ref[2]}; its compile {c_ref:.1f} s apart) | {w_ref:.2f} | "
               "1.00 |",
-              f"| `gpr3d reconstruct` end to end, warm ({g['nx']} x {g['ny']} x {g['nd']}) | {warm:.2f} | "
-              f"{warm / w_ref:.2f} |",
-              f"| `gpr3d reconstruct --coarse-to-fine` end to end, warm (stride {refine.get('stride')}, "
-              f"{100 * refine.get('refined_fraction', 1.0):.0f} % of the voxels refined) | {warm_c2f:.2f} | "
-              f"{warm_c2f / w_ref:.2f} |",
+              f"| `gpr3d reconstruct` end to end, warm, the defaults ({g['nx']} x {g['ny']} x {g['nd']}; "
+              f"coarse-to-fine: stride {refine.get('stride')}, {100 * refine.get('refined_fraction', 1.0):.0f} % of "
+              f"the voxels refined) | {warm:.2f} | {warm / w_ref:.2f} |",
+              f"| `gpr3d reconstruct --no-coarse-to-fine` end to end, warm (every voxel migrated) | {warm_every:.2f} | "
+              f"{warm_every / w_ref:.2f} |",
               f"| `gpr3d reconstruct --aperture-radius 1` end to end, warm (the reference's 1 m radius within the "
-              f"cone) | {warm_r1:.2f} | {warm_r1 / w_ref:.2f} |",
-              f"| `gpr3d reconstruct --aperture-radius 1 --coarse-to-fine` end to end, warm (stride "
-              f"{refine_r1.get('stride')}, {100 * refine_r1.get('refined_fraction', 1.0):.0f} % refined) | "
-              f"{warm_r1c:.2f} | {warm_r1c / w_ref:.2f} |",
+              f"cone; stride {refine_r1.get('stride')}, {100 * refine_r1.get('refined_fraction', 1.0):.0f} % "
+              f"refined) | {warm_r1:.2f} | {warm_r1 / w_ref:.2f} |",
+              f"| `gpr3d reconstruct --aperture-radius 1 --no-coarse-to-fine` end to end, warm | {warm_r1e:.2f} | "
+              f"{warm_r1e / w_ref:.2f} |",
               f"| `gpr3d reconstruct` end to end, cold cache (first run, background warm-up) | {cold:.2f} | "
               f"{cold / w_ref:.2f} |",
               f"| `gpr3d reconstruct` end to end, cold cache, no warm-up (GPR3D_WARMUP=0) | {cold0:.2f} | "

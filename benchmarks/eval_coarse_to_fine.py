@@ -4,7 +4,8 @@ Scenes: ``eval_scenes.py``'s random forward-model scenes (utility patches at 400
 concrete slabs with rebar mats at 1.2-2 GHz), 10,000 traces each along a cart's random walk, and the 8000-trace
 survey of ``bench_stages.py`` (the L-pipe scene, no noise). Each is reconstructed at ``reconstruct``'s defaults
 (the true eps_r given; 2 cm voxels on soil, 1 cm on the slabs, the whole record's depth) with every voxel
-migrated (``coarse_to_fine=False``, the default) and with coarse-to-fine at each ``--levels`` value
+migrated (``coarse_to_fine=False``) and with coarse-to-fine (the default since the thirty-third session) at each
+``--levels`` value
 (``refine_level``, a share of the target threshold; where the coarse pass marks more than
 ``refine.MAX_REFINED`` of the voxels, every voxel is migrated after it). Per scene and setting: the migration's seconds, the share of voxels refined, and the
 targets scored against the truth (``gpr3d.migration.metrics.evaluate_targets``: completeness, position and depth
@@ -160,10 +161,10 @@ def main(argv=None):
                         margins)
 
     settings = list(dict.fromkeys(r["setting"] for r in rows))
-    lines = [f"Host CPU: {cpu_name()}, {args.threads} threads; `reconstruct` at its defaults (true eps_r; 2 cm voxels "
-             f"on soil, 1 cm on slabs; whole record; every voxel migrated), and with `coarse_to_fine=True` at each "
-             f"`refine_level`, on the 8000-trace L-pipe survey and eval_scenes seeds {args.seeds} (10,000 traces "
-             "each)", "",
+    lines = [f"Host CPU: {cpu_name()}, {args.threads} threads; `reconstruct` (true eps_r; 2 cm voxels on soil, 1 cm on "
+             f"slabs; whole record) with every voxel migrated (`coarse_to_fine=False`), and coarse-to-fine (the "
+             f"default) at each `refine_level`, on the 8000-trace L-pipe survey and eval_scenes seeds {args.seeds} "
+             "(10,000 traces each)", "",
              "| setting | migration s (sum) | x every voxel | refined share (mean) | completeness (mean) | "
              "position err m (mean) | false targets (sum) | envelope change where targets are (max, of peak) | "
              "scenes with the same targets (to the mm) |",

@@ -302,8 +302,7 @@ def _reconstruction_stage(out: Path, log) -> dict:
                      "updates_per_s": result.updates_per_s, "grid": result.grid.to_dict()}
         if key == "estimated":
             g, mig = result.grid, result.timings_s["migrate"]
-            one_pass = result.image
-            result_targets = result.targets
+            result_targets, result_refine = result.targets, result.refine or {}
     log(f"[4/8] 3D reconstruction: {survey.n_traces} traces -> {g.nx} x {g.ny} x {g.nd} voxels in "
         f"{rows['estimated']['wall_s']:.1f} s (migration {mig:.1f} s, "
         f"{rows['estimated']['updates_per_s'] / 1e9:.2f} G updates/s); targets from the fused poses "
@@ -334,30 +333,31 @@ def _reconstruction_stage(out: Path, log) -> dict:
                             survey.positions_xyz)
     log(f"      depth range: {depth['why']}; gpr3d reconstruct --signal-depth would image to {depth['depth_m']:.2f} m "
         f"of the record's {depth['record_m']:.2f} m (the demo to 0.8 m, its pipes' depth)")
+    # coarse-to-fine is the default (a coarse pass over every few columns, then every voxel of the depths where
+    # that image holds energy): the same survey with every voxel migrated (gpr3d reconstruct --no-coarse-to-fine),
+    # and the targets against the default's
+    ref = result_refine
+    t = time.perf_counter()
+    every = reconstruct(survey, ReconstructConfig(spacing_m=0.02, max_depth_m=0.8, coarse_to_fine=False))
+    wall_every = time.perf_counter() - t
+    ev_every = _named(evaluate_targets(every.targets, truth_lines_from_pipes(pipes)))
+    matched, moved = _counterparts(result_targets, every.targets)
+    log(f"      coarse-to-fine (the default): {ref.get('refined_fraction', 1.0) * 100:.0f} % of the voxels migrated at "
+        f"full resolution (coarse columns every {ref.get('stride', 1)}), migration {mig:.1f} s against "
+        f"{every.timings_s['migrate']:.1f} s for every voxel (--no-coarse-to-fine); {len(result_targets)} targets "
+        f"against {len(every.targets)}, {matched} of them within {moved * 100:.1f} cm of one there; false targets "
+        f"{rows['estimated']['false_targets']} against {ev_every['false_targets']}")
     # site scale: the same survey in tiles, each from only the traces whose cone reaches it (gpr3d reconstruct
-    # --tile / --workers); the volume must be the one-pass volume bit for bit
+    # --tile / --workers, every voxel migrated); the volume must be the every-voxel one-pass volume bit for bit
     from gpr3d.migration.sitetiles import plan_tiles
 
     t = time.perf_counter()
     tiled = reconstruct(survey, ReconstructConfig(spacing_m=0.02, max_depth_m=0.8, tile_m=0.64))
     wall_tiles = time.perf_counter() - t
-    same = bool(np.array_equal(tiled.image, one_pass))
+    same = bool(np.array_equal(tiled.image, every.image))
     n_tiles = len(plan_tiles(tiled.grid, 0.64))
     log(f"      site scale: in {n_tiles} tiles of 0.64 m with the cone's halo ({wall_tiles:.1f} s), the volume "
         f"{'equals the one-pass volume bit for bit' if same else 'DIFFERS from the one-pass volume'}")
-    # coarse-to-fine (gpr3d reconstruct --coarse-to-fine): every third column first, then every voxel of the depths
-    # where that image holds energy; the targets against the one-pass ones
-    t = time.perf_counter()
-    c2f = reconstruct(survey, ReconstructConfig(spacing_m=0.02, max_depth_m=0.8, coarse_to_fine=True))
-    wall_c2f = time.perf_counter() - t
-    ev_c2f = _named(evaluate_targets(c2f.targets, truth_lines_from_pipes(pipes)))
-    matched, moved = _counterparts(c2f.targets, result_targets)
-    ref = c2f.refine
-    log(f"      coarse-to-fine: {ref.get('refined_fraction', 1.0) * 100:.0f} % of the voxels migrated at full "
-        f"resolution (coarse columns every {ref.get('stride', 1)}), migration {c2f.timings_s['migrate']:.1f} s against "
-        f"{mig:.1f} s; {len(c2f.targets)} targets against {len(result_targets)}, {matched} of them within "
-        f"{moved * 100:.1f} cm of one there; false targets {ev_c2f['false_targets']} against "
-        f"{rows['estimated']['false_targets']}")
     # an aperture radius (gpr3d reconstruct --aperture-radius): each trace's cone cut off at 0.5 m about its
     # midpoint, so a deep voxel sums no more traces than one 0.42 m down (the cone reaches 0.95 m at 0.8 m)
     rad = reconstruct(survey, ReconstructConfig(spacing_m=0.02, max_depth_m=0.8, aperture_m=0.5))
@@ -374,9 +374,9 @@ def _reconstruction_stage(out: Path, log) -> dict:
             "poses": "estimated (visual-inertial fusion)", "with_true_poses": rows["true"], "folder": "reconstruction",
             "depth_range": depth,
             "tiles": {"n": n_tiles, "tile_m": 0.64, "wall_s": wall_tiles, "equal_to_one_pass": same},
-            "coarse_to_fine": {"wall_s": wall_c2f, "migrate_s": c2f.timings_s["migrate"], "refine": ref,
-                               "n_targets": len(c2f.targets), "false_targets": ev_c2f["false_targets"],
-                               "matched": matched, "largest_move_m": moved},
+            "coarse_to_fine": {"migrate_s": mig, "refine": ref, "every_voxel": {
+                "wall_s": wall_every, "migrate_s": every.timings_s["migrate"], "n_targets": len(every.targets),
+                "false_targets": ev_every["false_targets"]}, "matched": matched, "largest_move_m": moved},
             "aperture_radius": {"radius_m": 0.5, "migrate_s": rad.timings_s["migrate"], "n_targets": len(rad.targets),
                                 "false_targets": ev_rad["false_targets"], "matched": matched_r,
                                 "largest_move_m": moved_r,

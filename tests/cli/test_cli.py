@@ -165,10 +165,11 @@ def test_demo_end_to_end(tmp_path):
     rec_tiles = summary["stages"]["reconstruction"]["tiles"]  # site tiles give the one-pass volume exactly
     assert rec_tiles["equal_to_one_pass"] and rec_tiles["n"] > 1
     rec = summary["stages"]["reconstruction"]
-    c2f = rec["coarse_to_fine"]  # the one-pass targets, within a voxel, from part of the work; no more false ones
+    # coarse-to-fine, the default: every-voxel's targets, within a voxel, from part of the work; no more false ones
+    c2f = rec["coarse_to_fine"]
     assert c2f["refine"]["stride"] > 1 and 0 < c2f["refine"]["refined_fraction"] < 0.5
-    assert c2f["matched"] == rec["n_targets"] <= c2f["n_targets"] and c2f["largest_move_m"] <= 0.02
-    assert c2f["false_targets"] <= rec["false_targets"]
+    assert c2f["matched"] == c2f["every_voxel"]["n_targets"] <= rec["n_targets"] and c2f["largest_move_m"] <= 0.02
+    assert rec["false_targets"] <= c2f["every_voxel"]["false_targets"]
     # an aperture radius of 0.5 m: the pipes the whole cone finds over most of their length are still found so
     rad = rec["aperture_radius"]
     full = [r["completeness"] for r in rec["truth"]]

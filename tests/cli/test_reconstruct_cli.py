@@ -34,8 +34,9 @@ def pipe_survey(tmp_path_factory):
 
 def test_reconstruct_with_a_tum_trajectory(pipe_survey):
     d, top = pipe_survey
+    # coarse-to-fine by default (here at a refine level of its own), config.json saying what it did
     r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--out", d / "out", "--max-depth", "0.7",
-                "--eps-r", "file")
+                "--eps-r", "file", "--refine-level", "0.4")
     assert "eps_r 6 (the file header)" in r.stdout
     assert r.returncode == 0, r.stderr
     out = d / "out"
@@ -50,19 +51,20 @@ def test_reconstruct_with_a_tum_trajectory(pipe_survey):
     assert np.allclose(p[:, 1], 0.6, atol=0.03)  # along x at y = 0.6
     assert np.allclose(p[:, 2], top, atol=0.03)  # depth to the top, positive down
     assert abs(p[1, 0] - p[0, 0]) > 0.6
-    assert json.loads((out / "config.json").read_text())["refine"] is None  # every voxel migrated by default
-    # --coarse-to-fine: the same targets, and config.json says what it did (at its level)
-    r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--out", d / "c2f", "--max-depth", "0.7",
-                "--eps-r", "file", "--coarse-to-fine", "--refine-level", "0.4")
-    assert r.returncode == 0, r.stderr
-    doc = json.loads((d / "c2f" / "config.json").read_text())
+    doc = json.loads((out / "config.json").read_text())
     assert doc["config"]["coarse_to_fine"] is True and doc["config"]["refine_level"] == 0.4
     refine = doc["refine"]
     assert refine["stride"] == 2 and refine["level"] == pytest.approx(0.4 * doc["config"]["threshold"]), refine
-    assert 0 < refine["refined_fraction"] < 0.7
-    fast = json.loads((d / "c2f" / "targets.json").read_text())["targets"]
-    assert [t["kind"] for t in fast] == [t["kind"] for t in targets]
-    for a, b in zip(targets, fast):
+    assert 0 < refine["fine_fraction"] < refine["refined_fraction"] < 0.7
+    # --no-coarse-to-fine: every voxel migrated, the same targets to the millimetre
+    r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--out", d / "every", "--max-depth", "0.7",
+                "--eps-r", "file", "--no-coarse-to-fine")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((d / "every" / "config.json").read_text())
+    assert doc["config"]["coarse_to_fine"] is False and doc["refine"] is None
+    every = json.loads((d / "every" / "targets.json").read_text())["targets"]
+    assert [t["kind"] for t in every] == [t["kind"] for t in targets]
+    for a, b in zip(targets, every):
         np.testing.assert_allclose(b["points_xyz"], a["points_xyz"], atol=1e-3)
 
 
@@ -121,7 +123,8 @@ def test_boxes_make_a_noise_map(pipe_survey, tmp_path):
     (["--scheduler", "localhost:8786"], "scheduler must be an address such as tcp://host:8786"),
     (["--coarse-to-fine", "--refine-level", "0"], "--refine-level must be > 0.0, got 0.0"),
     (["--coarse-to-fine", "--refine-level", "1.5"], "--refine-level must be <= 1.0, got 1.5"),
-    (["--refine-level", "0.4"], "--refine-level sets how coarse-to-fine imaging refines: give --coarse-to-fine with it"),
+    (["--no-coarse-to-fine", "--refine-level", "0.4"],
+     "--refine-level sets how coarse-to-fine imaging refines: leave --no-coarse-to-fine out"),
 ])
 def test_bad_reconstruct_arguments_are_one_line_errors(pipe_survey, tmp_path, extra, words):
     d, _ = pipe_survey
@@ -135,12 +138,13 @@ def test_bad_reconstruct_arguments_are_one_line_errors(pipe_survey, tmp_path, ex
 
 def test_tiles_resume_and_give_the_volume_of_one_pass(pipe_survey, tmp_path):
     """--tile cuts the grid into tiles migrated from the traces that reach them; --resume keeps them in OUT/tiles
-    and a second run reuses them. The volume equals the one-pass volume exactly."""
+    and a second run reuses them. The volume equals the one-pass volume with every voxel migrated exactly (tiles
+    leave coarse-to-fine out, and config.json says so)."""
     import h5py
 
     d, _ = pipe_survey
     common = ["--poses", d / "walk.tum", "--max-depth", "0.7", "--eps-r", "6"]
-    r = run_cli("reconstruct", d / "line.h5", *common, "--out", tmp_path / "one")
+    r = run_cli("reconstruct", d / "line.h5", *common, "--out", tmp_path / "one", "--no-coarse-to-fine")
     assert r.returncode == 0, r.stderr
     r = run_cli("reconstruct", d / "line.h5", *common, "--out", tmp_path / "tiled", "--tile", "0.5", "--resume")
     assert r.returncode == 0, r.stderr
@@ -153,6 +157,8 @@ def test_tiles_resume_and_give_the_volume_of_one_pass(pipe_survey, tmp_path):
         np.testing.assert_array_equal(a["image"][()], b["image"][()])
     one = json.loads((tmp_path / "one" / "targets.json").read_text())
     assert json.loads((tmp_path / "tiled" / "targets.json").read_text()) == one
+    doc = json.loads((tmp_path / "tiled" / "config.json").read_text())
+    assert doc["config"]["coarse_to_fine"] is True and doc["refine"] == {"skipped": "site tiles migrate every voxel"}
 
 
 def test_mask_detect_migrates_the_detected_boxes(pipe_survey, tmp_path):

@@ -187,6 +187,10 @@ def test_refined_voxels_equal_the_whole_image_and_the_rest_are_the_coarse_column
         assert info["refined_columns"] == pytest.approx((ranges[..., 1] > ranges[..., 0]).mean())
         assert info["refined_fraction"] < info["refined_columns"]  # not every depth of the refined columns
     assert inside.mean() == pytest.approx(info["refined_fraction"])
+    # the coarse columns keep the coarse pass's values at every depth, to the bit (the fine pass leaves them out)
+    np.testing.assert_array_equal(img[::k, ::k], cimg[: len(range(0, grid.nx, k)), : len(range(0, grid.ny, k))])
+    np.testing.assert_array_equal(fold[::k, ::k], cfold[: len(range(0, grid.nx, k)), : len(range(0, grid.ny, k))])
+    assert info["fine_fraction"] < info["refined_fraction"]
     peak = np.abs(whole).max()
     np.testing.assert_allclose(img[inside], whole[inside], atol=1e-5 * peak)
     np.testing.assert_allclose(fold[inside], whole_fold[inside], atol=1e-5 * whole_fold.max())
@@ -246,8 +250,8 @@ def test_reconstruct_coarse_to_fine_finds_the_same_targets_and_says_what_it_did(
     import functools
 
     s = _pipe_survey()
-    full = reconstruct(s, ReconstructConfig())
-    fast = reconstruct(s, ReconstructConfig(coarse_to_fine=True))
+    full = reconstruct(s, ReconstructConfig(coarse_to_fine=False))
+    fast = reconstruct(s, ReconstructConfig())  # coarse-to-fine: the default
     assert full.refine is None and fast.grid == full.grid
     r = fast.refine
     assert r["stride"] == 3 and r["frequency_hz"] == 500e6 and 0 < r["refined_fraction"] < 0.3
@@ -365,7 +369,8 @@ def test_what_the_refined_pass_reports():
     wall = time.perf_counter() - t
     assert fold is None and img.shape == op.grid.shape
     assert set(info) == {"stride", "coarse_grid", "wavelength_m", "level", "reference", "refine",
-                         "depth_margin_wavelengths", "refined_fraction", "refined_columns", "seconds"}
+                         "depth_margin_wavelengths", "refined_fraction", "refined_columns", "fine_fraction",
+                         "seconds"}
     assert info["stride"] == 2 and info["coarse_grid"] == [31, 31, 20] and info["wavelength_m"] == 0.13
     assert info["level"] == 0.4 and info["depth_margin_wavelengths"] == refine.DEPTH_MARGIN
     assert 0 < info["refined_fraction"] < info["refined_columns"] < 0.7 and info["refine"] == "depth ranges"
@@ -377,7 +382,7 @@ def test_what_the_refined_pass_reports():
     _, _, cinfo = refine.refined_adjoint(op, d, with_fold=False, wavelength_m=0.13, level=0.4, normalize="sqrt_fold",
                                          depth_margin=None)
     assert set(cinfo) == {"stride", "coarse_grid", "wavelength_m", "level", "reference", "refine",
-                          "margin_coarse_columns", "refined_fraction", "refined_columns", "seconds"}
+                          "margin_coarse_columns", "refined_fraction", "refined_columns", "fine_fraction", "seconds"}
     assert cinfo["refine"] == "whole columns" and cinfo["margin_coarse_columns"] == 0
     assert cinfo["refined_fraction"] == cinfo["refined_columns"] == pytest.approx(info["refined_columns"])
     assert cinfo["reference"] == info["reference"] > 0
@@ -398,7 +403,10 @@ def test_what_the_refined_pass_reports():
         # (the coarse pass's operator is a copy of this one, the spy with it: every depth of its columns)
         assert len(calls) == 2 and calls[0] is None and calls[1].shape == (60, 60, 2)
         kk = np.arange(op.grid.nd)
-        assert ((kk >= calls[1][..., :1]) & (kk < calls[1][..., 1:])).mean() == pytest.approx(low["refined_fraction"])
+        fine = (kk >= calls[1][..., :1]) & (kk < calls[1][..., 1:])
+        # every other column along x and y is a coarse one, migrated whole already: the fine pass leaves it out
+        assert not fine[::2, ::2].any() and fine.mean() == pytest.approx(low["fine_fraction"])
+        assert fine.mean() < low["refined_fraction"]
 
 
 def test_too_few_columns_apart_migrates_every_voxel_and_says_so():

@@ -56,7 +56,8 @@ def _stub(monkeypatch, entropy_of_eps):
 
     def fake(survey, cfg, boxes=None, **parts):
         assert parts == {"with_noise_map": False, "with_targets": False}  # the envelope is all it reads
-        tried.append((cfg.eps_r, cfg.spacing_m, cfg.max_depth_m, cfg.aperture_deg, boxes, cfg.depth_spacing_m))
+        tried.append((cfg.eps_r, cfg.spacing_m, cfg.max_depth_m, cfg.aperture_deg, boxes, cfg.depth_spacing_m,
+                      cfg.coarse_to_fine))
         return types.SimpleNamespace(envelope=cfg.eps_r)
 
     monkeypatch.setattr(rec, "reconstruct", fake)
@@ -71,7 +72,8 @@ def test_the_best_eps_is_the_parabola_vertex_in_slowness(monkeypatch):
     assert r["eps_r"] == pytest.approx(8.41, rel=1e-9, abs=0) and not r["at_edge"]
     np.testing.assert_allclose(r["eps_grid"], np.linspace(np.sqrt(3.0), np.sqrt(25.0), 12) ** 2)
     np.testing.assert_allclose(r["entropy"], (np.sqrt(r["eps_grid"]) - 2.9) ** 2 + 1.0)
-    assert [t[1:] for t in tried] == [(0.05, 0.8, 40.0, [[1, 2, 3, 4]], None)] * 12
+    # every voxel migrated (the entropy reads them all), whatever reconstruct's default
+    assert [t[1:] for t in tried] == [(0.05, 0.8, 40.0, [[1, 2, 3, 4]], None, False)] * 12
 
 
 def test_in_migrated_time_the_depth_range_and_cell_follow_the_wave_speed(monkeypatch):

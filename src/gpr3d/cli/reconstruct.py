@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import math
 from pathlib import Path
 
@@ -72,11 +73,12 @@ def add_arguments(sp):
     sp.add_argument("--air-gap", type=float, default=rc.air_gap_m,
                     help="the antennas' height above the ground (m) when held a wavelength or more above it (an "
                          f"air-launched antenna: the rays refract at the surface; default {rc.air_gap_m:g})")
-    sp.add_argument("--coarse-to-fine", action="store_true",
+    sp.add_argument("--coarse-to-fine", action=argparse.BooleanOptionalAction, default=rc.coarse_to_fine,
                     help="a coarse pass over every few columns first, then every voxel of the depths where it "
-                         "finds energy, the others interpolated (config.json's 'refine' says how many)")
+                         "finds energy, the others interpolated (config.json's 'refine' says how many; default "
+                         f"{'on' if rc.coarse_to_fine else 'off'}); --no-coarse-to-fine: every voxel migrated")
     sp.add_argument("--refine-level", type=float, default=None,
-                    help="with --coarse-to-fine: refine where the coarse envelope reaches this share of "
+                    help="coarse-to-fine: refine where the coarse envelope reaches this share of "
                          f"--threshold (default {rc.refine_level:g})")
     sp.add_argument("--engine", choices=("numba", "numpy", "torch"), default=None,
                     help=f"migration kernel (default {rc.engine}; torch with --device cuda: the GPU)")
@@ -126,7 +128,7 @@ def run(args):
     if args.signal_depth and args.max_depth is not None:
         raise GPR3DError("give --max-depth or --signal-depth, not both")
     if args.refine_level is not None and not args.coarse_to_fine:
-        raise GPR3DError("--refine-level sets how coarse-to-fine imaging refines: give --coarse-to-fine with it")
+        raise GPR3DError("--refine-level sets how coarse-to-fine imaging refines: leave --no-coarse-to-fine out")
     engine = _migration_engine(args.engine, args.device)
     settings = dict(spacing_m=args.spacing, max_depth_m=args.max_depth,
                     aperture_deg=None if args.aperture == 0 else args.aperture,

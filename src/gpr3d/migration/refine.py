@@ -94,6 +94,16 @@ def _interp(c: np.ndarray, k: int, nx: int, ny: int) -> np.ndarray:
     return _upsample(_upsample(c, k, nx, 0), k, ny, 1)
 
 
+def _fill(coarse: np.ndarray, fine: np.ndarray, inside: np.ndarray, k: int) -> np.ndarray:
+    """The fine image: ``fine`` where ``inside`` (the refined voxels), the ``coarse`` columns themselves on the fine
+    grid's every ``k``-th column, the coarse image interpolated across columns elsewhere."""
+    nx, ny = fine.shape[:2]
+    img = _interp(coarse, k, nx, ny)
+    np.copyto(img, fine, where=inside)
+    img[::k, ::k] = coarse[: -(-nx // k), : -(-ny // k)]
+    return img
+
+
 def refine_columns(cenv: np.ndarray, k: int, grid: Grid3D, *, level: float, wavelength_m: float,
                    reference_percentile: float = 99.5):
     """The fine columns to migrate whole, ``(nx, ny)`` booleans, from the coarse envelope ``cenv`` (every ``k``-th
@@ -203,15 +213,16 @@ def refined_adjoint(op, data, *, with_fold: bool, wavelength_m: float, level: fl
                      "why": f"the coarse pass marked {fraction:.0%} of the voxels: every voxel migrated",
                      "seconds": {"coarse": t_coarse, "mark": t_mark, "fine": time.perf_counter() - t}})
         return img, fold, info
-    out = op.adjoint(data, with_fold=with_fold, depth_range=ranges)
+    # the coarse columns are columns of the fine grid, migrated at every depth already: the fine pass leaves them
+    # out (a 1 / stride**2 share of its work) and they keep the coarse pass's values
+    fine = ranges.copy()
+    fine[::k, ::k] = 0
+    info["fine_fraction"] = float(((np.arange(grid.nd) >= fine[..., :1]) & (np.arange(grid.nd) < fine[..., 1:])).mean())
+    out = op.adjoint(data, with_fold=with_fold, depth_range=fine)
     fimg, ffold = out if with_fold else (out, None)
     t_fine = time.perf_counter() - t
     t = time.perf_counter()
-    img = _interp(cimg, k, grid.nx, grid.ny)
-    np.copyto(img, fimg, where=inside)
-    fold = None
-    if with_fold:
-        fold = _interp(cfold, k, grid.nx, grid.ny)
-        np.copyto(fold, ffold, where=inside)
+    img = _fill(cimg, fimg, inside, k)
+    fold = _fill(cfold, ffold, inside, k) if with_fold else None
     info["seconds"] = {"coarse": t_coarse, "mark": t_mark, "fine": t_fine, "fill": time.perf_counter() - t}
     return img, fold, info

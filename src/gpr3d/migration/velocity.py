@@ -60,7 +60,8 @@ def focus_eps(survey, *, boxes=None, eps_grid=None, spacing_m: float = 0.04, max
         k = float(np.sqrt(middle / eps)) if window == "time" else 1.0
         cfg = ReconstructConfig(eps_r=float(eps), spacing_m=spacing_m, aperture_deg=aperture_deg,
                                 depth_spacing_m=None if window == "depth" or spacing_m is None else spacing_m * k,
-                                max_depth_m=None if max_depth_m is None else max_depth_m * k)
+                                max_depth_m=None if max_depth_m is None else max_depth_m * k,
+                                coarse_to_fine=False)  # (the entropy reads every voxel: each one migrated)
         # the envelope is all the entropy reads: no noise map (a second migration) and no targets
         r = reconstruct(survey, cfg, boxes=boxes, with_noise_map=False, with_targets=False)
         ent.append(image_entropy(r.envelope))
