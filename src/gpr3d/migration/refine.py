@@ -9,14 +9,15 @@ range (:meth:`~gpr3d.migration.operator.BackProjection.adjoint`'s ``depth_range`
 deepest voxel its coarse neighbours marked, ``DEPTH_MARGIN`` wavelengths wider at both ends
 (:func:`refine_ranges`). Every other voxel takes the coarse image interpolated across columns (the coarse columns
 are columns of the fine grid: there the value is the migrated one). In the refined voxels image and fold are what
-migrating every voxel gives; the work is the coarse pass (about ``1 / stride**2``) plus the refined voxels'
+migrating every voxel gives (to rounding: the coarse columns, which the fine pass leaves out, keep the coarse
+pass's sums); the work is the coarse pass (about ``1 / stride**2``) plus the refined voxels' off the coarse columns
 (more than ``MAX_REFINED`` of the voxels marked: every voxel is migrated instead).
 
 The envelope is a Hilbert transform along each column, so the interpolated voxels beyond a refined range still
 reach into its envelope a little: on the 13 scenes of ``benchmarks/results/coarse_to_fine.md`` the envelope where
 targets are moved by at most 1 % of its peak and the targets by millimetres (the same completeness and false
-targets overall), for 0.79 of the time of migrating every voxel (0.28 on a clean survey; about the same on noisy
-soil, where the coarse pass marks deep noise). Refining whole columns instead (``depth_margin=None``,
+targets overall), for 0.67 of the time of migrating every voxel (0.26 on a clean survey; 0.78 to 1.02 on noisy
+soil, where the coarse pass marks deep noise). It is ``reconstruct``'s default. Refining whole columns instead (``depth_margin=None``,
 :func:`refine_columns`, a marked coarse column's neighbours at every depth) keeps the targets to the millimetre and
 saved nothing overall.
 
