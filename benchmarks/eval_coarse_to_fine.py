@@ -15,7 +15,8 @@ peak.
 
 Development used seeds 100-105; the table reports ``--seeds`` (default 0-11), which nothing was tuned on.
 
-    python benchmarks/eval_coarse_to_fine.py [--seeds 0-11] [--levels 0.25,0.5] [--threads 2]
+    python benchmarks/eval_coarse_to_fine.py [--seeds 0-11] [--levels 0.25,0.5] [--margins columns,0.5,1]
+        [--coarse-wavelengths 0.333] [--max-stride 4] [--threads 2]
 """
 
 from __future__ import annotations
@@ -131,6 +132,9 @@ def main(argv=None):
     ap.add_argument("--margins", default="columns,0.5,1",
                     help="how coarse-to-fine refines: 'columns' (whole columns) or a depth range's margin in "
                          "wavelengths, comma-separated")
+    ap.add_argument("--coarse-wavelengths", type=float, default=None,
+                    help="the coarse columns' spacing in wavelengths (default: refine.COARSE_WAVELENGTHS)")
+    ap.add_argument("--max-stride", type=int, default=None, help="the coarse stride's cap (default: refine.MAX_STRIDE)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--no-stages-survey", action="store_true")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
@@ -147,6 +151,16 @@ def main(argv=None):
         ap.error("--levels takes numbers and --margins numbers or 'columns', comma-separated")
     if not all(0 < v <= 1 for v in levels) or not all(m is None or m >= 0 for m in margins):
         ap.error("--levels must lie in (0, 1] and --margins be >= 0 (or 'columns')")
+    from gpr3d.migration import refine
+
+    if args.coarse_wavelengths is not None:
+        if not 0 < args.coarse_wavelengths <= 2:
+            ap.error("--coarse-wavelengths must lie in (0, 2]")
+        refine.COARSE_WAVELENGTHS = args.coarse_wavelengths
+    if args.max_stride is not None:
+        if args.max_stride < 1:
+            ap.error("--max-stride must be >= 1")
+        refine.MAX_STRIDE = args.max_stride
     rows = []
 
     def log(msg):
@@ -163,7 +177,8 @@ def main(argv=None):
     settings = list(dict.fromkeys(r["setting"] for r in rows))
     lines = [f"Host CPU: {cpu_name()}, {args.threads} threads; `reconstruct` (true eps_r; 2 cm voxels on soil, 1 cm on "
              f"slabs; whole record) with every voxel migrated (`coarse_to_fine=False`), and coarse-to-fine (the "
-             f"default) at each `refine_level`, on the 8000-trace L-pipe survey and eval_scenes seeds {args.seeds} "
+             f"default) at each `refine_level`, coarse columns {refine.COARSE_WAVELENGTHS:.3g} wavelength apart (stride "
+             f"at most {refine.MAX_STRIDE}), on the 8000-trace L-pipe survey and eval_scenes seeds {args.seeds} "
              "(10,000 traces each)", "",
              "| setting | migration s (sum) | x every voxel | refined share (mean) | completeness (mean) | "
              "position err m (mean) | false targets (sum) | envelope change where targets are (max, of peak) | "
