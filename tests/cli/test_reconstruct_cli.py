@@ -56,12 +56,16 @@ def test_reconstruct_with_a_tum_trajectory(pipe_survey):
     refine = doc["refine"]
     assert refine["stride"] == 2 and refine["level"] == pytest.approx(0.4 * doc["config"]["threshold"]), refine
     assert 0 < refine["fine_fraction"] < refine["refined_fraction"] < 0.7
+    assert (f"coarse-to-fine: every 2 columns at every depth, then {refine['refined_fraction']:.0%} of the voxels at "
+            "full resolution where that image holds energy" in r.stdout)
+    assert "voxel-trace updates/s counted over every voxel)" in r.stdout
     # --no-coarse-to-fine: every voxel migrated, the same targets to the millimetre
     r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--out", d / "every", "--max-depth", "0.7",
                 "--eps-r", "file", "--no-coarse-to-fine")
     assert r.returncode == 0, r.stderr
     doc = json.loads((d / "every" / "config.json").read_text())
     assert doc["config"]["coarse_to_fine"] is False and doc["refine"] is None
+    assert "coarse-to-fine" not in r.stdout and "counted over every voxel" not in r.stdout
     every = json.loads((d / "every" / "targets.json").read_text())["targets"]
     assert [t["kind"] for t in every] == [t["kind"] for t in targets]
     for a, b in zip(targets, every):
@@ -153,6 +157,7 @@ def test_tiles_resume_and_give_the_volume_of_one_pass(pipe_survey, tmp_path):
     tiles[0].unlink()
     r = run_cli("reconstruct", d / "line.h5", *common, "--out", tmp_path / "tiled", "--tile", "0.5", "--resume")
     assert r.returncode == 0 and "resumed 8 of 9 tiles" in r.stdout, r.stdout + r.stderr
+    assert "coarse-to-fine left out: site tiles migrate every voxel" in r.stdout
     with h5py.File(tmp_path / "one" / "volume.h5") as a, h5py.File(tmp_path / "tiled" / "volume.h5") as b:
         np.testing.assert_array_equal(a["image"][()], b["image"][()])
     one = json.loads((tmp_path / "one" / "targets.json").read_text())

@@ -161,10 +161,19 @@ def run(args):
     files = write_reconstruction_folder(done, args.out, source=str(args.input))
     result = done.result
     g = result.grid
-    rate = f" ({result.updates_per_s / 1e9:.2f} G voxel-trace updates/s)" if result.updates_per_s else ""
+    ref = result.refine or {}
+    coarse = ref.get("stride", 1) > 1 and "fine_fraction" in ref  # coarse-to-fine refined part of the voxels
+    rate = (f" ({result.updates_per_s / 1e9:.2f} G voxel-trace updates/s{' counted over every voxel' if coarse else ''})"
+            if result.updates_per_s else "")
     how = "line by line (pseudo-3D)" if args.method == "pseudo3d" else "onto"
     print(f"migrated {result.n_traces} traces {how} {g.nx} x {g.ny} x {g.nd} voxels in "
           f"{result.timings_s['migrate']:.1f} s{rate}")
+    if coarse:
+        print(f"coarse-to-fine: every {ref['stride']} columns at every depth, then {ref['refined_fraction']:.0%} of the "
+              "voxels at full resolution where that image holds energy, the rest interpolated (--no-coarse-to-fine: "
+              "every voxel)")
+    elif "skipped" in ref or "why" in ref:
+        print(f"coarse-to-fine left out: {ref.get('skipped') or ref['why']}")
     if result.frame is not None:
         print("one straight profile: migrated in 2D (the vertical plane under it); targets crossing it are points")
     for i, t in enumerate(result.targets):
