@@ -177,8 +177,8 @@ def main(argv=None):
     settings = list(dict.fromkeys(r["setting"] for r in rows))
     lines = [f"Host CPU: {cpu_name()}, {args.threads} threads; `reconstruct` (true eps_r; 2 cm voxels on soil, 1 cm on "
              f"slabs; whole record) with every voxel migrated (`coarse_to_fine=False`), and coarse-to-fine (the "
-             f"default) at each `refine_level`, coarse columns {refine.COARSE_WAVELENGTHS:.3g} wavelength apart (stride "
-             f"at most {refine.MAX_STRIDE}), on the 8000-trace L-pipe survey and eval_scenes seeds {args.seeds} "
+             f"default) at each `refine_level`, coarse columns {refine.COARSE_WAVELENGTHS:.3g} wavelength apart "
+             f"(stride at most {refine.MAX_STRIDE}), on the 8000-trace L-pipe survey and eval_scenes seeds {args.seeds} "
              "(10,000 traces each)", "",
              "| setting | migration s (sum) | x every voxel | refined share (mean) | completeness (mean) | "
              "position err m (mean) | false targets (sum) | envelope change where targets are (max, of peak) | "

@@ -305,8 +305,8 @@ def _reconstruction_stage(out: Path, log) -> dict:
             result_targets, result_refine = result.targets, result.refine or {}
     log(f"[4/8] 3D reconstruction: {survey.n_traces} traces -> {g.nx} x {g.ny} x {g.nd} voxels in "
         f"{rows['estimated']['wall_s']:.1f} s (migration {mig:.1f} s, "
-        f"{rows['estimated']['updates_per_s'] / 1e9:.2f} G updates/s); targets from the fused poses "
-        "(from the true poses):")
+        f"{rows['estimated']['updates_per_s'] / 1e9:.2f} G updates/s counted over every voxel); targets from the fused "
+        "poses (from the true poses):")
     for i, name in enumerate(names):
         cells = []
         for key in ("estimated", "true"):

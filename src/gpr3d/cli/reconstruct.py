@@ -163,15 +163,15 @@ def run(args):
     g = result.grid
     ref = result.refine or {}
     coarse = ref.get("stride", 1) > 1 and "fine_fraction" in ref  # coarse-to-fine refined part of the voxels
-    rate = (f" ({result.updates_per_s / 1e9:.2f} G voxel-trace updates/s{' counted over every voxel' if coarse else ''})"
-            if result.updates_per_s else "")
+    every = " counted over every voxel" if coarse else ""
+    rate = f" ({result.updates_per_s / 1e9:.2f} G voxel-trace updates/s{every})" if result.updates_per_s else ""
     how = "line by line (pseudo-3D)" if args.method == "pseudo3d" else "onto"
     print(f"migrated {result.n_traces} traces {how} {g.nx} x {g.ny} x {g.nd} voxels in "
           f"{result.timings_s['migrate']:.1f} s{rate}")
     if coarse:
-        print(f"coarse-to-fine: every {ref['stride']} columns at every depth, then {ref['refined_fraction']:.0%} of the "
-              "voxels at full resolution where that image holds energy, the rest interpolated (--no-coarse-to-fine: "
-              "every voxel)")
+        print(f"coarse-to-fine: every {ref['stride']} columns at every depth, then {ref['refined_fraction']:.0%} of "
+              "the voxels at full resolution where that image holds energy, the rest interpolated "
+              "(--no-coarse-to-fine: every voxel)")
     elif "skipped" in ref or "why" in ref:
         print(f"coarse-to-fine left out: {ref.get('skipped') or ref['why']}")
     if result.frame is not None:

@@ -46,8 +46,9 @@ class ReconstructConfig:
     threshold: float = 0.3
     #: coarse-to-fine imaging (:mod:`gpr3d.migration.refine`): a coarse pass over every few columns, then every
     #: voxel of the depths where its envelope reaches ``refine_level`` x ``threshold`` of the reference level (the
-    #: other voxels interpolated from the coarse pass); False: every voxel migrated. On by default: on 13 simulated
-    #: scenes the same targets to millimetres for 0.67 of the migration's time (``benchmarks/results/coarse_to_fine.md``)
+    #: other voxels interpolated from the coarse pass); False: every voxel migrated. On by default: on 13
+    #: simulated scenes the same targets to millimetres for 0.67 of the migration's time
+    #: (``benchmarks/results/coarse_to_fine.md``)
     coarse_to_fine: bool = True
     refine_level: float = 0.5
     min_line_m: float = 0.3
