@@ -19,7 +19,7 @@ far from every truth line). Point targets on a true bar count towards its comple
 
 Development used seeds 100-119; the table reports ``--seeds`` (default 0-23), which nothing was tuned on.
 
-    python benchmarks/eval_scenes.py [--seeds 0-23] [--json out.json]
+    python benchmarks/eval_scenes.py [--seeds 0-23] [--json out.json] [--no-coarse-to-fine]
 """
 
 from __future__ import annotations
@@ -141,11 +141,13 @@ def scene_survey(spec: dict, n_traces: int = 10_000) -> Survey:
                   frequency_hz=spec["frequency_hz"], eps_r=spec["eps_r"])
 
 
-def run_scene(spec: dict, n_traces: int = 10_000):
+def run_scene(spec: dict, n_traces: int = 10_000, **settings):
+    """The scene's survey reconstructed at ``reconstruct``'s defaults (``settings``: other ones), scored; returns the
+    evaluation and the reconstruction's seconds."""
     s = scene_survey(spec, n_traces)
     t = time.perf_counter()
     rec = reconstruct(s, ReconstructConfig(eps_r=spec["eps_r"], spacing_m=spec["spacing_m"],
-                                           max_depth_m=spec["max_depth_m"]))
+                                           max_depth_m=spec["max_depth_m"], **settings))
     wall = time.perf_counter() - t
     ev = evaluate_targets(rec.targets, truth_lines_from_pipes(spec["pipes"]))
     return ev, wall
@@ -168,6 +170,8 @@ def main(argv=None):
     ap.add_argument("--seeds", default="0-23", help="scene seeds: A-B or a comma list (default 0-23)")
     ap.add_argument("--traces", type=int, default=10_000)
     ap.add_argument("--json", default=None)
+    ap.add_argument("--no-coarse-to-fine", action="store_true", help="migrate every voxel (reconstruct's default "
+                    "is coarse-to-fine)")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     args = ap.parse_args(argv)
     try:
@@ -179,7 +183,7 @@ def main(argv=None):
     rows, scenes = [], []
     for seed in seeds:
         spec = make_scene(seed)
-        ev, wall = run_scene(spec, args.traces)
+        ev, wall = run_scene(spec, args.traces, **({"coarse_to_fine": False} if args.no_coarse_to_fine else {}))
         for r in ev["truth"]:
             rows.append({"kind": spec["kind"], "seed": seed, **{k: v for k, v in r.items() if k != "samples"}})
         scenes.append({"kind": spec["kind"], "seed": seed, "false_lines": ev["false_lines"],
@@ -192,7 +196,8 @@ def main(argv=None):
               f"{np.median([r['completeness'] for r in ev['truth']]):.2f}, excess {ev['excess_fraction'] * 100:.0f} %, "
               f"false lines {ev['false_lines']}, points {ev['false_points']} ({wall:.1f} s)", flush=True)
     lines = [f"Host CPU: {cpu_name()}, {os.environ['NUMBA_NUM_THREADS']} threads; {len(scenes)} scenes (seeds "
-             f"{args.seeds}), {args.traces} traces each; {len(rows)} true pipes and bars", "",
+             f"{args.seeds}), {args.traces} traces each; {len(rows)} true pipes and bars; "
+             f"{'every voxel migrated' if args.no_coarse_to_fine else 'coarse-to-fine (the default)'}", "",
              "| set | quantity | median | 10th pct | 90th pct | goal |", "|---|---|---|---|---|---|"]
 
     def add(kind, name, vals, goal, scale=1.0):
