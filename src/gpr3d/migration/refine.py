@@ -17,9 +17,9 @@ The envelope is a Hilbert transform along each column, so the interpolated voxel
 reach into its envelope a little: on the 13 scenes of ``benchmarks/results/coarse_to_fine.md`` the envelope where
 targets are moved by at most 1 % of its peak and the targets by millimetres (the same completeness and false
 targets overall), for 0.67 of the time of migrating every voxel (0.26 on a clean survey; 0.78 to 1.02 on noisy
-soil, where the coarse pass marks deep noise). It is ``reconstruct``'s default. Refining whole columns instead (``depth_margin=None``,
-:func:`refine_columns`, a marked coarse column's neighbours at every depth) keeps the targets to the millimetre and
-saved nothing overall.
+soil, where the coarse pass marks deep noise): ``reconstruct``'s default. Refining whole columns instead
+(``depth_margin=None``, :func:`refine_columns`, a marked coarse column's neighbours at every depth) keeps the
+targets to the millimetre and saved nothing overall.
 
 What was done is returned as a dict for ``config.json`` (``"refine"``).
 """
