@@ -72,6 +72,17 @@ def test_reconstruct_with_a_tum_trajectory(pipe_survey):
         np.testing.assert_allclose(b["points_xyz"], a["points_xyz"], atol=1e-3)
 
 
+def test_where_coarse_to_fine_cannot_gain_the_command_says_why(pipe_survey, tmp_path):
+    d, _ = pipe_survey
+    # 3 cm columns, a third of the 15 cm wavelength (800 MHz, eps_r 6) apart already: every voxel migrated
+    r = run_cli("reconstruct", d / "line.h5", "--poses", d / "walk.tum", "--out", tmp_path / "o", "--max-depth", "0.5",
+                "--eps-r", "file", "--spacing", "0.03")
+    assert r.returncode == 0, r.stderr
+    assert "coarse-to-fine: the grid's columns are within a third of a wavelength of each other already" in r.stdout
+    assert "counted over every voxel" not in r.stdout and "coarse-to-fine left out" not in r.stdout
+    assert json.loads((tmp_path / "o" / "config.json").read_text())["refine"]["stride"] == 1
+
+
 def test_reconstruct_errors_are_one_line(pipe_survey, tmp_path):
     d, _ = pipe_survey
     r = run_cli("reconstruct", d / "line.h5", "--out", tmp_path / "o")

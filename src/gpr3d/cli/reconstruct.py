@@ -162,7 +162,7 @@ def run(args):
     result = done.result
     g = result.grid
     ref = result.refine or {}
-    coarse = ref.get("stride", 1) > 1 and "fine_fraction" in ref  # coarse-to-fine refined part of the voxels
+    coarse = "why" not in ref and ref.get("refined_fraction", 1.0) < 1.0  # coarse-to-fine refined part of the voxels
     every = " counted over every voxel" if coarse else ""
     rate = f" ({result.updates_per_s / 1e9:.2f} G voxel-trace updates/s{every})" if result.updates_per_s else ""
     how = "line by line (pseudo-3D)" if args.method == "pseudo3d" else "onto"
@@ -172,8 +172,10 @@ def run(args):
         print(f"coarse-to-fine: every {ref['stride']} columns at every depth, then {ref['refined_fraction']:.0%} of "
               "the voxels at full resolution where that image holds energy, the rest interpolated "
               "(--no-coarse-to-fine: every voxel)")
-    elif "skipped" in ref or "why" in ref:
-        print(f"coarse-to-fine left out: {ref.get('skipped') or ref['why']}")
+    elif "skipped" in ref:
+        print(f"coarse-to-fine left out: {ref['skipped']}")
+    elif "why" in ref:
+        print(f"coarse-to-fine: {ref['why']}")
     if result.frame is not None:
         print("one straight profile: migrated in 2D (the vertical plane under it); targets crossing it are points")
     for i, t in enumerate(result.targets):

@@ -11,7 +11,7 @@ deepest voxel its coarse neighbours marked, ``DEPTH_MARGIN`` wavelengths wider a
 are columns of the fine grid: there the value is the migrated one). In the refined voxels image and fold are what
 migrating every voxel gives (to rounding: the coarse columns, which the fine pass leaves out, keep the coarse
 pass's sums); the work is the coarse pass (about ``1 / stride**2``) plus the refined voxels' off the coarse columns
-(more than ``MAX_REFINED`` of the voxels marked: every voxel is migrated instead).
+(more than ``MAX_REFINED`` of the voxels marked: every voxel off the coarse columns is migrated instead).
 
 The envelope is a Hilbert transform along each column, so the interpolated voxels beyond a refined range still
 reach into its envelope a little: on the 13 scenes of ``benchmarks/results/coarse_to_fine.md`` the envelope where
@@ -42,8 +42,8 @@ COARSE_WAVELENGTHS = 1 / 3
 MAX_STRIDE = 4
 #: how far the marked coarse columns are widened, in wavelengths (beyond the fine columns' coarse neighbours)
 LATERAL_MARGIN = 0.0
-#: more than this share of the voxels marked: every voxel is migrated instead (the refined voxels cost at least
-#: their share of the whole image's time, the coarse pass a tenth more: ``benchmarks/eval_coarse_to_fine.py``)
+#: more than this share of the voxels marked: every voxel off the coarse columns is migrated instead (the refined
+#: voxels cost at least their share of the whole image's time: ``benchmarks/eval_coarse_to_fine.py``)
 MAX_REFINED = 0.7
 #: how far each column's refined depth range reaches above its shallowest and below its deepest marked voxel, in
 #: wavelengths (the envelope's Hilbert transform spans the column: the interpolated voxels beyond the range reach
@@ -207,13 +207,11 @@ def refined_adjoint(op, data, *, with_fold: bool, wavelength_m: float, level: fl
     info.update(refined_fraction=fraction, refined_columns=float((ranges[..., 1] > ranges[..., 0]).mean()))
     t_mark = time.perf_counter() - t
     t = time.perf_counter()
-    if fraction > MAX_REFINED:
-        out = op.adjoint(data, with_fold=with_fold)
-        img, fold = out if with_fold else (out, None)
+    if fraction > MAX_REFINED:  # every voxel migrated: the other columns at every depth
+        ranges[...] = (0, grid.nd)
+        inside = np.ones(grid.shape, bool)
         info.update({"marked_fraction": fraction, "refined_fraction": 1.0,
-                     "why": f"the coarse pass marked {fraction:.0%} of the voxels: every voxel migrated",
-                     "seconds": {"coarse": t_coarse, "mark": t_mark, "fine": time.perf_counter() - t}})
-        return img, fold, info
+                     "why": f"the coarse pass marked {fraction:.0%} of the voxels: every voxel migrated"})
     # the coarse columns are columns of the fine grid, migrated at every depth already: the fine pass leaves them
     # out (a 1 / stride**2 share of its work) and they keep the coarse pass's values
     fine = ranges.copy()
