@@ -95,6 +95,12 @@ def _interp(c: np.ndarray, k: int, nx: int, ny: int) -> np.ndarray:
     return _upsample(_upsample(c, k, nx, 0), k, ny, 1)
 
 
+def _in_ranges(ranges: np.ndarray, nd: int) -> np.ndarray:
+    """The voxels (``(nx, ny, nd)`` booleans) inside each column's depth range ``[first, end)`` of ``ranges``."""
+    k = np.arange(nd)
+    return (k >= ranges[..., :1]) & (k < ranges[..., 1:])
+
+
 def _fill(coarse: np.ndarray, fine: np.ndarray, inside: np.ndarray, k: int) -> np.ndarray:
     """The fine image: ``fine`` where ``inside`` (the refined voxels), the ``coarse`` columns themselves on the fine
     grid's every ``k``-th column, the coarse image interpolated across columns elsewhere."""
@@ -202,7 +208,7 @@ def refined_adjoint(op, data, *, with_fold: bool, wavelength_m: float, level: fl
         ranges, ref = refine_ranges(cenv, k, grid, level=level, wavelength_m=wavelength_m,
                                     margin_wavelengths=depth_margin, reference_percentile=reference_percentile)
         info.update(reference=ref, refine="depth ranges", depth_margin_wavelengths=float(depth_margin))
-    inside = (np.arange(grid.nd) >= ranges[..., :1]) & (np.arange(grid.nd) < ranges[..., 1:])
+    inside = _in_ranges(ranges, grid.nd)
     fraction = float(inside.mean())
     info.update(refined_fraction=fraction, refined_columns=float((ranges[..., 1] > ranges[..., 0]).mean()))
     t_mark = time.perf_counter() - t
@@ -216,7 +222,7 @@ def refined_adjoint(op, data, *, with_fold: bool, wavelength_m: float, level: fl
     # out (a 1 / stride**2 share of its work) and they keep the coarse pass's values
     fine = ranges.copy()
     fine[::k, ::k] = 0
-    info["fine_fraction"] = float(((np.arange(grid.nd) >= fine[..., :1]) & (np.arange(grid.nd) < fine[..., 1:])).mean())
+    info["fine_fraction"] = float(_in_ranges(fine, grid.nd).mean())
     out = op.adjoint(data, with_fold=with_fold, depth_range=fine)
     fimg, ffold = out if with_fold else (out, None)
     t_fine = time.perf_counter() - t
