@@ -437,6 +437,29 @@ def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap
         facc = np.zeros((TILE * TILE, depth.shape[0] if fold else 1), np.float32)
         uu = np.empty(depth.shape[0], np.float32)
         ww = np.empty(depth.shape[0], np.float32)
+        # the tile's columns that sum any depth, listed once: their place, coordinates and depth range
+        n_c = 0
+        cc = np.empty(TILE * TILE, np.int64)
+        cx = np.empty(TILE * TILE, np.float32)
+        cy = np.empty(TILE * TILE, np.float32)
+        clo = np.empty(TILE * TILE, np.int64)
+        chi = np.empty(TILE * TILE, np.int64)
+        for ix in range(tx0, tx1):
+            for iy in range(ty0, ty1):
+                if krange[ix, iy, 0] < krange[ix, iy, 1]:
+                    cc[n_c] = (ix - tx0) * TILE + (iy - ty0)
+                    cx[n_c] = x[ix]
+                    cy[n_c] = y[iy]
+                    clo[n_c] = krange[ix, iy, 0]
+                    chi[n_c] = krange[ix, iy, 1]
+                    n_c += 1
+        # per trace, two loops over the listed columns: their legs and depth ranges first (no call, no skip: a
+        # tight loop), then the sums of those the trace reaches (the fine pass of coarse-to-fine imaging 25 % and
+        # every voxel 12 % faster than one loop doing both: benchmarks/results/bench_stages.md)
+        c0 = np.empty(TILE * TILE, np.int64)
+        c1 = np.empty(TILE * TILE, np.int64)
+        q2a = np.empty(TILE * TILE, np.float32)
+        q2b = np.empty(TILE * TILE, np.float32)
         # the bins within reach, one more on each side (float32 rounding at a bin's edge must not drop a trace)
         i_lo = max(int(math.floor((xa - treach - bx0) / bsize)) - 1, 0)
         i_hi = min(int(math.floor((xb + treach - bx0) / bsize)) + 1, nbx - 1)
@@ -457,26 +480,28 @@ def adjoint_tiled(data, tx, rx, gap, x, y, depth, slow, t0, inv_dt, umax, tan_ap
                     ha = tx[j, 2]
                     hb = rx[j, 2]
                     g = gap[j]
-                    for ix in range(tx0, tx1):
-                        for iy in range(ty0, ty1):
-                            if krange[ix, iy, 0] >= krange[ix, iy, 1]:
-                                continue
-                            ax, ay, bx, by, h2a, h2b = legs(x[ix], y[iy], tx, rx, j)
-                            k0 = max(start_depth(ax, ay, bx, by, tan_ap, rmax2, d0, dd, nd), krange[ix, iy, 0])
-                            if g > 0:
-                                k1 = end_depth(ax, ay, bx, by, ha + g, hb + g, lmax2a, d0, dd, nd)
+                    if g > 0:
+                        la, lb, l2 = ha + g, hb + g, lmax2a
+                    else:
+                        la, lb, l2 = ha, hb, lmax2
+                    for i in range(n_c):
+                        ax, ay, bx, by, h2a, h2b = legs(cx[i], cy[i], tx, rx, j)
+                        c0[i] = max(start_depth(ax, ay, bx, by, tan_ap, rmax2, d0, dd, nd), clo[i])
+                        c1[i] = min(end_depth(ax, ay, bx, by, la, lb, l2, d0, dd, nd), chi[i])
+                        q2a[i] = h2a
+                        q2b[i] = h2b
+                    for i in range(n_c):
+                        k0 = c0[i]
+                        k1 = c1[i]
+                        if k0 < k1:
+                            c = cc[i]
+                            if path and g <= 0:
+                                _stack(row, depth, slow, acc[c], facc[c], q2a[i], q2b[i], ha, hb, t0, inv_dt, umax,
+                                       k0 + off, min(nblk, (k1 + off + W - 1) // W), mode, fold, path)
                             else:
-                                k1 = end_depth(ax, ay, bx, by, ha, hb, lmax2, d0, dd, nd)
-                            k1 = min(k1, krange[ix, iy, 1])
-                            if k0 < k1:
-                                c = (ix - tx0) * TILE + (iy - ty0)
-                                if path and g <= 0:
-                                    _stack(row, depth, slow, acc[c], facc[c], h2a, h2b, ha, hb, t0, inv_dt, umax,
-                                           k0 + off, min(nblk, (k1 + off + W - 1) // W), mode, fold, path)
-                                else:
-                                    _scalar_depths(row, depth[off:], slow[off:], acc[c, off:],
-                                                   facc[c, off:] if fold else facc[c], h2a, h2b, ha, hb, t0, inv_dt,
-                                                   umax, k0, k1, mode, fold, uu, ww, g)
+                                _scalar_depths(row, depth[off:], slow[off:], acc[c, off:],
+                                               facc[c, off:] if fold else facc[c], q2a[i], q2b[i], ha, hb, t0,
+                                               inv_dt, umax, k0, k1, mode, fold, uu, ww, g)
         for ix in range(tx0, tx1):
             for iy in range(ty0, ty1):
                 c = (ix - tx0) * TILE + (iy - ty0)
