@@ -220,3 +220,50 @@ def test_building_the_tiled_kernel_first_waits_for_a_background_warm_up_of_it(mo
     _kernels.simd_adjoint(LOADS)
     _kernels.kernels()
     assert waited == ["tiled"]
+
+
+def test_a_preload_builds_the_tiled_kernel_once_while_another_thread_asks_for_it(monkeypatch):
+    """preload_tiled loads the tiled kernel in a thread of its own; a command that asks for it meanwhile waits for
+    that thread and gets the same kernel: it is probed once (two threads probing it at once abort numba's workqueue
+    threading layer)."""
+    import threading
+    import time
+
+    import gpr3d.core.warmup as warmup
+
+    monkeypatch.setattr(warmup, "wait", lambda group: 0.0)
+    monkeypatch.setattr(warmup, "done", lambda: {"tiled"})  # the warm-up has compiled it: it is preloaded
+    probed, started = [], threading.Event()
+
+    def slow_probe(fn, *extra):
+        started.set()
+        time.sleep(0.3)  # a load from numba's cache takes about this long
+        probed.append(threading.current_thread().name)
+        return fn
+
+    monkeypatch.setattr(_kernels, "_probe", slow_probe)
+    t = _kernels.preload_tiled(LOADS)
+    assert isinstance(t, threading.Thread) and t.daemon
+    assert started.wait(5.0)  # the preload is inside its probe: the main thread asks now
+    k = _kernels.tiled_adjoint(LOADS, True)
+    t.join(5.0)
+    assert probed == ["gpr3d-preload-tiled"] and k is not None
+    assert _kernels.tiled_adjoint(LOADS, True) is k and ("tiled", LOADS, True) in _kernels._CACHE
+    # with no path given, the read path of this CPU (set here: gathers); no fold asked: the one with the fold
+    monkeypatch.setenv("GPR3D_GATHER", "1")
+    t = _kernels.preload_tiled()
+    t.join(5.0)
+    assert ("tiled", GATHER, True) in _kernels._CACHE and len(probed) == 2
+
+
+def test_only_a_kernel_the_warm_up_compiled_is_preloaded(monkeypatch):
+    import gpr3d.core.warmup as warmup
+    from gpr3d.migration import preload_tiled
+
+    probed = []
+    monkeypatch.setattr(_kernels, "_probe", lambda fn, *extra: probed.append(1) or fn)
+    monkeypatch.setattr(warmup, "done", lambda: set())  # not compiled yet: the command builds it, timed, itself
+    assert preload_tiled(LOADS) is None and probed == [] and _kernels._CACHE == {}
+    monkeypatch.setattr(warmup, "done", lambda: {"tiled"})
+    preload_tiled(LOADS).join(5.0)
+    assert probed == [1] and ("tiled", LOADS, True) in _kernels._CACHE

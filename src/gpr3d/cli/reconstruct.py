@@ -150,6 +150,10 @@ def run(args):
                                      depth=args.depth if estimate else "none", weights=args.weights,
                                      depthnet=args.depthnet, device=args.device, runtime=args.runtime,
                                      refiner=args.refiner)
+    if engine == "numba" and args.method == "backprojection" and (args.aperture or args.aperture_radius):
+        from gpr3d.migration import preload_tiled
+
+        preload_tiled()  # the tiled kernel loaded while the file is read (the migration waits for it)
     survey = read_recording(args.input, format=args.format, channel=args.channel, track=args.track,
                             marks_every_m=args.marks_every, marks=args.marks)
     if args.poses:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 
 import numba
 import numpy as np
@@ -520,16 +521,40 @@ def tiled_adjoint(path: int, fold: bool = False):
     """:func:`adjoint_tiled` with its flags bound (``path``: 0 for the scalar depth loop, ``GATHER`` or ``LOADS``
     for the SIMD one), or None where it does not build."""
     key = ("tiled", path, fold)
-    if key not in _CACHE:
-        _after_warmup("tiled")
+    with _TILED_LOCK:  # (one thread builds and probes it: see preload_tiled)
+        if key not in _CACHE:
+            _after_warmup("tiled")
 
-        def run(*args, _path=path, _fold=fold):
-            return adjoint_tiled(*args, _path, _fold)
+            def run(*args, _path=path, _fold=fold):
+                return adjoint_tiled(*args, _path, _fold)
 
-        extra = (np.zeros(0, np.int64), np.zeros(2, np.int64), f32(0), f32(0), f32(1), 1, 1, np.zeros((1, 2), f32),
-                 f32(1), np.array([[[0, 2]]], np.int32), np.zeros((1, 1, 2), f32))
-        _CACHE[key] = run if _probe(run, *extra) is not None else None
+            extra = (np.zeros(0, np.int64), np.zeros(2, np.int64), f32(0), f32(0), f32(1), 1, 1,
+                     np.zeros((1, 2), f32), f32(1), np.array([[[0, 2]]], np.int32), np.zeros((1, 1, 2), f32))
+            _CACHE[key] = run if _probe(run, *extra) is not None else None
     return _CACHE[key]
+
+
+#: held while the tiled adjoint is built or loaded and probed: a second thread asking for it waits, then finds it
+#: in ``_CACHE`` (no two threads run its probe at once: numba's workqueue threading layer aborts on that)
+_TILED_LOCK = threading.Lock()
+
+
+def preload_tiled(path: int | None = None, fold: bool = True) -> threading.Thread | None:
+    """Load the tiled adjoint (``tiled_adjoint(path, fold)``; ``path`` None: :func:`read_path`'s) from numba's
+    cache in a background thread, and return the thread (started); None, and nothing done, where the kernel is not
+    known to be compiled (no background warm-up has recorded it, :mod:`gpr3d.core.warmup`: the first command builds
+    it as before, waiting for the warm-up in a timed stage of its own).
+
+    A command that will migrate starts this before it reads its input: the load (about 0.3 s on two cores) then
+    runs while the file is read, and the migration finds the kernel ready, or waits for the thread to finish it."""
+    from gpr3d.core import warmup
+
+    if "tiled" not in warmup.done():
+        return None
+    t = threading.Thread(target=tiled_adjoint, args=(read_path() if path is None else path, fold), daemon=True,
+                         name="gpr3d-preload-tiled")
+    t.start()
+    return t
 
 
 def bin_traces(mid: np.ndarray, bsize: float):
