@@ -242,18 +242,18 @@ def test_a_preload_builds_the_tiled_kernel_once_while_another_thread_asks_for_it
         return fn
 
     monkeypatch.setattr(_kernels, "_probe", slow_probe)
-    t = _kernels.preload_tiled(LOADS)
+    monkeypatch.setenv("GPR3D_GATHER", "0")  # this CPU's read path, whichever it is: scalar loads
+    t = _kernels.preload_tiled(GATHER)  # the path given wins
     assert isinstance(t, threading.Thread) and t.daemon
     assert started.wait(5.0)  # the preload is inside its probe: the main thread asks now
-    k = _kernels.tiled_adjoint(LOADS, True)
+    k = _kernels.tiled_adjoint(GATHER, True)
     t.join(5.0)
     assert probed == ["gpr3d-preload-tiled"] and k is not None
-    assert _kernels.tiled_adjoint(LOADS, True) is k and ("tiled", LOADS, True) in _kernels._CACHE
-    # with no path given, the read path of this CPU (set here: gathers); no fold asked: the one with the fold
-    monkeypatch.setenv("GPR3D_GATHER", "1")
+    assert _kernels.tiled_adjoint(GATHER, True) is k and list(_kernels._CACHE) == [("tiled", GATHER, True)]
+    # with no path given, the read path of this CPU (set above: loads); no fold asked: the one with the fold
     t = _kernels.preload_tiled()
     t.join(5.0)
-    assert ("tiled", GATHER, True) in _kernels._CACHE and len(probed) == 2
+    assert ("tiled", LOADS, True) in _kernels._CACHE and len(probed) == 2
 
 
 def test_only_a_kernel_the_warm_up_compiled_is_preloaded(monkeypatch):

@@ -523,15 +523,20 @@ def tiled_adjoint(path: int, fold: bool = False):
     key = ("tiled", path, fold)
     with _TILED_LOCK:  # (one thread builds and probes it: see preload_tiled)
         if key not in _CACHE:
-            _after_warmup("tiled")
-
-            def run(*args, _path=path, _fold=fold):
-                return adjoint_tiled(*args, _path, _fold)
-
-            extra = (np.zeros(0, np.int64), np.zeros(2, np.int64), f32(0), f32(0), f32(1), 1, 1,
-                     np.zeros((1, 2), f32), f32(1), np.array([[[0, 2]]], np.int32), np.zeros((1, 1, 2), f32))
-            _CACHE[key] = run if _probe(run, *extra) is not None else None
+            _CACHE[key] = _built_tiled(path, fold)
     return _CACHE[key]
+
+
+def _built_tiled(path: int, fold: bool):
+    # the tiled adjoint with its flags bound, once it has built and run on a tiny problem; None where it does not
+    _after_warmup("tiled")
+
+    def run(*args, _path=path, _fold=fold):
+        return adjoint_tiled(*args, _path, _fold)
+
+    extra = (np.zeros(0, np.int64), np.zeros(2, np.int64), f32(0), f32(0), f32(1), 1, 1, np.zeros((1, 2), f32),
+             f32(1), np.array([[[0, 2]]], np.int32), np.zeros((1, 1, 2), f32))
+    return run if _probe(run, *extra) is not None else None
 
 
 #: held while the tiled adjoint is built or loaded and probed: a second thread asking for it waits, then finds it
