@@ -42,7 +42,8 @@ def dump(det, records) -> list[dict]:
     """Per record: the detector's final boxes (seconds, cut to the record), scores, kind shares, and the refiner's
     quality and penultimate features at each final box (the mean of its two mirror looks), the labels."""
     import numpy as np
-    import torch
+
+    from pgpr_rescoring import feature_look
 
     from gpr3d.detection.refine import _refined, record_image
     from gpr3d.detection.windows import prepare
@@ -57,13 +58,7 @@ def dump(det, records) -> list[dict]:
         boxes = np.array([t["box"] for t in tg], float).reshape(-1, 4)
         probs = np.array([[t["kind_shares"][k] for k in kinds] for t in tg], float).reshape(-1, len(kinds))
         seen = []
-
-        def look(c):
-            with torch.inference_mode():
-                f = net[:-1](torch.from_numpy(np.ascontiguousarray(c, np.float32)))
-                seen.append(f.numpy().copy())
-                return net[-1](f).numpy().astype(float)
-
+        look = feature_look(net, seen)
         head, _ = ref.head_for(survey)
         proc = prepare(survey, det.window)
         _, q = _refined(survey, det.window.rows, boxes, record_image(proc, det.window.style), look, mirror=True,
@@ -174,26 +169,6 @@ def fit(recs, *, with_feats: bool, linear: bool, seed: int = 0, epochs: int = 30
     return predict
 
 
-def metrics(recs, kinds, scores) -> dict:
-    """Class-averaged metrics as ``gpr3d.detection.evaluate`` scores them, and the class-agnostic mAP@[.5:.95]."""
-    import numpy as np
-
-    from gpr3d.detection.evaluate import coco_metrics, kind_rows
-
-    boxes, sc, names = [], [], []
-    for r, s in zip(recs, scores):
-        rows = [(b, score, kind) for b, x, p in zip(r["bpx"], s, r["probs"])
-                for kind, score in kind_rows({"score": x, "kind": kinds[int(np.argmax(p))],
-                                              "kind_shares": dict(zip(kinds, p))})]
-        boxes.append(np.array([x[0] for x in rows], float).reshape(-1, 4))
-        sc.append(np.array([x[1] for x in rows], float))
-        names.append([x[2] for x in rows])
-    m = coco_metrics([r["gpx"] for r in recs], boxes, sc, gt_kinds=[r["kinds"] for r in recs], det_kinds=names,
-                     kinds=kinds)
-    m["agnostic"] = coco_metrics([r["gpx"] for r in recs], [r["bpx"] for r in recs], scores)["mAP"]
-    return m
-
-
 def cached(path: Path, make):
     if path.is_file():
         return pickle.loads(path.read_bytes())
@@ -207,6 +182,7 @@ def cached(path: Path, make):
 
 def main(argv=None) -> None:
     from eval_pgpr import PGPR_DEFAULT, load, pgpr_records
+    from pgpr_rescoring import metrics  # (class-averaged as gpr3d.detection.evaluate scores them)
 
     p = argparse.ArgumentParser(prog="pgpr_crossfit.py", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -27,11 +27,24 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from _report import cpu_name, write_table  # noqa: E402
 
 
+def feature_look(net, seen: list):
+    """The refiner ``net``'s outputs for a batch of crops, as ``_refined`` asks for them, with its penultimate
+    features (one row a crop) appended to ``seen`` at every look."""
+    import numpy as np
+    import torch
+
+    def look(c):
+        with torch.inference_mode():
+            f = net[:-1](torch.from_numpy(np.ascontiguousarray(c, np.float32)))
+            seen.append(f.numpy().copy())
+            return net[-1](f).numpy().astype(float)
+    return look
+
+
 def dump(det, records) -> list[dict]:
     """Per record: refined boxes (traces, seconds; cut to the record), scores, kind shares, the refiner's quality
     and features at each refined box (rows: the boxes, then their mirror looks), the labels and their kinds."""
     import numpy as np
-    import torch
 
     from gpr3d.detection.refine import _refined, check_application, record_image
 
@@ -43,13 +56,7 @@ def dump(det, records) -> list[dict]:
         _, proc, boxes, scores, _, _, probs, _ = det._views(survey)
         boxes = np.asarray(boxes, float).reshape(-1, 4)
         seen = []
-
-        def look(c):
-            with torch.inference_mode():
-                f = net[:-1](torch.from_numpy(np.ascontiguousarray(c, np.float32)))
-                seen.append(f.numpy().copy())
-                return net[-1](f).numpy().astype(float)
-
+        look = feature_look(net, seen)
         head, _ = ref.head_for(survey)
         rb, q = _refined(survey, det.window.rows, boxes, record_image(proc, det.window.style), look, mirror=mirror,
                          passes=passes, head=head, quality=True, score=True)

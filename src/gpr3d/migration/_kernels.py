@@ -551,7 +551,20 @@ def preload_tiled(path: int | None = None, fold: bool = True) -> threading.Threa
     it as before, waiting for the warm-up in a timed stage of its own).
 
     A command that will migrate starts this before it reads its input: the load (about 0.3 s on two cores) then
-    runs while the file is read, and the migration finds the kernel ready, or waits for the thread to finish it."""
+    runs while the file is read, and the migration finds the kernel ready, or waits for the thread to finish it.
+
+    Parameters
+    ----------
+    path : int, optional
+        How the SIMD loop reads the trace (``GATHER``, ``LOADS``; 0: the scalar loop); default this CPU's.
+    fold : bool
+        The kernel that sums the fold beside the image (``reconstruct``'s).
+
+    Returns
+    -------
+    threading.Thread or None
+        The loading thread, started (a daemon), or None where nothing was preloaded.
+    """
     from gpr3d.core import warmup
 
     if "tiled" not in warmup.done():
