@@ -116,8 +116,8 @@ def hand_features(r):
 
     b, s = r["bpx"], np.clip(r["scores"], 1e-4, 1 - 1e-4)
     n = len(b)
-    if not n:
-        return np.zeros((0, 16))
+    if not n:  # (as many columns as a record with boxes gives: 11 and one a kind)
+        return np.zeros((0, 11 + r["probs"].shape[1]))
     w = np.maximum(b[:, 2] - b[:, 0], 1e-3)
     h = np.maximum(b[:, 3] - b[:, 1], 1e-3) * r["dt"] * 1e9
     order = np.argsort(-s, kind="stable")

@@ -49,3 +49,6 @@ def test_the_overlap_features_read_only_the_boxes_scored_above():
     np.testing.assert_allclose(x[:, kinds + 2], np.log([0.6, 0.8, 0.4, 0.5]), rtol=1e-12)  # heights in ns
     np.testing.assert_allclose(x[:, kinds + 8], [1.0, 0.8 / 0.9, 0.7 / 0.9, 0.6 / 0.9], rtol=1e-12)
     np.testing.assert_allclose(x[:, kinds + 9], rec["q"], rtol=1e-12)
+    # a picture with no box describes none, in as many columns (the fit stacks every picture's rows)
+    empty = dict(rec, bpx=BOXES[:0], scores=np.zeros(0), probs=np.zeros((0, kinds)), q=np.zeros(0))
+    assert mod.hand_features(empty).shape == (0, x.shape[1])
