@@ -107,6 +107,7 @@ def run(args):
         reconstruct_recording,
         write_reconstruction_folder,
     )
+    from gpr3d.viz.worker import FigureWorker
 
     if args.mask == "detect" and args.boxes:
         raise GPR3DError("give --boxes or --mask detect, not both")
@@ -145,24 +146,26 @@ def run(args):
     _check_radius(args, args.depth)
     if not 0.0 <= args.score <= 1.0:
         raise GPR3DError(f"--score must lie in 0..1, got {args.score}")
-    # weights checked before the work starts
-    detector, depthnet = load_models(detector=args.mask == "detect" or (estimate and not args.boxes),
-                                     depth=args.depth if estimate else "none", weights=args.weights,
-                                     depthnet=args.depthnet, device=args.device, runtime=args.runtime,
-                                     refiner=args.refiner)
-    if engine == "numba" and args.method == "backprojection" and (args.aperture or args.aperture_radius):
-        from gpr3d.migration import preload_tiled
+    # the figures' process forked first, before any thread starts (it imports matplotlib while the file is read)
+    with FigureWorker() as figures:
+        # weights checked before the work starts
+        detector, depthnet = load_models(detector=args.mask == "detect" or (estimate and not args.boxes),
+                                         depth=args.depth if estimate else "none", weights=args.weights,
+                                         depthnet=args.depthnet, device=args.device, runtime=args.runtime,
+                                         refiner=args.refiner)
+        if engine == "numba" and args.method == "backprojection" and (args.aperture or args.aperture_radius):
+            from gpr3d.migration import preload_tiled
 
-        preload_tiled()  # the tiled kernel loaded while the file is read (the migration waits for it)
-    survey = read_recording(args.input, format=args.format, channel=args.channel, track=args.track,
-                            marks_every_m=args.marks_every, marks=args.marks)
-    if args.poses:
-        survey = attach_trajectory(survey, args.poses, source=str(args.input))
-    done = reconstruct_recording(survey, ReconstructConfig(**settings, **site), eps_r=eps_given,
-                                 boxes_file=args.boxes, mask=args.mask, detector=detector, depthnet=depthnet,
-                                 depth=args.depth, trace_spacing_m=args.trace_spacing, radius_m=args.radius,
-                                 score=args.score, input_name=str(args.input), log=print)
-    files = write_reconstruction_folder(done, args.out, source=str(args.input))
+            preload_tiled()  # the tiled kernel loaded while the file is read (the migration waits for it)
+        survey = read_recording(args.input, format=args.format, channel=args.channel, track=args.track,
+                                marks_every_m=args.marks_every, marks=args.marks)
+        if args.poses:
+            survey = attach_trajectory(survey, args.poses, source=str(args.input))
+        done = reconstruct_recording(survey, ReconstructConfig(**settings, **site), eps_r=eps_given,
+                                     boxes_file=args.boxes, mask=args.mask, detector=detector, depthnet=depthnet,
+                                     depth=args.depth, trace_spacing_m=args.trace_spacing, radius_m=args.radius,
+                                     score=args.score, input_name=str(args.input), log=print)
+        files = write_reconstruction_folder(done, args.out, source=str(args.input), figures=figures)
     result = done.result
     g = result.grid
     ref = result.refine or {}

@@ -125,7 +125,8 @@ def reconstruct_recording(survey, cfg, *, eps_r=None, boxes_file=None, mask: str
     return ReconstructionRun(result=result, found=found, mask=mask)
 
 
-def write_reconstruction_folder(run: ReconstructionRun, out, *, source: str, command: str = "reconstruct") -> list:
+def write_reconstruction_folder(run: ReconstructionRun, out, *, source: str, command: str = "reconstruct",
+                                figures=None) -> list:
     """Write a reconstruction into the folder ``out`` as one whole (:func:`~gpr3d.io.resultdir.result_folder`):
     the volume, targets, figures, VTI, and the detections where the detector made the mask.
 
@@ -139,6 +140,8 @@ def write_reconstruction_folder(run: ReconstructionRun, out, *, source: str, com
         The recording's name, kept in the files.
     command : str
         The command named in the folder's manifest.
+    figures : FigureWorker, optional
+        Draws the figures beside the writing (:class:`~gpr3d.viz.worker.FigureWorker`; None: drawn here).
 
     Returns
     -------
@@ -153,10 +156,10 @@ def write_reconstruction_folder(run: ReconstructionRun, out, *, source: str, com
             from gpr3d.io.detections import write_detections
 
             write_detections([run.found], folder / "detections.json")
-        return write_result(run.result, folder, source=source)
+        return write_result(run.result, folder, source=source, figures=figures)
 
 
-def write_result(result, out, *, source: str = "") -> list:
+def write_result(result, out, *, source: str = "", figures=None) -> list:
     """A reconstruction's data and its figures, written into the folder ``out`` file by file (each atomically).
 
     Parameters
@@ -167,6 +170,9 @@ def write_result(result, out, *, source: str = "") -> list:
         The folder (made with its parents where missing).
     source : str
         The recording's name, kept in ``volume.h5`` and ``config.json``.
+    figures : FigureWorker, optional
+        Draws the figures while the data files are written (:class:`~gpr3d.viz.worker.FigureWorker`; None, or a
+        worker that has gone: drawn here, after them).
 
     Returns
     -------
@@ -179,9 +185,15 @@ def write_result(result, out, *, source: str = "") -> list:
 
     from gpr3d.core.timing import stage
     from gpr3d.migration.reconstruct import write_reconstruction
-    from gpr3d.viz.volume import reconstruction_figures
+    from gpr3d.viz.volume import draw_figures, figure_inputs
 
+    with stage("figures"):  # (with a worker: the views taken and handed over; then the wait below)
+        drawn = (figures.submit if figures is not None else _here)(draw_figures, figure_inputs(result), Path(out))
     write_reconstruction(result, out, source=source)
     with stage("figures"):
-        reconstruction_figures(result, out)
+        drawn()
     return sorted(p.name for p in Path(out).iterdir())
+
+
+def _here(fn, *args):
+    return lambda: fn(*args)

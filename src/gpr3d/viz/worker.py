@@ -1,0 +1,144 @@
+"""Figures drawn in a process beside the command: a command that migrates starts :class:`FigureWorker` before it
+reads its input, the worker imports matplotlib on the core the reading leaves idle (about 0.3 s), and later draws
+the figures while the command writes its volume files. On a 2-core host the figures of ``gpr3d reconstruct`` cost
+about 0.75 s in the command itself, a quarter of its time (``benchmarks/results/bench_stages.md``).
+
+Where no ``fork`` is to be had (Windows, or ``GPR3D_FIGURE_WORKER=0``), or the worker has gone (killed, out of
+memory), the figures are drawn in the command's own process instead: the same files either way."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+__all__ = ["FigureWorker"]
+
+#: the worker's niceness, added to the command's (on a 2-core host it takes the core the reading leaves idle, and its
+#: import of matplotlib is over before the migration starts, where 19 spread it into the migration; with one core,
+#: the command comes first)
+NICE = 5
+
+
+def _serve(conn, theirs) -> None:  # pragma: no cover - runs in the forked child (its effects are tested from the parent)
+    """The worker's loop: matplotlib imported first, then one ``(function, args)`` at a time, each answered with
+    ``("ok", value)`` or ``("error", exception)``; ends when the command's end of the pipe closes (``theirs``:
+    that end, as the fork copied it, closed here at once)."""
+    import signal
+
+    theirs.close()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C is the command's to handle; it ends this one
+    try:
+        os.nice(NICE)  # the command's own work first: this one takes what a core leaves idle
+    except OSError:
+        pass
+    from gpr3d.viz._figures import pyplot
+
+    pyplot()
+    import mpl_toolkits.mplot3d  # noqa: F401  (the 3D view's axes)
+
+    while True:
+        try:
+            fn, args = conn.recv()
+        except (EOFError, OSError):
+            return
+        try:
+            conn.send(("ok", fn(*args)))
+        except BaseException as exc:  # sent back whole: the command raises it
+            try:
+                conn.send(("error", exc))
+            except Exception:  # an exception that does not pickle: its one line
+                conn.send(("error", RuntimeError(f"{type(exc).__name__}: {exc}")))
+
+
+def _enabled() -> bool:
+    import multiprocessing
+
+    return (os.environ.get("GPR3D_FIGURE_WORKER", "1") != "0" and sys.platform.startswith("linux")
+            and "fork" in multiprocessing.get_all_start_methods())
+
+
+class FigureWorker:
+    """A forked process that draws figures: ``with FigureWorker() as w: ...; job = w.submit(fn, *args); ...;
+    job()`` gives ``fn(*args)`` as drawn by the worker (or, without one, by this process when ``job`` is called).
+
+    Start it before the command starts any thread (a fork copies only the thread that forks); it is ended when
+    the ``with`` block ends, whatever happens in it.
+
+    Parameters
+    ----------
+    enabled : bool or None
+        Fork a worker (None: where ``fork`` is to be had, unless ``GPR3D_FIGURE_WORKER=0``).
+    """
+
+    #: how long a job may take in the worker before it is given up and drawn here instead (seconds)
+    patience_s = 600.0
+
+    def __init__(self, enabled: bool | None = None):
+        self.enabled = _enabled() if enabled is None else bool(enabled)
+        self._proc = self._conn = None
+        self._busy = False
+        self.answered = 0  #: jobs the worker itself answered (the rest ran here)
+
+    def __enter__(self) -> FigureWorker:
+        if self.enabled:
+            import multiprocessing
+
+            ctx = multiprocessing.get_context("fork")
+            mine, theirs = ctx.Pipe()
+            self._proc = ctx.Process(target=_serve, args=(theirs, mine), daemon=True, name="gpr3d-figures")
+            self._proc.start()
+            theirs.close()
+            self._conn = mine
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    @property
+    def alive(self) -> bool:
+        """Whether a worker process is running."""
+        return self._proc is not None and self._proc.is_alive()
+
+    def close(self) -> None:
+        """End the worker (its pipe closed; a worker still drawing is stopped after a second)."""
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+        if self._proc is not None:
+            self._proc.join(timeout=1.0 if self._busy else 5.0)
+            if self._proc.is_alive():
+                self._proc.kill()
+                self._proc.join()
+            self._proc = None
+
+    def submit(self, fn, *args):
+        """Hand ``fn(*args)`` to the worker (``fn`` a module-level function, ``args`` what pickles); returns a
+        callable that waits for and returns its value, raising what it raised. Without a worker, or one that
+        cannot take it, the callable runs ``fn(*args)`` here."""
+        if self._conn is not None and not self._busy and self.alive:
+            try:
+                self._conn.send((fn, args))
+                self._busy = True
+            except (OSError, ValueError):  # the worker has gone
+                self.close()
+            else:
+                return lambda: self._wait(fn, args)
+        return lambda: fn(*args)
+
+    def _wait(self, fn, args):
+        waited = 0.0
+        try:
+            while not self._conn.poll(0.25):  # a worker that died without a word is noticed within a quarter second
+                waited += 0.25
+                if not self._proc.is_alive() or waited >= self.patience_s:
+                    raise EOFError
+            status, value = self._conn.recv()
+        except (EOFError, OSError):  # the worker died (or hung) while drawing: drawn here
+            self.close()
+            self._busy = False
+            return fn(*args)
+        self._busy = False
+        self.answered += 1
+        if status == "error":
+            raise value
+        return value

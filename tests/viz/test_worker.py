@@ -1,0 +1,114 @@
+"""The figures' worker process: jobs run in another process and give back what they return or raise; a worker that
+dies or hangs leaves the job to this process; the same files either way."""
+
+import os
+import time
+
+import numpy as np
+import pytest
+
+from gpr3d.viz import worker as W
+
+needs_fork = pytest.mark.skipif(not W._enabled(), reason="no fork here (or GPR3D_FIGURE_WORKER=0)")
+
+
+def _pid_and(x):
+    return os.getpid(), x
+
+
+def _raise(msg):
+    raise ValueError(msg)
+
+
+def _die_unless(pid):
+    if os.getpid() != pid:  # the worker: gone without a word
+        os._exit(3)
+    return "drawn here"
+
+
+def _hang_unless(pid):
+    if os.getpid() != pid:
+        time.sleep(60)
+    return "drawn here"
+
+
+@needs_fork
+def test_a_job_runs_in_the_worker_and_gives_back_its_value():
+    with W.FigureWorker() as w:
+        assert w.alive
+        job = w.submit(_pid_and, [1, 2])
+        pid, x = job()
+        assert pid != os.getpid() and pid == w._proc.pid
+        assert x == [1, 2]
+        job = w.submit(_pid_and, "again")  # one job after another
+        assert job() == (pid, "again")
+        assert w.answered == 2
+
+
+def test_without_a_worker_the_job_runs_here(monkeypatch):
+    with W.FigureWorker(enabled=False) as w:
+        assert not w.alive
+        assert w.submit(_pid_and, 5)() == (os.getpid(), 5)
+    monkeypatch.setenv("GPR3D_FIGURE_WORKER", "0")
+    assert W.FigureWorker().enabled is False
+
+
+@needs_fork
+def test_what_the_job_raises_in_the_worker_is_raised_here():
+    with W.FigureWorker() as w:
+        job = w.submit(_raise, "no such colour map")
+        with pytest.raises(ValueError, match="no such colour map"):
+            job()
+        assert w.submit(_pid_and, 1)()[0] == w._proc.pid  # and the worker goes on
+
+
+@needs_fork
+def test_a_worker_that_dies_or_hangs_leaves_the_job_to_this_process():
+    with W.FigureWorker() as w:
+        job = w.submit(_die_unless, os.getpid())
+        assert job() == "drawn here"
+        assert not w.alive and w.answered == 0
+        assert w.submit(_pid_and, 2)() == (os.getpid(), 2)  # no worker left: here
+    with W.FigureWorker() as w:
+        w.patience_s = 0.5
+        pid = w._proc.pid
+        job = w.submit(_hang_unless, os.getpid())
+        assert job() == "drawn here"
+        assert not w.alive
+        with pytest.raises(ProcessLookupError):  # killed and reaped
+            os.kill(pid, 0)
+
+
+@needs_fork
+def test_the_worker_ends_with_its_block_even_after_an_error():
+    with pytest.raises(RuntimeError):
+        with W.FigureWorker() as w:
+            pid = w._proc.pid
+            w.submit(_hang_unless, os.getpid())  # still drawing when the command fails
+            raise RuntimeError("the command failed")
+    with pytest.raises(ProcessLookupError):
+        os.kill(pid, 0)
+
+
+@needs_fork
+@pytest.mark.parametrize("noise", [False, True])
+def test_the_result_folder_holds_the_same_figures_drawn_in_the_worker_or_here(tmp_path, noise):
+    from gpr3d.core.grid import Grid3D
+    from gpr3d.migration.reconstruct import Reconstruction
+    from gpr3d.migration.targets import Target3D
+    from gpr3d.pipeline.reconstruction import write_result
+
+    g = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 50, 40, 20)
+    env = np.random.default_rng(1).random(g.shape).astype(np.float32) * 0.2
+    env[:, 20, 9] = 1.0
+    t = Target3D(kind="line", points_xyz=[[0.0, 0.4, 0.18], [0.98, 0.4, 0.18]], score=1.0, depth_m=0.18)
+    rec = Reconstruction(image=env, envelope=env, noise_map=0.5 * env if noise else None, fold=None, grid=g,
+                         targets=[t], eps_r=9.0, config={"threshold": 0.3}, n_traces=10, timings_s={},
+                         updates_per_s=None)
+    here = write_result(rec, tmp_path / "here", source="s")
+    with W.FigureWorker() as w:
+        there = write_result(rec, tmp_path / "there", source="s", figures=w)
+        assert w.answered == 1  # the figures were the worker's
+    assert here == there and {"top.png", "front.png", "view3d.png"} <= set(here)
+    for name in ("top.png", "front.png", "view3d.png"):
+        assert (tmp_path / "here" / name).read_bytes() == (tmp_path / "there" / name).read_bytes(), name
