@@ -16,7 +16,7 @@ peak.
 Development used seeds 100-105; the table reports ``--seeds`` (default 0-11), which nothing was tuned on.
 
     python benchmarks/eval_coarse_to_fine.py [--seeds 0-11] [--levels 0.25,0.5] [--margins columns,0.5,1]
-        [--coarse-wavelengths 0.333] [--max-stride 4] [--threads 2]
+        [--coarse-wavelengths 0.333] [--max-stride 4] [--max-trace-step 4] [--threads 2]
 """
 
 from __future__ import annotations
@@ -117,11 +117,14 @@ def compare(name, s, pipes, spacing, levels, log, margins=(None,)):
             out.append({"scene": name, "setting": f"coarse-to-fine {lv:g}, {how}", "migrate_s": r.timings_s["migrate"],
                         "wall_s": wall, "fraction": r.refine.get("refined_fraction", 1.0),
                         "stride": r.refine.get("stride", 1), "env_change": d,
+                        "trace_step": (f"{r.refine['thinned']['trace_step']}, completed" if "thinned" in r.refine
+                                       else str(r.refine.get("coarse_trace_step", 1))),
                         "same": target_list(r) == target_list(full), **score(r, pipes)})
     for row in out:
         log(f"{row['scene']:>10s} {row['setting']:>20s} migrate {row['migrate_s']:6.2f} s  refined "
-            f"{row['fraction']:.3f}  completeness {row['completeness']:.3f}  pos {row['position_m']:.3f}  false "
-            f"{row['false']}  env change {row['env_change']:.4f}")
+            f"{row['fraction']:.3f} (coarse trace step {row.get('trace_step', '-')})  completeness "
+            f"{row['completeness']:.3f}  pos {row['position_m']:.3f}  false {row['false']}  env change "
+            f"{row['env_change']:.4f}")
     return out
 
 
@@ -135,6 +138,8 @@ def main(argv=None):
     ap.add_argument("--coarse-wavelengths", type=float, default=None,
                     help="the coarse columns' spacing in wavelengths (default: refine.COARSE_WAVELENGTHS)")
     ap.add_argument("--max-stride", type=int, default=None, help="the coarse stride's cap (default: refine.MAX_STRIDE)")
+    ap.add_argument("--max-trace-step", type=int, default=None,
+                    help="the coarse pass's trace thinning cap (default: refine.MAX_TRACE_STEP; 1: every trace)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--no-stages-survey", action="store_true")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
@@ -161,6 +166,10 @@ def main(argv=None):
         if args.max_stride < 1:
             ap.error("--max-stride must be >= 1")
         refine.MAX_STRIDE = args.max_stride
+    if args.max_trace_step is not None:
+        if args.max_trace_step < 1:
+            ap.error("--max-trace-step must be >= 1")
+        refine.MAX_TRACE_STEP = args.max_trace_step
     rows = []
 
     def log(msg):
@@ -178,7 +187,8 @@ def main(argv=None):
     lines = [f"Host CPU: {cpu_name()}, {args.threads} threads; `reconstruct` (true eps_r; 2 cm voxels on soil, 1 cm on "
              f"slabs; whole record) with every voxel migrated (`coarse_to_fine=False`), and coarse-to-fine (the "
              f"default) at each `refine_level`, coarse columns {refine.COARSE_WAVELENGTHS:.3g} wavelength apart "
-             f"(stride at most {refine.MAX_STRIDE}), on the 8000-trace L-pipe survey and eval_scenes seeds {args.seeds} "
+             f"(stride at most {refine.MAX_STRIDE}), the coarse pass from every m-th trace (m at most "
+             f"{refine.MAX_TRACE_STEP}: `refine.coarse_trace_step`), on the 8000-trace L-pipe survey and eval_scenes seeds {args.seeds} "
              "(10,000 traces each)", "",
              "| setting | migration s (sum) | x every voxel | refined share (mean) | completeness (mean) | "
              "position err m (mean) | false targets (sum) | envelope change where targets are (max, of peak) | "
@@ -192,10 +202,12 @@ def main(argv=None):
                      f"{np.nanmean([r['completeness'] for r in rs]):.3f} | "
                      f"{np.nanmean([r['position_m'] for r in rs]):.3f} | {sum(r['false'] for r in rs)} | "
                      f"{max(r['env_change'] for r in rs):.4f} | {sum(r['same'] for r in rs)} of {len(rs)} |")
-    lines += ["", "| scene | setting | migration s | refined share | completeness | position err m | false | targets |"
-              " envelope change | same targets |", "|---|---|---|---|---|---|---|---|---|---|"]
+    lines += ["", "| scene | setting | migration s | coarse pass: every m-th trace | refined share | completeness | "
+              "position err m | false | targets | envelope change | same targets |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['scene']} | {r['setting']} | {r['migrate_s']:.2f} | {r['fraction']:.3f} | "
+        lines.append(f"| {r['scene']} | {r['setting']} | {r['migrate_s']:.2f} | {r.get('trace_step', '-')} | "
+                     f"{r['fraction']:.3f} | "
                      f"{r['completeness']:.3f} | {r['position_m']:.3f} | {r['false']} | {r['n']} | "
                      f"{r['env_change']:.4f} | {'yes' if r['same'] else 'no'} |")
     write_table(args.out, "coarse_to_fine.md", "\n".join(lines), "eval_coarse_to_fine.py", argv)

@@ -208,6 +208,115 @@ def test_refined_voxels_equal_the_whole_image_and_the_rest_are_the_coarse_column
     assert inside[env >= 0.5 * env.max()].all()
 
 
+@pytest.mark.parametrize("step, n, want", [
+    (0.02, 3000, 2),   # a quarter of 20 cm over 2 cm along the path: 2.5 -> 2
+    (0.01, 3000, 4),   # 5, at most MAX_TRACE_STEP
+    (0.025, 3000, 2),  # exactly 2
+    (0.03, 3000, 1),   # 1.67: every trace
+    (0.06, 3000, 1),
+    (0.02, 1999, 1),   # fewer than MIN_TRACES_TO_THIN: every trace
+    (0.02, 2000, 2),
+    (0.0, 3000, 4),    # standing still
+])
+def test_coarse_trace_step_from_the_midpoints_spacing_along_the_path(step, n, want):
+    assert refine.MIN_TRACES_TO_THIN == 2000 and refine.MAX_TRACE_STEP == 4
+    s = np.arange(n) * step
+    # lines 0.5 m apart, back and forth, 0.3 m long each: the jumps between lines are a few in every hundred traces
+    per = max(int(round(0.3 / step)), 1) if step > 0 else n
+    along = s - (np.arange(n) // per) * per * step
+    mid = np.column_stack([along, 0.5 * (np.arange(n) // per), np.zeros(n)])
+    tx = mid + [0.05, 0.0, 0.0]  # the antennas 10 cm apart, across the path: their midpoint is what counts
+    rx = mid - [0.05, 0.0, 0.0]
+    assert refine.coarse_trace_step(tx, rx, 0.2) == want
+    # the same path with the antennas' offset turning with the cart: the same step
+    turn = np.column_stack([0.05 * np.cos(np.arange(n)), 0.05 * np.sin(np.arange(n)), np.zeros(n)])
+    assert refine.coarse_trace_step(mid + turn, mid - turn, 0.2) == want
+
+
+def test_a_thinned_coarse_pass_refines_as_before_and_fills_the_rest_from_every_other_trace_scaled(monkeypatch):
+    walk, data = _sphere_survey(1201)
+    tx, rx = antenna_positions(walk.positions_xyz, walk.orientations_quat_wxyz, 0.05)
+    grid = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 80, 78, 40)
+    op = BackProjection(grid, tx, rx, dt_s=12e-9 / 160, n_samples=160, eps_r=6.0, aperture_deg=45)
+    d = data.astype(np.float32)
+    whole, whole_fold = op.adjoint(d, with_fold=True)
+    calls = []
+    adjoint = BackProjection.adjoint
+
+    def spy(self, data, **kw):
+        calls.append((self.n_traces, kw.get("depth_range")))
+        return adjoint(self, data, **kw)
+
+    monkeypatch.setattr(BackProjection, "adjoint", spy)
+    img, fold, info = refine.refined_adjoint(op, d, with_fold=True, wavelength_m=0.2, level=0.15, normalize="fold",
+                                             trace_step=2)
+    made = list(calls)
+    k = info["stride"]
+    assert k == 3 and info["coarse_trace_step"] == 2 and 0 < info["refined_fraction"] < 0.5
+    # the coarse pass from every other trace (601 of 1201), its sums and fold scaled by 1201 / 601
+    cx, cy = np.arange(0, grid.nx + k - 1, k), np.arange(0, grid.ny + k - 1, k)
+    cop = BackProjection(Grid3D(0.0, 0.0, 0.02, 0.06, 0.06, 0.02, len(cx), len(cy), 40), tx[::2], rx[::2],
+                         dt_s=12e-9 / 160, n_samples=160, eps_r=6.0, aperture_deg=45)
+    cimg, cfold = cop.adjoint(d[::2], with_fold=True)
+    cimg *= 1201 / 601
+    cfold *= 1201 / 601
+    cenv = image_envelope(normalise_by_fold(cimg, cfold, "fold")[0])
+    ranges = refine.refine_ranges(cenv, k, grid, level=0.15, wavelength_m=0.2, margin_wavelengths=refine.DEPTH_MARGIN)[0]
+    kk = np.arange(grid.nd)
+    inside = (kk >= ranges[..., :1]) & (kk < ranges[..., 1:])
+    assert inside.mean() == pytest.approx(info["refined_fraction"])
+    # the coarse pass from 601 traces; the fine pass from every trace, the coarse columns' ranges included
+    assert len(made) == 2 and made[0] == (601, None) and made[1][0] == 1201
+    np.testing.assert_array_equal(made[1][1], ranges)
+    assert info["fine_fraction"] == pytest.approx(info["refined_fraction"])
+    assert inside[::k, ::k].any()
+    peak = np.abs(whole).max()
+    np.testing.assert_allclose(img[inside], whole[inside], atol=1e-5 * peak)  # the coarse columns' included
+    np.testing.assert_allclose(fold[inside], whole_fold[inside], atol=1e-5 * whole_fold.max())
+    grid_pts = np.stack(np.meshgrid(np.arange(grid.nx), np.arange(grid.ny), indexing="ij"), -1).reshape(-1, 2)
+    want = RegularGridInterpolator((cx, cy), cimg)(grid_pts).reshape(grid.shape)
+    np.testing.assert_allclose(img[~inside], want[~inside], atol=1e-5 * peak)
+    wfold = RegularGridInterpolator((cx, cy), cfold)(grid_pts).reshape(grid.shape)
+    np.testing.assert_allclose(fold[~inside], wfold[~inside], atol=1e-5 * whole_fold.max())
+    # the thinned coarse image is close to the whole one on its columns: the scaling is right (not 0.5x or 2x)
+    on = whole[::k, ::k]
+    c = cimg[: on.shape[0], : on.shape[1]]
+    assert np.abs(c - on).max() < 0.25 * peak
+    assert float(np.sum(c * on) / np.sum(on * on)) == pytest.approx(1.0, abs=0.1)
+    cf = cfold[: on.shape[0], : on.shape[1]]
+    assert float(np.median(cf[cf > 0] / whole_fold[::k, ::k][cf > 0])) == pytest.approx(1.0, abs=0.05)
+
+
+def test_a_thinned_coarse_pass_that_marks_too_much_is_completed_with_the_other_traces(monkeypatch):
+    op, d = _sphere_op(n=1201, size=60)
+    kw = dict(with_fold=True, wavelength_m=0.2, level=0.15, normalize="sqrt_fold")
+    img1, fold1, info1 = refine.refined_adjoint(op, d, trace_step=1, **kw)
+    monkeypatch.setattr(refine, "THIN_UP_TO", 1.0)
+    thin = refine.refined_adjoint(op, d, trace_step=3, **kw)[2]
+    marked = thin["refined_fraction"]
+    assert thin["coarse_trace_step"] == 3 and "thinned" not in thin and marked != info1["refined_fraction"]
+    monkeypatch.setattr(refine, "THIN_UP_TO", marked)  # exactly at the limit: kept thinned
+    assert refine.refined_adjoint(op, d, trace_step=3, **kw)[2]["coarse_trace_step"] == 3
+    monkeypatch.setattr(refine, "THIN_UP_TO", np.nextafter(marked, 0))
+    calls = []
+    adjoint = BackProjection.adjoint
+
+    def spy(self, data, **kw):
+        calls.append((self.n_traces, kw.get("depth_range")))
+        return adjoint(self, data, **kw)
+
+    monkeypatch.setattr(BackProjection, "adjoint", spy)
+    img, fold, info = refine.refined_adjoint(op, d, trace_step=3, **kw)
+    # traces 0, 3, 6, ... (401), then the other 800; then the fine pass without the coarse columns, as from every trace
+    assert [c[0] for c in calls] == [401, 800, 1201] and calls[0][1] is None and calls[1][1] is None
+    assert not calls[2][1][::info["stride"], ::info["stride"]].any()
+    assert info["coarse_trace_step"] == 1 and info["thinned"] == {"trace_step": 3, "refined_fraction": marked}
+    for key in ("refined_fraction", "refined_columns", "fine_fraction", "reference"):
+        assert info[key] == pytest.approx(info1[key], rel=1e-6), key
+    np.testing.assert_allclose(img, img1, rtol=0, atol=1e-5 * np.abs(img1).max())
+    np.testing.assert_allclose(fold, fold1, rtol=0, atol=1e-5 * fold1.max())
+
+
 def test_too_much_marked_migrates_every_voxel(monkeypatch):
     walk, data = _sphere_survey(600)
     tx, rx = antenna_positions(walk.positions_xyz, walk.orientations_quat_wxyz, 0.05)
@@ -377,10 +486,11 @@ def test_what_the_refined_pass_reports():
                                              normalize="sqrt_fold")
     wall = time.perf_counter() - t
     assert fold is None and img.shape == op.grid.shape
-    assert set(info) == {"stride", "coarse_grid", "wavelength_m", "level", "reference", "refine",
+    assert set(info) == {"stride", "coarse_grid", "coarse_trace_step", "wavelength_m", "level", "reference", "refine",
                          "depth_margin_wavelengths", "refined_fraction", "refined_columns", "fine_fraction",
                          "seconds"}
     assert info["stride"] == 2 and info["coarse_grid"] == [31, 31, 20] and info["wavelength_m"] == 0.13
+    assert info["coarse_trace_step"] == 1  # (600 traces: every one)
     assert info["level"] == 0.4 and info["depth_margin_wavelengths"] == refine.DEPTH_MARGIN
     assert 0 < info["refined_fraction"] < info["refined_columns"] < 0.7 and info["refine"] == "depth ranges"
     assert set(info["seconds"]) == {"coarse", "mark", "fine", "fill"}
@@ -390,7 +500,7 @@ def test_what_the_refined_pass_reports():
     assert same.mean() >= info["refined_fraction"]  # the refined voxels (and the coarse columns) are the whole image's
     _, _, cinfo = refine.refined_adjoint(op, d, with_fold=False, wavelength_m=0.13, level=0.4, normalize="sqrt_fold",
                                          depth_margin=None)
-    assert set(cinfo) == {"stride", "coarse_grid", "wavelength_m", "level", "reference", "refine",
+    assert set(cinfo) == {"stride", "coarse_grid", "coarse_trace_step", "wavelength_m", "level", "reference", "refine",
                           "margin_coarse_columns", "refined_fraction", "refined_columns", "fine_fraction", "seconds"}
     assert cinfo["refine"] == "whole columns" and cinfo["margin_coarse_columns"] == 0
     assert cinfo["refined_fraction"] == cinfo["refined_columns"] == pytest.approx(info["refined_columns"])
