@@ -287,16 +287,31 @@ def test_a_thinned_coarse_pass_refines_as_before_and_fills_the_rest_from_every_o
     assert float(np.median(cf[cf > 0] / whole_fold[::k, ::k][cf > 0])) == pytest.approx(1.0, abs=0.05)
 
 
-def test_a_thinned_coarse_pass_that_marks_too_much_is_completed_with_the_other_traces(monkeypatch):
+class _Clock:
+    """A clock one second further on at every reading."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def perf_counter(self):
+        self.now += 1.0
+        return self.now
+
+
+@pytest.mark.parametrize("m", [2, 3])
+def test_a_thinned_coarse_pass_that_marks_too_much_is_completed_with_the_other_traces(monkeypatch, m):
     op, d = _sphere_op(n=1201, size=60)
     kw = dict(with_fold=True, wavelength_m=0.2, level=0.15, normalize="sqrt_fold")
     img1, fold1, info1 = refine.refined_adjoint(op, d, trace_step=1, **kw)
     monkeypatch.setattr(refine, "THIN_UP_TO", 1.0)
-    thin = refine.refined_adjoint(op, d, trace_step=3, **kw)[2]
+    thin = refine.refined_adjoint(op, d, trace_step=m, **kw)[2]
     marked = thin["refined_fraction"]
-    assert thin["coarse_trace_step"] == 3 and "thinned" not in thin and marked != info1["refined_fraction"]
+    assert thin["coarse_trace_step"] == m and "thinned" not in thin and marked != info1["refined_fraction"]
     monkeypatch.setattr(refine, "THIN_UP_TO", marked)  # exactly at the limit: kept thinned
-    assert refine.refined_adjoint(op, d, trace_step=3, **kw)[2]["coarse_trace_step"] == 3
+    monkeypatch.setattr(refine, "time", _Clock())
+    kept = refine.refined_adjoint(op, d, trace_step=m, **kw)[2]
+    assert kept["coarse_trace_step"] == m
+    assert kept["seconds"] == {"coarse": 1.0, "mark": 1.0, "fine": 1.0, "fill": 1.0}  # one reading each side
     monkeypatch.setattr(refine, "THIN_UP_TO", np.nextafter(marked, 0))
     calls = []
     adjoint = BackProjection.adjoint
@@ -306,11 +321,14 @@ def test_a_thinned_coarse_pass_that_marks_too_much_is_completed_with_the_other_t
         return adjoint(self, data, **kw)
 
     monkeypatch.setattr(BackProjection, "adjoint", spy)
-    img, fold, info = refine.refined_adjoint(op, d, trace_step=3, **kw)
-    # traces 0, 3, 6, ... (401), then the other 800; then the fine pass without the coarse columns, as from every trace
-    assert [c[0] for c in calls] == [401, 800, 1201] and calls[0][1] is None and calls[1][1] is None
+    img, fold, info = refine.refined_adjoint(op, d, trace_step=m, **kw)
+    # traces 0, m, 2m, ..., then the others; then the fine pass without the coarse columns, as from every trace
+    part = len(range(0, 1201, m))
+    assert [c[0] for c in calls] == [part, 1201 - part, 1201] and calls[0][1] is None and calls[1][1] is None
     assert not calls[2][1][::info["stride"], ::info["stride"]].any()
-    assert info["coarse_trace_step"] == 1 and info["thinned"] == {"trace_step": 3, "refined_fraction": marked}
+    assert info["coarse_trace_step"] == 1 and info["thinned"] == {"trace_step": m, "refined_fraction": marked}
+    # the completion's pass and marking counted with the first ones'
+    assert info["seconds"] == {"coarse": 2.0, "mark": 2.0, "fine": 1.0, "fill": 1.0}
     for key in ("refined_fraction", "refined_columns", "fine_fraction", "reference"):
         assert info[key] == pytest.approx(info1[key], rel=1e-6), key
     np.testing.assert_allclose(img, img1, rtol=0, atol=1e-5 * np.abs(img1).max())

@@ -99,7 +99,7 @@ def coarse_trace_step(tx: np.ndarray, rx: np.ndarray, wavelength_m: float) -> in
     n = len(tx)
     if n < MIN_TRACES_TO_THIN:
         return 1
-    mid = 0.5 * (np.asarray(tx, np.float64)[:, :2] + np.asarray(rx, np.float64)[:, :2])
+    mid = 0.5 * (np.asarray(tx)[:, :2] + np.asarray(rx)[:, :2])
     step = float(np.median(np.hypot(*np.diff(mid, axis=0).T)))
     if not step > 0:  # a cart standing still: repeated traces add nothing the coarse image needs
         return MAX_TRACE_STEP
@@ -139,14 +139,12 @@ def _in_ranges(ranges: np.ndarray, nd: int) -> np.ndarray:
     return (k >= ranges[..., :1]) & (k < ranges[..., 1:])
 
 
-def _fill(coarse: np.ndarray, fine: np.ndarray, inside: np.ndarray, k: int, columns: bool = True) -> np.ndarray:
+def _fill(coarse: np.ndarray, fine: np.ndarray, inside: np.ndarray, k: int, columns: bool) -> np.ndarray:
     """The fine image: ``fine`` where ``inside`` (the refined voxels), the ``coarse`` columns themselves on the fine
-    grid's every ``k``-th column (``columns``: at every depth, the fine pass having left them out; otherwise
-    outside the refined voxels only), the coarse image interpolated across columns elsewhere."""
+    grid's every ``k``-th column (``columns``: at every depth, the fine pass having left them out; otherwise the
+    interpolation gives them outside the refined voxels), the coarse image interpolated across columns elsewhere."""
     nx, ny = fine.shape[:2]
     img = _interp(coarse, k, nx, ny)
-    if not columns:  # (the interpolation is the coarse image itself on its columns)
-        img[::k, ::k] = coarse[: -(-nx // k), : -(-ny // k)]
     np.copyto(img, fine, where=inside)
     if columns:
         img[::k, ::k] = coarse[: -(-nx // k), : -(-ny // k)]
