@@ -18,7 +18,9 @@ labels (IoU >= 0.5 each label once), a box that takes a label is worth its IoU, 
 background box) 0. A small MLP (or ``--linear``: a logistic model) of the standardised inputs predicts it; its output
 (or the score times it to a power) ranks val's boxes.
 
-Rows: val as shipped; val rescored by the model fitted to the folds' boxes; val rescored by a model fitted on val
+Rows: val as shipped; val rescored by the model fitted to the folds' boxes (its prediction as the score, the score
+times it to a power, or each picture's own score values handed out again in the order of the prediction: boxes
+reordered, the values a threshold sees per picture kept; also fitted without the refiner's quality estimate); val rescored by a model fitted on val
 itself, two-fold by picture (a diagnostic of what such features can give at best with val-like boxes: each half
 rescored by the model fitted on the other half; NOT a figure to quote for the shipped model); the label-aware oracles.
 The dumps are kept in ``--cache`` (a re-run reads them; delete it after a model changes).
@@ -108,8 +110,9 @@ def prepare_records(recs):
     return recs
 
 
-def hand_features(r):
-    """The label-free description of each box of a record (see the module's text)."""
+def hand_features(r, quality: bool = True):
+    """The label-free description of each box of a record (see the module's text); ``quality`` False: the
+    refiner's quality estimate left out (a column of zeros: ``gpr3d detect`` does not compute it for pictures)."""
     import numpy as np
 
     from gpr3d.detection.refine import pair_iou
@@ -128,22 +131,23 @@ def hand_features(r):
     over = np.where(above, iou, 0.0)
     return np.column_stack([np.log(s / (1 - s)), r["probs"], np.log(w), np.log(h), r["bpx"][:, 1] / r["n_samples"],
                             r["bpx"][:, 3] / r["n_samples"], over.max(1), (over >= 0.3).sum(1),
-                            np.log1p(rank), s / s.max(), np.clip(r["q"], 0, 1), np.full(n, np.log(n))])
+                            np.log1p(rank), s / s.max(), np.clip(r["q"], 0, 1) if quality else np.zeros(n),
+                            np.full(n, np.log(n))])
 
 
-def inputs(r, with_feats: bool):
+def inputs(r, with_feats: bool, quality: bool = True):
     import numpy as np
 
-    x = hand_features(r)
+    x = hand_features(r, quality)
     return np.hstack([x, r["feats"]]) if with_feats else x
 
 
-def fit(recs, *, with_feats: bool, linear: bool, seed: int = 0, epochs: int = 300):
+def fit(recs, *, with_feats: bool, linear: bool, seed: int = 0, epochs: int = 300, quality: bool = True):
     """A model of each box's credited IoU from its inputs: a function of a record giving each box's prediction."""
     import numpy as np
     import torch
 
-    x = torch.from_numpy(np.vstack([inputs(r, with_feats) for r in recs]).astype(np.float32))
+    x = torch.from_numpy(np.vstack([inputs(r, with_feats, quality) for r in recs]).astype(np.float32))
     y = torch.from_numpy(np.concatenate([r["credit"] for r in recs]).astype(np.float32))
     mu, sd = x.mean(0), x.std(0) + 1e-6
     torch.manual_seed(seed)
@@ -164,9 +168,20 @@ def fit(recs, *, with_feats: bool, linear: bool, seed: int = 0, epochs: int = 30
         if not len(r["bpx"]):
             return np.zeros(0)
         with torch.inference_mode():
-            z = torch.from_numpy(inputs(r, with_feats).astype(np.float32))
+            z = torch.from_numpy(inputs(r, with_feats, quality).astype(np.float32))
             return torch.sigmoid(net((z - mu) / sd)[:, 0]).numpy().astype(float)
     return predict
+
+
+def rank_mapped(scores, prediction):
+    """A picture's own score values handed out again in the order of ``prediction`` (the highest score to the box
+    predicted best, ...): the boxes are reordered, the values a threshold sees in the picture stay the same."""
+    import numpy as np
+
+    scores = np.asarray(scores, float)
+    out = np.empty_like(scores)
+    out[np.argsort(-np.asarray(prediction, float), kind="stable")] = np.sort(scores)[::-1]
+    return out
 
 
 def cached(path: Path, make):
@@ -249,6 +264,8 @@ def main(argv=None) -> None:
 
     def rescored(name, model, recs, rows):
         rows.append((f"{name}: the prediction alone", recs, [model(r) for r in recs]))
+        rows.append((f"{name}: the picture's scores rank-mapped by the prediction", recs,
+                     [rank_mapped(r["scores"], model(r)) for r in recs]))
         for w in args.powers:
             rows.append((f"{name}: score x prediction^{w:g}", recs, [r["scores"] * model(r) ** w for r in recs]))
 
@@ -258,9 +275,11 @@ def main(argv=None) -> None:
                      [r["scores"] for r in train]))
     variants = [("hand features, MLP", False, False), ("hand + refiner features, MLP", True, False),
                 ("hand features, logistic", False, True)]
-    for what, feats, linear in variants:
+    for what, feats, linear, quality in [v + (True,) for v in variants] + [
+            ("hand features without the refiner's quality, MLP", False, False, False)]:
         if train and not (feats and args.fold_refiners):  # (other refiners' features: not the shipped one's)
-            m = averaged([fit(train, with_feats=feats, linear=linear, seed=s) for s in range(args.seeds)])
+            m = averaged([fit(train, with_feats=feats, linear=linear, seed=s, quality=quality)
+                          for s in range(args.seeds)])
             rescored(f"val, fitted to the folds' train boxes ({what})", m, val, rows)
     halves = [[r for r in val if int(Path(r["name"]).stem[-1]) % 2 == k] for k in (0, 1)]
     for what, feats, linear in variants:

@@ -52,3 +52,17 @@ def test_the_overlap_features_read_only_the_boxes_scored_above():
     # a picture with no box describes none, in as many columns (the fit stacks every picture's rows)
     empty = dict(rec, bpx=BOXES[:0], scores=np.zeros(0), probs=np.zeros((0, kinds)), q=np.zeros(0))
     assert mod.hand_features(empty).shape == (0, x.shape[1])
+    # without the refiner's quality: that column zero, every other the same
+    y = mod.hand_features(rec, quality=False)
+    np.testing.assert_array_equal(y[:, kinds + 9], 0.0)
+    np.testing.assert_array_equal(np.delete(y, kinds + 9, axis=1), np.delete(x, kinds + 9, axis=1))
+
+
+def test_rank_mapping_hands_the_pictures_own_scores_out_in_the_predictions_order():
+    mod = load_script("benchmarks/pgpr_crossfit.py")
+    scores = np.array([0.9, 0.7, 0.6, 0.2])
+    got = mod.rank_mapped(scores, [0.1, 0.8, 0.5, 0.3])  # predicted best: box 1, then 2, 3, 0
+    np.testing.assert_array_equal(got, [0.2, 0.9, 0.7, 0.6])
+    assert sorted(got) == sorted(scores)  # the values a threshold sees are the picture's own
+    np.testing.assert_array_equal(mod.rank_mapped(scores, [0.5, 0.5, 0.5, 0.5]), scores)  # ties: the order kept
+    assert mod.rank_mapped(np.zeros(0), np.zeros(0)).shape == (0,)
