@@ -420,12 +420,15 @@ def extract_targets(envelope: np.ndarray, grid: Grid3D, *, threshold: float = 0.
                 jj, ss, ww = ii[run], s[run], w[ii[run]]
                 strong = ww >= end_rel * np.median(ww)
                 lo, hi = _extent(ss[strong], ww[strong], end_weight)
+                # as bright beside it as on it (a dipping layer), or plunging: no pipe; its columns stay (the first
+                # test needs only the ends' x, y: on a noisy record most runs fail it, and skip the depth fit)
+                if _side_level(val, grid, c + lo * d, c + hi * d, 2.5 * band) * lateral_contrast > ww.mean():
+                    continue
                 coef = _depth_fit(ss, D[members[jj]], ww, grid.dd)
+                if abs(coef[0]) > np.tan(np.radians(max_dip_deg)):
+                    continue
                 a = np.append(c + lo * d, coef[0] * lo + coef[1])
                 b = np.append(c + hi * d, coef[0] * hi + coef[1])
-                if abs(coef[0]) > np.tan(np.radians(max_dip_deg)) \
-                        or _side_level(val, grid, a[:2], b[:2], 2.5 * band) * lateral_contrast > ww.mean():
-                    continue  # plunging, or as bright beside it as on it (a dipping layer): no pipe; its columns stay
                 if ww.mean() >= line_contrast * threshold * peak and not _fringe(a[:2], b[:2], lines, 2 * band):
                     lines.append(Target3D("line", [a.tolist(), b.tolist()], float(min(a[2], b[2])),
                                           float(ww.mean() / peak), int(len(run))))
