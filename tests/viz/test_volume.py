@@ -70,3 +70,40 @@ def test_the_views_of_a_3d_image_are_laid_out_by_hand_with_every_label_inside_th
             e = t.get_window_extent(renderer)
             assert e.x0 >= box.x0 - 1 and e.x1 <= box.x1 + 1 and e.y0 >= box.y0 - 1 and e.y1 <= box.y1 + 1, \
                 (name, t.get_text(), e.bounds, box.bounds)
+
+
+@pytest.mark.parametrize("noise", [False, True])
+def test_a_profile_gets_its_map_and_its_migrated_section_with_the_noise_map_below(tmp_path, monkeypatch, noise):
+    from gpr3d.migration.reconstruct import ProfileFrame
+
+    saved = {}
+    monkeypatch.setattr(V, "save_figure", lambda fig, path, **kw: saved.__setitem__(path.name, (fig, kw)))
+    g = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 50, 1, 20)  # along the profile, one column across it
+    env = np.zeros(g.shape, np.float32)
+    env[20, 0, 8] = 1.0
+    env[35, 0, 3] = 0.4
+    t = Target3D(kind="point", points_xyz=[[1.0 + 0.4 * 0.6, 2.0 + 0.4 * 0.8, 0.18]], score=1.0, depth_m=0.18,
+                 extra={"along_m": [0.4]})
+    rec = Reconstruction(image=env, envelope=env, noise_map=0.5 * env[::-1] if noise else None, fold=None, grid=g,
+                         targets=[t], eps_r=9.0, config={"threshold": 0.3}, n_traces=10, timings_s={},
+                         updates_per_s=None, frame=ProfileFrame((1.0, 2.0), (0.6, 0.8)))
+    assert V.reconstruction_figures(rec, tmp_path) == ["front.png", "top.png", "view3d.png"]
+    fig, kw = saved["front.png"]
+    panels = [ax for ax in fig.axes if ax.images]
+    assert len(panels) == (2 if noise else 1) and kw.get("tight") is not False  # a profile's figures keep tight_layout
+    np.testing.assert_array_equal(panels[0].images[0].get_array(), env[:, 0, :].T)
+    if noise:
+        np.testing.assert_array_equal(panels[1].images[0].get_array(), rec.noise_map[:, 0, :].T)
+        assert "noise map" in panels[1].get_title()
+    # the target at its place along the profile and depth, its name beside it
+    mark = panels[0].lines[0].get_xydata()
+    np.testing.assert_allclose(mark, [[0.4, 0.18]], atol=1e-12)
+    # the map: the profile's ends in the world (from the frame), the target in the world
+    top = saved["top.png"][0].axes[0]
+    np.testing.assert_allclose(top.lines[0].get_xydata(), [[1.0, 2.0], [1.0 + 0.98 * 0.6, 2.0 + 0.98 * 0.8]],
+                               atol=1e-12)
+    np.testing.assert_allclose(top.lines[1].get_xydata(), [[1.24, 2.32]], atol=1e-12)
+    from gpr3d.viz._figures import pyplot
+
+    for f, _ in saved.values():
+        pyplot().close(f)
