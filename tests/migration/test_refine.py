@@ -233,13 +233,8 @@ def test_coarse_trace_step_from_the_midpoints_spacing_along_the_path(step, n, wa
     assert refine.coarse_trace_step(mid + turn, mid - turn, 0.2) == want
 
 
-def test_a_thinned_coarse_pass_refines_as_before_and_fills_the_rest_from_every_other_trace_scaled(monkeypatch):
-    walk, data = _sphere_survey(1201)
-    tx, rx = antenna_positions(walk.positions_xyz, walk.orientations_quat_wxyz, 0.05)
-    grid = Grid3D(0.0, 0.0, 0.02, 0.02, 0.02, 0.02, 80, 78, 40)
-    op = BackProjection(grid, tx, rx, dt_s=12e-9 / 160, n_samples=160, eps_r=6.0, aperture_deg=45)
-    d = data.astype(np.float32)
-    whole, whole_fold = op.adjoint(d, with_fold=True)
+def _spy_adjoints(monkeypatch) -> list:
+    """Every BackProjection.adjoint call from now on, as ``(number of traces, depth_range)``."""
     calls = []
     adjoint = BackProjection.adjoint
 
@@ -248,6 +243,14 @@ def test_a_thinned_coarse_pass_refines_as_before_and_fills_the_rest_from_every_o
         return adjoint(self, data, **kw)
 
     monkeypatch.setattr(BackProjection, "adjoint", spy)
+    return calls
+
+
+def test_a_thinned_coarse_pass_refines_as_before_and_fills_the_rest_from_every_other_trace_scaled(monkeypatch):
+    op, d = _sphere_op(n=1201, size=62, nd=40)
+    grid, tx, rx = op.grid, op.tx, op.rx
+    whole, whole_fold = op.adjoint(d, with_fold=True)
+    calls = _spy_adjoints(monkeypatch)
     img, fold, info = refine.refined_adjoint(op, d, with_fold=True, wavelength_m=0.2, level=0.15, normalize="fold",
                                              trace_step=2)
     made = list(calls)
@@ -255,7 +258,7 @@ def test_a_thinned_coarse_pass_refines_as_before_and_fills_the_rest_from_every_o
     assert k == 3 and info["coarse_trace_step"] == 2 and 0 < info["refined_fraction"] < 0.5
     # the coarse pass from every other trace (601 of 1201), its sums and fold scaled by 1201 / 601
     cx, cy = np.arange(0, grid.nx + k - 1, k), np.arange(0, grid.ny + k - 1, k)
-    cop = BackProjection(Grid3D(0.0, 0.0, 0.02, 0.06, 0.06, 0.02, len(cx), len(cy), 40), tx[::2], rx[::2],
+    cop = BackProjection(Grid3D(grid.x0, grid.y0, 0.02, 0.06, 0.06, 0.02, len(cx), len(cy), 40), tx[::2], rx[::2],
                          dt_s=12e-9 / 160, n_samples=160, eps_r=6.0, aperture_deg=45)
     cimg, cfold = cop.adjoint(d[::2], with_fold=True)
     cimg *= 1201 / 601
@@ -313,14 +316,7 @@ def test_a_thinned_coarse_pass_that_marks_too_much_is_completed_with_the_other_t
     assert kept["coarse_trace_step"] == m
     assert kept["seconds"] == {"coarse": 1.0, "mark": 1.0, "fine": 1.0, "fill": 1.0}  # one reading each side
     monkeypatch.setattr(refine, "THIN_UP_TO", np.nextafter(marked, 0))
-    calls = []
-    adjoint = BackProjection.adjoint
-
-    def spy(self, data, **kw):
-        calls.append((self.n_traces, kw.get("depth_range")))
-        return adjoint(self, data, **kw)
-
-    monkeypatch.setattr(BackProjection, "adjoint", spy)
+    calls = _spy_adjoints(monkeypatch)
     img, fold, info = refine.refined_adjoint(op, d, trace_step=m, **kw)
     # traces 0, m, 2m, ..., then the others; then the fine pass without the coarse columns, as from every trace
     part = len(range(0, 1201, m))
