@@ -40,9 +40,10 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from _report import cpu_name, write_table  # noqa: E402
 
 
-def dump(det, records) -> list[dict]:
-    """Per record: the detector's final boxes (seconds, cut to the record), scores, kind shares, and the refiner's
-    quality and penultimate features at each final box (the mean of its two mirror looks), the labels."""
+def dump(det, records, threshold: float = 0.0) -> list[dict]:
+    """Per record: the detector's final boxes at or above ``threshold`` (seconds, cut to the record), scores, kind
+    shares, and the refiner's quality and penultimate features at each final box (the mean of its two mirror looks),
+    the labels."""
     import numpy as np
 
     from pgpr_rescoring import feature_look
@@ -55,7 +56,7 @@ def dump(det, records) -> list[dict]:
     kinds = det.kinds
     out = []
     for survey, lab in records:
-        res = det.detect(survey, score_threshold=0.0)
+        res = det.detect(survey, score_threshold=threshold)
         tg = res["targets"]
         boxes = np.array([t["box"] for t in tg], float).reshape(-1, 4)
         probs = np.array([[t["kind_shares"][k] for k in kinds] for t in tg], float).reshape(-1, len(kinds))
@@ -211,6 +212,9 @@ def main(argv=None) -> None:
     p.add_argument("--powers", nargs="+", type=float, default=[1.0], metavar="W",
                    help="rows also rank by score x prediction^W for these W (0..8); the prediction alone always")
     p.add_argument("--seeds", type=int, default=3, help="models fitted from this many seeds, predictions averaged")
+    p.add_argument("--threshold", type=float, default=0.0,
+                   help="every detector keeps (and refines) only the boxes scored at or above this, as gpr3d detect "
+                        "does at its --score (default 0: every box)")
     p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
     p.add_argument("--name", default="pgpr_crossfit.md")
     p.add_argument("--cache", default=str(ROOT / "build" / "pgpr_crossfit"), help="where the dumped boxes are kept")
@@ -219,6 +223,8 @@ def main(argv=None) -> None:
         p.error(f"--powers must lie in 0..8, got {' '.join(f'{w:g}' for w in args.powers)}")
     if not 1 <= args.seeds <= 20:
         p.error(f"--seeds must lie in 1..20, got {args.seeds}")
+    if not 0 <= args.threshold < 1:
+        p.error(f"--threshold must lie in [0, 1), got {args.threshold:g}")
     for part in ("train", "val"):
         if not (Path(args.pgpr) / part).is_dir():
             p.error(f"--pgpr {args.pgpr}: no {part}/ folder in it (P-GPR's train/ and val/)")
@@ -247,16 +253,18 @@ def main(argv=None) -> None:
     cache = Path(args.cache)
     det = detector("default")
     kinds = det.kinds
-    val = prepare_records(cached(cache / f"val_{tag('default')}.pkl",
-                                 lambda: dump(det, pgpr_records(args.pgpr, "val"))))
+    at = f"_at{args.threshold:g}" if args.threshold else ""  # (the score-0 dumps keep their names)
+    val = prepare_records(cached(cache / f"val_{tag('default')}{at}.pkl",
+                                 lambda: dump(det, pgpr_records(args.pgpr, "val"), args.threshold)))
     train = []
     if args.folds:
         refs = args.fold_refiners or [None, "auto", None, "auto"]
         for k, (spec, held) in enumerate(zip(args.folds, ("*[13579].png", "*[02468].png"))):  # the half it has not seen
             ref, fine = refs[2 * k : 2 * k + 2]
             fd = detector(spec, ref, fine)
-            train += prepare_records(cached(cache / f"train_{tag(spec, ref, None if fine == 'auto' else fine)}.pkl",
-                                            lambda fd=fd, held=held: dump(fd, pgpr_records(args.pgpr, "train", held))))
+            train += prepare_records(cached(cache / f"train_{tag(spec, ref, None if fine == 'auto' else fine)}{at}.pkl",
+                                            lambda fd=fd, held=held: dump(fd, pgpr_records(args.pgpr, "train", held),
+                                                                          args.threshold)))
     dump_s = time.perf_counter() - t0
 
     def averaged(fitted):
@@ -298,7 +306,8 @@ def main(argv=None) -> None:
              + (f"; of the fold detectors on the train halves they did not see ({len(train)} pictures, {n_train} "
                 f"boxes, "
                 f"{np.mean(np.concatenate([r['credit'] for r in train]) > 0):.0%} credited)" if train else "")
-             + f"; every score; host CPU {cpu_name()}; dumping {dump_s:.0f} s", "",
+             + (f"; scores at or above {args.threshold:g} only" if args.threshold else "; every score")
+             + f"; host CPU {cpu_name()}; dumping {dump_s:.0f} s", "",
              "| ranking | class-averaged mAP@0.5 | mAP@0.75 | mAP@[.5:.95] | AR@100 | recall@0.5 | class-agnostic "
              "mAP@[.5:.95] |", "|---|---|---|---|---|---|---|"]
     for name, recs, scores in rows:

@@ -10,6 +10,7 @@ from tests.tools._script import load_script, refusal
 @pytest.mark.parametrize("args, line", [
     (["--powers", "9"], "--powers must lie in 0..8, got 9"),
     (["--seeds", "0"], "--seeds must lie in 1..20, got 0"),
+    (["--threshold", "1"], "--threshold must lie in [0, 1), got 1"),
     (["--pgpr", "{tmp}"], "--pgpr {tmp}: no train/ folder in it (P-GPR's train/ and val/)"),
     (["--fold-refiners", "a", "b", "c", "d"],
      "--fold-refiners go with --folds (the detectors whose boxes they refine)"),
