@@ -54,6 +54,14 @@ def test_without_a_worker_the_job_runs_here(monkeypatch):
 
 
 @needs_fork
+def test_a_job_that_does_not_pickle_runs_here_and_the_worker_stays():
+    with W.FigureWorker() as w:
+        job = w.submit(lambda x: (os.getpid(), x), 3)  # a lambda: no pickle
+        assert job() == (os.getpid(), 3) and w.alive and w.answered == 0
+        assert w.submit(_pid_and, 4)() == (w._proc.pid, 4)
+
+
+@needs_fork
 def test_what_the_job_raises_in_the_worker_is_raised_here():
     with W.FigureWorker() as w:
         job = w.submit(_raise, "no such colour map")

@@ -121,6 +121,8 @@ class FigureWorker:
                 self._busy = True
             except (OSError, ValueError):  # the worker has gone
                 self.close()
+            except Exception:  # what does not pickle (nothing was sent): drawn here, the worker kept
+                pass
             else:
                 return lambda: self._wait(fn, args)
         return lambda: fn(*args)
