@@ -28,7 +28,6 @@ The dumps are kept in ``--cache`` (a re-run reads them; delete it after a model 
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import pickle
 import sys
@@ -197,12 +196,10 @@ def cached(path: Path, make):
 
 
 def main(argv=None) -> None:
-    from eval_pgpr import PGPR_DEFAULT, load, pgpr_records
-    from pgpr_rescoring import metrics  # (class-averaged as gpr3d.detection.evaluate scores them)
+    from eval_pgpr import load, pgpr_records
+    from pgpr_rescoring import add_outputs, check_pgpr, parser, ranking_table
 
-    p = argparse.ArgumentParser(prog="pgpr_crossfit.py", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--pgpr", default=str(PGPR_DEFAULT), help="P-GPR folder (train/ and val/)")
+    p = parser("pgpr_crossfit", __doc__)
     p.add_argument("--folds", nargs=2, metavar=("EVEN", "ODD"), default=None,
                    help="weights of the detectors fine-tuned on P-GPR train's even- and odd-numbered pictures")
     p.add_argument("--fold-refiners", nargs=4, metavar=("EVEN", "EVEN_FINE", "ODD", "ODD_FINE"), default=None,
@@ -215,9 +212,7 @@ def main(argv=None) -> None:
     p.add_argument("--threshold", type=float, default=0.0,
                    help="every detector keeps (and refines) only the boxes scored at or above this, as gpr3d detect "
                         "does at its --score (default 0: every box)")
-    p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
-    p.add_argument("--name", default="pgpr_crossfit.md")
-    p.add_argument("--cache", default=str(ROOT / "build" / "pgpr_crossfit"), help="where the dumped boxes are kept")
+    add_outputs(p, "pgpr_crossfit")
     args = p.parse_args(argv)
     if any(not 0 <= w <= 8 for w in args.powers):
         p.error(f"--powers must lie in 0..8, got {' '.join(f'{w:g}' for w in args.powers)}")
@@ -225,9 +220,7 @@ def main(argv=None) -> None:
         p.error(f"--seeds must lie in 1..20, got {args.seeds}")
     if not 0 <= args.threshold < 1:
         p.error(f"--threshold must lie in [0, 1), got {args.threshold:g}")
-    for part in ("train", "val"):
-        if not (Path(args.pgpr) / part).is_dir():
-            p.error(f"--pgpr {args.pgpr}: no {part}/ folder in it (P-GPR's train/ and val/)")
+    check_pgpr(p, args.pgpr)
     if args.fold_refiners and not args.folds:
         p.error("--fold-refiners go with --folds (the detectors whose boxes they refine)")
     for flag, files in (("--folds", args.folds), ("--fold-refiners", args.fold_refiners)):
@@ -307,14 +300,7 @@ def main(argv=None) -> None:
                 f"boxes, "
                 f"{np.mean(np.concatenate([r['credit'] for r in train]) > 0):.0%} credited)" if train else "")
              + (f"; scores at or above {args.threshold:g} only" if args.threshold else "; every score")
-             + f"; host CPU {cpu_name()}; dumping {dump_s:.0f} s", "",
-             "| ranking | class-averaged mAP@0.5 | mAP@0.75 | mAP@[.5:.95] | AR@100 | recall@0.5 | class-agnostic "
-             "mAP@[.5:.95] |", "|---|---|---|---|---|---|---|"]
-    for name, recs, scores in rows:
-        m = metrics(recs, kinds, scores)
-        lines.append(f"| {name} | {m['mAP@0.5']:.3f} | {m['mAP@0.75']:.3f} | {m['mAP']:.3f} | {m['AR@100']:.3f} | "
-                     f"{m['recall@0.5']:.3f} | {m['agnostic']:.3f} |")
-        print(lines[-1], flush=True)
+             + f"; host CPU {cpu_name()}; dumping {dump_s:.0f} s", ""] + ranking_table(rows, kinds, echo=True)
     write_table(args.out, args.name, "\n".join(lines), "pgpr_crossfit.py", argv)
 
 

@@ -104,6 +104,21 @@ def metrics(recs, kinds, scores) -> dict:
     return m
 
 
+def ranking_table(rows, kinds, echo: bool = False) -> list[str]:
+    """The markdown table of ``rows`` (``(name, records, scores per record)``): class-averaged mAP@0.5, @0.75,
+    @[.5:.95], AR@100, recall@0.5 and class-agnostic mAP@[.5:.95] of each ranking (each row printed as it comes
+    with ``echo``)."""
+    lines = ["| ranking | class-averaged mAP@0.5 | mAP@0.75 | mAP@[.5:.95] | AR@100 | recall@0.5 | class-agnostic "
+             "mAP@[.5:.95] |", "|---|---|---|---|---|---|---|"]
+    for name, recs, scores in rows:
+        m = metrics(recs, kinds, scores)
+        lines.append(f"| {name} | {m['mAP@0.5']:.3f} | {m['mAP@0.75']:.3f} | {m['mAP']:.3f} | {m['AR@100']:.3f} | "
+                     f"{m['recall@0.5']:.3f} | {m['agnostic']:.3f} |")
+        if echo:
+            print(lines[-1], flush=True)
+    return lines
+
+
 def fit(recs, *, with_score: bool, l2: float = 1e-3):
     """A logistic model of each box's IoU from its features (and its score's logit): a function of a record
     giving each box's predicted IoU (the mean over its two mirror looks)."""
@@ -141,23 +156,41 @@ def fit(recs, *, with_score: bool, l2: float = 1e-3):
     return predict
 
 
-def main(argv=None) -> None:
-    from eval_pgpr import PGPR_DEFAULT, pgpr_records
+def parser(script: str, doc: str) -> argparse.ArgumentParser:
+    """The P-GPR rescoring scripts' parser, with its ``--pgpr`` folder (see :func:`add_outputs`, :func:`check_pgpr`)."""
+    from eval_pgpr import PGPR_DEFAULT
 
-    p = argparse.ArgumentParser(prog="pgpr_rescoring.py", description=__doc__,
+    p = argparse.ArgumentParser(prog=f"{script}.py", description=doc,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--pgpr", default=str(PGPR_DEFAULT), help="P-GPR folder (train/ and val/)")
+    return p
+
+
+def add_outputs(p: argparse.ArgumentParser, script: str) -> None:
+    """``--out``, ``--name`` (``SCRIPT.md``) and ``--cache`` (``build/SCRIPT``, where the dumped boxes are kept)."""
+    p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
+    p.add_argument("--name", default=f"{script}.md")
+    p.add_argument("--cache", default=str(ROOT / "build" / script), help="where the dumped boxes are kept")
+
+
+def check_pgpr(p: argparse.ArgumentParser, folder) -> None:
+    """One line from ``p`` where ``folder`` lacks P-GPR's train/ or val/."""
+    for part in ("train", "val"):
+        if not (Path(folder) / part).is_dir():
+            p.error(f"--pgpr {folder}: no {part}/ folder in it (P-GPR's train/ and val/)")
+
+
+def main(argv=None) -> None:
+    from eval_pgpr import pgpr_records
+
+    p = parser("pgpr_rescoring", __doc__)
     p.add_argument("--weights", nargs="+", type=float, default=[0.5, 1.0, 2.0], metavar="W",
                    help="the powers W of score x q^W tried (0..8)")
-    p.add_argument("--out", default=str(ROOT / "benchmarks" / "results"))
-    p.add_argument("--name", default="pgpr_rescoring.md")
-    p.add_argument("--cache", default=str(ROOT / "build" / "pgpr_rescoring"), help="where the dumped boxes are kept")
+    add_outputs(p, "pgpr_rescoring")
     args = p.parse_args(argv)
     if any(not 0 <= w <= 8 for w in args.weights):
         p.error(f"--weights must lie in 0..8, got {' '.join(f'{w:g}' for w in args.weights)}")
-    for part in ("train", "val"):
-        if not (Path(args.pgpr) / part).is_dir():
-            p.error(f"--pgpr {args.pgpr}: no {part}/ folder in it (P-GPR's train/ and val/)")
+    check_pgpr(p, args.pgpr)
     import numpy as np
 
     from gpr3d.detection.infer import load_detector
@@ -196,13 +229,7 @@ def main(argv=None) -> None:
     share = [float(np.mean(np.concatenate([r["iou"] for r in d]) >= 0.5)) for d in (train, val)]
     lines = [f"P-GPR: the shipped detector and refiner's boxes at every score, train {len(train)} pictures ({n_train} "
              f"boxes, {share[0]:.0%} at IoU >= 0.5), val {len(val)} ({n_val} boxes, {share[1]:.0%}); host CPU "
-             f"{cpu_name()}; dumping {dump_s:.0f} s", "",
-             "| ranking | class-averaged mAP@0.5 | mAP@0.75 | mAP@[.5:.95] | AR@100 | recall@0.5 | class-agnostic "
-             "mAP@[.5:.95] |", "|---|---|---|---|---|---|---|"]
-    for name, recs, scores in rows:
-        m = metrics(recs, kinds, scores)
-        lines.append(f"| {name} | {m['mAP@0.5']:.3f} | {m['mAP@0.75']:.3f} | {m['mAP']:.3f} | {m['AR@100']:.3f} | "
-                     f"{m['recall@0.5']:.3f} | {m['agnostic']:.3f} |")
+             f"{cpu_name()}; dumping {dump_s:.0f} s", ""] + ranking_table(rows, kinds)
     write_table(args.out, args.name, "\n".join(lines), "pgpr_rescoring.py", argv)
 
 

@@ -301,6 +301,16 @@ class _Clock:
         return self.now
 
 
+@pytest.mark.parametrize("step", [0, -2, 1.5, True, "2"])
+def test_a_trace_step_that_is_no_whole_number_from_1_is_named(step):
+    op, d = _sphere_op(n=50, size=20, nd=10)
+    with pytest.raises(InvalidDataError) as err:
+        refine.refined_adjoint(op, d, with_fold=False, wavelength_m=0.2, level=0.15, normalize="fold",
+                               trace_step=step)
+    assert str(err.value) == ("trace_step must be a whole number >= 1 (every how many traces the coarse pass reads) "
+                              f"or None, got {step!r}")
+
+
 @pytest.mark.parametrize("m", [2, 3])
 def test_a_thinned_coarse_pass_that_marks_too_much_is_completed_with_the_other_traces(monkeypatch, m):
     op, d = _sphere_op(n=1201, size=60)

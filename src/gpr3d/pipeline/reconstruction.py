@@ -186,14 +186,12 @@ def write_result(result, out, *, source: str = "", figures=None) -> list:
     from gpr3d.core.timing import stage
     from gpr3d.migration.reconstruct import write_reconstruction
     from gpr3d.viz.volume import draw_figures, figure_inputs
+    from gpr3d.viz.worker import FigureWorker
 
+    worker = figures if figures is not None else FigureWorker(enabled=False)  # (no worker: drawn here, when asked)
     with stage("figures"):  # (with a worker: the views taken and handed over; then the wait below)
-        drawn = (figures.submit if figures is not None else _here)(draw_figures, figure_inputs(result), Path(out))
+        drawn = worker.submit(draw_figures, figure_inputs(result), Path(out))
     write_reconstruction(result, out, source=source)
     with stage("figures"):
         drawn()
     return sorted(p.name for p in Path(out).iterdir())
-
-
-def _here(fn, *args):
-    return lambda: fn(*args)
