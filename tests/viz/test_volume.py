@@ -107,3 +107,68 @@ def test_a_profile_gets_its_map_and_its_migrated_section_with_the_noise_map_belo
 
     for f, _ in saved.values():
         pyplot().close(f)
+
+
+def test_the_3d_view_draws_every_point_once_in_the_colour_of_its_bin_dimmest_first(tmp_path, monkeypatch):
+    import matplotlib as mpl
+
+    saved = {}
+    monkeypatch.setattr(V, "save_figure", lambda fig, path, **kw: saved.__setitem__(path.name, fig))
+    rng = np.random.default_rng(3)
+    pts = rng.random((500, 3))
+    vals = rng.random(500) * 2.0 + 1.0
+    fi = V.figure_inputs(_rec(20))
+    fi.points, fi.values, fi.targets = pts, vals, []
+    V.draw_figures(fi, tmp_path, split=False)
+    ax = saved["view3d.png"].axes[0]
+    lines = ax.get_lines()
+    assert 20 < len(lines) <= V.COLOUR_BINS
+    cm = mpl.colormaps["hot"]
+    drawn, lows = [], []
+    lo, hi = vals.min(), vals.max()
+    for ln in lines:
+        x, y, z = (np.asarray(a) for a in ln.get_data_3d())
+        got = np.column_stack([x, y, z])
+        idx = [int(np.flatnonzero((pts == p).all(axis=1))[0]) for p in got]
+        drawn += idx
+        v = vals[idx]
+        b = min(int(np.floor((v.min() - lo) / (hi - lo) * V.COLOUR_BINS)), V.COLOUR_BINS - 1)  # its dimmest one's
+        assert np.all((v - lo) / (hi - lo) * V.COLOUR_BINS < b + 1 + 1e-9), "one bin per line"
+        np.testing.assert_allclose(mpl.colors.to_rgba(ln.get_color()), cm((b + 0.5) / V.COLOUR_BINS))
+        assert ln.get_alpha() == 0.5 and ln.get_marker() == "o"
+        lows.append(v.min())
+    assert sorted(drawn) == list(range(500))  # every point once
+    assert lows == sorted(lows)  # the brightest drawn last, on top
+    bar = saved["view3d.png"].axes[1]  # the colour bar spans the values
+    np.testing.assert_allclose(bar.get_ylim(), (lo, hi))
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="no fork here")
+@pytest.mark.parametrize("fails", [False, True])
+def test_a_split_drawing_writes_the_same_files_and_draws_here_what_its_fork_did_not(tmp_path, monkeypatch, fails):
+    import os
+
+    from gpr3d.viz import worker as W
+
+    fi = V.figure_inputs(_rec(40))
+    V.draw_figures(fi, tmp_path / "one", split=False)
+    me, here = os.getpid(), []
+    real = V._view3d
+
+    def view3d(fi, out):
+        if os.getpid() != me and fails:
+            raise RuntimeError("the forked drawing failed")
+        if os.getpid() == me:
+            here.append(out)
+        real(fi, out)
+
+    monkeypatch.setattr(V, "_view3d", view3d)
+    assert V.draw_figures(fi, tmp_path / "split", split=True) == ["front.png", "top.png", "view3d.png"]
+    assert here == ([tmp_path / "split"] if fails else [])  # drawn by the fork, or here when it failed
+    for name in ("top.png", "front.png", "view3d.png"):
+        assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "split" / name).read_bytes(), name
+    monkeypatch.setattr(W, "fork_job", lambda *a: None)  # no process to be had: drawn here
+    here.clear()
+    V.draw_figures(fi, tmp_path / "nofork", split=True)
+    assert here == [tmp_path / "nofork"]
+    assert (tmp_path / "nofork" / "view3d.png").read_bytes() == (tmp_path / "one" / "view3d.png").read_bytes()

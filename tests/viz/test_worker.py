@@ -120,3 +120,34 @@ def test_the_result_folder_holds_the_same_figures_drawn_in_the_worker_or_here(tm
     assert here == there and {"top.png", "front.png", "view3d.png"} <= set(here)
     for name in ("top.png", "front.png", "view3d.png"):
         assert (tmp_path / "here" / name).read_bytes() == (tmp_path / "there" / name).read_bytes(), name
+
+
+def _touch(path, pid_file):
+    path.write_text("written")
+    pid_file.write_text(str(os.getpid()))
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork here")
+def test_a_forked_job_tells_whether_it_returned():
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as d:
+        d = Path(d)
+        pid = W.fork_job(_touch, d / "out", d / "pid")
+        assert pid is not None and W.wait_job(pid) is True
+        assert (d / "out").read_text() == "written" and int((d / "pid").read_text()) == pid != os.getpid()
+    assert W.wait_job(W.fork_job(_raise, "no")) is False  # raised: said by its exit status, not raised in it
+    assert W.wait_job(W.fork_job(_die_unless, os.getpid())) is False  # (exit status 3)
+    assert W.in_worker() is False
+
+
+def _in_worker():
+    return W.in_worker()
+
+
+@needs_fork
+def test_the_worker_knows_it_is_the_worker():
+    with W.FigureWorker() as w:
+        assert w.submit(_in_worker)() is True
+    assert W.in_worker() is False

@@ -11,12 +11,64 @@ from __future__ import annotations
 import os
 import sys
 
-__all__ = ["FigureWorker"]
+__all__ = ["FigureWorker", "fork_job", "in_worker", "wait_job"]
 
 #: the worker's niceness, added to the command's (on a 2-core host it takes the core the reading leaves idle, and its
 #: import of matplotlib is over before the migration starts, where 19 spread it into the migration; with one core,
 #: the command comes first)
 NICE = 5
+
+_IN_WORKER = False  # True in the worker's own process (set by _serve)
+
+
+def in_worker() -> bool:
+    """Whether this process is a :class:`FigureWorker`'s (a process with no thread of its own, safe to fork)."""
+    return _IN_WORKER
+
+
+def fork_job(fn, *args) -> int | None:
+    """Run ``fn(*args)`` in a process forked for it (for a job whose result is a file it writes); returns the
+    process id for :func:`wait_job`, or None where no process could be forked (nothing was run). Fork only a
+    process that runs no thread (:func:`in_worker`); the forked one ends with this one."""
+    if not hasattr(os, "fork"):
+        return None
+    try:
+        pid = os.fork()
+    except OSError:
+        return None
+    if pid:
+        return pid
+    code = 1  # pragma: no cover - runs in the forked process (its effects are tested from the parent)
+    try:  # pragma: no cover
+        _die_with_parent()
+        fn(*args)
+        code = 0
+    finally:  # pragma: no cover - never back into the caller's stack: its exit status says how it went
+        os._exit(code)
+
+
+def wait_job(pid: int) -> bool:
+    """Wait for the process of :func:`fork_job`; True where ``fn`` returned, False where it raised or was killed."""
+    while True:
+        try:
+            _, status = os.waitpid(pid, 0)
+        except InterruptedError:  # pragma: no cover - retried by Python itself since 3.5
+            continue
+        except ChildProcessError:  # (already waited for)
+            return False
+        return os.waitstatus_to_exitcode(status) == 0
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the forked process
+    """Linux: this process is killed when the one that forked it ends (a worker stopped by its command)."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+        import signal
+
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
 
 
 def _serve(conn, theirs) -> None:  # pragma: no cover - runs in the forked child (its effects are tested from the parent)
@@ -25,6 +77,8 @@ def _serve(conn, theirs) -> None:  # pragma: no cover - runs in the forked child
     that end, as the fork copied it, closed here at once)."""
     import signal
 
+    global _IN_WORKER
+    _IN_WORKER = True
     theirs.close()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C is the command's to handle; it ends this one
     try:
