@@ -1,0 +1,29 @@
+"""references/detection/pseudo_labels.py: a box written as a YOLO line reads back as the same box in traces and
+seconds (the inverse of read_yolo), under P-GPR's class of its kind."""
+
+import numpy as np
+import pytest
+
+from tests.tools._script import load_script
+
+
+@pytest.mark.parametrize("kind, name", [("rebar", "rebar"), ("steel_pipe", "rebar"), ("pvc_pipe", "pvc_pipe"),
+                                        ("void", "pvc_pipe")])
+def test_a_box_written_as_a_yolo_line_reads_back_the_same(tmp_path, kind, name):
+    from PIL import Image
+
+    from gpr3d.io.yolo import read_yolo
+
+    mod = load_script("references/detection/pseudo_labels.py")
+    (tmp_path / "images").mkdir()
+    (tmp_path / "labels").mkdir()
+    Image.fromarray(np.random.default_rng(0).integers(0, 255, (256, 300), dtype=np.uint8)).save(
+        tmp_path / "images" / "a.png")
+    dt = 3.125e-11
+    boxes = [[12.0, 40 * dt, 87.5, 130 * dt], [0.0, 0.0, 299.0, 255 * dt]]
+    (tmp_path / "labels" / "a.txt").write_text("".join(mod.yolo_line(b, kind, 300, 256, dt) + "\n" for b in boxes))
+    (survey, lab), = read_yolo(tmp_path, **mod.PGPR)
+    assert (survey.n_traces, survey.n_samples) == (300, 256)
+    for got, want in zip(lab["labels"], boxes):
+        np.testing.assert_allclose(np.array(got["box"]) / [1, dt, 1, dt], np.array(want) / [1, dt, 1, dt], atol=1e-3)
+        assert got["kind"] == name
