@@ -151,3 +151,27 @@ def test_the_worker_knows_it_is_the_worker():
     with W.FigureWorker() as w:
         assert w.submit(_in_worker)() is True
     assert W.in_worker() is False
+
+
+def _fork_a_hang():
+    return W.fork_job(time.sleep, 60)
+
+
+def _gone(pid):
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] == "Z"  # (ended, not yet reaped)
+    except OSError:
+        return True
+
+
+@needs_fork
+def test_a_process_the_worker_forked_ends_with_the_worker():
+    with W.FigureWorker() as w:
+        pid = w.submit(_fork_a_hang)()
+        assert isinstance(pid, int) and not _gone(pid)
+    for _ in range(100):  # the worker ended with its block; what it forked follows it within moments
+        if _gone(pid):
+            break
+        time.sleep(0.05)
+    assert _gone(pid)

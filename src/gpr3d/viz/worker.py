@@ -32,6 +32,7 @@ def fork_job(fn, *args) -> int | None:
     process that runs no thread (:func:`in_worker`); the forked one ends with this one."""
     if not hasattr(os, "fork"):
         return None
+    parent = os.getpid()
     try:
         pid = os.fork()
     except OSError:
@@ -40,7 +41,7 @@ def fork_job(fn, *args) -> int | None:
         return pid
     code = 1  # pragma: no cover - runs in the forked process (its effects are tested from the parent)
     try:  # pragma: no cover
-        _die_with_parent()
+        _die_with_parent(parent)
         fn(*args)
         code = 0
     finally:  # pragma: no cover - never back into the caller's stack: its exit status says how it went
@@ -59,8 +60,9 @@ def wait_job(pid: int) -> bool:
         return os.waitstatus_to_exitcode(status) == 0
 
 
-def _die_with_parent() -> None:  # pragma: no cover - runs in the forked process
-    """Linux: this process is killed when the one that forked it ends (a worker stopped by its command)."""
+def _die_with_parent(parent: int) -> None:  # pragma: no cover - runs in the forked process
+    """Linux: this process is killed when ``parent``, the one that forked it, ends (a worker stopped by its command),
+    and ends at once if it has already ended."""
     if sys.platform.startswith("linux"):
         import ctypes
         import signal
@@ -69,6 +71,8 @@ def _die_with_parent() -> None:  # pragma: no cover - runs in the forked process
             ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # PR_SET_PDEATHSIG
         except (OSError, AttributeError):
             pass
+    if os.getppid() != parent:  # (ended before the line above took hold)
+        os._exit(1)
 
 
 def _serve(conn, theirs) -> None:  # pragma: no cover - runs in the forked child (its effects are tested from the parent)
