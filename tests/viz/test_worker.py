@@ -175,3 +175,13 @@ def test_a_process_the_worker_forked_ends_with_the_worker():
             break
         time.sleep(0.05)
     assert _gone(pid)
+
+
+@needs_fork
+def test_an_idle_worker_is_ended_at_once_not_waited_for():
+    import signal
+
+    with W.FigureWorker() as w:
+        assert w.submit(_pid_and, 1)()[1] == 1
+        proc = w._proc
+    assert proc.exitcode == -signal.SIGKILL  # killed idle, not left to wind matplotlib down
