@@ -202,3 +202,23 @@ def test_the_detections_key_follows_the_shipped_models_files(tmp_path, monkeypat
     own = run._models_key(RunConfig(input="x.h5", out=str(tmp_path / "r"), weights=str(mine)))
     assert own["weights"] == run._sha(mine) and own["refiner"] == "auto"  # no refiner with other weights
     assert run._models_key(RunConfig(input="x.h5", out=str(tmp_path / "r"), refiner="none"))["refiner"] == "none"
+
+
+def test_a_figure_worker_draws_the_reconstruction_figures_of_a_run(done_run, tmp_path):
+    import shutil
+
+    from gpr3d.viz.worker import FigureWorker
+
+    cfg0, out0, summary, _ = done_run
+    out = tmp_path / "run"
+    shutil.copytree(out0, out)
+    shutil.rmtree(out / "reconstruction")  # the journal's files gone: that stage made again, the others kept
+    log = []
+    with FigureWorker() as w:
+        again = run_pipeline(RunConfig(**{**cfg0.__dict__, "out": str(out)}), log=log.append, figures=w)
+        drawn = w.answered
+    assert [("kept" in m) for m in _lines(log)] == [True, True, False], log
+    assert drawn == (1 if w.enabled else 0)  # the worker drew them (where fork is to be had)
+    assert sorted(p.name for p in (out / "reconstruction").iterdir()) == sorted(
+        p.name for p in (out0 / "reconstruction").iterdir())
+    assert again["targets"] == summary["targets"]

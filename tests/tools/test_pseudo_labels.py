@@ -27,3 +27,18 @@ def test_a_box_written_as_a_yolo_line_reads_back_the_same(tmp_path, kind, name):
     for got, want in zip(lab["labels"], boxes):
         np.testing.assert_allclose(np.array(got["box"]) / [1, dt, 1, dt], np.array(want) / [1, dt, 1, dt], atol=1e-3)
         assert got["kind"] == name
+
+
+def test_a_box_under_a_better_scored_box_is_dropped_as_an_echo():
+    mod = load_script("references/detection/pseudo_labels.py")
+    bar = {"box": [10.0, 1.0, 30.0, 3.0], "score": 0.9}  # height 2
+    echo = {"box": [12.0, 2.0, 31.0, 4.0], "score": 0.8}  # its top 1 lower (> 0.3 x 2), its traces within
+    beside = {"box": [40.0, 2.0, 60.0, 4.0], "score": 0.8}  # no shared traces
+    shallow = {"box": [12.0, 1.5, 31.0, 4.0], "score": 0.8}  # top only 0.5 lower: 0.25 of the height
+    deeper_bottom = {"box": [12.0, 2.0, 31.0, 2.9], "score": 0.8}  # its bottom above the bar's: not under it
+    better = {"box": [12.0, 2.0, 31.0, 4.0], "score": 0.95}  # scored above the bar: kept, and the bar too
+    half = {"box": [25.0, 2.0, 45.0, 4.0], "score": 0.8}  # shares 5 of 20 traces
+    assert mod.drop_echoes([bar, echo, beside]) == [bar, beside]
+    assert mod.drop_echoes([bar, shallow, deeper_bottom, half]) == [bar, shallow, deeper_bottom, half]
+    assert mod.drop_echoes([bar, better]) == [bar, better]
+    assert mod.under([0, 2, 10, 4], [5, 0, 15, 2]) and not mod.under([0, 2, 10, 4], [5, 0, 15, 2], overlap=0.6)

@@ -71,7 +71,10 @@ def run(args):
                     trace_spacing_m=args.trace_spacing, eps_r=eps, depth=args.depth, score=args.score,
                     weights=args.weights, depthnet=args.depthnet, device=args.device, runtime=args.runtime,
                     refiner=args.refiner, reconstruct=settings)
-    summary = run_pipeline(cfg, log=print)
+    from gpr3d.viz.worker import FigureWorker
+
+    with FigureWorker() as figures:  # forked before any thread starts; draws the figures at the end
+        summary = run_pipeline(cfg, log=print, figures=figures)
     from gpr3d.migration.targets import target_name
 
     print(f"{len(summary['targets'])} targets in {args.input}:")

@@ -212,7 +212,7 @@ def _detections_stage(cfg: RunConfig, out: Path, log):
     return f"{len(found['targets'])} hyperbolas{eps}"
 
 
-def _reconstruction_stage(cfg: RunConfig, out: Path, log):
+def _reconstruction_stage(cfg: RunConfig, out: Path, log, figures=None):
     import gpr3d
     from gpr3d.io.detections import read_detections
     from gpr3d.migration.reconstruct import ReconstructConfig
@@ -234,11 +234,11 @@ def _reconstruction_stage(cfg: RunConfig, out: Path, log):
     run = reconstruct_recording(s, ReconstructConfig(**cfg.reconstruct), eps_r=eps,
                                 boxes_file=out / "detections.json", input_name=str(cfg.input), eps_r_source=source,
                                 log=log)
-    write_reconstruction_folder(run, out / "reconstruction", source=str(cfg.input), command="run")
+    write_reconstruction_folder(run, out / "reconstruction", source=str(cfg.input), command="run", figures=figures)
     return f"{len(run.result.targets)} targets, eps_r {run.result.eps_r:.2f} ({run.result.eps_r_source})"
 
 
-def run_pipeline(cfg: RunConfig, *, log=print, progress: bool | None = None) -> dict:
+def run_pipeline(cfg: RunConfig, *, log=print, progress: bool | None = None, figures=None) -> dict:
     """Run (or finish) the whole road for one recording; see the module's text for the folder it fills.
 
     Parameters
@@ -249,6 +249,9 @@ def run_pipeline(cfg: RunConfig, *, log=print, progress: bool | None = None) -> 
     progress : bool, optional
         A progress bar over the stages on stderr, named after the one running (None: where stderr is a
         terminal). The lines of ``log`` come either way.
+    figures : FigureWorker, optional
+        Draws the reconstruction's figures while its data files are written (:class:`~gpr3d.viz.worker.FigureWorker`,
+        started before anything else; None: drawn here).
 
     Returns
     -------
@@ -276,7 +279,8 @@ def run_pipeline(cfg: RunConfig, *, log=print, progress: bool | None = None) -> 
     keys["detections"] = _key("detections", keys["survey"], _models_key(cfg),
                               {k: settings[k] for k in ("eps_r", "depth", "score")})
     keys["reconstruction"] = _key("reconstruction", keys["detections"], {k: settings[k] for k in ("eps_r", "reconstruct")})
-    work = {"survey": _survey_stage, "detections": _detections_stage, "reconstruction": _reconstruction_stage}
+    work = {"survey": _survey_stage, "detections": _detections_stage,
+            "reconstruction": lambda *a: _reconstruction_stage(*a, figures=figures)}
     lines = {}
     from tqdm import tqdm
 
