@@ -160,12 +160,12 @@ class FigureWorker:
     def close(self) -> None:
         """End the worker: an idle one at once (it holds nothing unwritten; its own exit, matplotlib loaded, took
         tens of milliseconds of the command's end), one still drawing after a second (its pipe closed)."""
+        if self._proc is not None and not self._busy:
+            self._proc.kill()  # (before its pipe closes: an idle worker ends here, never by its own exit)
         if self._conn is not None:
             self._conn.close()
             self._conn = None
         if self._proc is not None:
-            if not self._busy:
-                self._proc.kill()
             self._proc.join(timeout=1.0)
             if self._proc.is_alive():
                 self._proc.kill()
