@@ -106,7 +106,7 @@ def draw_figures(fi: FigureInputs, out, *, split: bool | None = None) -> list[st
         The folder the figures are written into.
     split : bool or None
         Draw ``view3d.png`` in a process forked for it while this one draws ``top.png`` and ``front.png`` (the
-        same files, in two thirds of the time on two cores; :data:`HERE`); a figure whose process could not be
+        same files, in two thirds of the time on two cores; ``HERE``); a figure whose process could not be
         forked, or did not write it, is drawn here. None: split only in the figures' own process
         (:mod:`gpr3d.viz.worker`), which runs no thread (a process with threads is not forked).
 
