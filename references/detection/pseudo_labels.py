@@ -6,8 +6,8 @@ written as a YOLO dataset that ``finetune_pgpr.py --pgpr`` reads as it reads P-G
 The pictures of ``--pgpr``'s ``--split`` are read as pictures only: their label files are never opened (the
 records are read from a copy of the image folder with no ``labels/``), so a model trained on the result has
 seen no real label (issue 29 item 5: sim-to-real without labels). Each box at or above ``--score`` becomes a
-label line: ``steel`` for the kinds of metal (rebar, steel_pipe), ``pipe`` for the others (pvc_pipe, void, tank),
-P-GPR's two class names, so that the same reading (``names``, ``kinds``, pixel map) applies. The images in
+label line: ``steel`` for the kinds of metal (rebar, steel_pipe) and a one-class detector's boxes, ``pipe`` for the
+others (pvc_pipe, void, tank), P-GPR's two class names, so that the same reading (``names``, ``kinds``, pixel map) applies. The images in
 ``OUT/train/images`` are links to the originals.
 
 ``--drop-echoes``: a box lying under another box of the same or a higher score (the other's top higher by over
@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from eval_pgpr import PGPR, PGPR_DEFAULT, load  # noqa: E402
 
-#: gpr3d kind -> P-GPR class id (0 steel, 1 pipe)
+#: gpr3d kind -> P-GPR class id (0 steel, 1 pipe); any other name (a one-class detector's) is 0
 CLASS_OF = {"rebar": 0, "steel_pipe": 0, "pvc_pipe": 1, "void": 1, "tank": 1}
 
 
@@ -41,7 +41,7 @@ def yolo_line(box, kind: str, n_traces: int, n_samples: int, dt_s: float) -> str
     x0, x1 = (i0 + 0.5) / n_traces, (i1 + 0.5) / n_traces
     y0, y1 = (t0 / dt_s + 0.5) / n_samples, (t1 / dt_s + 0.5) / n_samples
     x0, y0, x1, y1 = max(x0, 0.0), max(y0, 0.0), min(x1, 1.0), min(y1, 1.0)
-    return f"{CLASS_OF[kind]} {(x0 + x1) / 2:.6f} {(y0 + y1) / 2:.6f} {x1 - x0:.6f} {y1 - y0:.6f}"
+    return f"{CLASS_OF.get(kind, 0)} {(x0 + x1) / 2:.6f} {(y0 + y1) / 2:.6f} {x1 - x0:.6f} {y1 - y0:.6f}"
 
 
 def under(box, other, overlap: float = 0.5) -> bool:
@@ -70,9 +70,13 @@ def main(argv=None):
     args = p.parse_args(argv)
     if not 0.0 < args.score <= 1.0:
         p.error(f"--score must lie in (0, 1], got {args.score}")
+    src = Path(args.pgpr) / args.split
+    if not (src / "images").is_dir():
+        p.error(f"--pgpr {args.pgpr} --split {args.split}: no {args.split}/images/ folder there")
+    if args.weights != "default" and not Path(args.weights).is_file():
+        p.error(f"no such weights file: {args.weights}")
     from gpr3d.io.yolo import read_yolo, yolo_images
 
-    src = Path(args.pgpr) / args.split
     out = Path(args.out) / "train"
     (out / "images").mkdir(parents=True, exist_ok=True)
     (out / "labels").mkdir(parents=True, exist_ok=True)
@@ -88,7 +92,8 @@ def main(argv=None):
     det, name = load(args.weights)
     n_boxes, kinds = 0, {}
     for survey, lab in read_yolo(blind, **PGPR):
-        assert not lab["labels"], "a real label was read"  # (the blind folder has none)
+        if lab["labels"]:  # (the blind folder has no labels/: this cannot happen unless someone put one there)
+            raise SystemExit(f"pseudo_labels.py: {blind} holds labels; remove it and run again")
         res = det.detect(survey, score_threshold=args.score)
         targets = drop_echoes(res["targets"]) if args.drop_echoes else res["targets"]
         lines = [yolo_line(t["box"], t["kind"], survey.n_traces, survey.n_samples, survey.dt_s) for t in targets]
@@ -106,4 +111,9 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from gpr3d.core.errors import GPR3DError
+
+    try:
+        sys.exit(main())
+    except GPR3DError as e:  # a damaged picture or weights file: one line, as the gpr3d commands answer
+        sys.exit(f"pseudo_labels.py: {e}")

@@ -42,3 +42,29 @@ def test_a_box_under_a_better_scored_box_is_dropped_as_an_echo():
     assert mod.drop_echoes([bar, shallow, deeper_bottom, half]) == [bar, shallow, deeper_bottom, half]
     assert mod.drop_echoes([bar, better]) == [bar, better]
     assert mod.under([0, 2, 10, 4], [5, 0, 15, 2]) and not mod.under([0, 2, 10, 4], [5, 0, 15, 2], overlap=0.6)
+
+
+@pytest.mark.parametrize("args, line", [
+    (["default", "--out", "{tmp}/o", "--score", "0"], "--score must lie in (0, 1], got 0.0"),
+    (["default", "--out", "{tmp}/o", "--pgpr", "{tmp}"], "--pgpr {tmp} --split train: no train/images/ folder there"),
+    (["{tmp}/none.pt", "--out", "{tmp}/o", "--pgpr", "{tmp}/p"], "no such weights file: {tmp}/none.pt"),
+])
+def test_wrong_arguments_are_one_line_before_any_work(tmp_path, args, line):
+    import subprocess
+    import sys
+
+    from tests.tools._script import ROOT
+
+    (tmp_path / "p" / "train" / "images").mkdir(parents=True)
+    r = subprocess.run([sys.executable, str(ROOT / "references/detection/pseudo_labels.py"),
+                        *(a.replace("{tmp}", str(tmp_path)) for a in args)], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 2 and r.stdout == "" and "Traceback" not in r.stderr, r.stderr
+    assert r.stderr.strip().splitlines()[-1].endswith("error: " + line.replace("{tmp}", str(tmp_path)))
+    assert not (tmp_path / "o").exists()  # nothing made
+
+
+def test_a_one_class_detectors_boxes_are_steel():
+    mod = load_script("references/detection/pseudo_labels.py")
+    assert mod.yolo_line([0, 0, 9, 1e-9], "hyperbola", 10, 100, 1e-10).split()[0] == "0"
+    assert mod.yolo_line([0, 0, 9, 1e-9], "tank", 10, 100, 1e-10).split()[0] == "1"

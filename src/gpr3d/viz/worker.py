@@ -50,14 +50,11 @@ def fork_job(fn, *args) -> int | None:
 
 def wait_job(pid: int) -> bool:
     """Wait for the process of :func:`fork_job`; True where ``fn`` returned, False where it raised or was killed."""
-    while True:
-        try:
-            _, status = os.waitpid(pid, 0)
-        except InterruptedError:  # pragma: no cover - retried by Python itself since 3.5
-            continue
-        except ChildProcessError:  # (already waited for)
-            return False
-        return os.waitstatus_to_exitcode(status) == 0
+    try:
+        _, status = os.waitpid(pid, 0)
+    except ChildProcessError:  # (already waited for)
+        return False
+    return os.waitstatus_to_exitcode(status) == 0
 
 
 def _die_with_parent(parent: int) -> None:  # pragma: no cover - runs in the forked process
