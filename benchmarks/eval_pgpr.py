@@ -142,6 +142,9 @@ def main(argv=None):
     p.add_argument("--mirror", action="store_true", help="test-time views: also each picture's traces reversed")
     p.add_argument("--vote", action="store_true", help="a fused box's score: the views' scores summed over the views")
     p.add_argument("--no-average", action="store_true", help="fused views keep the best box's corners (not the mean)")
+    p.add_argument("--members", nargs="+", default=[], metavar="WEIGHTS",
+                   help="an ensemble: these detectors' networks run on the same windows beside each detector's, "
+                        "their boxes fused as views (Detector.set_members; with --vote a box scores its group's mean)")
     p.add_argument("--reference-from", default=None, metavar="GLOB",
                    help="with --trace-scales auto: the median trace width (gpr3d.detection.windows.trace_width) "
                         "of P-GPR's train pictures named by GLOB (the detector's training pictures)")
@@ -190,6 +193,11 @@ def main(argv=None):
         det, name = load(spec)
         det.refiner = None
         det.trace_scales, det.mirror, det.fuse_average, det.vote = scales, args.mirror, not args.no_average, args.vote
+        if args.members:
+            det.set_members([load(m)[0] for m in args.members])
+            name += (" + " + " + ".join(Path(m).parent.name if Path(m).name == "weights.pt" else m for m in args.members)
+                     + (" (vote)" if args.vote and scales == (1.0,) and not args.mirror else "")
+                     + (" (best box)" if args.no_average and scales == (1.0,) and not args.mirror else ""))
         if reference is not None:  # else what the weights recorded (finetune_pgpr.py), if they did
             det.reference_width = reference
         if "auto" in scales and not det.reference_width:

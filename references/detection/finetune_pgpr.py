@@ -67,6 +67,9 @@ def main(argv=None):
                    help="share of the wall scans whose echoes ring (gpr3d.simulation.surveys.echo_ringing)")
     p.add_argument("--augment", action="store_true",
                    help="stretch the windows along the traces, change their gain and noise (gpr3d.detection.augment)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="the network's seed (TrainConfig.seed); the window draws' seed is 1000 + it (data_seed): "
+                        "another seed trains a twin of the same recipe, e.g. a member of an ensemble")
     p.add_argument("--stretch", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
                    help="with --augment: the trace-axis stretch's range (default 0.7 1.4; the two radars' hyperbolas "
                         "differ about 2.5x in width)")
@@ -77,13 +80,15 @@ def main(argv=None):
         p.error("--stretch is the range of --augment's stretch: give --augment too")
     if args.stretch and not 0.25 <= args.stretch[0] <= args.stretch[1] <= 4.0:
         p.error(f"--stretch must satisfy 0.25 <= LOW <= HIGH <= 4, got {args.stretch[0]:g} {args.stretch[1]:g}")
+    if args.seed < 0:
+        p.error(f"--seed must be 0 or more, got {args.seed}")
     zero_shot = args.real == 0  # no P-GPR label read: the zero-shot model of issue 29 item 5
     cfg = TrainConfig(out=args.out, init=args.init, kinds=list(CATEGORIES), steps=args.steps, batch=args.batch,
                       lr=args.lr, warmup=50, labels=None if zero_shot else str(Path(args.pgpr) / args.split), labels_fraction=args.real,
                       freeze=args.freeze, checkpoint_every=50, labels_pattern=args.only,
                       packed=args.packed or None, packed_fraction=args.packed_fraction,
                       augment=({"stretch": tuple(args.stretch)} if args.stretch else True) if args.augment else None,
-                      wall_fraction=args.wall, **PGPR)
+                      wall_fraction=args.wall, seed=args.seed, data_seed=1000 + args.seed, **PGPR)
     wall = SurveySource(cfg.data_seed, profile="wall", ringing=args.wall_ringing) if args.wall else None
     res = train_detector(cfg, SurveySource(cfg.data_seed), wall_source=wall, progress=False,
                          max_seconds=args.max_seconds)

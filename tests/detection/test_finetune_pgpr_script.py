@@ -20,7 +20,8 @@ def test_a_two_step_fine_tune_records_its_pictures_trace_width(tmp_path):
 
     pgpr = real_file("pgpr_1600MHz")
     r = subprocess.run([sys.executable, str(REPO / "references" / "detection" / "finetune_pgpr.py"), "--out",
-                        str(tmp_path / "ft"), "--pgpr", str(pgpr), "--only", "IECAS_00*", "--steps", "2", "--batch", "2"],
+                        str(tmp_path / "ft"), "--pgpr", str(pgpr), "--only", "IECAS_00*", "--steps", "2", "--batch", "2",
+                        "--seed", "3"],
                        capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stderr[-2000:]
     det = load_detector(tmp_path / "ft" / "weights.pt", refiner="none")
@@ -32,3 +33,12 @@ def test_a_two_step_fine_tune_records_its_pictures_trace_width(tmp_path):
     want = float(np.median([trace_width(prepare(s, WindowConfig())) for s, _ in pictures]))
     assert det.provenance["trace_width"] == det.reference_width == pytest.approx(want, rel=1e-12)
     assert 8 < want < 14  # IECAS's features: about 11 traces wide (AIR's about 23)
+    # --seed: the network's seed and the window draws' (1000 + it), as the provenance records them
+    assert (det.provenance["config"]["seed"], det.provenance["config"]["data_seed"]) == (3, 1003)
+
+
+def test_a_negative_seed_is_refused_in_one_line_before_any_work(tmp_path):
+    r = subprocess.run([sys.executable, str(REPO / "references" / "detection" / "finetune_pgpr.py"), "--out",
+                        str(tmp_path / "ft"), "--seed", "-2"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "--seed must be 0 or more, got -2" in r.stderr
+    assert not (tmp_path / "ft").exists()

@@ -361,7 +361,7 @@ def test_a_view_s_boxes_come_back_to_the_record_s_traces(factor, mirror, half):
     net.factor = factor
     det = infer.Detector(net, _PLAIN)
     survey = _one_bright_trace()
-    boxes, scores, labels, shares, probs, n_windows, proc = det._view(survey, None, factor, mirror)
+    ((boxes, scores, labels, shares, probs),), n_windows, proc = det._view(survey, None, factor, mirror)
     # the bright trace 37 is seen at column 37 f (mirrored: (79 - 37) f), the box's 6 columns are 6 / f traces
     left = 0.01 if (42 if mirror else 37) * factor < 60 else 0.0  # where the fake network saw the bright trace
     assert n_windows == 1 and labels.tolist() == [1] and scores.tolist() == [pytest.approx(0.5 + factor / 10 + left)]
@@ -399,6 +399,55 @@ def test_the_views_are_fused_into_the_record_s_boxes():
     assert out["targets"][0]["box"][0] == pytest.approx((0.61 * 34 + 0.7 * 35.5) / 1.31, abs=1e-6)
 
 
+class _ShiftedNet(_BrightNet):
+    """The bright trace's box moved ``shift`` columns right, scored ``score``: another member of an ensemble."""
+
+    def __init__(self, shift, score):
+        self.shift, self.score = shift, score
+
+    def __call__(self, batch):
+        out = super().__call__(batch)
+        for r in out:
+            r["boxes"] = r["boxes"] + torch.tensor([self.shift, 0.0, self.shift, 0.0])
+            r["scores"] = torch.tensor([self.score])
+        return out
+
+
+def test_an_ensemble_fuses_each_member_network_s_boxes_as_views():
+    det = infer.Detector(_ShiftedNet(0.0, 0.8), _PLAIN)
+    survey = _one_bright_trace()
+    alone = det.detect(survey, score_threshold=0.0)
+    assert [t["box"][0] for t in alone["targets"]] == pytest.approx([34.0])
+    det.set_members([infer.Detector(_ShiftedNet(1.0, 0.4), _PLAIN)])  # [35, 41]: IoU 5/7 with [34, 40], one group
+    out = det.detect(survey, score_threshold=0.0)
+    (t,) = out["targets"]
+    assert out["n_windows"] == 1  # the windows are cut once; each network reads them
+    assert alone["members"] == [] and out["members"] == ["gpr3d detector"]
+    assert t["box"][0] == pytest.approx((0.8 * 34 + 0.4 * 35) / 1.2, abs=1e-6)  # corners weighted by score
+    assert t["box"][2] == pytest.approx((0.8 * 40 + 0.4 * 41) / 1.2, abs=1e-6)
+    assert t["score"] == pytest.approx(0.8)  # the best member's score
+    det.vote = True  # the score: the group's mean over the two networks
+    assert det.detect(survey, score_threshold=0.0)["targets"][0]["score"] == pytest.approx(0.6)
+    det.set_members([infer.Detector(_ShiftedNet(5.0, 0.4), _PLAIN)])  # [39, 45]: no overlap to speak of, two boxes
+    boxes = sorted(t["box"][0] for t in det.detect(survey, score_threshold=0.0)["targets"])
+    assert boxes == pytest.approx([34.0, 39.0]) and det.members[0].model.shift == 5.0
+    det.set_members([])  # no member: the detector alone again
+    assert det.detect(survey, score_threshold=0.0)["targets"][0]["box"] == pytest.approx(alone["targets"][0]["box"])
+
+
+def test_an_ensemble_member_must_read_the_same_windows_and_name_the_same_kinds():
+    det = infer.Detector(_ShiftedNet(0.0, 0.8), _PLAIN)
+    with pytest.raises(InvalidDataError, match="member 1 .*windows"):
+        det.set_members([infer.Detector(_ShiftedNet(0.0, 0.8), WindowConfig())])
+    other = infer.Detector(_ShiftedNet(0.0, 0.8), _PLAIN)
+    other.model.gpr3d_kinds = ["rebar", "pvc_pipe"]
+    with pytest.raises(InvalidDataError, match="member 2 .*kinds"):
+        det.set_members([infer.Detector(_ShiftedNet(0.0, 0.8), _PLAIN), other])
+    with pytest.raises(InvalidDataError, match="member 1: not a detector"):
+        det.set_members(["weights.pt"])
+    assert det.members == ()  # nothing set by a refused call
+
+
 def test_the_auto_trace_scale_stretches_a_record_to_the_training_records_width():
     from gpr3d.detection.windows import prepare, trace_width
 
@@ -411,11 +460,11 @@ def test_the_auto_trace_scale_stretches_a_record_to_the_training_records_width()
     assert det.auto_scale(proc) == pytest.approx(2.0, rel=1e-12)
     auto = det._view(survey, None, "auto", False)
     two = det._view(survey, None, 2.0, False)
-    assert np.array_equal(auto[0], two[0]) and auto[4] == two[4] == 1
+    assert np.array_equal(auto[0][0][0], two[0][0][0]) and auto[1] == two[1] == 1
     det.trace_scales = ("auto",)  # through detect: the view named as asked, the boxes the x2 view's
     out = det.detect(survey, score_threshold=0.0)
     assert out["views"] == {"trace_scales": ["auto"], "mirror": False}
-    assert out["targets"][0]["box"] == pytest.approx(two[0][0].tolist(), abs=1e-12)
+    assert out["targets"][0]["box"] == pytest.approx(two[0][0][0][0].tolist(), abs=1e-12)
     det.reference_width = 100 * w  # kept within 0.25..4
     assert det.auto_scale(proc) == 4.0
     det.reference_width = 0.01 * w

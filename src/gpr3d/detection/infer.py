@@ -150,6 +150,9 @@ class Detector:
     #: their median): what a trace scale of ``"auto"`` stretches each record to; None: unknown
     reference_width = None
     fuse_average = True  #: the fused views' boxes: the score-weighted mean of each group's corners (else the best's)
+    #: other networks run on the same windows (an ensemble: :meth:`set_members`); each one's boxes are one more view,
+    #: fused as the views are (with ``vote``, a box's score is its group's mean over the views)
+    members: tuple = ()
     #: a refined box overlapping a surer one by this IoU or more has its score lowered as a duplicate
     #: (:func:`~gpr3d.detection.windows.soften_duplicates`); None: the refined boxes keep their scores
     duplicate_iou = DUPLICATE_IOU
@@ -226,11 +229,28 @@ class Detector:
                                      r["kind_probs"].cpu().numpy() if "kind_probs" in r else None))
         return out
 
+    def set_members(self, members) -> None:
+        """Run these detectors' networks too, on the same windows (an ensemble): each one's boxes are fused with this
+        one's as another view of the record (``vote``: a fused box scores its group's mean over the networks and
+        views). The members must read the same windows and name the same kinds; one line naming the first that
+        does not."""
+        members = tuple(members)
+        for k, m in enumerate(members, 1):
+            if not callable(getattr(m, "predict_windows_kinds", None)):
+                raise InvalidDataError(f"ensemble member {k}: not a detector ({type(m).__name__})")
+            if m.window != self.window:
+                raise InvalidDataError(f"ensemble member {k} ({m.provenance.get('name', 'detector')}): its windows "
+                                       f"({m.window}) differ from the detector's ({self.window})")
+            if m.kinds != self.kinds:
+                raise InvalidDataError(f"ensemble member {k} ({m.provenance.get('name', 'detector')}): it names the "
+                                       f"kinds {m.kinds}, the detector {self.kinds}")
+        self.members = members
+
     def _view(self, survey, proc: np.ndarray | None, factor: float, mirror: bool):
-        """One view's merged boxes in the record's traces and seconds, their scores, labels, kind shares and every
-        kind's share, its window count and the processed record (``proc``, made here where None): that record
-        stretched along its traces by ``factor`` (old trace ``i`` at ``i * factor``) and, with ``mirror``, its traces
-        reversed."""
+        """One view of the record (``proc``, made here where None, stretched along its traces by ``factor``: old
+        trace ``i`` at ``i * factor``; with ``mirror``, its traces reversed): ``(parts, window count, proc)``, a part
+        for each network (this one, then :attr:`members`), each its merged boxes in the record's traces and seconds,
+        their scores, labels, kind shares and every kind's share."""
         from gpr3d.detection.augment import stretch_traces
 
         with stage("windows"):
@@ -245,22 +265,25 @@ class Detector:
             if factor != 1.0:
                 view = stretch_traces(view, factor)
             wins = windows(survey, self.window, processed=np.ascontiguousarray(view))
-        with stage("network"):
-            raw = self.predict_windows_kinds([w.image for w in wins])
-            # (a subclass's four items, without every kind's share: the named kind's alone)
-            raw = [r if len(r) > 4 else _kept(self.kinds, *r) for r in raw]
-        with stage("merge"):
-            boxes, scores, index = merge([(w, b, s) for w, (b, s, *_) in zip(wins, raw)], view.shape[0],
-                                         survey.dt_s, nms=self.nms, return_index=True)
-        labels = np.concatenate([r[2] for r in raw])[index] if raw else np.zeros(0, np.int64)
-        shares = np.concatenate([r[3] for r in raw])[index] if raw else np.zeros(0)
-        probs = (np.concatenate([r[4] for r in raw])[index] if raw
-                 else np.zeros((0, len(self.kinds) if self.kinds else 1)))
-        boxes = np.asarray(boxes, float).reshape(-1, 4).copy()
-        boxes[:, [0, 2]] /= factor
-        if mirror:
-            boxes[:, [0, 2]] = (n - 1.0) - boxes[:, [2, 0]]
-        return boxes, np.asarray(scores, float), labels, shares, probs, len(wins), proc
+        parts = []
+        for net in (self, *self.members):
+            with stage("network"):
+                raw = net.predict_windows_kinds([w.image for w in wins])
+                # (a subclass's four items, without every kind's share: the named kind's alone)
+                raw = [r if len(r) > 4 else _kept(self.kinds, *r) for r in raw]
+            with stage("merge"):
+                boxes, scores, index = merge([(w, b, s) for w, (b, s, *_) in zip(wins, raw)], view.shape[0],
+                                             survey.dt_s, nms=self.nms, return_index=True)
+            labels = np.concatenate([r[2] for r in raw])[index] if raw else np.zeros(0, np.int64)
+            shares = np.concatenate([r[3] for r in raw])[index] if raw else np.zeros(0)
+            probs = (np.concatenate([r[4] for r in raw])[index] if raw
+                     else np.zeros((0, len(self.kinds) if self.kinds else 1)))
+            boxes = np.asarray(boxes, float).reshape(-1, 4).copy()
+            boxes[:, [0, 2]] /= factor
+            if mirror:
+                boxes[:, [0, 2]] = (n - 1.0) - boxes[:, [2, 0]]
+            parts.append((boxes, np.asarray(scores, float), labels, shares, probs))
+        return parts, len(wins), proc
 
     def auto_scale(self, proc: np.ndarray) -> float:
         """The stretch that makes a processed record's features as wide as the training records' were:
@@ -281,10 +304,13 @@ class Detector:
         with stage("prepare"):
             plain = prepare(survey, replace(self.window, equalise=False))
             proc = equalise_rows(plain) if self.window.equalise else plain
-        parts = [self._view(survey, proc, f, m) for f, m in views]
-        n_windows = sum(p[5] for p in parts)
+        parts, n_windows = [], 0
+        for f, m in views:
+            got, n, _ = self._view(survey, proc, f, m)
+            parts += got
+            n_windows += n
         if len(parts) == 1:
-            return (plain, proc, *parts[0][:5], n_windows)
+            return (plain, proc, *parts[0], n_windows)
         with stage("merge"):
             boxes = np.concatenate([p[0] for p in parts])
             scores = np.concatenate([p[1] for p in parts])
@@ -365,5 +391,6 @@ class Detector:
                 "refine": None if self.refiner is None else self._refine_settings(survey),
                 "views": {"trace_scales": [f if f == "auto" else float(f) for f in self.trace_scales],
                           "mirror": bool(self.mirror)},
+                "members": [m.provenance.get("name", "gpr3d detector") for m in self.members],
                 "score_threshold": score_threshold, "calibrated": self.calibration is not None,
                 "wall_s": time.perf_counter() - t0, "targets": targets}
