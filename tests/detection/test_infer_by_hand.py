@@ -418,11 +418,12 @@ def test_an_ensemble_fuses_each_member_network_s_boxes_as_views():
     survey = _one_bright_trace()
     alone = det.detect(survey, score_threshold=0.0)
     assert [t["box"][0] for t in alone["targets"]] == pytest.approx([34.0])
-    det.set_members([infer.Detector(_ShiftedNet(1.0, 0.4), _PLAIN)])  # [35, 41]: IoU 5/7 with [34, 40], one group
+    det.set_members([infer.Detector(_ShiftedNet(1.0, 0.4), _PLAIN, provenance={"name": "twin"})])  # [35, 41]: IoU
+    # 5/7 with [34, 40], one group
     out = det.detect(survey, score_threshold=0.0)
     (t,) = out["targets"]
     assert out["n_windows"] == 1  # the windows are cut once; each network reads them
-    assert alone["members"] == [] and out["members"] == ["gpr3d detector"]
+    assert alone["members"] == [] and out["members"] == ["twin"]
     assert t["box"][0] == pytest.approx((0.8 * 34 + 0.4 * 35) / 1.2, abs=1e-6)  # corners weighted by score
     assert t["box"][2] == pytest.approx((0.8 * 40 + 0.4 * 41) / 1.2, abs=1e-6)
     assert t["score"] == pytest.approx(0.8)  # the best member's score
@@ -431,19 +432,26 @@ def test_an_ensemble_fuses_each_member_network_s_boxes_as_views():
     det.set_members([infer.Detector(_ShiftedNet(5.0, 0.4), _PLAIN)])  # [39, 45]: no overlap to speak of, two boxes
     boxes = sorted(t["box"][0] for t in det.detect(survey, score_threshold=0.0)["targets"])
     assert boxes == pytest.approx([34.0, 39.0]) and det.members[0].model.shift == 5.0
+    det.set_members([infer.Detector(_ShiftedNet(1.0, 0.4), _PLAIN)])  # an unnamed member: named as the detector is
+    assert det.detect(survey, score_threshold=0.0)["members"] == ["gpr3d detector"]
     det.set_members([])  # no member: the detector alone again
     assert det.detect(survey, score_threshold=0.0)["targets"][0]["box"] == pytest.approx(alone["targets"][0]["box"])
 
 
 def test_an_ensemble_member_must_read_the_same_windows_and_name_the_same_kinds():
     det = infer.Detector(_ShiftedNet(0.0, 0.8), _PLAIN)
-    with pytest.raises(InvalidDataError, match="member 1 .*windows"):
-        det.set_members([infer.Detector(_ShiftedNet(0.0, 0.8), WindowConfig())])
-    other = infer.Detector(_ShiftedNet(0.0, 0.8), _PLAIN)
+    with pytest.raises(InvalidDataError, match=r"member 1 \(wide\): its windows"):
+        det.set_members([infer.Detector(_ShiftedNet(0.0, 0.8), WindowConfig(), provenance={"name": "wide"})])
+    other = infer.Detector(_ShiftedNet(0.0, 0.8), _PLAIN, provenance={"name": "kinds2"})
     other.model.gpr3d_kinds = ["rebar", "pvc_pipe"]
-    with pytest.raises(InvalidDataError, match="member 2 .*kinds"):
+    with pytest.raises(InvalidDataError, match=r"member 2 \(kinds2\): it names the kinds \['rebar', 'pvc_pipe'\]"):
         det.set_members([infer.Detector(_ShiftedNet(0.0, 0.8), _PLAIN), other])
-    with pytest.raises(InvalidDataError, match="member 1: not a detector"):
+    with pytest.raises(InvalidDataError, match=r"member 1 \(gpr3d detector\): its windows"):  # unnamed
+        det.set_members([infer.Detector(_ShiftedNet(0.0, 0.8), WindowConfig())])
+    with pytest.raises(InvalidDataError, match=r"member 1 \(gpr3d detector\): it names"):
+        other.provenance = {}
+        det.set_members([other])
+    with pytest.raises(InvalidDataError, match=r"member 1: not a detector \(str\)"):
         det.set_members(["weights.pt"])
     assert det.members == ()  # nothing set by a refused call
 

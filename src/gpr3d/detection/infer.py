@@ -239,10 +239,10 @@ class Detector:
             if not callable(getattr(m, "predict_windows_kinds", None)):
                 raise InvalidDataError(f"ensemble member {k}: not a detector ({type(m).__name__})")
             if m.window != self.window:
-                raise InvalidDataError(f"ensemble member {k} ({m.provenance.get('name', 'detector')}): its windows "
+                raise InvalidDataError(f"ensemble member {k} ({m.provenance.get('name', 'gpr3d detector')}): its windows "
                                        f"({m.window}) differ from the detector's ({self.window})")
             if m.kinds != self.kinds:
-                raise InvalidDataError(f"ensemble member {k} ({m.provenance.get('name', 'detector')}): it names the "
+                raise InvalidDataError(f"ensemble member {k} ({m.provenance.get('name', 'gpr3d detector')}): it names the "
                                        f"kinds {m.kinds}, the detector {self.kinds}")
         self.members = members
 
