@@ -189,12 +189,19 @@ def main(argv=None):
         variants = refiner_variants(args.refiner, args.quality_weights)
     except GPR3DError as exc:
         p.error(str(exc))
+    try:  # the members read before any work: a file that is not a detector is one line
+        members = [load(m)[0] for m in args.members]
+    except GPR3DError as exc:
+        p.error(f"--members: {exc}")
     for spec, (refiner, qw) in [(d, r) for d in args.detectors for r in [(None, None), *variants]]:
         det, name = load(spec)
         det.refiner = None
         det.trace_scales, det.mirror, det.fuse_average, det.vote = scales, args.mirror, not args.no_average, args.vote
-        if args.members:
-            det.set_members([load(m)[0] for m in args.members])
+        if members:
+            try:
+                det.set_members(members)
+            except GPR3DError as exc:
+                p.error(f"--members: {exc}")
             name += (" + " + " + ".join(Path(m).parent.name if Path(m).name == "weights.pt" else m for m in args.members)
                      + (" (vote)" if args.vote and scales == (1.0,) and not args.mirror else "")
                      + (" (best box)" if args.no_average and scales == (1.0,) and not args.mirror else ""))
