@@ -185,3 +185,37 @@ def test_an_idle_worker_is_ended_at_once_not_waited_for():
         assert w.submit(_pid_and, 1)()[1] == 1
         proc = w._proc
     assert proc.exitcode == -signal.SIGKILL  # killed idle, not left to wind matplotlib down
+
+
+@needs_fork
+def test_a_worker_whose_command_is_killed_ends_with_it_and_writes_nothing_more(tmp_path):
+    import signal
+    import subprocess
+    import sys
+
+    done = tmp_path / "drawn.txt"
+    script = f"""
+import os, signal, sys, time
+from pathlib import Path
+from gpr3d.viz import worker as W
+
+def slow_figure(path):
+    time.sleep(2.0)
+    Path(path).write_text("drawn")
+
+w = W.FigureWorker().__enter__()
+w.submit(slow_figure, {str(done)!r})
+print(w._proc.pid, flush=True)
+time.sleep(0.5)
+os.kill(os.getpid(), signal.SIGKILL)  # the command killed while its figure is drawn
+"""
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert r.returncode == -signal.SIGKILL, r.stderr
+    pid = int(r.stdout.split()[0])
+    for _ in range(40):  # killed with its command (PR_SET_PDEATHSIG): gone within moments, not after its drawing
+        if _gone(pid):
+            break
+        time.sleep(0.05)
+    assert _gone(pid)
+    time.sleep(2.5)  # past the moment the drawing would have ended
+    assert not done.exists()

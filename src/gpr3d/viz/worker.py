@@ -72,14 +72,16 @@ def _die_with_parent(parent: int) -> None:  # pragma: no cover - runs in the for
         os._exit(1)
 
 
-def _serve(conn, theirs) -> None:  # pragma: no cover - runs in the forked child (its effects are tested from the parent)
+def _serve(conn, theirs, parent: int) -> None:  # pragma: no cover - runs in the forked child (tested from outside)
     """The worker's loop: matplotlib imported first, then one ``(function, args)`` at a time, each answered with
     ``("ok", value)`` or ``("error", exception)``; ends when the command's end of the pipe closes (``theirs``:
-    that end, as the fork copied it, closed here at once)."""
+    that end, as the fork copied it, closed here at once), and is killed when the command (``parent``) ends: a
+    command killed while its figures are drawn leaves no worker writing into a folder the next run removes."""
     import signal
 
     global _IN_WORKER
     _IN_WORKER = True
+    _die_with_parent(parent)
     theirs.close()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C is the command's to handle; it ends this one
     try:
@@ -140,7 +142,8 @@ class FigureWorker:
 
             ctx = multiprocessing.get_context("fork")
             mine, theirs = ctx.Pipe()
-            self._proc = ctx.Process(target=_serve, args=(theirs, mine), daemon=True, name="gpr3d-figures")
+            self._proc = ctx.Process(target=_serve, args=(theirs, mine, os.getpid()), daemon=True,
+                                     name="gpr3d-figures")
             self._proc.start()
             theirs.close()
             self._conn = mine
