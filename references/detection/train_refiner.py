@@ -1,11 +1,12 @@
 """Train the box refiner (``gpr3d.detection.refine``) on labelled records, on the CPU, in minutes.
 
     python references/detection/train_refiner.py --out runs/refiner.pt [--pgpr DIR] [--only GLOB] [--synthetic N]
-        [--gprmax FILE.h5[:N] ...] [--epochs 9] [--per-label 24] [--onnx OUT.onnx]
+        [--wall N] [--gprmax FILE.h5[:N] ...] [--epochs 9] [--per-label 24] [--onnx OUT.onnx]
 
 Labels from P-GPR's train split (its own box rule: the people who labelled its real
 B-scans) and, with ``--synthetic N`` / ``--gprmax``, from N survey-scale synthetic records
-(``survey_sample(1000, i)``, the detector's training source) and packed gprMax records
+(``survey_sample(1000, i)``, the detector's training source), with ``--wall N`` from N handheld
+wall scans (``profile="wall"``: with ``--pgpr none`` a refiner that has read no real label) and packed gprMax records
 (each ``FILE:N`` leaves out its last N; several files may be given): gpr3d's label rule
 (``docs/labels.md``). Each record is rendered as the shipped detector's windows render it. Nothing of P-GPR's validation
 split nor of the held-out gprMax survey set is read.
@@ -59,6 +60,9 @@ def main(argv=None):
     p.add_argument("--only", default=None, help="P-GPR train pictures named by this glob only (AIR_* for one radar: "
                    "a refiner for the device-held-out test)")
     p.add_argument("--synthetic", type=int, default=0, help="survey-scale synthetic records (seed 1000) to add")
+    p.add_argument("--wall", type=int, default=0, metavar="N",
+                   help="handheld wall scans (survey_sample(1000, i, profile='wall'), seed 1000) to add: with "
+                        "--pgpr none, a refiner that has read no real label (the zero-shot line)")
     p.add_argument("--gprmax", nargs="+", default=[], metavar="FILE[:N]",
                    help="packed gprMax files to add, FILE:N leaving out its last N")
     p.add_argument("--name", default="gpr3d box refiner", help="the refiner's name in detections")
@@ -87,8 +91,11 @@ def main(argv=None):
                         "applied after the first refiner (gpr3d.detection.refine.FINE_JITTER_SCALE)")
     p.add_argument("--onnx", default=None, help="also export the refiner (crops in, edge moves out) to this .onnx")
     args = p.parse_args(argv)
-    if args.pgpr == "none" and not args.synthetic and not args.gprmax:
-        p.error("nothing to train on: --pgpr none with neither --synthetic nor --gprmax")
+    if args.synthetic < 0 or args.wall < 0:
+        p.error(f"--synthetic and --wall are counts of records (whole numbers >= 0), got {args.synthetic} and "
+                f"{args.wall}")
+    if args.pgpr == "none" and not args.synthetic and not args.wall and not args.gprmax:
+        p.error("nothing to train on: --pgpr none with none of --synthetic, --wall and --gprmax")
     if args.members < 1:
         p.error(f"--members must be a whole number >= 1, got {args.members}")
     if not 0.0 < args.jitter_scale <= 4.0:
@@ -122,7 +129,7 @@ def main(argv=None):
     _, window, _ = load_weights()
     # with --rule-heads, a head for each rule whose data are given: P-GPR's pictures teach 'pgpr', records 'gpr3d'
     rules = [r for r in RULES if (r == "pgpr" and args.pgpr != "none") or
-             (r == "gpr3d" and (args.synthetic or args.gprmax))] if args.rule_heads else None
+             (r == "gpr3d" and (args.synthetic or args.wall or args.gprmax))] if args.rule_heads else None
     pgpr_head = rules.index("pgpr") if rules and "pgpr" in rules else 0
     gpr3d_head = rules.index("gpr3d") if rules and "gpr3d" in rules else 0
     pictures, records, parts = [], [], []
@@ -140,6 +147,11 @@ def main(argv=None):
 
         records += [survey_sample(1000, i) for i in range(args.synthetic)]
         parts.append(f"survey_sample(1000, i < {args.synthetic})")
+    if args.wall:
+        from gpr3d.simulation.surveys import survey_sample
+
+        records += [survey_sample(1000, i, profile="wall") for i in range(args.wall)]
+        parts.append(f"survey_sample(1000, i < {args.wall}, profile='wall')")
     for spec in args.gprmax:
         from gpr3d.io.packed import labelled_records
 

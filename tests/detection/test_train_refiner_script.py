@@ -69,6 +69,24 @@ def test_a_wrong_gprmax_file_is_one_line_before_any_work(tmp_path, spec, says):
     assert not (tmp_path / "ref.pt").exists()
 
 
+def test_wall_scans_alone_train_a_refiner_that_read_no_real_label(tmp_path):
+    """``--pgpr none --wall N``: the first N handheld wall scans of seed 1000 (their labels the boxes it learned),
+    named in the weights, no P-GPR credit (the zero-shot line reads no real label)."""
+    from gpr3d.detection.refine import load_refiner
+    from gpr3d.simulation.surveys import survey_sample
+
+    out = tmp_path / "ref.pt"
+    r = subprocess.run([sys.executable, str(SCRIPT), "--out", str(out), "--pgpr", "none", "--wall", "2",
+                        "--epochs", "1", "--per-label", "1"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    n_labels = sum(len([x for x in survey_sample(1000, i, profile="wall")[1]["labels"] if x.get("visible", True)])
+                   for i in range(2))
+    assert f"over {n_labels} crops" in r.stdout  # one crop per label: the two wall scans' labels, no other record's
+    prov = load_refiner(out).provenance
+    assert prov["data"] == "survey_sample(1000, i < 2, profile='wall')"
+    assert "credit" not in prov
+
+
 def test_nothing_to_train_on_is_one_line(tmp_path):
     r = subprocess.run([sys.executable, str(SCRIPT), "--out", str(tmp_path / "ref.pt"), "--pgpr", "none"],
                        capture_output=True, text=True, timeout=120)
@@ -141,6 +159,9 @@ def test_a_fine_stage_of_p_gpr_s_rule_alone_averages_its_members(tmp_path):
 
 @pytest.mark.parametrize("args, says", [(["--pgpr", "none", "--synthetic", "2", "--members", "0"],
                                          "--members must be a whole number >= 1, got 0"),
+                                        (["--pgpr", "none", "--wall", "-2"],
+                                         "--synthetic and --wall are counts of records (whole numbers >= 0), got 0 "
+                                         "and -2"),
                                         (["--pgpr", "none", "--synthetic", "2", "--jitter-scale", "0"],
                                          "--jitter-scale must be a number in (0, 4], got 0.0"),
                                         (["--pgpr", "none", "--synthetic", "2", "--jitter-scale", "nan"],
