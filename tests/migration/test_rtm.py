@@ -137,3 +137,27 @@ def test_bad_arguments_are_named(change, words):
     kw.update(change)
     with pytest.raises(InvalidDataError, match=words):
         rtm_bscan(kw.pop("data"), kw.pop("x_m"), kw.pop("dt_s"), **kw)
+
+
+def test_a_small_model_steps_on_one_thread_and_the_same_image_as_on_several(monkeypatch):
+    """Under ``SERIAL_CELLS`` cells the FDTD steps run on one thread (RTMResult.threads), numba's thread count is
+    given back afterwards, and the image is the one the parallel steps make (each cell is its own sum: equal to
+    the bit)."""
+    import numba
+
+    import gpr3d.migration.rtm as rtm
+
+    eps = 6.0
+    v = C0 / math.sqrt(eps)
+    x = np.arange(0.0, 0.6, 0.01)
+    data = bscan(2 * np.hypot(x - 0.3, 0.2) / v)
+    had = numba.get_num_threads()
+    small = rtm_bscan(data, x, DT, frequency_hz=F, depth_m=0.4, eps_r=eps, t0_s=T0)
+    nx, nz = small.image.shape[0] + 80, small.image.shape[1] + 81  # (the sponges: 40 cells a side, the row above)
+    assert nx * nz < rtm.SERIAL_CELLS and small.threads == 1
+    assert numba.get_num_threads() == had
+    monkeypatch.setattr(rtm, "SERIAL_CELLS", 0)  # every model counts as large: numba's threads
+    large = rtm_bscan(data, x, DT, frequency_hz=F, depth_m=0.4, eps_r=eps, t0_s=T0)
+    assert large.threads == had and numba.get_num_threads() == had
+    np.testing.assert_array_equal(small.image, large.image)
+    assert np.abs(small.image).max() > 0  # (a field that reached the image, not two empty ones)

@@ -2,6 +2,7 @@
 steps, captured where they enter the FDTD kernel (replaced here), against values worked out in the test."""
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -143,3 +144,27 @@ def test_too_much_work_is_refused(monkeypatch, captured):
     with pytest.raises(InvalidDataError, match=r"^the RTM model would be \d+ x \d+ cells x \d+ steps \(cell [0-9.]+ "
                                                r"mm\): give a coarser cell_m or a shallower depth_m$"):
         rtm.rtm_bscan(np.zeros((2, 10)), [0.0, 0.1], 1e-10, frequency_hz=1e9, depth_m=0.05, eps_r=4.0)
+
+
+def test_the_steps_run_on_one_thread_below_serial_cells_and_the_count_is_given_back(monkeypatch, captured):
+    """numba's thread calls replaced by a record (whatever threads this machine or the mutation run has): a model
+    of fewer than SERIAL_CELLS cells steps on one thread, one of exactly that many on all; the count set back."""
+    calls = []
+    monkeypatch.setattr(rtm.numba, "get_num_threads", lambda: 4)
+    monkeypatch.setattr(rtm.numba, "set_num_threads", lambda n: calls.append((n, "ey" in captured)))
+    data = np.random.default_rng(2).normal(size=(4, 30))
+    kw = dict(frequency_hz=2e9, depth_m=0.05, eps_r=6.0, pad_cells=12)
+    x = np.linspace(0.0, 0.075, 4)
+    t0 = time.perf_counter()
+    res = rtm.rtm_bscan(data, x, 25e-12, **kw)
+    elapsed = time.perf_counter() - t0
+    assert 0 < res.wall_s <= elapsed  # (its own wall time: inside the call's)
+    nx, nz = captured["shapes"][0]
+    assert nx * nz > 1000 and res.threads == 1
+    assert calls == [(1, False), (4, True)]  # one thread set before the kernel ran, the count set back after it
+    calls.clear()
+    captured.clear()
+    monkeypatch.setattr(rtm, "SERIAL_CELLS", nx * nz)  # the same model, now exactly at the limit: all threads
+    assert rtm.rtm_bscan(data, x, 25e-12, **kw).threads == 4 and calls == [(4, False), (4, True)]
+    monkeypatch.setattr(rtm, "SERIAL_CELLS", nx * nz + 1)
+    assert rtm.rtm_bscan(data, x, 25e-12, **kw).threads == 1

@@ -14,8 +14,8 @@ straight rays of Kirchhoff migration and the constant velocity of Stolt's do not
 Assumptions: zero offset (the tx-rx offset is small next to the depth), a flat surface, no loss (the back
 propagation does not amplify, so deep reflectors come out weak).
 
-The FDTD step runs in numba, parallel over columns; a B-scan of a few hundred traces takes well under a second to
-a few seconds.
+The FDTD step runs in numba, parallel over columns (a model of fewer than :data:`SERIAL_CELLS` cells on one
+thread); a B-scan of a few hundred traces takes well under a second to a few seconds.
 """
 
 from __future__ import annotations
@@ -24,22 +24,30 @@ import math
 import time
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from numba import njit, prange
 
 from gpr3d.core.errors import InvalidDataError
 from gpr3d.core.units import C0
 
-__all__ = ["RTMResult", "rtm_bscan", "eps_column"]
+__all__ = ["RTMResult", "rtm_bscan", "eps_column", "SERIAL_CELLS"]
 
 #: the largest model (cells x time steps) rtm_bscan will run: beyond it, a one-line error asks for coarser cells
 MAX_WORK = 2e11
+#: models of fewer cells than this (sponges included) run the FDTD steps on one thread: each step is two parallel
+#: regions, and where a step's work is this small a region's barrier can cost more than the work whenever another
+#: process holds the other core (the first demo's B-scan beside the background compilation of the kernels: 561
+#: steps of 204,000 cells took 3.4-7.1 s on two threads, 0.03 s on one; alone, 0.05 s against 0.08 s:
+#: benchmarks/results/bench_stages.md)
+SERIAL_CELLS = 250_000
 
 
 @dataclass
 class RTMResult:
     """The migrated section: ``image (nx, nz)`` float32 on ``x_m`` (along the line) x ``depth_m`` (from 0 at the
-    surface, positive down), with the cell size, the number of time steps and the wall time."""
+    surface, positive down), with the cell size, the number of time steps, the wall time and the threads the FDTD
+    steps ran on."""
 
     image: np.ndarray
     x_m: np.ndarray
@@ -47,6 +55,7 @@ class RTMResult:
     cell_m: float
     steps: int
     wall_s: float
+    threads: int = 1
 
 
 def eps_column(depth_m: np.ndarray, eps_r=None, layers=None) -> np.ndarray:
@@ -160,8 +169,14 @@ def rtm_bscan(data, x_m, dt_s: float, *, frequency_hz: float, depth_m: float, ep
     ey = np.zeros((nx, nz), np.float32)
     hx = np.zeros((nx, nz), np.float32)
     hz = np.zeros((nx, nz), np.float32)
-    _run(ey, hx, hz, ce, np.float32(C0 * dt / h), _sponge(nxc, p).astype(np.float32),
-         _sponge(nzc + 1, p)[: nz].astype(np.float32), src, p, ks)
+    had = numba.get_num_threads()
+    threads = 1 if nx * nz < SERIAL_CELLS else had
+    numba.set_num_threads(threads)
+    try:
+        _run(ey, hx, hz, ce, np.float32(C0 * dt / h), _sponge(nxc, p).astype(np.float32),
+             _sponge(nzc + 1, p)[: nz].astype(np.float32), src, p, ks)
+    finally:
+        numba.set_num_threads(had)
     image = np.ascontiguousarray(ey[p: p + nxc, ks: ks + nzc])
     return RTMResult(image=image, x_m=xs, depth_m=h * np.arange(nzc), cell_m=h, steps=steps,
-                     wall_s=time.perf_counter() - t_start)
+                     wall_s=time.perf_counter() - t_start, threads=threads)
