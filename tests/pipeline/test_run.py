@@ -222,3 +222,57 @@ def test_a_figure_worker_draws_the_reconstruction_figures_of_a_run(done_run, tmp
     assert sorted(p.name for p in (out / "reconstruction").iterdir()) == sorted(
         p.name for p in (out0 / "reconstruction").iterdir())
     assert again["targets"] == summary["targets"]
+
+
+def test_a_stage_stopped_while_it_writes_leaves_a_journal_naming_only_whole_stages(tmp_path, monkeypatch):
+    """The journal forgets a stage before its files are written again: a run stopped inside the detection stage,
+    after it has replaced detections.json (a kill between the file and the journal), leaves a journal that names
+    the survey (whole) and neither the detections nor the reconstruction made from the old ones."""
+    from gpr3d.pipeline import report, run
+
+    rec = tmp_path / "line.h5"
+    rec.write_bytes(b"a recording")
+    out = tmp_path / "run"
+    calls = []
+
+    def survey(cfg, out, log):
+        calls.append("survey")
+        (out / "survey.h5").write_bytes(b"survey")
+        return "survey line"
+
+    def detections(cfg, out, log):
+        calls.append("detections")
+        (out / "detections.json").write_text(json.dumps({"score": cfg.score}))
+        if cfg.score == 0.6:
+            raise KeyboardInterrupt  # (stopped after the file, before the journal's record)
+        return "detections line"
+
+    def reconstruction(cfg, out, log, figures=None):
+        calls.append("reconstruction")
+        (out / "reconstruction").mkdir(exist_ok=True)
+        (out / "reconstruction" / "targets.json").write_text(json.dumps({"targets": [], "score": cfg.score}))
+        return "reconstruction line"
+
+    monkeypatch.setattr(run, "_survey_stage", survey)
+    monkeypatch.setattr(run, "_detections_stage", detections)
+    monkeypatch.setattr(run, "_reconstruction_stage", reconstruction)
+    monkeypatch.setattr(report, "write_report", lambda out: out / "report.html")
+    cfg = RunConfig(input=str(rec), out=str(out), eps_r=6.0)
+    run_pipeline(cfg, log=lambda m: None)
+    j = run._Journal(out)
+    assert list(j.stages) == ["survey", "detections", "reconstruction"]
+    assert all(j.done(s, r["key"]) for s, r in j.stages.items())
+    with pytest.raises(KeyboardInterrupt):
+        run_pipeline(RunConfig(**{**cfg.__dict__, "score": 0.6}), log=lambda m: None)
+    assert calls == ["survey", "detections", "reconstruction", "detections"]  # (the survey kept)
+    j = run._Journal(out)
+    assert list(j.stages) == ["survey"], j.stages  # (the old detections' record is gone with their file)
+    assert j.done("survey", j.stages["survey"]["key"])
+    # the next run makes detection and reconstruction again and keeps the survey
+    calls.clear()
+    run_pipeline(RunConfig(**{**cfg.__dict__, "score": 0.55}), log=lambda m: None)
+    assert calls == ["detections", "reconstruction"]
+    j = run._Journal(out)
+    assert list(j.stages) == ["survey", "detections", "reconstruction"]
+    assert all(j.done(s, r["key"]) for s, r in j.stages.items())
+    assert json.loads((out / "reconstruction" / "targets.json").read_text())["score"] == 0.55

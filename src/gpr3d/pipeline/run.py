@@ -122,13 +122,25 @@ class _Journal:
         except OSError:
             return False
 
-    def record(self, stage: str, key: str, wall_s: float, line: str) -> None:
-        from gpr3d.core.atomic import atomic_write_text
+    def begin(self, stage: str) -> None:
+        """Forget ``stage`` and those after it on disk before its files are written again: a run killed while
+        it writes them leaves a journal that names only stages whose files are whole."""
+        later = list(STAGES)[list(STAGES).index(stage):]
+        if any(n in self.stages for n in later):
+            for n in later:
+                self.stages.pop(n, None)
+            self._write()
 
+    def record(self, stage: str, key: str, wall_s: float, line: str) -> None:
         self.stages[stage] = {"key": key, "files": _files_sha(self.out, STAGES[stage]), "wall_s": round(wall_s, 3),
                               "line": line}
         for later in list(STAGES)[list(STAGES).index(stage) + 1:]:
             self.stages.pop(later, None)  # what came after was made from the old result
+        self._write()
+
+    def _write(self) -> None:
+        from gpr3d.core.atomic import atomic_write_text
+
         atomic_write_text(self.path, json.dumps({"version": 1, "stages": self.stages}, indent=1))
 
 
@@ -294,6 +306,7 @@ def run_pipeline(cfg: RunConfig, *, log=print, progress: bool | None = None, fig
                 log(f"[{k}/{len(work)}] {stage}: kept from an earlier run ({lines[stage]['line']})")
                 bar.update(1)
                 continue
+            journal.begin(stage)  # (before its files change: a kill from here on leaves it unnamed)
             t0 = time.perf_counter()
             line = fn(cfg, out, log)
             wall = time.perf_counter() - t0
