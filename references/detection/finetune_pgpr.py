@@ -65,6 +65,9 @@ def main(argv=None):
                    help="share of the synthetic records drawn as handheld wall scans (survey_sample(..., profile='wall'))")
     p.add_argument("--wall-ringing", type=float, default=0.0,
                    help="share of the wall scans whose echoes ring (gpr3d.simulation.surveys.echo_ringing)")
+    p.add_argument("--wall-box-pad", type=float, default=None, metavar="PERIODS",
+                   help="the wall scans' boxes reach this many periods before the apex and after the latest arrival "
+                        "(default the label rule's 0.7; 0.4: the Ricker's side lobes, the first lobe a picture shows)")
     p.add_argument("--augment", action="store_true",
                    help="stretch the windows along the traces, change their gain and noise (gpr3d.detection.augment)")
     p.add_argument("--seed", type=int, default=0,
@@ -76,6 +79,10 @@ def main(argv=None):
     args = p.parse_args(argv)
     if not 0.0 <= args.wall <= 1.0 or not 0.0 <= args.real <= 1.0:
         p.error("--wall and --real are shares in 0..1")
+    if args.wall_box_pad is not None and not args.wall:
+        p.error("--wall-box-pad sets the wall scans' boxes: give --wall too")
+    if args.wall_box_pad is not None and not 0.0 <= args.wall_box_pad <= 2.0:
+        p.error(f"--wall-box-pad must lie in 0..2 periods, got {args.wall_box_pad:g}")
     if args.stretch and not args.augment:
         p.error("--stretch is the range of --augment's stretch: give --augment too")
     if args.stretch and not 0.25 <= args.stretch[0] <= args.stretch[1] <= 4.0:
@@ -88,8 +95,10 @@ def main(argv=None):
                       freeze=args.freeze, checkpoint_every=50, labels_pattern=args.only,
                       packed=args.packed or None, packed_fraction=args.packed_fraction,
                       augment=({"stretch": tuple(args.stretch)} if args.stretch else True) if args.augment else None,
-                      wall_fraction=args.wall, seed=args.seed, data_seed=1000 + args.seed, **PGPR)
-    wall = SurveySource(cfg.data_seed, profile="wall", ringing=args.wall_ringing) if args.wall else None
+                      wall_fraction=args.wall, wall_box_pad=args.wall_box_pad, seed=args.seed, data_seed=1000 + args.seed,
+                      **PGPR)
+    wall = SurveySource(cfg.data_seed, profile="wall", ringing=args.wall_ringing,
+                        box_pad=args.wall_box_pad) if args.wall else None
     res = train_detector(cfg, SurveySource(cfg.data_seed), wall_source=wall, progress=False,
                          max_seconds=args.max_seconds)
     if res["steps"] < cfg.steps:
@@ -118,6 +127,8 @@ def main(argv=None):
                                         if args.packed else "") + f"the others survey_sample(seed={cfg.data_seed}, i)"
                                      + (f" ({args.wall:.0%} of them wall scans, profile 'wall'"
                                         + (f", {args.wall_ringing:.0%} of those ringing" if args.wall_ringing else "")
+                                        + (f", boxes padded {args.wall_box_pad:g} periods" if args.wall_box_pad
+                                           is not None else "")
                                         + ")" if args.wall else "")
                                      + (f"; augmented {cfg.augment}" if cfg.augment else ""),
                              "steps_done": res["steps"], **({"trace_width": width} if width else {})})

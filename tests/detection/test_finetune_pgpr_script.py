@@ -42,3 +42,14 @@ def test_a_negative_seed_is_refused_in_one_line_before_any_work(tmp_path):
                         str(tmp_path / "ft"), "--seed", "-2"], capture_output=True, text=True, timeout=300)
     assert r.returncode == 2 and "--seed must be 0 or more, got -2" in r.stderr
     assert not (tmp_path / "ft").exists()
+
+
+@pytest.mark.parametrize("extra, msg", [
+    (["--wall-box-pad", "0.4"], "--wall-box-pad sets the wall scans' boxes: give --wall too"),
+    (["--wall", "0.5", "--wall-box-pad", "2.5"], "--wall-box-pad must lie in 0..2 periods, got 2.5"),
+])
+def test_a_wrong_wall_box_pad_is_refused_in_one_line_before_any_work(tmp_path, extra, msg):
+    r = subprocess.run([sys.executable, str(REPO / "references" / "detection" / "finetune_pgpr.py"), "--out",
+                        str(tmp_path / "ft"), "--real", "0", *extra], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and msg in r.stderr, r.stderr
+    assert not (tmp_path / "ft").exists()

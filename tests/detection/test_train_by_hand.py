@@ -120,7 +120,8 @@ def test_a_whole_run_sees_each_item_once_in_order_and_logs_every_step(tmp_path, 
     assert ck["step"] == 5 and ck["epoch"] == 0 and ck["windows_seen"] == 10 and ck["gpr3d"] == __version__
     assert ck["config"] == asdict(cfg)
     assert ck["resume_key"] == {k: v for k, v in asdict(cfg).items()  # (no wall share: keys as before it existed)
-                                if k not in ("device", "workers", "checkpoint_every", "out", "wall_fraction")}
+                                if k not in ("device", "workers", "checkpoint_every", "out", "wall_fraction",
+                                             "wall_box_pad")}
     assert torch.equal(ck["model"]["w"], res["model"].w.detach())
     assert ck["optimizer"]["param_groups"][0]["lr"] == pytest.approx(lr_at(5, 1e-3, 2, 5), rel=1e-12)
     assert ck["scheduler"]["last_epoch"] == 5
@@ -489,3 +490,37 @@ def test_the_bar_counts_on_from_where_a_run_resumes(tmp_path, stand_ins, capsys)
     last = capsys.readouterr().err.rstrip().split("\r")[-1]
     assert last.startswith("train ssdlite: 100%") and "| 5/5 [" in last, last
     assert re.search(r"\d(step/s|s/step), loss=\d+\.\d{3}\]$", last), last
+
+
+class _Walls:
+    def __init__(self, box_pad=None):
+        self.box_pad = box_pad
+
+
+def test_the_wall_records_box_pad_is_part_of_the_run_and_must_be_the_source_s(tmp_path, stand_ins, sources):
+    cfg = cfg_for(tmp_path, steps=1, wall_fraction=0.4, wall_box_pad=0.4)
+    with pytest.raises(GPR3DError) as err:  # a source that pads otherwise: refused before any work
+        train_detector(cfg, "gen", wall_source=_Walls(), progress=False, log=quiet)
+    assert str(err.value) == "--wall-box-pad 0.4: the wall-scan source given pads its boxes by None"
+    assert stand_ins["built"] == []
+    train_detector(cfg, "gen", wall_source=_Walls(0.4), progress=False, log=quiet)
+    ck = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
+    assert ck["resume_key"]["wall_box_pad"] == 0.4  # another pad is another run
+    with pytest.raises(GPR3DError, match="the wall-scan source given pads its boxes by 0.4"):
+        train_detector(cfg_for(tmp_path / "b", steps=1, wall_fraction=0.4), "gen", wall_source=_Walls(0.4),
+                       progress=False, log=quiet)
+    train_detector(cfg_for(tmp_path / "c", steps=1, wall_fraction=0.4), "gen", wall_source=_Walls(),
+                   progress=False, log=quiet)
+    ck = torch.load(tmp_path / "c" / "run" / "checkpoint.pt", weights_only=True)
+    assert "wall_box_pad" not in ck["resume_key"]  # (none asked: runs from before the setting resume)
+
+
+@pytest.mark.parametrize("kw, msg", [
+    (dict(wall_fraction=0.4, wall_box_pad=-0.1), "--wall-box-pad must lie in 0..2 periods, got -0.1"),
+    (dict(wall_fraction=0.4, wall_box_pad=float("nan")), "--wall-box-pad must lie in 0..2 periods, got nan"),
+    (dict(wall_box_pad=0.4), "--wall-box-pad sets the wall records' boxes: give --wall-fraction too"),
+])
+def test_a_wrong_wall_box_pad_is_one_line(tmp_path, kw, msg):
+    with pytest.raises(InvalidDataError) as err:
+        cfg_for(tmp_path, **kw)
+    assert str(err.value) == msg

@@ -245,3 +245,28 @@ def test_visible_up_to_the_record_s_ends_inclusive():
     assert d + a == t_end
     assert label_traces(s, x, 400, 0.02e-9, source_delay_s=d)[0]["visible"]
     assert not label_traces(s, x, 400, 0.02e-9, source_delay_s=np.nextafter(d, 1.0) + 1e-15)[0]["visible"]
+
+
+def test_a_time_pad_of_its_own_moves_only_the_box_s_times():
+    """``pad_periods``: the box reaches that many periods before the apex and after the latest arrival (by hand, as
+    above: a steel pipe at 0.1 m, its box's outermost traces 0.14 m off its axis), the traces and the rest kept."""
+    s = scene()
+    s.targets.append(Target("steel_pipe", x_m=0.3, depth_m=0.1, radius_m=0.05))
+    n, dt, f, v = 400, 0.02e-9, 1e9, s.medium.velocity_m_s
+    x = s.trace_midpoints_x()
+    rule = label_traces(s, x, n, dt)
+    assert rule == label_traces(s, x, n, dt, pad_periods=0.7)  # the rule's own pad
+    tight = label_traces(s, x, n, dt, pad_periods=0.4)
+    b = tight[1]
+    i0, t0, i1, t1 = b["box"]
+    assert (i0, i1) == (8, 22)
+    far = 2 * (math.hypot(0.14, 0.15) - 0.05) / v
+    assert t1 == pytest.approx(math.sqrt(2) / f + far + 0.4 / f, rel=1e-5, abs=0)
+    assert t0 == pytest.approx(math.sqrt(2) / f + 2 * 0.1 / v - 0.4 / f, rel=1e-9, abs=0)
+    for a, r in zip(tight, rule):
+        assert {k: v for k, v in a.items() if k != "box"} == {k: v for k, v in r.items() if k != "box"}
+        assert a["box"][1] - r["box"][1] == pytest.approx(0.3 / f) or r["box"][1] == 0.0
+    assert label_traces(s, x, n, dt, pad_periods=0.0)[1]["box"][1] == pytest.approx(b["apex_time_s"], rel=1e-12)
+    for bad in (-0.1, 2.5, float("nan")):
+        with pytest.raises(ValueError, match="pad_periods must lie in 0..2"):
+            label_traces(s, x, n, dt, pad_periods=bad)

@@ -191,3 +191,23 @@ def test_ringing_is_a_share_of_wall_records_drawn_apart():
     for bad in (dict(profile="wall", ringing=1.5), dict(profile="train", ringing=0.5)):
         with pytest.raises(ValueError, match="ringing is a share"):
             SurveySource(5, **bad)
+
+
+def test_a_wall_record_s_box_pad_changes_its_labels_times_and_nothing_else():
+    from gpr3d.simulation.surveys import SurveySource, survey_sample
+
+    s0, lab0 = survey_sample(5, 2, profile="wall")
+    s1, lab1 = survey_sample(5, 2, profile="wall", box_pad=0.4)
+    assert np.array_equal(s0.data, s1.data) and lab0["dt_s"] == lab1["dt_s"]
+    f = s0.frequency_hz
+    t_end = (lab0["n_samples"] - 1) * lab0["dt_s"]
+    assert lab0["labels"]
+    for a, b in zip(lab0["labels"], lab1["labels"]):
+        assert a["apex_time_s"] == b["apex_time_s"] and a["box"][0::2] == b["box"][0::2]
+        assert b["box"][1] == pytest.approx(max(a["apex_time_s"] - 0.4 / f, 0.0), rel=1e-9, abs=1e-15)
+        if a["box"][3] < t_end:  # (not clipped by the record's end)
+            assert a["box"][3] - b["box"][3] == pytest.approx(0.3 / f, rel=1e-6)
+    assert SurveySource(5, profile="wall", box_pad=0.4)(2)[1] == lab1
+    for bad in (-1.0, 3.0, float("inf")):
+        with pytest.raises(ValueError, match="box_pad is the labels' time pad"):
+            SurveySource(5, profile="wall", box_pad=bad)

@@ -10,6 +10,7 @@ refused, so two runs never mix). At the end the weights are exported with
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -65,6 +66,8 @@ class TrainConfig:
     #: share of the synthetic records drawn from the ``wall_source`` given to :func:`train_detector` (handheld
     #: concrete wall scans, ``SurveySource(data_seed, profile="wall")`` in ``gpr3d train detector``)
     wall_fraction: float = 0.0
+    #: the wall records' box time pad in periods (``SurveySource(..., box_pad=)``; None: the label rule's 0.7)
+    wall_box_pad: float | None = None
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -90,6 +93,10 @@ class TrainConfig:
             raise InvalidDataError(f"--labels-fraction must lie in 0..1, got {self.labels_fraction!r}")
         if not 0.0 <= self.wall_fraction <= 1.0:
             raise InvalidDataError(f"--wall-fraction must lie in 0..1, got {self.wall_fraction!r}")
+        if self.wall_box_pad is not None and not (math.isfinite(self.wall_box_pad) and 0 <= self.wall_box_pad <= 2):
+            raise InvalidDataError(f"--wall-box-pad must lie in 0..2 periods, got {self.wall_box_pad!r}")
+        if self.wall_box_pad is not None and not self.wall_fraction:
+            raise InvalidDataError("--wall-box-pad sets the wall records' boxes: give --wall-fraction too")
         if not isinstance(self.freeze, int) or not 0 <= self.freeze <= 4:
             raise InvalidDataError(f"--freeze must be an integer in 0..4 (backbone stages kept fixed), got {self.freeze!r}")
         if self.kinds is not None:
@@ -160,6 +167,9 @@ def train_detector(cfg: TrainConfig, source, *, wall_source=None, progress: bool
     """
     if cfg.wall_fraction and wall_source is None:
         raise GPR3DError(f"--wall-fraction {cfg.wall_fraction}: no wall-scan source was given to draw them from")
+    if cfg.wall_fraction and getattr(wall_source, "box_pad", None) != cfg.wall_box_pad:
+        raise GPR3DError(f"--wall-box-pad {cfg.wall_box_pad}: the wall-scan source given pads its boxes by "
+                         f"{getattr(wall_source, 'box_pad', None)}")
     torch = require("torch")
 
     from gpr3d.detection.data import WindowDataset, collate
@@ -172,6 +182,8 @@ def train_detector(cfg: TrainConfig, source, *, wall_source=None, progress: bool
     same = {k: v for k, v in cfg_dict.items() if k not in ("device", "workers", "checkpoint_every", "out")}
     if not cfg.wall_fraction:  # (runs from before the setting resume)
         del same["wall_fraction"]
+    if cfg.wall_box_pad is None:  # (likewise)
+        del same["wall_box_pad"]
     torch.manual_seed(cfg.seed)
     kinds = cfg.kinds
     init = None

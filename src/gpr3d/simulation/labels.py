@@ -65,14 +65,20 @@ def label_scene(scene: Scene, n_samples: int, dt_s: float) -> list[dict]:
     return label_traces(scene, scene.trace_midpoints_x(), n_samples, dt_s)
 
 
-def label_traces(scene: Scene, x, n_samples: int, dt_s: float, *, source_delay_s: float | None = None) -> list[dict]:
+def label_traces(scene: Scene, x, n_samples: int, dt_s: float, *, source_delay_s: float | None = None,
+                 pad_periods: float = BOX_PAD_PERIODS) -> list[dict]:
     """Labels (as :func:`label_scene`) for traces at antenna midpoints ``x`` (non-decreasing, m).
 
     ``source_delay_s`` is the time from the first sample to the pulse's peak at the
     source (default gprMax's ``sqrt(2)/f``). Uneven steps, stops (repeated
     positions) and gaps are allowed; ``apex_trace`` is then the fractional trace
-    index at which the antenna passes over the target.
+    index at which the antenna passes over the target. ``pad_periods``: the box's
+    time reaches this many periods ``1 / f`` before the apex and after the latest
+    arrival (default the rule's ``BOX_PAD_PERIODS``, 0.7: the wavelet's main lobes;
+    0.4 stops at the Ricker's side lobes' peaks, ``0.39 / f`` from its own).
     """
+    if not (math.isfinite(pad_periods) and 0.0 <= pad_periods <= 2.0):
+        raise ValueError(f"pad_periods must lie in 0..2 periods, got {pad_periods!r}")
     f = scene.antenna.frequency_hz
     delay = math.sqrt(2) / f if source_delay_s is None else float(source_delay_s)
     x = np.asarray(x, dtype=float)
@@ -92,8 +98,8 @@ def label_traces(scene: Scene, x, n_samples: int, dt_s: float, *, source_delay_s
             step = (x[-1] - x[0]) / max(n - 1, 1) or 1.0
             apex_trace = (t.x_m - x[0]) / step
         apex_twt = float(twt.min())
-        t0 = delay + apex_twt - BOX_PAD_PERIODS / f
-        t1 = delay + float(twt.max()) + BOX_PAD_PERIODS / f
+        t0 = delay + apex_twt - pad_periods / f
+        t1 = delay + float(twt.max()) + pad_periods / f
         out.append({
             "kind": t.kind,
             "category": CATEGORIES.index(t.kind) + 1,

@@ -227,7 +227,7 @@ def _trace_positions(scene: Scene, rng, augment: bool) -> np.ndarray:
 
 
 def synthesize_survey(scene: Scene, *, seed: int = 0, augment: bool = True, n_samples: int | None = None,
-                      wall: bool = False, ringing: float = 0.0):
+                      wall: bool = False, ringing: float = 0.0, box_pad: float | None = None):
     """A recorded-looking B-scan of ``scene`` (forward model) and its labels: ``(Survey, labels dict)``.
 
     With ``augment`` the artefacts listed in the module docstring are drawn from
@@ -235,7 +235,9 @@ def synthesize_survey(scene: Scene, *, seed: int = 0, augment: bool = True, n_sa
     (with ``augment``): recorded as a handheld wall scanner records (``WALL_RANGES``): a
     narrower beam, the concrete's aggregate as many weak scatterers, noise correlated from
     trace to trace, and most often kept as an 8-bit picture (:func:`display_8bit`); ``ringing``: the share of
-    wall records whose every echo rings (:func:`echo_ringing`, a draw of its own: 0 leaves the records as they were).
+    wall records whose every echo rings (:func:`echo_ringing`, a draw of its own: 0 leaves the records as they were);
+    ``box_pad``: the labels' time pad in periods (:func:`~gpr3d.simulation.labels.label_traces`' ``pad_periods``;
+    None: the rule's 0.7). The record itself does not depend on it.
     """
     from gpr3d.core.poses import quat_from_yaw
     from gpr3d.core.survey import Survey
@@ -285,7 +287,8 @@ def synthesize_survey(scene: Scene, *, seed: int = 0, augment: bool = True, n_sa
                     metadata={"format": "forward", "scene": scene.to_dict(), "antenna": "forward model",
                               "simulation": {"engine": "forward", "augment": augment, "seed": int(seed),
                                              "source_delay_s": delay}})
-    labels = label_traces(scene, x, n_samples, dt, source_delay_s=delay)
+    labels = label_traces(scene, x, n_samples, dt, source_delay_s=delay,
+                          **({} if box_pad is None else {"pad_periods": box_pad}))
     return survey, {"eps_r": scene.medium.eps_r, "n_traces": len(x), "n_samples": n_samples, "dt_s": dt,
                     "labels": labels}
 
@@ -358,26 +361,30 @@ def display_8bit(data: np.ndarray, rng) -> np.ndarray:
 
 
 def survey_sample(seed: int, index: int, *, host: str | None = None, augment: bool = True, profile: str = "train",
-                  ringing: float = 0.0):
+                  ringing: float = 0.0, box_pad: float | None = None):
     """``(Survey, labels)`` of survey-scale sample ``index``: the detector's training and test source
     (``profile="wall"``: P-GPR-like handheld wall scans, ``WALL_RANGES``; ``ringing``: the share of those whose
-    echoes ring, :func:`echo_ringing`)."""
+    echoes ring, :func:`echo_ringing`; ``box_pad``: the labels' time pad in periods, None: the rule's)."""
     scene = sample_survey_scene(seed, index, host=host, profile=profile)
     return synthesize_survey(scene, seed=int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0]),
-                             augment=augment, wall=profile == "wall", ringing=ringing)
+                             augment=augment, wall=profile == "wall", ringing=ringing, box_pad=box_pad)
 
 
 class SurveySource:
     """``source(i) -> survey_sample(seed, i)``: a picklable record source for training and evaluation."""
 
-    def __init__(self, seed: int, *, augment: bool = True, profile: str = "train", ringing: float = 0.0):
+    def __init__(self, seed: int, *, augment: bool = True, profile: str = "train", ringing: float = 0.0,
+                 box_pad: float | None = None):
         if not isinstance(seed, int) or seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
         if profile not in ("train", "wall"):
             raise ValueError(f"a survey source draws 'train' or 'wall' records, got {profile!r}")
         if not 0.0 <= ringing <= 1.0 or (ringing and profile != "wall"):
             raise ValueError(f"ringing is a share (0..1) of wall records, got {ringing!r} for profile {profile!r}")
-        self.seed, self.augment, self.profile, self.ringing = seed, augment, profile, ringing
+        if box_pad is not None and not (math.isfinite(box_pad) and 0.0 <= box_pad <= 2.0):
+            raise ValueError(f"box_pad is the labels' time pad in periods (0..2), got {box_pad!r}")
+        self.seed, self.augment, self.profile, self.ringing, self.box_pad = seed, augment, profile, ringing, box_pad
 
     def __call__(self, i: int):
-        return survey_sample(self.seed, i, augment=self.augment, profile=self.profile, ringing=self.ringing)
+        return survey_sample(self.seed, i, augment=self.augment, profile=self.profile, ringing=self.ringing,
+                             box_pad=self.box_pad)
