@@ -267,6 +267,7 @@ def test_a_time_pad_of_its_own_moves_only_the_box_s_times():
         assert {k: v for k, v in a.items() if k != "box"} == {k: v for k, v in r.items() if k != "box"}
         assert a["box"][1] - r["box"][1] == pytest.approx(0.3 / f) or r["box"][1] == 0.0
     assert label_traces(s, x, n, dt, pad_periods=0.0)[1]["box"][1] == pytest.approx(b["apex_time_s"], rel=1e-12)
-    for bad in (-0.1, 2.5, float("nan")):
+    assert label_traces(s, x, n, dt, pad_periods=2.0)[1]["box"][1] == pytest.approx(b["apex_time_s"] - 2.0 / f)
+    for bad in (-0.1, 2.01, float("nan")):
         with pytest.raises(ValueError, match="pad_periods must lie in 0..2"):
             label_traces(s, x, n, dt, pad_periods=bad)
