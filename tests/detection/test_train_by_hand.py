@@ -503,6 +503,9 @@ def test_the_wall_records_box_pad_is_part_of_the_run_and_must_be_the_source_s(tm
         train_detector(cfg, "gen", wall_source=_Walls(), progress=False, log=quiet)
     assert str(err.value) == "--wall-box-pad 0.4: the wall-scan source given pads its boxes by None"
     assert stand_ins["built"] == []
+    with pytest.raises(GPR3DError) as err:  # a source that names no pad (the default rule's)
+        train_detector(cfg, "gen", wall_source="walls", progress=False, log=quiet)
+    assert str(err.value) == "--wall-box-pad 0.4: the wall-scan source given pads its boxes by None"
     train_detector(cfg, "gen", wall_source=_Walls(0.4), progress=False, log=quiet)
     ck = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
     assert ck["resume_key"]["wall_box_pad"] == 0.4  # another pad is another run
@@ -524,3 +527,12 @@ def test_a_wrong_wall_box_pad_is_one_line(tmp_path, kw, msg):
     with pytest.raises(InvalidDataError) as err:
         cfg_for(tmp_path, **kw)
     assert str(err.value) == msg
+
+
+@pytest.mark.parametrize("pad, ok", [(0.0, True), (2.0, True), (2.5, False), (-1e-9, False)])
+def test_a_wall_box_pad_lies_in_0_to_2_periods_ends_included(tmp_path, pad, ok):
+    if ok:
+        assert cfg_for(tmp_path, wall_fraction=0.4, wall_box_pad=pad).wall_box_pad == pad
+    else:
+        with pytest.raises(InvalidDataError, match="--wall-box-pad must lie in 0..2 periods"):
+            cfg_for(tmp_path, wall_fraction=0.4, wall_box_pad=pad)
