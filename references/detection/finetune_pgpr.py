@@ -68,6 +68,9 @@ def main(argv=None):
     p.add_argument("--wall-box-pad", type=float, default=None, metavar="PERIODS",
                    help="the wall scans' boxes reach this many periods before the apex and after the latest arrival "
                         "(default the label rule's 0.7; 0.4: the Ricker's side lobes, the first lobe a picture shows)")
+    p.add_argument("--wall-pad-wavelet", action="store_true",
+                   help="the wall scans' box pad in periods of each record's drawn wavelet (its true centre "
+                        "frequency, 0.8-1.2x the label's), not of the label's frequency")
     p.add_argument("--augment", action="store_true",
                    help="stretch the windows along the traces, change their gain and noise (gpr3d.detection.augment)")
     p.add_argument("--seed", type=int, default=0,
@@ -83,6 +86,8 @@ def main(argv=None):
         p.error("--wall-box-pad sets the wall scans' boxes: give --wall too")
     if args.wall_box_pad is not None and not 0.0 <= args.wall_box_pad <= 2.0:
         p.error(f"--wall-box-pad must lie in 0..2 periods, got {args.wall_box_pad:g}")
+    if args.wall_pad_wavelet and not args.wall:
+        p.error("--wall-pad-wavelet sets the wall scans' boxes: give --wall too")
     if args.stretch and not args.augment:
         p.error("--stretch is the range of --augment's stretch: give --augment too")
     if args.stretch and not 0.25 <= args.stretch[0] <= args.stretch[1] <= 4.0:
@@ -95,10 +100,11 @@ def main(argv=None):
                       freeze=args.freeze, checkpoint_every=50, labels_pattern=args.only,
                       packed=args.packed or None, packed_fraction=args.packed_fraction,
                       augment=({"stretch": tuple(args.stretch)} if args.stretch else True) if args.augment else None,
-                      wall_fraction=args.wall, wall_box_pad=args.wall_box_pad, seed=args.seed, data_seed=1000 + args.seed,
+                      wall_fraction=args.wall, wall_box_pad=args.wall_box_pad,
+                      wall_pad_wavelet=args.wall_pad_wavelet, seed=args.seed, data_seed=1000 + args.seed,
                       **PGPR)
     wall = SurveySource(cfg.data_seed, profile="wall", ringing=args.wall_ringing,
-                        box_pad=args.wall_box_pad) if args.wall else None
+                        box_pad=args.wall_box_pad, pad_wavelet=args.wall_pad_wavelet) if args.wall else None
     res = train_detector(cfg, SurveySource(cfg.data_seed), wall_source=wall, progress=False,
                          max_seconds=args.max_seconds)
     if res["steps"] < cfg.steps:
@@ -129,6 +135,8 @@ def main(argv=None):
                                         + (f", {args.wall_ringing:.0%} of those ringing" if args.wall_ringing else "")
                                         + (f", boxes padded {args.wall_box_pad:g} periods" if args.wall_box_pad
                                            is not None else "")
+                                        + (", boxes padded in the drawn wavelet's periods" if args.wall_pad_wavelet
+                                           else "")
                                         + ")" if args.wall else "")
                                      + (f"; augmented {cfg.augment}" if cfg.augment else ""),
                              "steps_done": res["steps"], **({"trace_width": width} if width else {})})

@@ -47,6 +47,7 @@ def test_a_negative_seed_is_refused_in_one_line_before_any_work(tmp_path):
 @pytest.mark.parametrize("extra, msg", [
     (["--wall-box-pad", "0.4"], "--wall-box-pad sets the wall scans' boxes: give --wall too"),
     (["--wall", "0.5", "--wall-box-pad", "2.5"], "--wall-box-pad must lie in 0..2 periods, got 2.5"),
+    (["--wall-pad-wavelet"], "--wall-pad-wavelet sets the wall scans' boxes: give --wall too"),
 ])
 def test_a_wrong_wall_box_pad_is_refused_in_one_line_before_any_work(tmp_path, extra, msg):
     r = subprocess.run([sys.executable, str(REPO / "references" / "detection" / "finetune_pgpr.py"), "--out",

@@ -121,7 +121,7 @@ def test_a_whole_run_sees_each_item_once_in_order_and_logs_every_step(tmp_path, 
     assert ck["config"] == asdict(cfg)
     assert ck["resume_key"] == {k: v for k, v in asdict(cfg).items()  # (no wall share: keys as before it existed)
                                 if k not in ("device", "workers", "checkpoint_every", "out", "wall_fraction",
-                                             "wall_box_pad")}
+                                             "wall_box_pad", "wall_pad_wavelet")}
     assert torch.equal(ck["model"]["w"], res["model"].w.detach())
     assert ck["optimizer"]["param_groups"][0]["lr"] == pytest.approx(lr_at(5, 1e-3, 2, 5), rel=1e-12)
     assert ck["scheduler"]["last_epoch"] == 5
@@ -493,8 +493,8 @@ def test_the_bar_counts_on_from_where_a_run_resumes(tmp_path, stand_ins, capsys)
 
 
 class _Walls:
-    def __init__(self, box_pad=None):
-        self.box_pad = box_pad
+    def __init__(self, box_pad=None, pad_wavelet=False):
+        self.box_pad, self.pad_wavelet = box_pad, pad_wavelet
 
 
 def test_the_wall_records_box_pad_is_part_of_the_run_and_must_be_the_source_s(tmp_path, stand_ins, sources):
@@ -536,3 +536,24 @@ def test_a_wall_box_pad_lies_in_0_to_2_periods_ends_included(tmp_path, pad, ok):
     else:
         with pytest.raises(InvalidDataError, match="--wall-box-pad must lie in 0..2 periods"):
             cfg_for(tmp_path, wall_fraction=0.4, wall_box_pad=pad)
+
+
+def test_a_pad_in_the_wavelet_s_periods_is_part_of_the_run_and_must_be_the_source_s(tmp_path, stand_ins, sources):
+    cfg = cfg_for(tmp_path, steps=1, wall_fraction=0.4, wall_pad_wavelet=True)
+    with pytest.raises(GPR3DError) as err:
+        train_detector(cfg, "gen", wall_source=_Walls(), progress=False, log=quiet)
+    assert str(err.value) == "--wall-pad-wavelet True: the wall-scan source given pads by the label's frequency"
+    with pytest.raises(GPR3DError) as err:
+        train_detector(cfg_for(tmp_path / "b", steps=1, wall_fraction=0.4), "gen",
+                       wall_source=_Walls(pad_wavelet=True), progress=False, log=quiet)
+    assert str(err.value) == "--wall-pad-wavelet False: the wall-scan source given pads by the drawn wavelet's frequency"
+    assert stand_ins["built"] == []
+    train_detector(cfg, "gen", wall_source=_Walls(pad_wavelet=True), progress=False, log=quiet)
+    ck = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
+    assert ck["resume_key"]["wall_pad_wavelet"] is True and "wall_box_pad" not in ck["resume_key"]
+    for kw, msg in ((dict(wall_pad_wavelet=True), "--wall-pad-wavelet sets the wall records' boxes: give "
+                     "--wall-fraction too"),
+                    (dict(wall_fraction=0.4, wall_pad_wavelet="yes"), "--wall-pad-wavelet is true or false, got 'yes'")):
+        with pytest.raises(InvalidDataError) as err:
+            cfg_for(tmp_path, **kw)
+        assert str(err.value) == msg

@@ -211,3 +211,39 @@ def test_a_wall_record_s_box_pad_changes_its_labels_times_and_nothing_else():
     for bad in (-1.0, 3.0, float("inf")):
         with pytest.raises(ValueError, match="box_pad is the labels' time pad"):
             SurveySource(5, profile="wall", box_pad=bad)
+
+
+def test_a_pad_in_the_drawn_wavelet_s_periods_follows_the_frequency_the_record_was_made_with(monkeypatch):
+    """``pad_wavelet``: the box's pad is counted in periods of the wavelet the forward model was given (recorded
+    here from its call), not of the label's frequency; the record and the boxes' traces stay."""
+    import gpr3d.simulation.forward as fwd
+    from gpr3d.simulation.surveys import SurveySource, survey_sample
+
+    calls, real = [], fwd.forward_model
+
+    def spy(*a, **kw):
+        calls.append(kw["frequency_hz"])
+        return real(*a, **kw)
+
+    monkeypatch.setattr(fwd, "forward_model", spy)
+    seen = set()
+    for i in range(3):
+        s0, lab0 = survey_sample(5, i, profile="wall")
+        for pad in (None, 0.4):
+            s1, lab1 = survey_sample(5, i, profile="wall", box_pad=pad, pad_wavelet=True)
+            f_drawn, f = calls[-1], s1.frequency_hz
+            seen.add(round(f_drawn / f, 6))
+            assert np.array_equal(s0.data, s1.data)
+            t_end = (lab1["n_samples"] - 1) * lab1["dt_s"]
+            p = 0.7 if pad is None else pad
+            for a, b in zip(lab0["labels"], lab1["labels"]):
+                assert a["box"][0::2] == b["box"][0::2] and a["apex_time_s"] == b["apex_time_s"]
+                assert b["box"][1] == pytest.approx(max(a["apex_time_s"] - p / f_drawn, 0.0), rel=1e-9, abs=1e-15)
+                if a["box"][3] < t_end and b["box"][3] < t_end:
+                    assert b["box"][3] - a["box"][3] == pytest.approx(p / f_drawn - 0.7 / f, rel=1e-6, abs=1e-15)
+        assert SurveySource(5, profile="wall", pad_wavelet=True)(i)[1] == survey_sample(
+            5, i, profile="wall", pad_wavelet=True)[1]
+    assert len(seen) == 3 and all(0.8 <= r <= 1.2 for r in seen) and 1.0 not in seen  # (drawn, not the label's)
+    # without augmentation the wavelet is the label's: the same boxes
+    assert survey_sample(5, 0, profile="wall", augment=False, pad_wavelet=True)[1] == \
+        survey_sample(5, 0, profile="wall", augment=False)[1]

@@ -68,6 +68,8 @@ class TrainConfig:
     wall_fraction: float = 0.0
     #: the wall records' box time pad in periods (``SurveySource(..., box_pad=)``; None: the label rule's 0.7)
     wall_box_pad: float | None = None
+    #: that pad in periods of each wall record's drawn wavelet (``SurveySource(..., pad_wavelet=True)``)
+    wall_pad_wavelet: bool = False
 
     def __post_init__(self):
         if self.model not in MODELS:
@@ -97,6 +99,10 @@ class TrainConfig:
             raise InvalidDataError(f"--wall-box-pad must lie in 0..2 periods, got {self.wall_box_pad!r}")
         if self.wall_box_pad is not None and not self.wall_fraction:
             raise InvalidDataError("--wall-box-pad sets the wall records' boxes: give --wall-fraction too")
+        if self.wall_pad_wavelet not in (True, False):
+            raise InvalidDataError(f"--wall-pad-wavelet is true or false, got {self.wall_pad_wavelet!r}")
+        if self.wall_pad_wavelet and not self.wall_fraction:
+            raise InvalidDataError("--wall-pad-wavelet sets the wall records' boxes: give --wall-fraction too")
         if not isinstance(self.freeze, int) or not 0 <= self.freeze <= 4:
             raise InvalidDataError(f"--freeze must be an integer in 0..4 (backbone stages kept fixed), got {self.freeze!r}")
         if self.kinds is not None:
@@ -170,6 +176,9 @@ def train_detector(cfg: TrainConfig, source, *, wall_source=None, progress: bool
     if cfg.wall_fraction and getattr(wall_source, "box_pad", None) != cfg.wall_box_pad:
         raise GPR3DError(f"--wall-box-pad {cfg.wall_box_pad}: the wall-scan source given pads its boxes by "
                          f"{getattr(wall_source, 'box_pad', None)}")
+    if cfg.wall_fraction and bool(getattr(wall_source, "pad_wavelet", False)) != cfg.wall_pad_wavelet:
+        raise GPR3DError(f"--wall-pad-wavelet {cfg.wall_pad_wavelet}: the wall-scan source given pads by "
+                         f"{'the drawn wavelet' if cfg.wall_pad_wavelet is False else 'the label'}'s frequency")
     torch = require("torch")
 
     from gpr3d.detection.data import WindowDataset, collate
@@ -184,6 +193,8 @@ def train_detector(cfg: TrainConfig, source, *, wall_source=None, progress: bool
         del same["wall_fraction"]
     if cfg.wall_box_pad is None:  # (likewise)
         del same["wall_box_pad"]
+    if not cfg.wall_pad_wavelet:
+        del same["wall_pad_wavelet"]
     torch.manual_seed(cfg.seed)
     kinds = cfg.kinds
     init = None

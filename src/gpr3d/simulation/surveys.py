@@ -227,7 +227,8 @@ def _trace_positions(scene: Scene, rng, augment: bool) -> np.ndarray:
 
 
 def synthesize_survey(scene: Scene, *, seed: int = 0, augment: bool = True, n_samples: int | None = None,
-                      wall: bool = False, ringing: float = 0.0, box_pad: float | None = None):
+                      wall: bool = False, ringing: float = 0.0, box_pad: float | None = None,
+                      pad_wavelet: bool = False):
     """A recorded-looking B-scan of ``scene`` (forward model) and its labels: ``(Survey, labels dict)``.
 
     With ``augment`` the artefacts listed in the module docstring are drawn from
@@ -237,12 +238,14 @@ def synthesize_survey(scene: Scene, *, seed: int = 0, augment: bool = True, n_sa
     trace to trace, and most often kept as an 8-bit picture (:func:`display_8bit`); ``ringing``: the share of
     wall records whose every echo rings (:func:`echo_ringing`, a draw of its own: 0 leaves the records as they were);
     ``box_pad``: the labels' time pad in periods (:func:`~gpr3d.simulation.labels.label_traces`' ``pad_periods``;
-    None: the rule's 0.7). The record itself does not depend on it.
+    None: the rule's 0.7). ``pad_wavelet``: that pad in periods of the wavelet the record was drawn with (the
+    antenna's true centre frequency, 0.8-1.2x its label's with ``augment``), not of the label's frequency, so that
+    a box reaches the same lobes of every record's echo. The record itself depends on neither.
     """
     from gpr3d.core.poses import quat_from_yaw
     from gpr3d.core.survey import Survey
     from gpr3d.simulation.forward import Layer, forward_model, scene_to_forward
-    from gpr3d.simulation.labels import label_traces
+    from gpr3d.simulation.labels import BOX_PAD_PERIODS, label_traces
 
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xA06]))
     f = scene.antenna.frequency_hz
@@ -287,8 +290,10 @@ def synthesize_survey(scene: Scene, *, seed: int = 0, augment: bool = True, n_sa
                     metadata={"format": "forward", "scene": scene.to_dict(), "antenna": "forward model",
                               "simulation": {"engine": "forward", "augment": augment, "seed": int(seed),
                                              "source_delay_s": delay}})
-    labels = label_traces(scene, x, n_samples, dt, source_delay_s=delay,
-                          **({} if box_pad is None else {"pad_periods": box_pad}))
+    pad = BOX_PAD_PERIODS if box_pad is None else box_pad
+    if pad_wavelet:  # (the same pad of the drawn wavelet's periods, in the label's frequency's; 2 at most)
+        pad = min(pad * f / kw["frequency_hz"], 2.0)
+    labels = label_traces(scene, x, n_samples, dt, source_delay_s=delay, pad_periods=pad)
     return survey, {"eps_r": scene.medium.eps_r, "n_traces": len(x), "n_samples": n_samples, "dt_s": dt,
                     "labels": labels}
 
@@ -361,20 +366,22 @@ def display_8bit(data: np.ndarray, rng) -> np.ndarray:
 
 
 def survey_sample(seed: int, index: int, *, host: str | None = None, augment: bool = True, profile: str = "train",
-                  ringing: float = 0.0, box_pad: float | None = None):
+                  ringing: float = 0.0, box_pad: float | None = None, pad_wavelet: bool = False):
     """``(Survey, labels)`` of survey-scale sample ``index``: the detector's training and test source
     (``profile="wall"``: P-GPR-like handheld wall scans, ``WALL_RANGES``; ``ringing``: the share of those whose
-    echoes ring, :func:`echo_ringing`; ``box_pad``: the labels' time pad in periods, None: the rule's)."""
+    echoes ring, :func:`echo_ringing`; ``box_pad``: the labels' time pad in periods, None: the rule's;
+    ``pad_wavelet``: that pad in the drawn wavelet's periods, :func:`synthesize_survey`)."""
     scene = sample_survey_scene(seed, index, host=host, profile=profile)
     return synthesize_survey(scene, seed=int(np.random.SeedSequence([int(seed), int(index)]).generate_state(1)[0]),
-                             augment=augment, wall=profile == "wall", ringing=ringing, box_pad=box_pad)
+                             augment=augment, wall=profile == "wall", ringing=ringing, box_pad=box_pad,
+                             pad_wavelet=pad_wavelet)
 
 
 class SurveySource:
     """``source(i) -> survey_sample(seed, i)``: a picklable record source for training and evaluation."""
 
     def __init__(self, seed: int, *, augment: bool = True, profile: str = "train", ringing: float = 0.0,
-                 box_pad: float | None = None):
+                 box_pad: float | None = None, pad_wavelet: bool = False):
         if not isinstance(seed, int) or seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
         if profile not in ("train", "wall"):
@@ -384,7 +391,8 @@ class SurveySource:
         if box_pad is not None and not (math.isfinite(box_pad) and 0.0 <= box_pad <= 2.0):
             raise ValueError(f"box_pad is the labels' time pad in periods (0..2), got {box_pad!r}")
         self.seed, self.augment, self.profile, self.ringing, self.box_pad = seed, augment, profile, ringing, box_pad
+        self.pad_wavelet = bool(pad_wavelet)
 
     def __call__(self, i: int):
         return survey_sample(self.seed, i, augment=self.augment, profile=self.profile, ringing=self.ringing,
-                             box_pad=self.box_pad)
+                             box_pad=self.box_pad, pad_wavelet=self.pad_wavelet)
