@@ -188,7 +188,8 @@ def run(args):
         PackedSource(cfg.packed, holdout=cfg.packed_holdout)
     if cfg.labels:  # a wrong label file fails in one line before any model is built
         _read_labels(args, cfg.labels)
-    wall = SurveySource(cfg.data_seed, profile="wall", box_pad=cfg.wall_box_pad) if cfg.wall_fraction else None
+    wall = SurveySource(cfg.data_seed, profile="wall", box_pad=cfg.wall_box_pad,
+                        pad_wavelet=cfg.wall_pad_wavelet) if cfg.wall_fraction else None
     res = train_detector(cfg, SurveySource(cfg.data_seed), wall_source=wall, progress=not args.no_progress,
                          max_seconds=args.max_seconds)
     weights = Path(args.out) / "weights.pt"
