@@ -521,6 +521,7 @@ def test_the_wall_records_box_pad_is_part_of_the_run_and_must_be_the_source_s(tm
 @pytest.mark.parametrize("kw, msg", [
     (dict(wall_fraction=0.4, wall_box_pad=-0.1), "--wall-box-pad must lie in 0..2 periods, got -0.1"),
     (dict(wall_fraction=0.4, wall_box_pad=float("nan")), "--wall-box-pad must lie in 0..2 periods, got nan"),
+    (dict(wall_fraction=0.4, wall_box_pad="0.4"), "--wall-box-pad must lie in 0..2 periods, got '0.4'"),
     (dict(wall_box_pad=0.4), "--wall-box-pad sets the wall records' boxes: give --wall-fraction too"),
 ])
 def test_a_wrong_wall_box_pad_is_one_line(tmp_path, kw, msg):

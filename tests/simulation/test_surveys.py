@@ -208,7 +208,7 @@ def test_a_wall_record_s_box_pad_changes_its_labels_times_and_nothing_else():
         if a["box"][3] < t_end:  # (not clipped by the record's end)
             assert a["box"][3] - b["box"][3] == pytest.approx(0.3 / f, rel=1e-6)
     assert SurveySource(5, profile="wall", box_pad=0.4)(2)[1] == lab1
-    for bad in (-1.0, 3.0, float("inf")):
+    for bad in (-1.0, 3.0, float("inf"), "0.4"):
         with pytest.raises(ValueError, match="box_pad is the labels' time pad"):
             SurveySource(5, profile="wall", box_pad=bad)
 

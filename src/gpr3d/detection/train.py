@@ -95,7 +95,8 @@ class TrainConfig:
             raise InvalidDataError(f"--labels-fraction must lie in 0..1, got {self.labels_fraction!r}")
         if not 0.0 <= self.wall_fraction <= 1.0:
             raise InvalidDataError(f"--wall-fraction must lie in 0..1, got {self.wall_fraction!r}")
-        if self.wall_box_pad is not None and not (math.isfinite(self.wall_box_pad) and 0 <= self.wall_box_pad <= 2):
+        if self.wall_box_pad is not None and not (isinstance(self.wall_box_pad, (int, float))
+                                                  and math.isfinite(self.wall_box_pad) and 0 <= self.wall_box_pad <= 2):
             raise InvalidDataError(f"--wall-box-pad must lie in 0..2 periods, got {self.wall_box_pad!r}")
         if self.wall_box_pad is not None and not self.wall_fraction:
             raise InvalidDataError("--wall-box-pad sets the wall records' boxes: give --wall-fraction too")

@@ -388,7 +388,8 @@ class SurveySource:
             raise ValueError(f"a survey source draws 'train' or 'wall' records, got {profile!r}")
         if not 0.0 <= ringing <= 1.0 or (ringing and profile != "wall"):
             raise ValueError(f"ringing is a share (0..1) of wall records, got {ringing!r} for profile {profile!r}")
-        if box_pad is not None and not (math.isfinite(box_pad) and 0.0 <= box_pad <= 2.0):
+        if box_pad is not None and not (isinstance(box_pad, (int, float)) and math.isfinite(box_pad)
+                                        and 0.0 <= box_pad <= 2.0):
             raise ValueError(f"box_pad is the labels' time pad in periods (0..2), got {box_pad!r}")
         self.seed, self.augment, self.profile, self.ringing, self.box_pad = seed, augment, profile, ringing, box_pad
         self.pad_wavelet = bool(pad_wavelet)
